@@ -1,0 +1,1 @@
+"""The Gymnasium env (a thin shell over world, robot and sensors)."""

@@ -1,0 +1,1 @@
+"""Experiments: scenarios, the calendar loop, results, reports and regression checks."""

@@ -1,0 +1,1 @@
+"""Readers for recorded robot data (CARMEN logs)."""

@@ -1,0 +1,1 @@
+"""Metrics: pure functions over arrays comparing estimates with ground truth (DESIGN.md §6)."""

@@ -1,0 +1,1 @@
+"""The differential-drive robot body (DESIGN.md §4)."""

@@ -1,0 +1,65 @@
+"""Planar rigid-body transforms (SE(2)) on ``(x_m, y_m, theta_rad)`` arrays.
+
+All functions broadcast over leading dimensions: a pose may be ``(3,)`` or ``(..., 3)``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+FloatArray = NDArray[np.float64]
+
+
+def wrap_angle(theta_rad: ArrayLike) -> FloatArray:
+    """Wrap angles to ``[-pi, pi)``."""
+    return (np.asarray(theta_rad, dtype=np.float64) + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def compose(a: ArrayLike, b: ArrayLike) -> FloatArray:
+    """``a ⊕ b``: pose ``b`` expressed in frame ``a``, returned in ``a``'s parent frame."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
+    y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
+    return np.stack([x, y, wrap_angle(a[..., 2] + b[..., 2])], axis=-1)
+
+
+def inverse(a: ArrayLike) -> FloatArray:
+    """``⊖ a``: the inverse transform."""
+    a = np.asarray(a, dtype=np.float64)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    x = -c * a[..., 0] - s * a[..., 1]
+    y = s * a[..., 0] - c * a[..., 1]
+    return np.stack([x, y, wrap_angle(-a[..., 2])], axis=-1)
+
+
+def between(a: ArrayLike, b: ArrayLike) -> FloatArray:
+    """``⊖ a ⊕ b``: pose ``b`` expressed in the frame of pose ``a``."""
+    return compose(inverse(a), b)
+
+
+def transform_points(pose: ArrayLike, points: ArrayLike) -> FloatArray:
+    """Map points ``(N, 2)`` from the frame of ``pose`` into its parent frame."""
+    pose = np.asarray(pose, dtype=np.float64)
+    pts = np.asarray(points, dtype=np.float64)
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    out = np.empty_like(pts)
+    out[:, 0] = pose[0] + c * pts[:, 0] - s * pts[:, 1]
+    out[:, 1] = pose[1] + s * pts[:, 0] + c * pts[:, 1]
+    return out
+
+
+def scan_to_points(
+    ranges_m: ArrayLike, angles_rad: ArrayLike, pose: ArrayLike | None = None
+) -> FloatArray:
+    """Finite readings of a scan as 2-D points, in the sensor frame or, given ``pose``, its parent.
+
+    Non-finite readings (REP-117 ``±inf``, ``NaN``) are dropped.
+    """
+    r = np.asarray(ranges_m, dtype=np.float64)
+    a = np.asarray(angles_rad, dtype=np.float64)
+    ok = np.isfinite(r)
+    pts = np.stack([r[ok] * np.cos(a[ok]), r[ok] * np.sin(a[ok])], axis=-1)
+    return pts if pose is None else transform_points(pose, pts)

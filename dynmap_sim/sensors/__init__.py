@@ -1,0 +1,1 @@
+"""Simulated sensors: laser scanners and wheel odometry (DESIGN.md §4)."""
