@@ -1,0 +1,74 @@
+"""Lost and recovered: episodes where the position error exceeds a threshold (DESIGN.md §6).
+
+A localizer is *lost* at a scan when its position error exceeds ``threshold_m`` (0.5 m by
+default). A lost episode is a maximal stretch of consecutive lost scans; it is *recovered*
+when a scan that is not lost follows it within the same sequence, and its time to recover is
+the time from its first lost scan to that first good scan.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+#: Position error above which a localizer counts as lost [m].
+LOST_THRESHOLD_M = 0.5
+
+
+@dataclass(frozen=True)
+class LostStats:
+    """Lost/recovered summary of one sequence (e.g. a run)."""
+
+    n_scans: int
+    lost_fraction: float
+    n_episodes: int
+    n_recovered: int
+    mean_time_to_recover_s: float
+    max_time_to_recover_s: float
+
+    def to_dict(self) -> dict[str, float]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, float]) -> LostStats:
+        return cls(**d)
+
+
+def lost_episodes(lost: ArrayLike) -> NDArray[np.int64]:
+    """``(E, 2)`` start and end (exclusive) indices of the runs of True in ``lost``."""
+    flags = np.asarray(lost, dtype=bool).ravel()
+    padded = np.concatenate([[False], flags, [False]]).astype(np.int8)
+    d = np.diff(padded)
+    starts = np.flatnonzero(d == 1)
+    ends = np.flatnonzero(d == -1)
+    return np.stack([starts, ends], axis=1).astype(np.int64)
+
+
+def lost_stats(
+    errors_m: ArrayLike, t_s: ArrayLike, threshold_m: float = LOST_THRESHOLD_M
+) -> LostStats:
+    """Lost fraction, episodes and recovery times of position errors ``errors_m`` at times
+    ``t_s`` [s] (same length). NaN errors count as lost (no estimate is as bad as a wrong one).
+    """
+    e = np.asarray(errors_m, dtype=np.float64).ravel()
+    t = np.asarray(t_s, dtype=np.float64).ravel()
+    if e.shape != t.shape:
+        raise ValueError(f"errors {e.shape} and times {t.shape} differ in shape")
+    n = int(e.size)
+    if n == 0:
+        nan = float("nan")
+        return LostStats(0, nan, 0, 0, nan, nan)
+    lost = ~(e <= threshold_m)
+    eps = lost_episodes(lost)
+    recovered = eps[eps[:, 1] < n]
+    times = t[recovered[:, 1]] - t[recovered[:, 0]]
+    return LostStats(
+        n_scans=n,
+        lost_fraction=float(lost.mean()),
+        n_episodes=int(len(eps)),
+        n_recovered=int(len(recovered)),
+        mean_time_to_recover_s=float(times.mean()) if times.size else float("nan"),
+        max_time_to_recover_s=float(times.max()) if times.size else float("nan"),
+    )
