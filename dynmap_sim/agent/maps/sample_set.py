@@ -1,0 +1,255 @@
+"""Dynamic sample sets, vectorized over many rays (Biber & Duckett 2009, §3.1–3.3, §4.2).
+
+One :class:`SampleSets` object holds ``n_rays`` independent sample sets of capacity
+``n_samples`` each, as a ``uint16`` array of range samples in millimetres (2 bytes per sample,
+§5.1) plus a per-ray fill count. Valid samples of ray ``r`` are ``samples_mm[r, :count[r]]``.
+
+* :meth:`SampleSets.update` — the update rule of §3.1 with update ratio ``u``: remove ``u·n``
+  randomly chosen samples and add ``u·n`` randomly chosen measurements (while the set is not
+  full, the new samples go to free slots instead: the filling phase). ``u·n`` that is not an
+  integer is rounded stochastically so that every old sample survives a step with probability
+  exactly ``1 − u`` — which gives the age distribution ``p(t) = u(1 − u)^t`` of eq. 3 (§3.2).
+  A ray that received fewer measurements than ``u·n`` in a step takes all of them (a
+  measurement is never duplicated).
+* :meth:`SampleSets.estimates` — the robust estimates of §3.3: median (eq. 4; for an even
+  number of samples the *lower* of the two middle samples, never their mean, so the estimate
+  is always a measured value — requirement 4), ``σ = 1.48·MAD`` (eq. 5) and the outlier ratio
+  (share of samples farther than 3σ from the median).
+* :meth:`SampleSets.log_likelihood` — the perceptual model eq. 6–8: a mixture of
+  ``N(ρ, σ²)`` and ``U(0, maxRange)`` weighted by the outlier ratio.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+#: Largest storable range [mm] (uint16); also the sort key of empty slots.
+MAX_RANGE_MM = 65535
+
+#: 1/sqrt(2π)
+_INV_SQRT_2PI = 0.3989422804014327
+
+
+@dataclass(frozen=True)
+class RayEstimates:
+    """Robust per-ray statistics of a sample set (§3.3), each of shape ``(n_rays,)``.
+
+    ``rho_m`` is the median (a measured value; NaN where a ray has no sample), ``sigma_m`` is
+    1.48·MAD, ``outlier_ratio`` the share of samples outside ``ρ ± 3σ``, ``count`` the number
+    of samples.
+    """
+
+    rho_m: NDArray[np.float64]
+    sigma_m: NDArray[np.float64]
+    outlier_ratio: NDArray[np.float64]
+    count: NDArray[np.int64]
+
+
+def to_mm(range_m: ArrayLike) -> NDArray[np.uint16]:
+    """Ranges in metres -> rounded uint16 millimetres (clipped to ``[0, 65.535]`` m)."""
+    r = np.asarray(range_m, dtype=np.float64)
+    return np.clip(np.rint(r * 1000.0), 0, MAX_RANGE_MM).astype(np.uint16)
+
+
+class SampleSets:
+    """``n_rays`` dynamic sample sets of ``n_samples`` each, update ratio ``update_ratio``."""
+
+    def __init__(self, n_rays: int, n_samples: int, update_ratio: float) -> None:
+        if n_rays < 1 or n_samples < 1:
+            raise ValueError("n_rays and n_samples must be >= 1")
+        if not 0.0 <= update_ratio <= 1.0:
+            raise ValueError(f"update_ratio must be in [0, 1], got {update_ratio}")
+        self.n_rays = int(n_rays)
+        self.n_samples = int(n_samples)
+        self.update_ratio = float(update_ratio)
+        self.samples_mm = np.zeros((self.n_rays, self.n_samples), dtype=np.uint16)
+        self.count = np.zeros(self.n_rays, dtype=np.uint16)
+        self._est: RayEstimates | None = None
+
+    # ------------------------------------------------------------------ memory
+    @property
+    def nbytes(self) -> int:
+        """Bytes of the sample storage (2 per sample slot) plus the per-ray counts."""
+        return int(self.samples_mm.nbytes + self.count.nbytes)
+
+    @property
+    def sample_bytes(self) -> int:
+        """Bytes of the sample storage alone: ``2 · n_rays · n_samples``."""
+        return int(self.samples_mm.nbytes)
+
+    def copy(self) -> SampleSets:
+        """A deep copy (used for the frozen snapshot of the static-map variants, §5.3)."""
+        out = SampleSets(self.n_rays, self.n_samples, self.update_ratio)
+        out.samples_mm[:] = self.samples_mm
+        out.count[:] = self.count
+        out._est = self._est
+        return out
+
+    # ------------------------------------------------------------------ update rule
+    def _n_new(self, n_groups: int, rng: np.random.Generator) -> NDArray[np.int64]:
+        """``u·n`` per ray, rounded stochastically when it is not an integer."""
+        k = self.update_ratio * self.n_samples
+        base = int(np.floor(k))
+        frac = k - base
+        out = np.full(n_groups, base, dtype=np.int64)
+        if frac > 1e-12:
+            out += rng.random(n_groups) < frac
+        return out
+
+    def update(
+        self,
+        ray_idx: ArrayLike,
+        values_mm: ArrayLike,
+        rng: np.random.Generator,
+        *,
+        fill: bool = False,
+    ) -> None:
+        """Apply one time step of the §3.1 rule with the measurements ``(ray_idx, values_mm)``.
+
+        The measurements are a flat list: measurement ``i`` belongs to ray ``ray_idx[i]``
+        (any order, any multiplicity). Rays without measurements are unchanged. With
+        ``fill=True`` the set is only filled (every free slot may take a measurement, nothing is
+        removed): used to initialize a new local map from one scan (§4.4).
+        """
+        ray = np.asarray(ray_idx, dtype=np.int64).ravel()
+        val = np.asarray(values_mm).ravel()
+        if ray.shape != val.shape:
+            raise ValueError("ray_idx and values_mm must have the same length")
+        if ray.size == 0:
+            return
+        if val.dtype != np.uint16:
+            val = np.clip(val, 0, MAX_RANGE_MM).astype(np.uint16)
+        if ray.min() < 0 or ray.max() >= self.n_rays:
+            raise ValueError("ray index out of range")
+        m = ray.size
+        # Random order within each ray: "randomly chosen samples from M".
+        order = np.lexsort((rng.random(m), ray))
+        r_s = ray[order]
+        v_s = val[order]
+        uniq, first, m_per = np.unique(r_s, return_index=True, return_counts=True)
+        g = np.repeat(np.arange(uniq.size), m_per)
+        rank = np.arange(m) - first[g]
+
+        cnt = self.count[uniq].astype(np.int64)
+        free = self.n_samples - cnt
+        if fill:
+            n_new = np.minimum(m_per, free)
+        else:
+            n_new = np.minimum(self._n_new(uniq.size, rng), m_per)
+        n_add = np.minimum(n_new, free)
+        n_rep = n_new - n_add
+
+        slot = cnt[g] + rank  # filling: next free slot
+        rep_rows = np.flatnonzero(n_rep > 0)
+        if rep_rows.size:
+            # Random permutation of each such ray's *old* slots [0, cnt): remove the first n_rep.
+            keys = rng.random((rep_rows.size, self.n_samples))
+            keys[np.arange(self.n_samples)[None, :] >= cnt[rep_rows, None]] = 2.0
+            perm = np.argsort(keys, axis=1)
+            row_of_group = np.full(uniq.size, -1, dtype=np.int64)
+            row_of_group[rep_rows] = np.arange(rep_rows.size)
+            is_rep = (rank >= n_add[g]) & (rank < n_new[g])
+            pr = row_of_group[g[is_rep]]
+            slot[is_rep] = perm[pr, rank[is_rep] - n_add[g[is_rep]]]
+        keep = rank < n_new[g]
+        self.samples_mm[uniq[g[keep]], slot[keep]] = v_s[keep]
+        self.count[uniq] = (cnt + n_add).astype(np.uint16)
+        self._est = None
+
+    def update_m(
+        self,
+        ray_idx: ArrayLike,
+        range_m: ArrayLike,
+        rng: np.random.Generator,
+        *,
+        fill: bool = False,
+    ) -> None:
+        """:meth:`update` with ranges in metres."""
+        self.update(ray_idx, to_mm(range_m), rng, fill=fill)
+
+    # ------------------------------------------------------------------ statistics
+    def estimates(self) -> RayEstimates:
+        """Median, 1.48·MAD and outlier ratio of every ray (eq. 4–5, §3.3); cached."""
+        if self._est is None:
+            self._est = robust_estimates(self.samples_mm, self.count)
+        return self._est
+
+    def log_likelihood(
+        self,
+        ray_idx: ArrayLike,
+        range_m: ArrayLike,
+        max_range_m: float,
+        *,
+        sigma_min_m: float = 0.0,
+        min_outlier_ratio: float = 0.0,
+    ) -> NDArray[np.float64]:
+        """``log p(d)`` of eq. 6–8 for readings ``range_m`` on rays ``ray_idx``.
+
+        ``p(d) = (1 − p_o)·N(d; ρ, σ²) + p_o·U(d; 0, maxRange)``. A ray without samples knows
+        nothing and gives the uniform density. ``sigma_min_m`` and ``min_outlier_ratio`` are
+        optional floors (0 = the paper's model exactly) that keep a ray whose few samples
+        agree to the millimetre from giving an infinitely sharp density.
+        """
+        est = self.estimates()
+        return mixture_log_likelihood(
+            est,
+            np.asarray(ray_idx, dtype=np.int64),
+            np.asarray(range_m, dtype=np.float64),
+            max_range_m,
+            sigma_min_m=sigma_min_m,
+            min_outlier_ratio=min_outlier_ratio,
+        )
+
+
+def robust_estimates(samples_mm: NDArray[np.uint16], count: NDArray[np.integer]) -> RayEstimates:
+    """Eq. 4–5 and the 3σ outlier ratio for every row of ``samples_mm`` (first ``count`` valid)."""
+    n_rays, n = samples_mm.shape
+    cnt = count.astype(np.int64)
+    valid = np.arange(n)[None, :] < cnt[:, None]
+    s = np.where(valid, samples_mm.astype(np.int32), MAX_RANGE_MM + 1)
+    s.sort(axis=1)
+    rows = np.arange(n_rays)
+    has = cnt > 0
+    mid = np.maximum(cnt - 1, 0) // 2  # lower middle: always a measured value
+    rho_mm = s[rows, mid]
+    absdev = np.abs(samples_mm.astype(np.int32) - rho_mm[:, None])
+    dev = np.where(valid, absdev, np.iinfo(np.int32).max)
+    dev.sort(axis=1)
+    lo = dev[rows, mid].astype(np.float64)
+    hi = dev[rows, np.minimum(cnt // 2, n - 1)].astype(np.float64)
+    mad_mm = np.where(cnt % 2 == 1, lo, 0.5 * (lo + hi))  # MAD is a scale: the usual median
+    sigma_mm = 1.48 * mad_mm
+    n_out = np.sum(valid & (absdev > 3.0 * sigma_mm[:, None]), axis=1)
+    outlier = np.where(has, n_out / np.maximum(cnt, 1), 0.0)
+    rho_m = np.where(has, rho_mm / 1000.0, np.nan)
+    sigma_m = np.where(has, sigma_mm / 1000.0, np.nan)
+    return RayEstimates(rho_m=rho_m, sigma_m=sigma_m, outlier_ratio=outlier, count=cnt)
+
+
+def mixture_log_likelihood(
+    est: RayEstimates,
+    ray_idx: NDArray[np.int64],
+    range_m: NDArray[np.float64],
+    max_range_m: float,
+    *,
+    sigma_min_m: float = 0.0,
+    min_outlier_ratio: float = 0.0,
+) -> NDArray[np.float64]:
+    """Eq. 6–8 evaluated with precomputed :class:`RayEstimates` (see ``log_likelihood``)."""
+    cnt = est.count[ray_idx]
+    rho = est.rho_m[ray_idx]
+    sig = np.maximum(est.sigma_m[ray_idx], sigma_min_m)
+    po = np.maximum(est.outlier_ratio[ray_idx], min_outlier_ratio)
+    inside = (range_m >= 0.0) & (range_m <= max_range_m)
+    p_uni = np.where(inside, 1.0 / max_range_m, 0.0)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        z = (range_m - rho) / sig
+        p_norm = np.where(sig > 0, _INV_SQRT_2PI / sig * np.exp(-0.5 * z * z), 0.0)
+        # A zero-width Gaussian (σ = 0, no floor) is a point mass: density only on the sample.
+        p_norm = np.where((sig == 0) & (range_m == rho), np.inf, p_norm)
+        p = (1.0 - po) * p_norm + po * p_uni
+        p = np.where(cnt > 0, p, p_uni)
+        return np.log(p)

@@ -1,0 +1,137 @@
+"""Dynamic sample sets (Biber & Duckett §3.1–3.3, eq. 3–8)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from dynmap_sim.agent.maps.sample_set import SampleSets, robust_estimates, to_mm
+
+
+def test_storage_is_two_bytes_per_sample():
+    s = SampleSets(1440, 100, 0.05)
+    assert s.samples_mm.dtype == np.uint16
+    assert s.sample_bytes == 1440 * 100 * 2
+
+
+def test_filling_phase_adds_u_n_then_replaces():
+    rng = np.random.default_rng(0)
+    s = SampleSets(3, 10, 0.3)
+    for step in range(1, 4):
+        s.update(np.repeat([0, 1], 50), np.arange(100) + 1, rng)
+        assert list(s.count) == [min(3 * step, 10), min(3 * step, 10), 0]
+    s.update(np.repeat([0, 1], 50), np.arange(100) + 1, rng)
+    assert list(s.count) == [10, 10, 0]  # 9 + 1 added, 2 replaced
+    for _ in range(5):
+        s.update(np.repeat([0, 1], 50), np.arange(100) + 1, rng)
+        assert list(s.count) == [10, 10, 0]
+
+
+def test_update_replaces_exactly_u_n_samples():
+    rng = np.random.default_rng(1)
+    s = SampleSets(50, 20, 0.25)
+    s.update(np.repeat(np.arange(50), 20), np.full(1000, 1000), rng, fill=True)
+    assert np.all(s.count == 20)
+    s.update(np.repeat(np.arange(50), 20), np.full(1000, 2000), rng)
+    assert np.all(np.sum(s.samples_mm == 2000, axis=1) == 5)
+
+
+def test_few_measurements_are_never_duplicated():
+    rng = np.random.default_rng(2)
+    s = SampleSets(1, 50, 0.8)
+    s.update([0] * 50, np.full(50, 1000), rng, fill=True)
+    s.update([0, 0, 0], [7, 8, 9], rng)  # u·n = 40 but only 3 measurements
+    assert sorted(s.samples_mm[0][s.samples_mm[0] < 1000].tolist()) == [7, 8, 9]
+
+
+def test_robust_estimates_closed_form():
+    samples = np.array([[1000, 1010, 990, 1005, 5000, 0, 0]], dtype=np.uint16)
+    est = robust_estimates(samples, np.array([5]))
+    assert est.rho_m[0] == pytest.approx(1.005)  # sorted 990 1000 1005 1010 5000
+    # |x - 1005| = 5 5 15 0 3995 -> sorted 0 5 5 15 3995 -> MAD 5 mm
+    assert est.sigma_m[0] == pytest.approx(1.48 * 0.005)
+    assert est.outlier_ratio[0] == pytest.approx(1 / 5)  # 3σ = 22.2 mm: only 5000 is out
+
+
+def test_even_count_median_is_a_sample_not_a_mean():
+    est = robust_estimates(np.array([[1000, 2000]], dtype=np.uint16), np.array([2]))
+    assert est.rho_m[0] in (1.0, 2.0)
+
+
+def test_empty_ray_gives_nan_and_uniform_likelihood():
+    s = SampleSets(4, 5, 0.2)
+    ll = s.log_likelihood([0, 1], [1.0, 3.0], max_range_m=5.0)
+    assert np.allclose(ll, np.log(1 / 5.0))
+    assert np.isnan(s.estimates().rho_m).all()
+
+
+def test_perceptual_model_is_gaussian_plus_uniform():
+    rng = np.random.default_rng(3)
+    s = SampleSets(1, 100, 0.2)
+    vals = to_mm(2.0 + 0.01 * rng.standard_normal(100))
+    vals[:10] = 4000  # 10 % outliers
+    s.update(np.zeros(100, int), vals, rng, fill=True)
+    est = s.estimates()
+    rho, sig, po = est.rho_m[0], est.sigma_m[0], est.outlier_ratio[0]
+    assert po == pytest.approx(0.1, abs=0.03)
+    d = np.array([rho, rho + sig, 0.5, 6.0])
+    expect = (1 - po) * np.exp(-0.5 * ((d - rho) / sig) ** 2) / (sig * np.sqrt(2 * np.pi))
+    expect += po * np.where(d <= 5.0, 1 / 5.0, 0.0)
+    got = s.log_likelihood(np.zeros(4, int), d, max_range_m=5.0)
+    assert np.allclose(np.exp(got[:3]), expect[:3])
+    assert np.exp(got[3]) == pytest.approx(expect[3], abs=1e-300)
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    n=st.integers(2, 30),
+    count=st.integers(1, 30),
+    seed=st.integers(0, 2**31),
+)
+def test_estimate_is_always_a_measured_value(n, count, seed):
+    rng = np.random.default_rng(seed)
+    s = SampleSets(8, n, 0.5)
+    measured: list[set[int]] = [set() for _ in range(8)]
+    for _ in range(4):
+        ray = rng.integers(0, 8, size=count)
+        val = rng.integers(100, 9000, size=count).astype(np.uint16)
+        s.update(ray, val, rng)
+        for r, v in zip(ray, val, strict=True):
+            measured[r].add(int(v))
+    est = s.estimates()
+    for r in range(8):
+        if s.count[r]:
+            assert round(est.rho_m[r] * 1000) in measured[r]
+            assert round(est.rho_m[r] * 1000) in s.samples_mm[r, : s.count[r]].tolist()
+        else:
+            assert np.isnan(est.rho_m[r])
+
+
+@settings(max_examples=12, deadline=None)
+@given(
+    n=st.sampled_from([5, 10, 20, 40]),
+    u=st.sampled_from([0.05, 0.1, 0.2, 0.25, 0.5, 0.75, 0.8, 0.33]),
+    seed=st.integers(0, 2**31),
+)
+def test_age_distribution_follows_u_one_minus_u_power_t(n, u, seed):
+    """§3.2, eq. 3: the share of samples of age t is u(1 − u)^t (truncated at the start)."""
+    rng = np.random.default_rng(seed)
+    n_rays = 8000 // n
+    steps = int(np.ceil(np.log(1e-3) / np.log(1 - u)))
+    s = SampleSets(n_rays, n, u)
+    rays = np.repeat(np.arange(n_rays), n)
+    s.update(rays, np.zeros(rays.size, np.uint16), rng, fill=True)  # value = birth step
+    for t in range(1, steps + 1):
+        s.update(rays, np.full(rays.size, t, np.uint16), rng)
+    ages = steps - s.samples_mm.astype(int).ravel()
+    hist = np.bincount(ages, minlength=steps + 1) / ages.size
+    t = np.arange(steps + 1)
+    expect = u * (1 - u) ** t
+    expect[-1] = (1 - u) ** steps  # the initial samples, all of age `steps`
+    assert expect.sum() == pytest.approx(1.0)
+    ks = np.max(np.abs(np.cumsum(hist) - np.cumsum(expect)))  # Kolmogorov-Smirnov distance
+    assert ks < 0.04, (ks, hist[:5], expect[:5])
+    mean_age = np.sum(t * expect)
+    assert ages.mean() == pytest.approx(mean_age, rel=0.1, abs=0.1)
