@@ -1,0 +1,250 @@
+"""Occupancy grid and its likelihood field (distance to the nearest obstacle).
+
+The grid follows ROS ``nav_msgs/OccupancyGrid`` conventions: cell ``[iy, ix]`` covers
+``origin + ([ix, iy] .. [ix+1, iy+1]) * resolution_m``; values are ``-1`` unknown, ``0``
+free, ``100`` occupied. The likelihood field of Thrun et al., *Probabilistic Robotics*
+§6.4 (the table AMCL precomputes) is the Euclidean distance from each cell centre to the
+nearest occupied cell centre, from ``scipy.ndimage.distance_transform_edt``, clipped at
+``max_dist_m``.
+
+Grids are built either by rasterizing known wall segments (a scenario's prior) or by
+tracing laser beams from known poses (free cells along each beam, an occupied cell at each
+end point, combined as log-odds, Thrun et al. §9.2).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy import ndimage
+
+from dynmap_sim import se2
+from dynmap_sim.types import LaserSpec
+
+FloatArray = NDArray[np.float64]
+
+UNKNOWN = -1
+FREE = 0
+OCCUPIED = 100
+
+
+class OccupancyGrid:
+    """A 2-D occupancy grid with a cached likelihood field.
+
+    ``occupancy`` is ``(H, W)`` int8 (``-1``/``0``/``100``); ``origin_xy_m`` the map-frame
+    corner of cell ``[0, 0]``; ``dist_m`` ``(H, W)`` float32 the distance [m] from each
+    cell centre to the nearest occupied cell centre, clipped at ``max_dist_m``.
+    """
+
+    def __init__(
+        self,
+        occupancy: ArrayLike,
+        origin_xy_m: ArrayLike,
+        resolution_m: float = 0.05,
+        max_dist_m: float = 2.0,
+    ) -> None:
+        occ = np.asarray(occupancy, dtype=np.int8)
+        if occ.ndim != 2 or occ.size == 0:
+            raise ValueError(f"occupancy must be a non-empty 2-D array, got shape {occ.shape}")
+        if resolution_m <= 0:
+            raise ValueError(f"resolution_m must be > 0, got {resolution_m}")
+        self.occupancy = occ
+        self.origin_xy_m = np.asarray(origin_xy_m, dtype=np.float64).reshape(2)
+        self.resolution_m = float(resolution_m)
+        self.max_dist_m = float(max_dist_m)
+        self.dist_m = self._distance_field(self.max_dist_m)
+
+    # -- geometry ------------------------------------------------------------------------
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.occupancy.shape  # type: ignore[return-value]
+
+    @property
+    def extent_m(self) -> tuple[float, float, float, float]:
+        """``(xmin, ymin, xmax, ymax)`` of the grid [m]."""
+        h, w = self.shape
+        x0, y0 = self.origin_xy_m
+        return (x0, y0, x0 + w * self.resolution_m, y0 + h * self.resolution_m)
+
+    def cell_of(self, xy: ArrayLike) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """Cell indices ``(ix, iy)`` of points ``(..., 2)`` (may be out of the grid)."""
+        p = np.asarray(xy, dtype=np.float64)
+        ix = np.floor((p[..., 0] - self.origin_xy_m[0]) / self.resolution_m).astype(np.intp)
+        iy = np.floor((p[..., 1] - self.origin_xy_m[1]) / self.resolution_m).astype(np.intp)
+        return ix, iy
+
+    def cell_centers(self, ix: ArrayLike, iy: ArrayLike) -> FloatArray:
+        """Map-frame centres ``(N, 2)`` of cells ``(ix, iy)``."""
+        ix = np.asarray(ix, dtype=np.float64)
+        iy = np.asarray(iy, dtype=np.float64)
+        return np.stack(
+            [
+                self.origin_xy_m[0] + (ix + 0.5) * self.resolution_m,
+                self.origin_xy_m[1] + (iy + 0.5) * self.resolution_m,
+            ],
+            axis=-1,
+        )
+
+    def _distance_field(self, max_dist_m: float) -> NDArray[np.float32]:
+        occ = self.occupancy == OCCUPIED
+        if not occ.any():
+            return np.full(self.shape, max_dist_m, dtype=np.float32)
+        d = ndimage.distance_transform_edt(~occ) * self.resolution_m
+        return np.minimum(d, max_dist_m).astype(np.float32)
+
+    def distance_at(self, x_m: ArrayLike, y_m: ArrayLike) -> NDArray[np.float32]:
+        """Likelihood-field distance [m] at map points; ``max_dist_m`` outside the grid."""
+        x = np.asarray(x_m, dtype=np.float64)
+        y = np.asarray(y_m, dtype=np.float64)
+        ix = np.floor((x - self.origin_xy_m[0]) / self.resolution_m).astype(np.intp)
+        iy = np.floor((y - self.origin_xy_m[1]) / self.resolution_m).astype(np.intp)
+        h, w = self.shape
+        inside = (ix >= 0) & (ix < w) & (iy >= 0) & (iy < h)
+        out = np.full(x.shape, self.max_dist_m, dtype=np.float32)
+        out[inside] = self.dist_m[iy[inside], ix[inside]]
+        return out
+
+    def occupied_points(self) -> FloatArray:
+        """Centres ``(N, 2)`` of the occupied cells [m]."""
+        iy, ix = np.nonzero(self.occupancy == OCCUPIED)
+        return self.cell_centers(ix, iy)
+
+    def free_points(self) -> FloatArray:
+        """Centres ``(N, 2)`` of the free cells [m] (AMCL draws random poses from these)."""
+        iy, ix = np.nonzero(self.occupancy == FREE)
+        return self.cell_centers(ix, iy)
+
+    # -- construction --------------------------------------------------------------------
+    @classmethod
+    def _empty(
+        cls, bounds: tuple[float, float, float, float], resolution_m: float, margin_m: float
+    ) -> tuple[FloatArray, int, int]:
+        xmin, ymin, xmax, ymax = bounds
+        origin = np.array(
+            [
+                np.floor((xmin - margin_m) / resolution_m) * resolution_m,
+                np.floor((ymin - margin_m) / resolution_m) * resolution_m,
+            ]
+        )
+        w = int(np.ceil((xmax + margin_m - origin[0]) / resolution_m))
+        h = int(np.ceil((ymax + margin_m - origin[1]) / resolution_m))
+        return origin, max(h, 1), max(w, 1)
+
+    @classmethod
+    def from_segments(
+        cls,
+        segments: ArrayLike,
+        resolution_m: float = 0.05,
+        margin_m: float = 1.0,
+        free_seed_xy_m: ArrayLike | None = None,
+        max_dist_m: float = 2.0,
+    ) -> OccupancyGrid:
+        """Rasterize wall segments ``(N, 4)`` (``x0, y0, x1, y1`` [m]) into a grid.
+
+        Cells the segments pass through are occupied. Given ``free_seed_xy_m`` (e.g. the
+        robot's start), the non-occupied cells 4-connected to it are free and the rest
+        unknown (the inside of the building, not the outside); otherwise every other cell
+        is free.
+        """
+        segs = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
+        if len(segs) == 0:
+            raise ValueError("from_segments needs at least one segment")
+        pts_all = np.concatenate([segs[:, :2], segs[:, 2:]])
+        bounds = (*pts_all.min(axis=0), *pts_all.max(axis=0))
+        origin, h, w = cls._empty(bounds, resolution_m, margin_m)
+        lengths = np.hypot(segs[:, 2] - segs[:, 0], segs[:, 3] - segs[:, 1])
+        n = np.maximum(2, np.ceil(lengths / (0.25 * resolution_m)).astype(int) + 1)
+        seg_id = np.repeat(np.arange(len(segs)), n)
+        t = np.concatenate([np.linspace(0.0, 1.0, k) for k in n])
+        s = segs[seg_id]
+        xy = s[:, :2] + t[:, None] * (s[:, 2:] - s[:, :2])
+        ix = np.floor((xy[:, 0] - origin[0]) / resolution_m).astype(np.intp)
+        iy = np.floor((xy[:, 1] - origin[1]) / resolution_m).astype(np.intp)
+        occ = np.zeros((h, w), dtype=bool)
+        occ[iy, ix] = True
+        grid = np.full((h, w), FREE, dtype=np.int8)
+        if free_seed_xy_m is not None:
+            seed = np.asarray(free_seed_xy_m, dtype=np.float64)
+            sx = int(np.floor((seed[0] - origin[0]) / resolution_m))
+            sy = int(np.floor((seed[1] - origin[1]) / resolution_m))
+            labels, _ = ndimage.label(~occ)
+            if 0 <= sx < w and 0 <= sy < h and labels[sy, sx] > 0:
+                grid[:] = UNKNOWN
+                grid[labels == labels[sy, sx]] = FREE
+        grid[occ] = OCCUPIED
+        return cls(grid, origin, resolution_m, max_dist_m)
+
+    @classmethod
+    def from_scans(
+        cls,
+        poses: ArrayLike,
+        ranges_m: ArrayLike,
+        laser: LaserSpec,
+        resolution_m: float = 0.05,
+        margin_m: float = 1.0,
+        no_return_free_m: float = 4.0,
+        l_hit: float = 0.9,
+        l_pass: float = -0.4,
+        max_dist_m: float = 2.0,
+    ) -> OccupancyGrid:
+        """Trace scans ``ranges_m`` ``(K, n_beams)`` taken at robot ``poses`` ``(K, 3)``.
+
+        Each finite reading marks its end cell with log-odds ``l_hit`` and the cells before
+        it with ``l_pass`` (each cell counted once per beam); a ``+inf`` (no return) clears
+        ``no_return_free_m`` of free space.
+        Cells with positive total log-odds are occupied, negative free, unseen unknown.
+        """
+        poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+        rng_all = np.asarray(ranges_m, dtype=np.float64).reshape(len(poses), -1)
+        angles = laser.angles()
+        mount = np.asarray(laser.mount_pose, dtype=np.float64)
+        lp = se2.compose(poses, np.broadcast_to(mount, poses.shape))  # laser poses (K, 3)
+        ends = []
+        for k in range(len(poses)):
+            r = rng_all[k]
+            ok = np.isfinite(r) & (r >= laser.range_min_m) & (r < laser.range_max_m)
+            th = lp[k, 2] + angles[ok]
+            ends.append(lp[k, :2] + r[ok, None] * np.stack([np.cos(th), np.sin(th)], axis=1))
+        allpts = np.concatenate([lp[:, :2], *ends]) if ends else lp[:, :2]
+        reach = max(no_return_free_m, 0.0)
+        bounds = (
+            allpts[:, 0].min() - reach,
+            allpts[:, 1].min() - reach,
+            allpts[:, 0].max() + reach,
+            allpts[:, 1].max() + reach,
+        )
+        origin, h, w = cls._empty(bounds, resolution_m, margin_m)
+        hits = np.zeros(h * w, dtype=np.float64)
+        passes = np.zeros(h * w, dtype=np.float64)
+        step = 0.5 * resolution_m
+        for k in range(len(poses)):
+            r = rng_all[k].copy()
+            hit = np.isfinite(r) & (r >= laser.range_min_m) & (r < laser.range_max_m)
+            clear = np.where(hit, r - resolution_m, np.where(r == np.inf, reach, 0.0))
+            th = lp[k, 2] + angles
+            c, s = np.cos(th), np.sin(th)
+            n_max = int(np.ceil(max(clear.max(), 0.0) / step))
+            if n_max > 0:
+                t = np.arange(n_max) * step
+                use = t[None, :] < clear[:, None]
+                xs = lp[k, 0] + c[:, None] * t[None, :]
+                ys = lp[k, 1] + s[:, None] * t[None, :]
+                ix = np.floor((xs[use] - origin[0]) / resolution_m).astype(np.intp)
+                iy = np.floor((ys[use] - origin[1]) / resolution_m).astype(np.intp)
+                # Count each cell at most once per beam.
+                beam = np.broadcast_to(np.arange(len(r))[:, None], use.shape)[use]
+                key = np.unique(beam.astype(np.int64) * (h * w) + iy * w + ix)
+                passes += np.bincount(key % (h * w), minlength=h * w)
+            if hit.any():
+                ex = lp[k, 0] + c[hit] * r[hit]
+                ey = lp[k, 1] + s[hit] * r[hit]
+                ix = np.floor((ex - origin[0]) / resolution_m).astype(np.intp)
+                iy = np.floor((ey - origin[1]) / resolution_m).astype(np.intp)
+                hits += np.bincount(iy * w + ix, minlength=h * w)
+        logodds = l_hit * hits + l_pass * passes
+        grid = np.full(h * w, UNKNOWN, dtype=np.int8)
+        seen = (hits + passes) > 0
+        grid[seen & (logodds < 0)] = FREE
+        grid[seen & (logodds >= 0) & (hits > 0)] = OCCUPIED
+        grid[seen & (logodds >= 0) & (hits == 0)] = FREE
+        return cls(grid.reshape(h, w), origin, resolution_m, max_dist_m)

@@ -1,0 +1,257 @@
+"""Static SLAM of the first run: scan-matching front end, loop closure, pose-graph back end.
+
+Biber & Duckett §4: "an initial map is built from the first run ... by a classical static
+SLAM algorithm ... based on scan matching". This is that algorithm:
+
+* **front end** (online, :meth:`FirstRunMapper.update`): each scan is matched by
+  point-to-line ICP (:mod:`.scan_matcher`) against a local map made of the last keyframes,
+  seeded by odometry, with an odometry prior (B&D eq. 9) that grows with the motion; a new
+  keyframe is taken every ``keyframe_dist_m`` / ``keyframe_angle_rad``;
+* **loop closure** (:meth:`FirstRunMapper.finish`): keyframes near each other in the current
+  estimate but far apart in sequence are matched by ICP; a match is accepted only if it
+  converges with a small residual and a high inlier fraction;
+* **back end**: the keyframe pose graph (sequential + loop edges) is optimized by
+  :func:`.pose_graph.optimize_pose_graph`, anchored at the first keyframe so that the map
+  frame is the frame of the initial pose the prior grants;
+* the optimized keyframe scans are rendered into a 5 cm
+  :class:`~dynmap_sim.agent.grid.OccupancyGrid`, and every scan's pose is re-attached
+  rigidly to its reference keyframe.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from dynmap_sim import se2
+from dynmap_sim.agent.grid import OccupancyGrid
+from dynmap_sim.agent.mapping.pose_graph import Edge, optimize_pose_graph
+from dynmap_sim.agent.mapping.scan_matcher import PointMap, match_scan
+from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Scan
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Keyframe:
+    """A keyframe: robot pose ``(3,)`` in the map frame and its raw scan (REP-117 ranges)."""
+
+    pose: FloatArray
+    ranges_m: NDArray[np.float32]
+    scan_index: int = 0
+
+
+@dataclass
+class StaticMap:
+    """The first run's map: every scan's pose, the grid, and the keyframes (optimized)."""
+
+    trajectory: FloatArray
+    grid: OccupancyGrid
+    keyframes: list[Keyframe]
+    stamps_s: FloatArray = field(default_factory=lambda: np.zeros(0))
+    n_loop_closures: int = 0
+
+
+def scan_points_base(laser: LaserSpec, ranges_m: ArrayLike) -> FloatArray:
+    """Valid readings of a scan as points ``(N, 2)`` in the robot (``base_link``) frame."""
+    r = np.asarray(ranges_m, dtype=np.float64)
+    ok = np.isfinite(r) & (r >= laser.range_min_m) & (r < laser.range_max_m)
+    pts = se2.scan_to_points(np.where(ok, r, np.nan), laser.angles())
+    return se2.transform_points(np.asarray(laser.mount_pose, dtype=np.float64), pts)
+
+
+def voxel_downsample(points: FloatArray, voxel_m: float) -> FloatArray:
+    """One point (the first) per ``voxel_m`` square cell."""
+    if len(points) == 0:
+        return points
+    key = np.floor(points / voxel_m).astype(np.int64)
+    _, idx = np.unique(key[:, 0] * 1_000_003 + key[:, 1], return_index=True)
+    return points[np.sort(idx)]
+
+
+class FirstRunMapper:
+    """Online scan-matching front end with keyframes; :meth:`finish` closes loops and maps."""
+
+    def __init__(
+        self,
+        laser: LaserSpec,
+        initial_pose: ArrayLike,
+        keyframe_dist_m: float = 0.3,
+        keyframe_angle_rad: float = 0.3,
+        local_map_keyframes: int = 12,
+        voxel_m: float = 0.03,
+        max_correspondence_m: float = 0.3,
+        loop_radius_m: float = 2.0,
+        loop_min_gap: int = 15,
+        resolution_m: float = 0.05,
+    ) -> None:
+        self.laser = laser
+        self.initial_pose = np.asarray(initial_pose, dtype=np.float64).reshape(3).copy()
+        self.keyframe_dist_m = float(keyframe_dist_m)
+        self.keyframe_angle_rad = float(keyframe_angle_rad)
+        self.local_map_keyframes = int(local_map_keyframes)
+        self.voxel_m = float(voxel_m)
+        self.max_correspondence_m = float(max_correspondence_m)
+        self.loop_radius_m = float(loop_radius_m)
+        self.loop_min_gap = int(loop_min_gap)
+        self.resolution_m = float(resolution_m)
+        self.pose = self.initial_pose.copy()
+        self.cov = np.diag([1e-6, 1e-6, 1e-6])
+        self._last_odom: FloatArray | None = None
+        self.keyframes: list[Keyframe] = []
+        self._kf_points: list[FloatArray] = []  # base-frame points per keyframe
+        self._seq_cov: list[FloatArray] = []  # front-end covariance at each keyframe
+        self._ref: list[tuple[int, FloatArray]] = []  # per scan: (keyframe, pose in it)
+        self._stamps: list[float] = []
+        self._local: PointMap | None = None
+        self.n_scans = 0
+        self.n_rejected = 0
+
+    # -- front end -----------------------------------------------------------------------
+    def _add_keyframe(self, ranges: NDArray[np.float32], pts: FloatArray) -> None:
+        self.keyframes.append(
+            Keyframe(self.pose.copy(), np.asarray(ranges, np.float32).copy(), self.n_scans)
+        )
+        self._kf_points.append(voxel_downsample(pts, self.voxel_m))
+        self._seq_cov.append(self.cov.copy())
+        self._rebuild_local_map()
+
+    def _rebuild_local_map(self) -> None:
+        sel = range(max(0, len(self.keyframes) - self.local_map_keyframes), len(self.keyframes))
+        pts = np.concatenate(
+            [se2.transform_points(self.keyframes[k].pose, self._kf_points[k]) for k in sel]
+        )
+        pts = voxel_downsample(pts, self.voxel_m)
+        self._local = PointMap(pts) if len(pts) >= 3 else None
+
+    def update(self, odom: Odometry, scan: Scan) -> PoseEstimate:
+        """Fuse one odometry reading and scan; return the front end's pose estimate."""
+        opose = np.asarray(odom.pose, dtype=np.float64)
+        ranges = np.asarray(scan.ranges_m, dtype=np.float32)
+        pts = scan_points_base(self.laser, ranges)
+        if self._last_odom is None:
+            self._last_odom = opose.copy()
+            self._add_keyframe(ranges, pts)
+        else:
+            delta = se2.between(self._last_odom, opose)
+            self._last_odom = opose.copy()
+            pred = se2.compose(self.pose, delta)
+            d = float(np.hypot(delta[0], delta[1]))
+            a = abs(float(delta[2]))
+            sig_xy = 0.02 + 0.2 * d + 0.02 * a
+            sig_th = 0.01 + 0.1 * a + 0.1 * d
+            q = np.diag([sig_xy**2, sig_xy**2, sig_th**2])
+            accepted = False
+            if self._local is not None and len(pts) >= 20:
+                res = match_scan(
+                    pts[:: max(1, len(pts) // 400)],
+                    self._local,
+                    pred,
+                    prior_mean=pred,
+                    prior_info=np.linalg.inv(q),
+                    max_correspondence_m=self.max_correspondence_m,
+                    max_iterations=20,
+                )
+                n_used = len(pts[:: max(1, len(pts) // 400)])
+                if res.n_matched >= max(15, 0.3 * n_used) and res.rmse_m < 0.08:
+                    self.pose = res.pose
+                    self.cov = res.cov
+                    accepted = True
+            if not accepted:
+                self.n_rejected += 1
+                self.pose = pred
+                self.cov = self.cov + q
+            kf = self.keyframes[-1].pose
+            rel = se2.between(kf, self.pose)
+            if np.hypot(rel[0], rel[1]) > self.keyframe_dist_m or abs(rel[2]) > (
+                self.keyframe_angle_rad
+            ):
+                self._add_keyframe(ranges, pts)
+        kf_idx = len(self.keyframes) - 1
+        self._ref.append((kf_idx, se2.between(self.keyframes[kf_idx].pose, self.pose)))
+        self._stamps.append(float(scan.stamp_s))
+        self.n_scans += 1
+        return PoseEstimate(mean=self.pose.copy(), cov=self.cov.copy())
+
+    # -- back end ------------------------------------------------------------------------
+    def _sequential_edges(self, poses: FloatArray) -> list[Edge]:
+        edges = []
+        for k in range(len(poses) - 1):
+            z = se2.between(poses[k], poses[k + 1])
+            d = float(np.hypot(z[0], z[1]))
+            sxy = 0.01 + 0.03 * d
+            sth = 0.005 + 0.02 * d + 0.02 * abs(float(z[2]))
+            edges.append(Edge(k, k + 1, z, np.diag([1 / sxy**2, 1 / sxy**2, 1 / sth**2])))
+        return edges
+
+    def _loop_edges(self, poses: FloatArray) -> list[Edge]:
+        edges: list[Edge] = []
+        k_all = len(poses)
+        info = np.diag([1 / 0.03**2, 1 / 0.03**2, 1 / 0.01**2])
+        last_i = -(10**9)
+        for i in range(k_all):
+            if i - last_i < 3:  # at most one closure per few keyframes
+                continue
+            cand = np.arange(0, i - self.loop_min_gap)
+            if len(cand) == 0:
+                continue
+            dist = np.hypot(*(poses[cand, :2] - poses[i, :2]).T)
+            dth = np.abs(se2.wrap_angle(poses[cand, 2] - poses[i, 2]))
+            ok = (dist < self.loop_radius_m) & (dth < 1.2)
+            if not ok.any():
+                continue
+            j = int(cand[ok][np.argmin(dist[ok])])
+            sub = range(max(0, j - 2), min(k_all, j + 3))
+            tgt = voxel_downsample(
+                np.concatenate([se2.transform_points(poses[m], self._kf_points[m]) for m in sub]),
+                self.voxel_m,
+            )
+            src = self._kf_points[i]
+            if len(tgt) < 20 or len(src) < 20:
+                continue
+            target = PointMap(tgt)
+            res = match_scan(src, target, poses[i], max_correspondence_m=0.5, max_iterations=40)
+            if res.converged:  # refine with tight gating
+                res = match_scan(src, target, res.pose, max_correspondence_m=0.15)
+            moved = float(np.hypot(*(res.pose[:2] - poses[i, :2])))
+            if (
+                res.converged
+                and res.n_matched >= 0.6 * len(src)
+                and res.rmse_m < 0.03
+                and moved < 1.0
+                and np.all(np.sqrt(np.diag(res.cov)[:2]) < 0.05)
+            ):
+                edges.append(Edge(j, i, se2.between(poses[j], res.pose), info))
+                last_i = i
+        return edges
+
+    def finish(self) -> StaticMap:
+        """Close loops, optimize the pose graph, render the grid; return the static map."""
+        if not self.keyframes:
+            raise ValueError("FirstRunMapper.finish() before any update()")
+        poses = np.array([k.pose for k in self.keyframes])
+        seq = self._sequential_edges(poses)
+        n_loops = 0
+        for _ in range(2):
+            loops = self._loop_edges(poses)
+            n_loops = len(loops)
+            if not loops:
+                break
+            poses = optimize_pose_graph(poses, seq + loops, anchor=0)
+        kfs = [Keyframe(poses[m], k.ranges_m, k.scan_index) for m, k in enumerate(self.keyframes)]
+        traj = np.array([se2.compose(poses[k], rel) for k, rel in self._ref])
+        grid = OccupancyGrid.from_scans(
+            poses,
+            np.array([k.ranges_m for k in self.keyframes]),
+            self.laser,
+            resolution_m=self.resolution_m,
+        )
+        return StaticMap(
+            trajectory=traj,
+            grid=grid,
+            keyframes=kfs,
+            stamps_s=np.array(self._stamps),
+            n_loop_closures=n_loops,
+        )

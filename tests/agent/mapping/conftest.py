@@ -1,0 +1,110 @@
+"""Synthetic worlds for the mapping tests: a few wall segments and an exact ray caster."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dynmap_sim.types import LaserSpec
+
+
+def raycast(pose: np.ndarray, angles: np.ndarray, segs: np.ndarray, max_range: float) -> np.ndarray:
+    """Exact ranges from ``pose`` along ``angles`` (robot frame) to the segments (+inf: none)."""
+    th = pose[2] + angles
+    d = np.stack([np.cos(th), np.sin(th)], axis=1)  # (B, 2)
+    p0 = segs[:, :2]
+    e = segs[:, 2:] - p0  # (S, 2)
+    w = p0 - pose[:2]  # (S, 2)
+    den = d[:, None, 0] * e[None, :, 1] - d[:, None, 1] * e[None, :, 0]  # (B, S)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (w[None, :, 0] * e[None, :, 1] - w[None, :, 1] * e[None, :, 0]) / den
+        u = (w[None, :, 0] * d[:, None, 1] - w[None, :, 1] * d[:, None, 0]) / den
+    hit = (np.abs(den) > 1e-12) & (t > 0) & (u >= 0) & (u <= 1)
+    t = np.where(hit, t, np.inf)
+    r = t.min(axis=1)
+    r[r > max_range] = np.inf
+    return r
+
+
+def room_segments() -> np.ndarray:
+    """An L-shaped 8 m x 6 m room with a pillar and a cupboard (rich geometry)."""
+    pts = np.array([[0, 0], [8, 0], [8, 3], [5, 3], [5, 6], [0, 6]], float)
+    walls = np.concatenate([pts, np.roll(pts, -1, axis=0)], axis=1)
+    pillar = np.array([[2, 2], [2.4, 2], [2.4, 2.4], [2, 2.4]], float)
+    pil = np.concatenate([pillar, np.roll(pillar, -1, axis=0)], axis=1)
+    cup = np.array([[6.5, 0.0, 6.5, 0.6], [6.5, 0.6, 7.3, 0.6], [7.3, 0.6, 7.3, 0.0]])
+    box = np.array([[1.0, 4.5, 1.8, 4.5], [1.8, 4.5, 1.8, 5.0], [1.8, 5.0, 1.0, 5.0]])
+    return np.concatenate([walls, pil, cup, box])
+
+
+@pytest.fixture
+def laser() -> LaserSpec:
+    """A URG-04LX-like scanner with fewer beams (240 degrees, 5.6 m)."""
+    n = 241
+    return LaserSpec(
+        name="test-urg",
+        n_beams=n,
+        angle_min_rad=-2.0862,
+        angle_increment_rad=(2.0923 + 2.0862) / (n - 1),
+        range_min_m=0.02,
+        range_max_m=5.6,
+        scan_period_s=0.1,
+        time_increment_s=0.0,
+    )
+
+
+@pytest.fixture
+def segments() -> np.ndarray:
+    return room_segments()
+
+
+@pytest.fixture
+def cast():
+    """The exact ray caster :func:`raycast` as a fixture."""
+    return raycast
+
+
+def loop_path(step_m: float = 0.05, turn_rad: float = 0.1, laps: int = 2) -> np.ndarray:
+    """True poses ``(T, 3)`` along a rectangle around the pillar, turning in place at corners."""
+    corners = np.array([[1.0, 1.0], [4.0, 1.0], [4.0, 3.8], [1.0, 3.8]])
+    poses = []
+    th = 0.0
+    for _ in range(laps):
+        for c in range(4):
+            a, b = corners[c], corners[(c + 1) % 4]
+            heading = np.arctan2(b[1] - a[1], b[0] - a[0])
+            dth = (heading - th + np.pi) % (2 * np.pi) - np.pi
+            for k in range(int(np.ceil(abs(dth) / turn_rad))):
+                th += np.sign(dth) * min(turn_rad, abs(dth) - k * turn_rad)
+                poses.append([a[0], a[1], th])
+            th = heading
+            n = int(np.hypot(*(b - a)) / step_m)
+            for k in range(n):
+                p = a + (b - a) * (k + 1) / n
+                poses.append([p[0], p[1], th])
+    return np.array(poses)
+
+
+def drifting_odometry(truth: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """Odometry poses ``(T, 3)`` with systematic scale/heading drift and noise (odom frame)."""
+    from dynmap_sim import se2
+
+    odo = [np.zeros(3)]
+    for k in range(1, len(truth)):
+        d = se2.between(truth[k - 1], truth[k])
+        dist = np.hypot(d[0], d[1])
+        dn = d * np.array([1.02, 1.02, 1.03])
+        dn[2] += 0.03 * dist + rng.normal(0, 0.002)
+        dn[:2] += rng.normal(0, 0.002, 2)
+        odo.append(se2.compose(odo[-1], dn))
+    return np.array(odo)
+
+
+@pytest.fixture
+def path_fn():
+    return loop_path
+
+
+@pytest.fixture
+def odo_fn():
+    return drifting_odometry
