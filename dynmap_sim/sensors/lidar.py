@@ -1,0 +1,293 @@
+"""Simulated 2-D laser scanners: Hokuyo URG-04LX and SICK LMS200 (DESIGN.md §4).
+
+A :class:`Lidar` casts every beam of a scan exactly against the world's geometry
+(:mod:`dynmap_sim.sensors.raycast`) and then applies a seeded noise model. The presets follow
+the datasheets and every figure can be overridden (:func:`make_lidar`).
+
+Noise model (all random draws come from the ``numpy.random.Generator`` passed to
+:meth:`Lidar.scan`; nothing is global). For a beam whose true range is ``r`` (the distance to
+the first surface it hits):
+
+1. **Range noise** — Gaussian, ``sigma(r) = max(sigma_m, sigma_rel * r)``. The URG-04LX
+   datasheet gives "±10 mm up to 1 m, 1 % of the range beyond": the preset takes these bounds
+   as one standard deviation (``sigma_m = 0.01``, ``sigma_rel = 0.01``). The LMS200 (mm mode)
+   has ``sigma_m = 0.005`` and a *systematic* error of up to ±15 mm: a fixed per-beam bias,
+   uniform in ``±systematic_m``, drawn once when the sensor is built (``bias_seed``), i.e. a
+   property of the physical unit that stays the same across runs.
+2. **Mixed pixels** — where two neighbouring beams' true ranges differ by more than
+   ``mixed_jump_m`` the spot straddles an edge; with probability ``p_mixed`` such a beam reads
+   a range uniformly between the two surfaces.
+3. **Spurious short returns** — with probability ``p_short`` a beam reads a range uniform in
+   ``[range_min, r]`` (dust, a passing hand; the "short" term of the beam model).
+4. **Max-range dropouts** — with probability ``p_dropout`` a beam that hit something returns
+   nothing (``+inf``), e.g. black or specular surfaces.
+5. **Invalid readings** — with probability ``p_invalid`` a beam reads ``NaN``. This is **0 by
+   default** (Gymnasium's ``Box.contains`` rejects NaN, so ``check_env`` would fail).
+
+Readings follow REP-117: ``+inf`` no return within ``range_max``, ``-inf`` a return closer than
+``range_min``, ``NaN`` invalid. The truth labels (:class:`LidarReading` ``beam_object``,
+``beam_class``) describe what each beam geometrically hits, before noise.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+from typing import Any, Protocol
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dynmap_sim.se2 import compose
+from dynmap_sim.sensors.raycast import SegmentCache, cast_scan, scan_bearings
+from dynmap_sim.types import LaserSpec
+
+FloatArray = NDArray[np.float64]
+
+
+class GeometryLike(Protocol):
+    """What the lidar reads from the world (``dynmap_sim.world.geometry.GeometryView``)."""
+
+    segments: FloatArray
+    segment_object: NDArray[np.int32]
+    segment_class: NDArray[np.int8]
+    circles: FloatArray
+    circle_object: NDArray[np.int32]
+    circle_class: NDArray[np.int8]
+    static_version: int
+
+
+@dataclass(frozen=True)
+class LidarNoise:
+    """Parameters of the noise model (see the module docstring); probabilities per beam."""
+
+    sigma_m: float = 0.01
+    sigma_rel: float = 0.01
+    systematic_m: float = 0.0
+    p_dropout: float = 0.002
+    p_short: float = 0.001
+    p_mixed: float = 0.5
+    mixed_jump_m: float = 0.15
+    p_invalid: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("sigma_m", "sigma_rel", "systematic_m", "mixed_jump_m"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0.0):
+                raise ValueError(f"LidarNoise.{name} must be finite and >= 0, got {v!r}")
+        for name in ("p_dropout", "p_short", "p_mixed", "p_invalid"):
+            v = getattr(self, name)
+            if not (0.0 <= v <= 1.0):
+                raise ValueError(f"LidarNoise.{name} must be a probability in [0, 1], got {v!r}")
+
+
+#: Noise-free model (for exact-geometry tests and ground-truth scans).
+NOISELESS = LidarNoise(0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.15, 0.0)
+
+_URG_STEP = 2.0 * math.pi / 1024.0
+
+
+def _urg04lx(**over: Any) -> tuple[LaserSpec, LidarNoise]:
+    spec = LaserSpec(
+        name="urg-04lx",
+        n_beams=683,
+        # Datasheet: -2.0862 .. +2.0923 rad in steps of 360/1024 deg, 683 readings. Those three
+        # figures disagree by one step (681 steps span 4.1785 rad); we keep 683 beams from
+        # -2.0862 rad, so the last beam points at +2.0985 rad.
+        angle_min_rad=-2.0862,
+        angle_increment_rad=_URG_STEP,
+        range_min_m=0.02,
+        range_max_m=5.6,
+        scan_period_s=0.1,
+        time_increment_s=0.1 / 1024.0,
+    )
+    return spec, LidarNoise(sigma_m=0.01, sigma_rel=0.01)
+
+
+def _lms200(beams: int = 361, mode: str = "mm", **over: Any) -> tuple[LaserSpec, LidarNoise]:
+    if beams not in (181, 361):
+        raise ValueError(f"lms200: beams must be 181 or 361, got {beams!r}")
+    if mode not in ("mm", "cm"):
+        raise ValueError(f"lms200: mode must be 'mm' (8.19 m) or 'cm' (81.9 m), got {mode!r}")
+    inc = math.pi / (beams - 1)
+    # The mirror turns at 75 Hz (13.3 ms); 0.5 deg scans interleave two turns (26.7 ms), and
+    # the serial link limits delivery: 361 x 2 bytes at 38.4 kbaud is about 0.2 s per scan.
+    spec = LaserSpec(
+        name="lms200",
+        n_beams=beams,
+        angle_min_rad=-math.pi / 2.0,
+        angle_increment_rad=inc,
+        range_min_m=0.0 if mode == "mm" else 0.0,
+        range_max_m=8.19 if mode == "mm" else 81.9,
+        scan_period_s=0.2,
+        time_increment_s=(1.0 / 75.0) / 360.0 * (2.0 if beams == 361 else 1.0) / 2.0,
+    )
+    noise = (
+        LidarNoise(sigma_m=0.005, sigma_rel=0.0, systematic_m=0.015)
+        if mode == "mm"
+        else LidarNoise(sigma_m=0.05, sigma_rel=0.0, systematic_m=0.04)
+    )
+    return spec, noise
+
+
+PRESETS = ("urg-04lx", "lms200")
+
+
+def make_lidar(
+    sensor: str = "urg-04lx",
+    *,
+    mount_pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    noise: LidarNoise | dict[str, float] | None = None,
+    bias_seed: int = 0,
+    **overrides: Any,
+) -> Lidar:
+    """A :class:`Lidar` from a preset name, with overrides.
+
+    ``sensor`` is ``"urg-04lx"`` or ``"lms200"``. For the LMS200, ``beams`` (181 or 361) and
+    ``mode`` (``"mm"``: 8.19 m, ``"cm"``: 81.9 m) select the variant. Any
+    :class:`~dynmap_sim.types.LaserSpec` field (``n_beams``, ``range_max_m``, ...) may be
+    overridden by keyword; ``noise`` is a :class:`LidarNoise` or a dict of fields to change in
+    the preset's noise model.
+    """
+    variant = {k: overrides.pop(k) for k in ("beams", "mode") if k in overrides}
+    if sensor == "urg-04lx":
+        if variant:
+            raise ValueError(f"urg-04lx has no variants {sorted(variant)}")
+        spec, preset_noise = _urg04lx()
+    elif sensor == "lms200":
+        spec, preset_noise = _lms200(**variant)
+    else:
+        raise ValueError(f"unknown laser scanner {sensor!r}; choose one of {PRESETS}")
+    fields = set(LaserSpec.__dataclass_fields__)
+    bad = sorted(set(overrides) - fields)
+    if bad:
+        raise ValueError(f"unknown laser parameter(s) {bad}; valid: {sorted(fields)}")
+    spec = replace(spec, mount_pose=tuple(float(v) for v in mount_pose), **overrides)
+    if isinstance(noise, dict):
+        noise = replace(preset_noise, **noise)
+    return Lidar(spec, noise if noise is not None else preset_noise, bias_seed=bias_seed)
+
+
+@dataclass
+class LidarReading:
+    """One scan: REP-117 ``ranges_m`` (float32) plus ground truth per beam.
+
+    ``true_range_m`` is the noise-free distance (``+inf`` for no hit); ``beam_object`` indexes
+    ``GeometryView.object_ids`` (``-1``: nothing hit); ``beam_class`` is a
+    :class:`~dynmap_sim.types.BeamClass` value (``0``: nothing hit).
+    """
+
+    ranges_m: NDArray[np.float32]
+    true_range_m: FloatArray
+    beam_object: NDArray[np.int32]
+    beam_class: NDArray[np.int8]
+
+
+class Lidar:
+    """A laser scanner mounted on the robot at ``spec.mount_pose`` (``base_link`` frame)."""
+
+    def __init__(self, spec: LaserSpec, noise: LidarNoise, bias_seed: int = 0) -> None:
+        if spec.n_beams < 2:
+            raise ValueError(f"a laser scanner needs at least 2 beams, got {spec.n_beams}")
+        if not (0.0 <= spec.range_min_m < spec.range_max_m and math.isfinite(spec.range_max_m)):
+            raise ValueError(
+                f"need 0 <= range_min_m < range_max_m < inf, got "
+                f"{spec.range_min_m}, {spec.range_max_m}"
+            )
+        if not spec.angle_increment_rad > 0.0:
+            raise ValueError("angle_increment_rad must be > 0")
+        self.spec = spec
+        self.noise = noise
+        brng = np.random.default_rng(np.random.SeedSequence([bias_seed, 117]))
+        self._bias_m = brng.uniform(-1.0, 1.0, spec.n_beams) * noise.systematic_m
+        self._cache_key: tuple[int, int, int] | None = None
+        self._cache: SegmentCache | None = None
+        self._labels: tuple[NDArray[np.int32], NDArray[np.int8]] | None = None
+
+    def _segments(self, geom: GeometryLike) -> SegmentCache:
+        key = (int(geom.static_version), id(geom.segments), int(geom.segments.shape[0]))
+        if key != self._cache_key or self._cache is None:
+            self._cache = SegmentCache.build(geom.segments)
+            self._cache_key = key
+        return self._cache
+
+    def laser_pose(self, robot_pose: FloatArray) -> FloatArray:
+        """The laser's pose in the map frame for a robot (``base_link``) pose."""
+        return compose(np.asarray(robot_pose, dtype=np.float64), self.spec.mount_pose)
+
+    def cast(self, robot_pose: FloatArray, geom: GeometryLike) -> tuple[FloatArray, NDArray]:
+        """Noise-free ranges [m] (``+inf``: no hit) and hit indices (see ``cast_scan``)."""
+        lp = self.laser_pose(robot_pose)
+        spec = self.spec
+        b, cb, sb = scan_bearings(
+            float(lp[2]), spec.angle_min_rad, spec.angle_increment_rad, spec.n_beams
+        )
+        circles = geom.circles if geom.circles.shape[0] else None
+        return cast_scan(
+            (float(lp[0]), float(lp[1])), b, cb, sb, spec.range_max_m, self._segments(geom), circles
+        )
+
+    def scan(
+        self, robot_pose: FloatArray, geom: GeometryLike, rng: np.random.Generator
+    ) -> LidarReading:
+        """One noisy scan from the robot at ``robot_pose`` (map frame) with truth labels."""
+        true_r, hit = self.cast(robot_pose, geom)
+        n_seg = geom.segments.shape[0]
+        obj = np.full(hit.shape[0], -1, dtype=np.int32)
+        cls = np.zeros(hit.shape[0], dtype=np.int8)
+        sh = hit >= 0
+        if sh.any():
+            h = hit[sh]
+            is_seg = h < n_seg
+            hs = np.minimum(h, n_seg - 1) if n_seg else np.zeros_like(h)
+            hc = np.maximum(h - n_seg, 0)
+            obj[sh] = np.where(
+                is_seg,
+                geom.segment_object[hs] if n_seg else -1,
+                geom.circle_object[hc] if geom.circles.shape[0] else -1,
+            )
+            cls[sh] = np.where(
+                is_seg,
+                geom.segment_class[hs] if n_seg else 0,
+                geom.circle_class[hc] if geom.circles.shape[0] else 0,
+            )
+        ranges = self.apply_noise(true_r, rng)
+        return LidarReading(ranges, true_r, obj, cls)
+
+    def apply_noise(
+        self, true_range_m: FloatArray, rng: np.random.Generator
+    ) -> NDArray[np.float32]:
+        """REP-117 readings from noise-free ranges (see the module docstring for the model).
+
+        ``true_range_m`` has shape ``(..., n_beams)`` (a batch of scans is allowed).
+        """
+        nz = self.noise
+        spec = self.spec
+        r = np.asarray(true_range_m, dtype=np.float64)
+        if r.shape[-1] != spec.n_beams:
+            raise ValueError(f"expected (..., {spec.n_beams}) ranges, got shape {r.shape}")
+        hit = np.isfinite(r)
+        gauss = rng.standard_normal(r.shape)
+        u = rng.random((6, *r.shape))
+        sigma = np.maximum(nz.sigma_m, nz.sigma_rel * np.where(hit, r, 0.0))
+        out = np.where(hit, r + self._bias_m + sigma * gauss, np.inf)
+        if nz.p_mixed > 0.0:
+            nxt = np.concatenate([r[..., 1:], r[..., -1:]], axis=-1)
+            prv = np.concatenate([r[..., :1], r[..., :-1]], axis=-1)
+            with np.errstate(invalid="ignore"):
+                jn = np.abs(nxt - r)
+                jp = np.abs(prv - r)
+                other = np.where(np.isfinite(jn) & (jn >= np.nan_to_num(jp, nan=-1.0)), nxt, prv)
+                jump = np.abs(other - r)
+            mixed = hit & np.isfinite(other) & (jump > nz.mixed_jump_m) & (u[0] < nz.p_mixed)
+            out = np.where(mixed, r + u[1] * (other - r), out)
+        if nz.p_short > 0.0:
+            short = hit & (u[2] < nz.p_short)
+            out = np.where(short, spec.range_min_m + u[5] * (r - spec.range_min_m), out)
+        out = np.where(out < spec.range_min_m, -np.inf, out)
+        out = np.where(out > spec.range_max_m, np.inf, out)
+        if nz.p_dropout > 0.0:
+            out = np.where(hit & (u[3] < nz.p_dropout), np.inf, out)
+        if nz.p_invalid > 0.0:
+            out = np.where(u[4] < nz.p_invalid, np.nan, out)
+        return out.astype(np.float32)
