@@ -1,0 +1,135 @@
+"""The tour driver on synthetic geometry, with a unicycle standing in for the robot."""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from dynmap_sim.experiments.drivers import TourDriver, TourParams, clip_route
+from dynmap_sim.experiments.drivers.grid_planner import GridPlanner, build_clearance_grid
+from dynmap_sim.types import BeamClass
+
+
+def box(x0, y0, x1, y1):
+    return np.array(
+        [[x0, y0, x1, y0], [x1, y0, x1, y1], [x1, y1, x0, y1], [x0, y1, x0, y0]], dtype=float
+    )
+
+
+def room(extra=()):
+    """A 10 m x 4 m room with optional obstacle boxes."""
+    segs = [box(0, 0, 10, 4)] + [box(*b) for b in extra]
+    seg = np.concatenate(segs)
+    cls = np.full(len(seg), BeamClass.WALL, dtype=np.int8)
+    cls[4:] = BeamClass.FURNITURE
+    return SimpleNamespace(
+        segments=seg,
+        segment_class=cls,
+        circles=np.zeros((0, 3)),
+        circle_class=np.zeros(0, dtype=np.int8),
+    )
+
+
+def seg_point_dist(p, seg):
+    a, b = seg[:, :2], seg[:, 2:]
+    ab = b - a
+    u = np.clip(np.einsum("ij,ij->i", p - a, ab) / np.einsum("ij,ij->i", ab, ab), 0, 1)
+    q = a + u[:, None] * ab
+    return np.hypot(*(p - q).T).min()
+
+
+def drive(driver, geom, start, people=lambda t: np.zeros((0, 3)), dt=0.1, max_steps=3000):
+    pose = np.array(start, dtype=float)
+    driver.begin_run(geom, pose)
+    poses = [pose.copy()]
+    for k in range(max_steps):
+        if driver.done:
+            break
+        v, w = driver.act(pose, people(k * dt), k * dt)
+        pose = pose + dt * np.array([v * np.cos(pose[2]), v * np.sin(pose[2]), w])
+        poses.append(pose.copy())
+    return np.array(poses)
+
+
+def test_clip_route():
+    r = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0]])
+    np.testing.assert_allclose(clip_route(r, 0.75), [[0, 0], [2, 0], [2, 1]])
+    np.testing.assert_allclose(clip_route(r, 0.25), [[0, 0], [1, 0]])
+    assert clip_route(r, 1.0) is r or np.array_equal(clip_route(r, 1.0), r)
+
+
+def test_straight_route_is_followed_closely():
+    geom = room()
+    route = np.array([[1.0, 2.0], [9.0, 2.0]])
+    d = TourDriver(route)
+    poses = drive(d, geom, (1.0, 2.0, 0.0))
+    assert d.done
+    assert np.hypot(*(poses[-1, :2] - route[-1])) < 0.15
+    assert np.abs(poses[:, 1] - 2.0).max() < 0.05
+    assert d.skipped_waypoints == 0 and not [e for e in d.events if e[2] == "detour"]
+    # cruise speed ~0.35 m/s: 8 m in roughly 23 s
+    assert 20.0 < len(poses) * 0.1 < 35.0
+
+
+def test_detours_around_a_blocking_obstacle_without_touching_it():
+    geom = room(extra=[(4.0, 1.0, 5.0, 3.0)])
+    route = np.array([[1.0, 2.0], [9.0, 2.0]])
+    d = TourDriver(route)
+    poses = drive(d, geom, (1.0, 2.0, 0.0))
+    assert d.done and np.hypot(*(poses[-1, :2] - route[-1])) < 0.15
+    assert any(e[2] == "detour" for e in d.events)
+    clearance = min(seg_point_dist(p[None], geom.segments) for p in poses[:, :2])
+    assert clearance > TourParams().robot_radius_m
+
+
+def test_waypoint_inside_an_obstacle_is_skipped_and_recorded():
+    geom = room(extra=[(4.0, 1.0, 6.0, 3.0)])
+    route = np.array([[1.0, 2.0], [5.0, 2.0], [9.0, 2.0]])
+    d = TourDriver(route)
+    poses = drive(d, geom, (1.0, 2.0, 0.0))
+    assert d.skipped_waypoints == 1
+    assert [e[2] for e in d.events].count("skip_waypoint") == 1
+    assert np.hypot(*(poses[-1, :2] - route[-1])) < 0.15
+
+
+def test_unreachable_waypoint_is_skipped():
+    # a wall across the room cuts it in two
+    geom = room(extra=[(5.0, -0.5, 5.1, 4.5)])
+    route = np.array([[1.0, 2.0], [9.0, 2.0]])
+    d = TourDriver(route)
+    drive(d, geom, (1.0, 2.0, 0.0), max_steps=50)
+    assert d.skipped_waypoints == 1
+    assert "unreachable" in d.events[0][3]
+
+
+def test_waits_for_a_person_in_the_way():
+    geom = room()
+    route = np.array([[1.0, 2.0], [9.0, 2.0]])
+    d = TourDriver(route)
+    # a person stands at x=4 for the first 30 s, then leaves
+    person = lambda t: np.array([[4.0, 2.0, 0.0]]) if t < 30 else np.zeros((0, 3))  # noqa: E731
+    poses = drive(d, geom, (1.0, 2.0, 0.0), people=person)
+    assert any(e[2] == "wait_for_person" for e in d.events)
+    assert np.max(poses[:, 0][:300]) < 4.0 - TourParams().person_stop_m + 0.05
+    assert d.done
+
+
+def test_teleport_replans_to_the_remaining_route():
+    geom = room()
+    route = np.array([[1.0, 1.0], [5.0, 1.0], [9.0, 1.0], [9.0, 3.0]])
+    d = TourDriver(route)
+    d.begin_run(geom, np.array([1.0, 1.0, 0.0]))
+    d.notify_teleport(np.array([2.0, 3.0, 0.0]), 1.0)
+    v = d.path()
+    np.testing.assert_allclose(v[0], [2.0, 3.0], atol=0.05)
+    np.testing.assert_allclose(v[-1], [9.0, 3.0], atol=0.05)
+
+
+def test_planner_nearest_free_and_clearance():
+    geom = room()
+    grid = build_clearance_grid(geom.segments, geom.circles, resolution_m=0.05)
+    assert grid.clearance_at(np.array([5.0, 2.0])) == pytest.approx(2.0, abs=0.05)
+    pl = GridPlanner(grid, 0.25, 0.3)
+    q = pl.nearest_free(np.array([5.0, 0.1]), 0.5)
+    assert q is not None and q[1] == pytest.approx(0.25, abs=0.06)
+    assert pl.nearest_free(np.array([5.0, 0.1]), 0.05) is None
