@@ -1,0 +1,143 @@
+"""The dynamic map: a set of local maps and its online/offline learning (Biber & Duckett §4.4).
+
+* **Short-term memory** (λ1, "always"): after each localization step every local map whose
+  centre is within ``update_radius_m`` (2.5 m) of the robot learns the scan (one §3.1 step);
+  if no local map is that near, a new one is created at the robot's position and initialized
+  (filled) with the scan.
+* **Long-term memory** (λ2 per run, λ3–λ5 per day): the (scan, pose) pairs of the run / day
+  are stored and learned offline, with exactly the same rule: for each local map, all points
+  of the scans taken within ``update_radius_m`` form the measurements ``M`` of one time step.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from dynmap_sim.agent.maps.local_map import TABLE1, LocalMap, Timescale
+
+FloatArray = NDArray[np.float64]
+
+
+class DynamicMap:
+    """Local maps with their centres; learning entry points of §4.4."""
+
+    def __init__(
+        self,
+        timescales: tuple[Timescale, ...] = TABLE1,
+        max_range_m: float = 8.0,
+        update_radius_m: float = 2.5,
+    ) -> None:
+        self.timescales = timescales
+        self.max_range_m = float(max_range_m)
+        self.update_radius_m = float(update_radius_m)
+        self.local_maps: list[LocalMap] = []
+
+    def __len__(self) -> int:
+        return len(self.local_maps)
+
+    @property
+    def centres(self) -> FloatArray:
+        """Centres ``(L, 2)`` of the local maps [m]."""
+        if not self.local_maps:
+            return np.zeros((0, 2))
+        return np.array([lm.centre for lm in self.local_maps])
+
+    def levels(self, interval: str) -> list[int]:
+        """Indices of the timescales updated at ``interval`` ("always", "run", "day")."""
+        return [i for i, ts in enumerate(self.timescales) if ts.interval == interval]
+
+    def near(self, xy: ArrayLike, radius_m: float) -> NDArray[np.int64]:
+        """Indices of local maps with centres within ``radius_m`` of ``xy``, nearest first."""
+        if not self.local_maps:
+            return np.zeros(0, dtype=np.int64)
+        d = np.hypot(*(self.centres - np.asarray(xy, dtype=np.float64)[:2]).T)
+        idx = np.flatnonzero(d < radius_m)
+        return idx[np.argsort(d[idx], kind="stable")]
+
+    def add_local_map(
+        self, centre_xy: ArrayLike, points_map: ArrayLike, rng: np.random.Generator
+    ) -> int:
+        """Create a local map at ``centre_xy`` and fill every sub-map with ``points_map``."""
+        lm = LocalMap(centre_xy, self.timescales, self.max_range_m)
+        polar = lm.polar(points_map)
+        for level in range(len(self.timescales)):
+            lm.learn(level, points_map, rng, fill=True, polar=polar)
+        self.local_maps.append(lm)
+        return len(self.local_maps) - 1
+
+    def learn_online(
+        self,
+        pose: ArrayLike,
+        points_map: ArrayLike,
+        rng: np.random.Generator,
+        *,
+        levels: Sequence[int] | None = None,
+        allow_new: bool = True,
+    ) -> list[int]:
+        """Short-term update after a localization step (§4.4); returns the updated maps.
+
+        A new local map is created at the pose when none is within ``update_radius_m`` (and
+        ``allow_new``); its index is returned then.
+        """
+        lv = self.levels("always") if levels is None else list(levels)
+        idx = self.near(pose, self.update_radius_m)
+        pts = np.asarray(points_map, dtype=np.float64).reshape(-1, 2)
+        if idx.size == 0:
+            if allow_new and len(pts) > 0:
+                return [self.add_local_map(np.asarray(pose)[:2], pts, rng)]
+            return []
+        for i in idx:
+            lm = self.local_maps[int(i)]
+            polar = lm.polar(pts)
+            for level in lv:
+                lm.learn(level, pts, rng, polar=polar)
+        return [int(i) for i in idx]
+
+    def learn_offline(
+        self,
+        levels: Sequence[int],
+        poses: ArrayLike,
+        points_map: Sequence[FloatArray],
+        rng: np.random.Generator,
+    ) -> int:
+        """One long-term step of ``levels`` from stored scans (§4.4); returns maps updated.
+
+        ``poses`` ``(T, 3)`` and ``points_map`` (T arrays of map-frame points) are the run's
+        or the day's (pose, scan) pairs. For each local map, the points of all scans taken
+        within ``update_radius_m`` of its centre are the measurements of one time step.
+        """
+        poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+        if not self.local_maps or len(poses) == 0 or not levels:
+            return 0
+        if len(points_map) != len(poses):
+            raise ValueError("poses and points_map must have the same length")
+        c = self.centres
+        d = np.hypot(poses[:, None, 0] - c[None, :, 0], poses[:, None, 1] - c[None, :, 1])  # (T, L)
+        near = d < self.update_radius_m
+        n_updated = 0
+        for i in np.flatnonzero(near.any(axis=0)):
+            sel = np.flatnonzero(near[:, i])
+            pts = np.concatenate([points_map[k] for k in sel]) if sel.size else np.zeros((0, 2))
+            if len(pts) == 0:
+                continue
+            lm = self.local_maps[int(i)]
+            polar = lm.polar(pts)
+            for level in levels:
+                lm.learn(level, pts, rng, polar=polar)
+            n_updated += 1
+        return n_updated
+
+    # ------------------------------------------------------------------ memory
+    @property
+    def sample_bytes(self) -> int:
+        """Bytes of all samples of all local maps."""
+        return int(sum(lm.sample_bytes for lm in self.local_maps))
+
+    def copy(self) -> DynamicMap:
+        """A deep copy (a frozen snapshot, §5.3)."""
+        out = DynamicMap(self.timescales, self.max_range_m, self.update_radius_m)
+        out.local_maps = [lm.copy() for lm in self.local_maps]
+        return out

@@ -1,0 +1,151 @@
+"""Local maps: 360° polar sample-set sub-maps at several timescales (Biber & Duckett §4.1).
+
+A local map is linked to the global map by the position of its centre (map frame). Each of
+its sub-maps is a 360° "range scan" from that centre: ray ``j`` of a sub-map with ``R`` rays
+points at angle ``j·2π/R`` (map-frame axes) and holds a dynamic sample set (§3.1). A 2-D point
+seen from nearby is projected to the centre: it goes to the closest ray, with the distance
+from the centre as its range (§4.1).
+
+:data:`TABLE1` holds the timescales of Table 1: rays 360/360/720/1440/1440, samples
+5/10/50/100/100, update ratios 0.2 (always) / 0.8 (per run) / 0.8, 0.2, 0.05 (daily) — 329,400
+samples per local map, 658,800 bytes at 2 bytes per sample.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from dynmap_sim.agent.maps.sample_set import SampleSets, mixture_log_likelihood, to_mm
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Timescale:
+    """One row of Table 1: update ratio, when it is updated, rays and samples per ray."""
+
+    name: str
+    update_ratio: float
+    interval: str  # "always" (after each localization step), "run" or "day"
+    n_rays: int
+    n_samples: int
+
+    @property
+    def half_life_steps(self) -> float:
+        """Half-life ``ln 2 / λ`` with ``λ = −ln(1 − u)`` in update intervals (§3.2)."""
+        return float(np.log(2.0) / -np.log(1.0 - self.update_ratio))
+
+
+#: Table 1 of Biber & Duckett: λ1 is the short-term memory, λ2–λ5 the long-term memories.
+TABLE1: tuple[Timescale, ...] = (
+    Timescale("lambda1", 0.2, "always", 360, 5),
+    Timescale("lambda2", 0.8, "run", 360, 10),
+    Timescale("lambda3", 0.8, "day", 720, 50),
+    Timescale("lambda4", 0.2, "day", 1440, 100),
+    Timescale("lambda5", 0.05, "day", 1440, 100),
+)
+
+
+class LocalMap:
+    """A local map at ``centre_xy`` (map frame, metres) with one sub-map per timescale."""
+
+    def __init__(
+        self,
+        centre_xy: ArrayLike,
+        timescales: tuple[Timescale, ...] = TABLE1,
+        max_range_m: float = 8.0,
+    ) -> None:
+        self.centre = np.asarray(centre_xy, dtype=np.float64).reshape(2).copy()
+        self.timescales = timescales
+        self.max_range_m = float(max_range_m)
+        self.sub = [SampleSets(ts.n_rays, ts.n_samples, ts.update_ratio) for ts in timescales]
+
+    # ------------------------------------------------------------------ geometry
+    def polar(self, points_map: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """Bearing [rad, 0..2π) and distance [m] of map-frame points seen from the centre."""
+        p = np.asarray(points_map, dtype=np.float64).reshape(-1, 2) - self.centre
+        ang = np.arctan2(p[:, 1], p[:, 0]) % (2.0 * np.pi)
+        return ang, np.hypot(p[:, 0], p[:, 1])
+
+    @staticmethod
+    def ray_index(bearing_rad: ArrayLike, n_rays: int) -> NDArray[np.int64]:
+        """Closest ray of a sub-map with ``n_rays`` rays (ray ``j`` at ``j·2π/n_rays``)."""
+        b = np.asarray(bearing_rad, dtype=np.float64)
+        return (np.rint(b * (n_rays / (2.0 * np.pi))).astype(np.int64)) % n_rays
+
+    def ray_directions(self, level: int) -> FloatArray:
+        """Unit vectors ``(n_rays, 2)`` of the rays of sub-map ``level``."""
+        n = self.timescales[level].n_rays
+        a = np.arange(n) * (2.0 * np.pi / n)
+        return np.stack([np.cos(a), np.sin(a)], axis=1)
+
+    # ------------------------------------------------------------------ learning
+    def learn(
+        self,
+        level: int,
+        points_map: ArrayLike,
+        rng: np.random.Generator,
+        *,
+        fill: bool = False,
+        polar: tuple[FloatArray, FloatArray] | None = None,
+    ) -> None:
+        """One §3.1 update of sub-map ``level`` with the points (all of one time step).
+
+        Points farther than ``max_range_m`` from the centre are ignored.
+        """
+        ang, dist = self.polar(points_map) if polar is None else polar
+        ok = dist <= self.max_range_m
+        ray = self.ray_index(ang[ok], self.timescales[level].n_rays)
+        self.sub[level].update(ray, to_mm(dist[ok]), rng, fill=fill)
+
+    # ------------------------------------------------------------------ perceptual model
+    def log_likelihood(
+        self,
+        level: int,
+        polar: tuple[FloatArray, FloatArray],
+        *,
+        sigma_min_m: float = 0.0,
+        min_outlier_ratio: float = 0.0,
+    ) -> FloatArray:
+        """Per-reading ``log p(d)`` (eq. 6–8) of readings given in this map's polar frame."""
+        ang, dist = polar
+        ray = self.ray_index(ang, self.timescales[level].n_rays)
+        return mixture_log_likelihood(
+            self.sub[level].estimates(),
+            ray,
+            dist,
+            self.max_range_m,
+            sigma_min_m=sigma_min_m,
+            min_outlier_ratio=min_outlier_ratio,
+        )
+
+    def points(self, level: int, sigma_max_m: float = 0.05) -> FloatArray:
+        """Map-frame points of the medians of sub-map ``level`` with ``σ ≤ sigma_max_m`` (§4.3)."""
+        est = self.sub[level].estimates()
+        ok = (est.count > 0) & (est.sigma_m <= sigma_max_m)
+        return self.centre + est.rho_m[ok, None] * self.ray_directions(level)[ok]
+
+    # ------------------------------------------------------------------ memory
+    @property
+    def n_samples_capacity(self) -> int:
+        """Sample slots of all sub-maps (329,400 for Table 1)."""
+        return int(sum(ts.n_rays * ts.n_samples for ts in self.timescales))
+
+    @property
+    def sample_bytes(self) -> int:
+        """Bytes of the sample storage of all sub-maps (2 per sample)."""
+        return int(sum(s.sample_bytes for s in self.sub))
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of samples plus per-ray counts of all sub-maps."""
+        return int(sum(s.nbytes for s in self.sub))
+
+    def copy(self) -> LocalMap:
+        """A deep copy."""
+        out = LocalMap(self.centre, self.timescales, self.max_range_m)
+        out.sub = [s.copy() for s in self.sub]
+        return out
