@@ -1,0 +1,236 @@
+"""A differential-drive robot body in the world's pymunk space (DESIGN.md §4).
+
+The chain from command to motion is the one a real robot has:
+
+1. the commanded twist ``(v, omega)`` is clipped to the speed limits and rate-limited by the
+   acceleration limits (per control step);
+2. the motor controller turns it into wheel rotation rates with the *nominal* geometry
+   (:func:`~dynmap_sim.sensors.odometry.wheel_rates_for_twist`);
+3. the wheels move the body with the *actual* geometry (UMBmark errors ``E_d``, ``E_b``,
+   :func:`~dynmap_sim.sensors.odometry.body_twist_from_wheels`), reduced by a random
+   **slip** drawn per control step: ``v_body = v_wheels (1 - s_v)``,
+   ``omega_body = omega_wheels (1 - s_w)``, ``s ~ N(slip_mean, slip_sigma)`` clipped to
+   ``[-0.5, 0.5]``;
+4. the body is a circle moved by *swept-circle collision* against the world's pymunk space:
+   each substep casts the disc along its displacement (``Space.segment_query_first`` with the
+   robot's radius, which is exactly the swept disc), stops at the first contact and slides the
+   rest of the way along the obstacle's surface. A person who walks into the robot is handled
+   by a nearest-point query: the robot may only move away from it. The body stays a kinematic
+   pymunk shape in the space, so other queries see it. Substeps are at most
+   ``max_substep_m`` long, and the sweep is continuous anyway, so the robot never tunnels.
+
+Any contact during a step is a **bumper event** (``StepResult.collision``). The wheels keep
+turning against an obstacle, so the encoders (and thus the odometry) run on while the body
+is stopped, as on a real robot that pushes against a wall.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import pymunk
+from numpy.typing import NDArray
+
+from dynmap_sim.sensors.odometry import (
+    WheelGeometry,
+    body_twist_from_wheels,
+    wheel_rates_for_twist,
+)
+
+FloatArray = NDArray[np.float64]
+
+#: pymunk collision type and shape-filter category of the robot.
+COLLISION_ROBOT = 7
+CATEGORY_ROBOT = 0b1000
+#: Gap [m] kept between the robot and an obstacle it stops at.
+_SKIN_M = 1e-4
+
+
+@dataclass(frozen=True)
+class RobotParams:
+    """Body, limits and wheel parameters of the robot (SI units)."""
+
+    radius_m: float = 0.2
+    max_v_mps: float = 1.0
+    max_omega_radps: float = 1.5
+    max_accel_mps2: float = 1.0
+    max_alpha_radps2: float = 3.0
+    wheels: WheelGeometry = field(default_factory=WheelGeometry)
+    slip_mean: float = 0.0
+    slip_sigma: float = 0.01
+    max_substep_m: float = 0.05
+
+    def __post_init__(self) -> None:
+        for name in (
+            "radius_m",
+            "max_v_mps",
+            "max_omega_radps",
+            "max_accel_mps2",
+            "max_alpha_radps2",
+            "max_substep_m",
+        ):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0.0):
+                raise ValueError(f"RobotParams.{name} must be finite and > 0, got {v!r}")
+        if not (math.isfinite(self.slip_sigma) and self.slip_sigma >= 0.0):
+            raise ValueError(f"RobotParams.slip_sigma must be >= 0, got {self.slip_sigma!r}")
+        if not (math.isfinite(self.slip_mean) and abs(self.slip_mean) < 0.5):
+            raise ValueError(f"RobotParams.slip_mean must be in (-0.5, 0.5), got {self.slip_mean}")
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """Outcome of one control step: wheel rotations [rad] and the bumper state."""
+
+    dphi_left_rad: float
+    dphi_right_rad: float
+    collision: bool
+    v_mps: float
+    omega_radps: float
+
+
+class DiffDriveRobot:
+    """The robot's body in a pymunk ``space`` (it queries the space, it never steps it)."""
+
+    def __init__(
+        self,
+        space: pymunk.Space,
+        params: RobotParams | None = None,
+        pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    ) -> None:
+        self.params = params if params is not None else RobotParams()
+        p = self.params
+        self.body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+        self.shape = pymunk.Circle(self.body, p.radius_m)
+        self.shape.collision_type = COLLISION_ROBOT
+        self.shape.filter = pymunk.ShapeFilter(categories=CATEGORY_ROBOT)
+        # our own queries see everything but the robot itself
+        self._filter = pymunk.ShapeFilter(mask=pymunk.ShapeFilter.ALL_MASKS() ^ CATEGORY_ROBOT)
+        self.space: pymunk.Space | None = None
+        self.attach(space)
+        self.set_pose(pose)
+
+    # -- space ----------------------------------------------------------------------------
+    def attach(self, space: pymunk.Space) -> None:
+        """Put the body into ``space`` (leaving the previous one, if any)."""
+        if self.space is space:
+            return
+        if self.space is not None:
+            self.space.remove(self.body, self.shape)
+        self.space = space
+        space.add(self.body, self.shape)
+
+    # -- state ----------------------------------------------------------------------------
+    def set_pose(self, pose: tuple[float, float, float] | FloatArray) -> None:
+        """Place the body at ``pose`` (map frame) at rest."""
+        self._x, self._y, self._th = float(pose[0]), float(pose[1]), float(pose[2])
+        self.body.position = (self._x, self._y)
+        self.body.angle = self._th
+        self._v = 0.0
+        self._w = 0.0
+        if self.space is not None:
+            self.space.reindex_shapes_for_body(self.body)
+
+    @property
+    def pose(self) -> FloatArray:
+        """True pose ``(x_m, y_m, theta_rad)`` in the map frame (a fresh array)."""
+        return np.array([self._x, self._y, math.remainder(self._th, 2.0 * math.pi)])
+
+    @property
+    def twist(self) -> tuple[float, float]:
+        """The current commanded (rate-limited) twist ``(v_mps, omega_radps)``."""
+        return self._v, self._w
+
+    # -- motion ---------------------------------------------------------------------------
+    def limit(self, v_mps: float, omega_radps: float, dt_s: float) -> tuple[float, float]:
+        """Apply speed and acceleration limits to a commanded twist."""
+        p = self.params
+        v = min(max(v_mps, -p.max_v_mps), p.max_v_mps)
+        w = min(max(omega_radps, -p.max_omega_radps), p.max_omega_radps)
+        dv = p.max_accel_mps2 * dt_s
+        dw = p.max_alpha_radps2 * dt_s
+        v = min(max(v, self._v - dv), self._v + dv)
+        w = min(max(w, self._w - dw), self._w + dw)
+        return v, w
+
+    def step(
+        self, v_mps: float, omega_radps: float, dt_s: float, rng: np.random.Generator | None
+    ) -> StepResult:
+        """Drive for ``dt_s`` seconds with a commanded twist (clipped and rate-limited)."""
+        if not (math.isfinite(v_mps) and math.isfinite(omega_radps)):
+            raise ValueError(f"robot command must be finite, got ({v_mps}, {omega_radps})")
+        p = self.params
+        v, w = self.limit(v_mps, omega_radps, dt_s)
+        self._v, self._w = v, w
+        wl, wr = wheel_rates_for_twist(p.wheels, v, w)
+        vb, wb = body_twist_from_wheels(p.wheels, wl, wr)
+        if rng is not None and p.slip_sigma > 0.0:
+            s = rng.normal(p.slip_mean, p.slip_sigma, 2)
+            vb *= 1.0 - min(max(float(s[0]), -0.5), 0.5)
+            wb *= 1.0 - min(max(float(s[1]), -0.5), 0.5)
+        elif p.slip_mean != 0.0:
+            vb *= 1.0 - p.slip_mean
+            wb *= 1.0 - p.slip_mean
+        n_sub = max(1, math.ceil(abs(vb) * dt_s / p.max_substep_m - 1e-9))
+        h = dt_s / n_sub
+        contact = False
+        th = self._th
+        for _ in range(n_sub):
+            a = th + 0.5 * wb * h  # midpoint heading over the substep
+            contact |= self._move(vb * h * math.cos(a), vb * h * math.sin(a))
+            th += wb * h
+        self._th = math.remainder(th, 2.0 * math.pi)
+        body = self.body
+        body.position = (self._x, self._y)
+        body.angle = self._th
+        body.velocity = (vb * math.cos(th), vb * math.sin(th))
+        body.angular_velocity = wb
+        assert self.space is not None
+        self.space.reindex_shapes_for_body(body)
+        return StepResult(wl * dt_s, wr * dt_s, contact, vb, wb)
+
+    def _move(self, dx: float, dy: float) -> bool:
+        """Sweep the disc by ``(dx, dy)`` [m], sliding along obstacles; True on contact."""
+        space = self.space
+        assert space is not None
+        r = self.params.radius_m
+        x, y = self._x, self._y
+        flt = self._filter
+        near = space.point_query_nearest((x, y), r - _SKIN_M, flt)
+        if near is not None:
+            # overlapping (a person stepped into us): only moves away from it are allowed
+            gx, gy = near.gradient
+            if near.distance < 0.0:
+                gx, gy = -gx, -gy
+            into = dx * gx + dy * gy
+            if into < 0.0:
+                dx -= into * gx
+                dy -= into * gy
+            self._x, self._y = x + dx, y + dy
+            return True
+        contact = False
+        for _ in range(3):
+            length = math.hypot(dx, dy)
+            if length < 1e-12:
+                break
+            hit = space.segment_query_first((x, y), (x + dx, y + dy), r, flt)
+            if hit is None:
+                x += dx
+                y += dy
+                break
+            contact = True
+            travel = max(hit.alpha * length - _SKIN_M, 0.0)
+            x += dx * travel / length
+            y += dy * travel / length
+            rest = 1.0 - travel / length
+            dx *= rest
+            dy *= rest
+            nx, ny = hit.normal
+            into = dx * nx + dy * ny
+            if into < 0.0:  # slide: drop the component into the surface
+                dx -= into * nx
+                dy -= into * ny
+        self._x, self._y = x, y
+        return contact
