@@ -1,0 +1,173 @@
+"""Regression checks: run a scenario and test its ``[expectations]`` (DESIGN.md §6).
+
+``dynmap-sim check SCENARIO`` prints the table of :meth:`CheckResult.table` and exits 1 when
+any expectation fails; :func:`dynmap_sim.testing.run_scenario` does the same for pytest.
+"""
+
+from __future__ import annotations
+
+import math
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from dynmap_sim.experiments.results import ResultsDB
+from dynmap_sim.experiments.runner import run_experiment
+from dynmap_sim.experiments.scenario import Scenario, load_scenario
+
+
+@dataclass(frozen=True)
+class CheckRow:
+    """One checked expectation."""
+
+    seed: int
+    subject: str  # a localizer label or "robot"
+    criterion: str
+    limit: float
+    measured: float
+    passed: bool
+    where: str = ""  # e.g. the failing day
+
+
+@dataclass
+class CheckResult:
+    """All checked expectations of one scenario; ``passed`` when every row passed."""
+
+    scenario: str
+    rows: list[CheckRow] = field(default_factory=list)
+    out_dirs: list[Path] = field(default_factory=list)
+
+    @property
+    def passed(self) -> bool:
+        return all(r.passed for r in self.rows)
+
+    def table(self) -> str:
+        """A plain-text pass/fail table."""
+        head = ("seed", "subject", "criterion", "limit", "measured", "where", "result")
+        body = [
+            (
+                str(r.seed),
+                r.subject,
+                r.criterion,
+                f"<= {r.limit:g}",
+                "nan" if math.isnan(r.measured) else f"{r.measured:.4g}",
+                r.where,
+                "PASS" if r.passed else "FAIL",
+            )
+            for r in self.rows
+        ]
+        widths = [max(len(x) for x in col) for col in zip(head, *body, strict=True)]
+        line = "  ".join("{:<" + str(w) + "}" for w in widths)
+        out = [f"scenario {self.scenario}: " + ("PASSED" if self.passed else "FAILED")]
+        out.append(line.format(*head))
+        out.append("  ".join("-" * w for w in widths))
+        out += [line.format(*row) for row in body]
+        if not self.rows:
+            out.append("(no expectations in this scenario)")
+        return "\n".join(out)
+
+
+def _le(measured: float, limit: float) -> bool:
+    return not math.isnan(measured) and measured <= limit
+
+
+def evaluate(scenario: Scenario, out_dir: Path, seed: int) -> list[CheckRow]:
+    """Check a finished experiment in ``out_dir`` against the scenario's expectations."""
+    exp = scenario.expectations
+    rows: list[CheckRow] = []
+    with ResultsDB.open(out_dir) as db:
+        labels = db.labels()
+        if exp.no_collisions:
+            n = db.query("SELECT coalesce(sum(collisions), 0) FROM runs")[0][0]
+            rows.append(CheckRow(seed, "robot", "collisions", 0, float(n), n == 0))
+        if exp.max_skipped_waypoints is not None:
+            n = db.query("SELECT coalesce(sum(skipped_waypoints), 0) FROM runs")[0][0]
+            lim = exp.max_skipped_waypoints
+            rows.append(CheckRow(seed, "robot", "skipped waypoints", lim, float(n), n <= lim))
+        for label, e in exp.localizers.items():
+            k = labels.index(label)
+            days = db.query(
+                "SELECT day, mean_error_m, rmse_m, mean_heading_error_rad FROM day_summaries "
+                "WHERE loc=? ORDER BY day",
+                (k,),
+            )
+
+            def worst(col: int, days=days) -> tuple[float, str]:
+                vals = [(math.nan if r[col] is None else r[col], r[0]) for r in days]
+                if not vals:
+                    return math.nan, ""
+                v, d = max(vals, key=lambda x: math.inf if math.isnan(x[0]) else x[0])
+                return v, f"day {d}"
+
+            if e.mean_error_m is not None:
+                v, w = worst(1)
+                rows.append(
+                    CheckRow(
+                        seed,
+                        label,
+                        "mean error per day [m]",
+                        e.mean_error_m,
+                        v,
+                        _le(v, e.mean_error_m),
+                        w,
+                    )
+                )
+            if e.rmse_m is not None:
+                v, w = worst(2)
+                rows.append(
+                    CheckRow(seed, label, "RMSE per day [m]", e.rmse_m, v, _le(v, e.rmse_m), w)
+                )
+            if e.mean_heading_error_rad is not None:
+                v, w = worst(3)
+                lim = e.mean_heading_error_rad
+                rows.append(
+                    CheckRow(
+                        seed, label, "mean heading error per day [rad]", lim, v, _le(v, lim), w
+                    )
+                )
+            if e.max_error_m is not None:
+                r = db.query(
+                    "SELECT max(err_m), count(*) - count(err_m) FROM estimates WHERE loc=?", (k,)
+                )[0]
+                v = math.inf if r[1] else (math.nan if r[0] is None else float(r[0]))
+                rows.append(
+                    CheckRow(seed, label, "max error [m]", e.max_error_m, v, _le(v, e.max_error_m))
+                )
+            if e.lost_fraction is not None:
+                r = db.query(
+                    "SELECT avg(CASE WHEN err_m <= 0.5 THEN 0.0 ELSE 1.0 END) FROM estimates "
+                    "WHERE loc=?",
+                    (k,),
+                )[0]
+                v = math.nan if r[0] is None else float(r[0])
+                rows.append(
+                    CheckRow(
+                        seed, label, "lost fraction", e.lost_fraction, v, _le(v, e.lost_fraction)
+                    )
+                )
+    return rows
+
+
+def check_scenario(
+    path: str | Path | Scenario, out_dir: str | Path | None = None, progress: bool = True
+) -> CheckResult:
+    """Run a scenario (every seed in its ``seeds``) and check its expectations.
+
+    Results go to ``out_dir`` (``seed-<n>`` subfolders when there are several seeds), or to a
+    temporary folder that is removed afterwards; earlier results there are replaced.
+    """
+    scenario = path if isinstance(path, Scenario) else load_scenario(path)
+    result = CheckResult(scenario.name)
+    tmp = tempfile.TemporaryDirectory(prefix="dynmap-check-") if out_dir is None else None
+    base = Path(tmp.name if tmp is not None else out_dir)  # type: ignore[arg-type]
+    try:
+        for seed in scenario.seeds:
+            out = base if len(scenario.seeds) == 1 else base / f"seed-{seed}"
+            run_experiment(scenario, out_dir=out, seed=seed, progress=progress, overwrite=True)
+            result.rows += evaluate(scenario, out, seed)
+            if tmp is None:
+                result.out_dirs.append(out)
+    finally:
+        if tmp is not None:
+            tmp.cleanup()
+    return result

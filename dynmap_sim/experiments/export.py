@@ -1,0 +1,61 @@
+"""Export trajectories of a results folder in the TUM format (for ``evo``, Sturm et al. 2012).
+
+Each line is ``timestamp tx ty tz qx qy qz qw``. The timestamp is seconds since midnight of the
+experiment's first date, so it increases over the whole experiment (day after day); z is 0
+and the quaternion a rotation about z by the heading.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import re
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from dynmap_sim.experiments.results import ResultsDB
+
+
+def write_tum(path: str | Path, t_s: ArrayLike, poses: ArrayLike) -> Path:
+    """Write planar poses ``(N, 3)`` at times ``t_s`` [s] as a TUM trajectory file."""
+    t = np.asarray(t_s, dtype=np.float64).ravel()
+    p = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+    if len(t) != len(p):
+        raise ValueError(f"{len(t)} timestamps for {len(p)} poses")
+    half = 0.5 * p[:, 2]
+    zeros = np.zeros(len(p))
+    table = np.column_stack([t, p[:, 0], p[:, 1], zeros, zeros, zeros, np.sin(half), np.cos(half)])
+    out = Path(path)
+    np.savetxt(out, table, fmt="%.9f", delimiter=" ")
+    return out
+
+
+def _safe(label: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]+", "_", label)
+
+
+def export_tum(out_dir: str | Path, tum_dir: str | Path) -> list[Path]:
+    """Write ``truth.tum`` and ``<label>.tum`` for each localizer of a results folder."""
+    dst = Path(tum_dir)
+    dst.mkdir(parents=True, exist_ok=True)
+    written: list[Path] = []
+    with ResultsDB.open(out_dir) as db:
+        first = dt.date.fromisoformat(db.meta()["first_date"])
+        for k, label in enumerate(db.labels()):
+            d = db.per_scan(k)
+            dates = {
+                (int(a), int(b)): dt.date.fromisoformat(c)
+                for a, b, c in db.query("SELECT day, run, date FROM runs")
+            }
+            offset = np.array(
+                [
+                    (dates[(a, b)] - first).days * 86400.0
+                    for a, b in zip(d["day"], d["run"], strict=True)
+                ]
+            )
+            stamps = offset + d["t_s"]
+            if k == 0:
+                written.append(write_tum(dst / "truth.tum", stamps, d["truth"]))
+            written.append(write_tum(dst / f"{_safe(label)}.tum", stamps, d["estimate"]))
+    return written

@@ -1,0 +1,349 @@
+"""Reports of a results folder: figures, ``summary.md`` and ``per_day.csv`` (DESIGN.md §6).
+
+Figures mirror the papers: the mean localization error per day for each localizer (H&W §7,
+Fig. 7), the error over time within runs, scan likelihood and certainty (λ_min) over time
+(B&D §5.2, Figs. 10–11) when a localizer reports them, and trajectories over the map.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dynmap_sim.experiments.results import ResultsDB
+from dynmap_sim.metrics import ate, class_scores, lost_stats, rpe
+from dynmap_sim.types import BeamClass
+
+#: Columns of ``per_day.csv``, in order.
+PER_DAY_COLUMNS = (
+    "day",
+    "localizer",
+    "mean_error_m",
+    "max_error_m",
+    "rmse_m",
+    "lost_fraction",
+    "mean_scan_loglik",
+    "mean_lambda_min",
+)
+
+_CLASS_COLORS = {
+    int(BeamClass.WALL): "black",
+    int(BeamClass.FURNITURE): "tab:brown",
+    int(BeamClass.EXHIBIT): "tab:purple",
+    int(BeamClass.DOOR): "tab:olive",
+    int(BeamClass.ROBOT): "tab:gray",
+}
+
+
+def _fmt(v: Any, nd: int = 3) -> str:
+    if v is None:
+        return "nan"
+    if isinstance(v, float):
+        return "nan" if math.isnan(v) else f"{v:.{nd}f}"
+    return str(v)
+
+
+def _f(v: Any) -> float:
+    return math.nan if v is None else float(v)
+
+
+def per_day_rows(db: ResultsDB) -> list[dict[str, Any]]:
+    """Rows of ``per_day.csv`` (day-major, localizers in scenario order)."""
+    labels = db.labels()
+    rows = db.query(
+        "SELECT day, loc, mean_error_m, max_error_m, rmse_m, lost_fraction, "
+        "mean_scan_loglik, mean_lambda_min FROM day_summaries ORDER BY day, loc"
+    )
+    return [
+        {
+            "day": int(r[0]),
+            "localizer": labels[int(r[1])],
+            **{c: _f(v) for c, v in zip(PER_DAY_COLUMNS[2:], r[2:], strict=True)},
+        }
+        for r in rows
+    ]
+
+
+def write_per_day_csv(db: ResultsDB, path: Path) -> Path:
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(PER_DAY_COLUMNS)
+        for row in per_day_rows(db):
+            w.writerow(
+                [row["day"], row["localizer"]] + [_fmt(row[c], 6) for c in PER_DAY_COLUMNS[2:]]
+            )
+    return path
+
+
+def overall_stats(db: ResultsDB) -> list[dict[str, Any]]:
+    """Whole-experiment figures per localizer (ATE, RPE, lost/recovered, collisions)."""
+    out = []
+    for k, label in enumerate(db.labels()):
+        d = db.per_scan(k)
+        err = d["err_m"]
+        # lost episodes never span two runs: evaluate run by run
+        n_ep = n_rec = 0
+        rec_times: list[float] = []
+        rpes: list[float] = []
+        n_rpe = 0
+        for day, run in sorted({(a, b) for a, b in zip(d["day"], d["run"], strict=True)}):
+            m = (d["day"] == day) & (d["run"] == run)
+            ls = lost_stats(err[m], d["t_s"][m])
+            n_ep += ls.n_episodes
+            n_rec += ls.n_recovered
+            if ls.n_recovered:
+                rec_times.append(ls.mean_time_to_recover_s * ls.n_recovered)
+            r = rpe(d["truth"][m], d["estimate"][m], delta=10)
+            if r.translation.n:
+                rpes.append(r.translation.rmse**2 * r.translation.n)
+                n_rpe += r.translation.n
+        a = ate(d["truth"], d["estimate"]) if len(err) else None
+        out.append(
+            {
+                "localizer": label,
+                "n_scans": int(len(err)),
+                "ate_rmse_m": a.rmse if a else math.nan,
+                "mean_error_m": a.mean if a else math.nan,
+                "max_error_m": a.max if a else math.nan,
+                "mean_heading_error_rad": float(np.nanmean(d["err_theta_rad"]))
+                if len(err)
+                else math.nan,
+                "rpe_1s_rmse_m": math.sqrt(sum(rpes) / n_rpe) if n_rpe else math.nan,
+                "lost_fraction": float(np.mean(~(err <= 0.5))) if len(err) else math.nan,
+                "lost_episodes": n_ep,
+                "recovered": n_rec,
+                "mean_time_to_recover_s": sum(rec_times) / n_rec if n_rec else math.nan,
+            }
+        )
+    return out
+
+
+def _summary_md(db: ResultsDB, path: Path, figures: list[Path]) -> Path:
+    meta = db.meta()
+    labels = db.labels()
+    runs = db.query(
+        "SELECT count(*), coalesce(sum(n_steps),0), coalesce(sum(duration_s),0), "
+        "coalesce(sum(collisions),0), coalesce(sum(skipped_waypoints),0), "
+        "coalesce(sum(wall_s),0), coalesce(avg(route_progress),0) FROM runs"
+    )[0]
+    n_runs, n_steps, robot_s, coll, skipped, wall_s, prog = runs
+    lines = [
+        f"# {meta.get('scenario_name', 'experiment')}",
+        "",
+        f"- world: `{meta.get('world')}`; days {meta['days'][0]}-{meta['days'][1]}, "
+        f"seed {meta.get('seed')}; {n_runs} of {len(meta.get('slots', []))} runs done"
+        + ("" if meta.get("complete") else " (incomplete)"),
+        f"- {n_steps} scans, {robot_s / 3600.0:.2f} h of robot time simulated in "
+        f"{wall_s / 60.0:.1f} min of wall time",
+        f"- collisions: {coll}; skipped waypoints: {skipped}; mean route progress "
+        f"{100.0 * prog:.0f} %",
+        "",
+        "## Overall (position error in the map frame, no alignment)",
+        "",
+        "| localizer | ATE RMSE [m] | mean [m] | max [m] | mean heading [rad] | RPE 1 s [m] "
+        "| lost | lost episodes | recovered | mean time to recover [s] |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for s in overall_stats(db):
+        lines.append(
+            f"| {s['localizer']} | {_fmt(s['ate_rmse_m'])} | {_fmt(s['mean_error_m'])} "
+            f"| {_fmt(s['max_error_m'])} | {_fmt(s['mean_heading_error_rad'])} "
+            f"| {_fmt(s['rpe_1s_rmse_m'])} | {100.0 * s['lost_fraction']:.1f} % "
+            f"| {s['lost_episodes']} | {s['recovered']} | {_fmt(s['mean_time_to_recover_s'], 1)} |"
+        )
+    lines += [
+        "",
+        "## Per day",
+        "",
+        "| day | localizer | mean [m] | max [m] | RMSE [m] | lost | mean scan loglik "
+        "| mean λ_min |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in per_day_rows(db):
+        lines.append(
+            f"| {r['day']} | {r['localizer']} | {_fmt(r['mean_error_m'])} "
+            f"| {_fmt(r['max_error_m'])} | {_fmt(r['rmse_m'])} "
+            f"| {100.0 * r['lost_fraction']:.1f} % | {_fmt(r['mean_scan_loglik'])} "
+            f"| {_fmt(r['mean_lambda_min'], 1)} |"
+        )
+    conf = _confusions(db, len(labels))
+    if any(c.sum() for c in conf):
+        lines += [
+            "",
+            "## Point classes (H&W §4.4) against beam labels",
+            "",
+            "| localizer | class | precision | recall | support |",
+            "|---|---|---|---|---|",
+        ]
+        for label, c in zip(labels, conf, strict=True):
+            if not c.sum():
+                continue
+            sc = class_scores(c)
+            for j, name in enumerate(("dynamic", "semi-static", "static")):
+                lines.append(
+                    f"| {label} | {name} | {_fmt(sc.precision[j])} | {_fmt(sc.recall[j])} "
+                    f"| {sc.support[j]} |"
+                )
+    events = db.query("SELECT kind, count(*) FROM events GROUP BY kind ORDER BY kind")
+    if events:
+        lines += ["", "## Events", ""]
+        lines += [f"- {kind}: {n}" for kind, n in events]
+    if figures:
+        lines += ["", "## Figures", ""]
+        lines += [f"![{f.stem}]({f.name})" for f in figures]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _confusions(db: ResultsDB, n_loc: int) -> list[np.ndarray]:
+    out = [np.zeros((4, 4), dtype=np.int64) for _ in range(n_loc)]
+    for loc, blob in db.query("SELECT loc, confusion FROM point_classes"):
+        out[int(loc)] += np.frombuffer(blob, dtype="<i8").reshape(4, 4)
+    return out
+
+
+# ---------------------------------------------------------------------- figures
+def _fig_error_per_day(db: ResultsDB, path: Path) -> Path:
+    import matplotlib.pyplot as plt
+
+    rows = per_day_rows(db)
+    fig, ax = plt.subplots(figsize=(8, 4))
+    labels = db.labels()
+    n = len(labels)
+    for k, label in enumerate(labels):
+        r = [x for x in rows if x["localizer"] == label]
+        days = np.array([x["day"] for x in r], dtype=float)
+        mean = np.array([x["mean_error_m"] for x in r])
+        mx = np.array([x["max_error_m"] for x in r])
+        off = (k - (n - 1) / 2) * 0.8 / max(n, 1)
+        ax.bar(days + off, mean, width=0.8 / max(n, 1), label=f"{label} (mean)")
+        ax.plot(days + off, mx, "_", ms=10, color=ax.patches[-1].get_facecolor())
+    ax.set_xlabel("day")
+    ax.set_ylabel("position error [m]")
+    ax.set_title("Localization error per day (bars: mean, ticks: max)")
+    ax.legend(fontsize="small")
+    ax.grid(axis="y", alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _pick_runs(db: ResultsDB) -> list[tuple[int, int]]:
+    """The first run, the last run and the run with the largest error."""
+    runs = [(int(d), int(r)) for d, r in db.query("SELECT day, run FROM runs ORDER BY day, run")]
+    if not runs:
+        return []
+    worst = db.query("SELECT day, run FROM run_summaries ORDER BY max_error_m DESC LIMIT 1")
+    pick = [runs[0]] + ([tuple(map(int, worst[0]))] if worst else []) + [runs[-1]]
+    return list(dict.fromkeys(pick))  # type: ignore[arg-type]
+
+
+def _fig_error_over_time(db: ResultsDB, path: Path) -> Path:
+    import matplotlib.pyplot as plt
+
+    picks = _pick_runs(db)
+    fig, axes = plt.subplots(len(picks), 1, figsize=(8, 2.4 * len(picks)), squeeze=False)
+    for ax, (day, run) in zip(axes[:, 0], picks, strict=True):
+        for k, label in enumerate(db.labels()):
+            d = db.per_scan(k, day, run)
+            ax.plot(d["t_s"] - d["t_s"][0] if len(d["t_s"]) else [], d["err_m"], label=label)
+        ax.axhline(0.5, color="gray", ls=":", lw=1)
+        ax.set_title(f"day {day}, run {run}", fontsize="small")
+        ax.set_ylabel("error [m]")
+    axes[-1, 0].set_xlabel("time in run [s]")
+    axes[0, 0].legend(fontsize="small")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _fig_trajectories(db: ResultsDB, path: Path) -> Path:
+    import matplotlib.pyplot as plt
+
+    picks = _pick_runs(db)
+    fig, axes = plt.subplots(1, len(picks), figsize=(5 * len(picks), 5), squeeze=False)
+    for ax, (day, run) in zip(axes[0], picks, strict=True):
+        g = db.geometry(day, run)
+        if g is not None:
+            seg, cls = g
+            for c in np.unique(cls):
+                s = seg[cls == c]
+                ax.plot(
+                    np.stack([s[:, 0], s[:, 2]]),
+                    np.stack([s[:, 1], s[:, 3]]),
+                    color=_CLASS_COLORS.get(int(c), "black"),
+                    lw=1,
+                )
+        for k, label in enumerate(db.labels()):
+            d = db.per_scan(k, day, run)
+            if k == 0:
+                ax.plot(d["truth"][:, 0], d["truth"][:, 1], "g-", lw=2, label="truth", alpha=0.6)
+            ax.plot(d["estimate"][:, 0], d["estimate"][:, 1], lw=1, label=label)
+        ax.set_aspect("equal")
+        ax.set_title(f"day {day}, run {run}", fontsize="small")
+        ax.set_xlabel("x [m]")
+        ax.set_ylabel("y [m]")
+    axes[0, 0].legend(fontsize="small")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _fig_likelihood(db: ResultsDB, path: Path) -> Path | None:
+    import matplotlib.pyplot as plt
+
+    labels = db.labels()
+    series = []
+    for k, label in enumerate(labels):
+        d = db.per_scan(k)
+        if np.isfinite(d["scan_loglik"]).any() or np.isfinite(d["lambda_min"]).any():
+            series.append((label, d))
+    if not series:
+        return None
+    fig, (a1, a2) = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
+    for label, d in series:
+        x = np.arange(len(d["t_s"]))
+        a1.plot(x, d["scan_loglik"], lw=0.6, label=label)
+        a2.plot(x, d["lambda_min"], lw=0.6, label=label)
+    a1.set_ylabel("scan log-likelihood")
+    a2.set_ylabel("λ_min")
+    a2.set_yscale("symlog")
+    a2.set_xlabel("scan index over the experiment")
+    a1.legend(fontsize="small")
+    a1.set_title("Likelihood and certainty over time (cf. B&D Figs. 10-11)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def write_report(out_dir: str | Path) -> list[Path]:
+    """Write figures, ``summary.md`` and ``per_day.csv`` into a results folder."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    out = Path(out_dir)
+    with ResultsDB.open(out) as db:
+        if not db.query("SELECT 1 FROM runs LIMIT 1"):
+            from dynmap_sim.errors import InputError
+
+            raise InputError(f"{out}: no finished run to report on")
+        written = [write_per_day_csv(db, out / "per_day.csv")]
+        figs = [
+            _fig_error_per_day(db, out / "error_per_day.png"),
+            _fig_error_over_time(db, out / "error_over_time.png"),
+            _fig_trajectories(db, out / "trajectories.png"),
+        ]
+        lik = _fig_likelihood(db, out / "likelihood_certainty.png")
+        if lik is not None:
+            figs.append(lik)
+        written.append(_summary_md(db, out / "summary.md", figs))
+        written += figs
+    return written
