@@ -1,0 +1,443 @@
+"""``static-mcl``: Monte Carlo localization faithful to ROS 2 nav2's AMCL, on a fixed map.
+
+Augmented KLD-sampling MCL (*Probabilistic Robotics* Table 8.3 "Augmented_MCL" and
+Table 8.4 "KLD_Sampling_MCL"; Fox 2003) exactly as nav2_amcl composes it:
+
+* the filter only updates after the odometry moved ``update_min_d`` [m] in x or y or
+  ``update_min_a`` [rad] (``amcl_node.cpp``); in between, the reported pose is the last
+  filter estimate carried along by odometry (the ``map -> odom`` transform AMCL publishes);
+* prediction by the ``diff-corrected`` odometry model (:mod:`.motion_model`);
+* correction by the likelihood field (:mod:`.likelihood_field`), ``likelihood_field`` or
+  ``likelihood_field_prob`` with beam skipping;
+* ``w_slow``/``w_fast`` running averages of the mean weight (Table 8.3 lines 10-11); during
+  resampling each draw is a uniformly random pose in the map's free space with probability
+  ``max(0, 1 - w_fast / w_slow)``, after which both averages are reset (as ``pf.c`` does);
+* KLD-sampling picks the number of particles (0.5 m x 0.5 m x 10 degree bins,
+  :mod:`.kld_sampling`), low-variance resampling draws them (:mod:`.resampling`);
+* the estimate is the mean of the heaviest cluster of particles (clusters are connected
+  occupied bins, as ``pf_cluster_stats``), with a weighted covariance (circular for theta).
+
+The map is either the first run's SLAM map (built by
+:class:`~dynmap_sim.agent.mapping.first_run.FirstRunMapper` on the experiment's first run,
+whose estimates it reports meanwhile) or the prior
+walls rasterized to a 5 cm grid. It never changes afterwards.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from dynmap_sim import se2
+from dynmap_sim.agent.grid import OccupancyGrid
+from dynmap_sim.agent.localization.kld_sampling import bin_keys, kld_prefix_size
+from dynmap_sim.agent.localization.likelihood_field import (
+    LikelihoodFieldParams,
+    beam_likelihoods,
+    endpoint_distances,
+    likelihood_field_prob_logweights,
+    likelihood_field_weights,
+    select_beams,
+    valid_beams,
+)
+from dynmap_sim.agent.localization.motion_model import sample_odometry_motion
+from dynmap_sim.agent.localization.resampling import low_variance_resample
+from dynmap_sim.agent.localizer import Localizer, register_localizer
+from dynmap_sim.agent.mapping.first_run import FirstRunMapper, StaticMap
+from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Prior, Scan
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class MCLConfig:
+    """AMCL parameters (nav2 names and units)."""
+
+    alpha1: float = 0.2
+    alpha2: float = 0.2
+    alpha3: float = 0.2
+    alpha4: float = 0.2
+    laser_model_type: str = "likelihood_field"  # or "likelihood_field_prob"
+    max_beams: int = 60
+    laser_likelihood_max_dist: float = 2.0
+    laser_max_range: float = 100.0
+    laser_min_range: float = -1.0
+    z_hit: float = 0.5
+    z_rand: float = 0.5
+    sigma_hit: float = 0.2
+    do_beamskip: bool = False
+    beam_skip_distance: float = 0.5
+    beam_skip_threshold: float = 0.3
+    beam_skip_error_threshold: float = 0.9
+    min_particles: int = 500
+    max_particles: int = 2000
+    pf_err: float = 0.05
+    pf_z: float = 0.99
+    kld_cell_m: float = 0.5
+    kld_angle_rad: float = float(np.deg2rad(10.0))
+    recovery_alpha_slow: float = 0.0
+    recovery_alpha_fast: float = 0.0
+    resample_interval: int = 1
+    update_min_d: float = 0.25
+    update_min_a: float = 0.2
+    init_sigma_xy: float = 0.5
+    init_sigma_theta: float = float(np.pi / 12.0)
+
+
+#: nav2's defaults (``nav2_params.yaml`` / ``amcl_node.cpp``): recovery off, no beam skipping.
+NAV2_DEFAULT = MCLConfig()
+
+#: Tuned to the simulated sensors: URG-04LX noise (1 cm / 1 %), drifting wheel odometry,
+#: people in the scans (beam skipping), kidnapping and global localization (recovery on).
+TUNED = MCLConfig(
+    alpha1=0.05,
+    alpha2=0.05,
+    alpha3=0.05,
+    alpha4=0.05,
+    laser_model_type="likelihood_field_prob",
+    max_beams=60,
+    z_hit=0.9,
+    z_rand=0.1,
+    sigma_hit=0.08,
+    do_beamskip=True,
+    min_particles=500,
+    max_particles=5000,
+    pf_err=0.01,
+    pf_z=2.326,
+    recovery_alpha_slow=0.001,
+    recovery_alpha_fast=0.1,
+    update_min_d=0.1,
+    update_min_a=0.1,
+    init_sigma_xy=0.2,
+    init_sigma_theta=0.1,
+)
+
+CONFIGS: dict[str, MCLConfig] = {"nav2-default": NAV2_DEFAULT, "tuned": TUNED}
+MAP_SOURCES = ("first-run", "prior-walls")
+
+
+def weighted_pose_stats(
+    particles: FloatArray, weights: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Weighted mean (circular for theta) and 3x3 covariance of a particle set.
+
+    The theta variance is AMCL's circular ``-2 ln R`` (``R`` the mean resultant length);
+    cross terms use the wrapped angle residuals.
+    """
+    w = np.asarray(weights, dtype=np.float64)
+    w = w / w.sum()
+    c = float(np.sum(w * np.cos(particles[:, 2])))
+    s = float(np.sum(w * np.sin(particles[:, 2])))
+    mean = np.array(
+        [float(np.sum(w * particles[:, 0])), float(np.sum(w * particles[:, 1])), np.arctan2(s, c)]
+    )
+    res = particles - mean
+    res[:, 2] = se2.wrap_angle(res[:, 2])
+    cov = (res * w[:, None]).T @ res
+    r_len = min(max(np.hypot(c, s), 1e-12), 1.0)
+    cov[2, 2] = max(-2.0 * np.log(r_len), 0.0)
+    return mean, 0.5 * (cov + cov.T)
+
+
+class AMCLFilter:
+    """The particle filter of nav2's AMCL on a fixed :class:`OccupancyGrid` (no ROS)."""
+
+    def __init__(self, grid: OccupancyGrid, laser: LaserSpec, config: MCLConfig) -> None:
+        self.grid = grid
+        self.laser = laser
+        self.config = config
+        self.beams = select_beams(laser.n_beams, config.max_beams)
+        self.angles = laser.angles()[self.beams]
+        self.range_max = (
+            min(laser.range_max_m, config.laser_max_range)
+            if config.laser_max_range > 0
+            else laser.range_max_m
+        )
+        self.range_min = (
+            max(laser.range_min_m, config.laser_min_range)
+            if config.laser_min_range > 0
+            else laser.range_min_m
+        )
+        self.lf = LikelihoodFieldParams(
+            z_hit=config.z_hit,
+            z_rand=config.z_rand,
+            sigma_hit=config.sigma_hit,
+            range_max=self.range_max,
+            do_beamskip=config.do_beamskip,
+            beam_skip_distance=config.beam_skip_distance,
+            beam_skip_threshold=config.beam_skip_threshold,
+            beam_skip_error_threshold=config.beam_skip_error_threshold,
+        )
+        self.free_xy = grid.free_points()
+        if len(self.free_xy) == 0:
+            raise ValueError("the map has no free cells to draw random poses from")
+        self.mount = np.asarray(laser.mount_pose, dtype=np.float64)
+        self.particles = np.zeros((0, 3))
+        self.weights = np.zeros(0)
+        self.w_slow = 0.0
+        self.w_fast = 0.0
+        self.n_random_injected = 0
+
+    # -- initialization ------------------------------------------------------------------
+    def random_poses(self, n: int, rng: np.random.Generator) -> FloatArray:
+        """``n`` uniformly random poses in the map's free space (AMCL's pose generator)."""
+        idx = rng.integers(0, len(self.free_xy), size=n)
+        jitter = (rng.random((n, 2)) - 0.5) * self.grid.resolution_m
+        th = rng.uniform(-np.pi, np.pi, size=n)
+        return np.column_stack([self.free_xy[idx] + jitter, th])
+
+    def init_gaussian(self, mean: ArrayLike, cov: ArrayLike, rng: np.random.Generator) -> None:
+        """Particles drawn from ``N(mean, cov)`` (AMCL ``pf_init``), ``max_particles`` of them."""
+        n = self.config.max_particles
+        p = rng.multivariate_normal(np.asarray(mean, float), np.asarray(cov, float), size=n)
+        p[:, 2] = se2.wrap_angle(p[:, 2])
+        self.particles = p
+        self.weights = np.full(n, 1.0 / n)
+        self.w_slow = self.w_fast = 0.0
+
+    def init_uniform(self, rng: np.random.Generator) -> None:
+        """Global localization: ``max_particles`` random poses in free space."""
+        n = self.config.max_particles
+        self.particles = self.random_poses(n, rng)
+        self.weights = np.full(n, 1.0 / n)
+        self.w_slow = self.w_fast = 0.0
+
+    # -- filter steps --------------------------------------------------------------------
+    def predict(self, odom_old: ArrayLike, odom_new: ArrayLike, rng: np.random.Generator) -> None:
+        c = self.config
+        self.particles = sample_odometry_motion(
+            self.particles, odom_old, odom_new, (c.alpha1, c.alpha2, c.alpha3, c.alpha4), rng
+        )
+
+    def _beams_of(self, ranges_m: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        r = np.asarray(ranges_m, dtype=np.float64)[self.beams]
+        ok = valid_beams(r, self.range_max) & (r >= self.range_min)
+        return r[ok], self.angles[ok]
+
+    def correct(self, ranges_m: ArrayLike) -> None:
+        """Sensor update (``pf_update_sensor``) with the recovery averages."""
+        r, a = self._beams_of(ranges_m)
+        if len(r) == 0:
+            return
+        d = endpoint_distances(self.particles, r, a, self.mount, self.grid)
+        if self.config.laser_model_type == "likelihood_field_prob":
+            logp, _ = likelihood_field_prob_logweights(d, self.lf)
+        else:
+            logp = np.log(likelihood_field_weights(d, self.lf))
+        logw = np.log(np.maximum(self.weights, 1e-300)) + logp
+        m = float(logw.max())
+        total_scaled = float(np.sum(np.exp(logw - m)))
+        total = np.exp(m) * total_scaled
+        self.weights = np.exp(logw - m) / total_scaled
+        if total > 0 and np.isfinite(total):
+            w_avg = total / len(self.particles)
+            c = self.config
+            self.w_slow = (
+                w_avg
+                if self.w_slow == 0
+                else self.w_slow + c.recovery_alpha_slow * (w_avg - self.w_slow)
+            )
+            self.w_fast = (
+                w_avg
+                if self.w_fast == 0
+                else self.w_fast + c.recovery_alpha_fast * (w_avg - self.w_fast)
+            )
+
+    def resample(self, rng: np.random.Generator) -> None:
+        """``pf_update_resample``: KLD-sized, low-variance, with random-pose injection."""
+        c = self.config
+        w_diff = 0.0
+        if self.w_slow > 0:
+            w_diff = max(0.0, 1.0 - self.w_fast / self.w_slow)
+        n_max = c.max_particles
+        # Candidate sequence in random draw order to size the set like AMCL's loop.
+        cand_idx = low_variance_resample(self.weights, n_max, rng)
+        cand = self.particles[rng.permutation(cand_idx)]
+        is_rand = rng.random(n_max) < w_diff
+        if is_rand.any():
+            cand[is_rand] = self.random_poses(int(is_rand.sum()), rng)
+        keys = bin_keys(cand, c.kld_cell_m, c.kld_angle_rad)
+        n = kld_prefix_size(keys, c.pf_err, c.pf_z, c.min_particles, c.max_particles)
+        n_rand = int(is_rand[:n].sum())
+        idx = low_variance_resample(self.weights, n - n_rand, rng)
+        parts = [self.particles[idx]]
+        if n_rand:
+            parts.append(cand[:n][is_rand[:n]])
+        self.particles = np.concatenate(parts)
+        self.weights = np.full(len(self.particles), 1.0 / len(self.particles))
+        self.n_random_injected += n_rand
+        if w_diff > 0:
+            self.w_slow = self.w_fast = 0.0
+
+    def estimate(self) -> tuple[FloatArray, FloatArray]:
+        """Mean and covariance of the heaviest cluster (``pf_cluster_stats``)."""
+        c = self.config
+        p = self.particles
+        n_th = int(round(2 * np.pi / c.kld_angle_rad))
+        ix = np.floor(p[:, 0] / c.kld_cell_m).astype(np.int64)
+        iy = np.floor(p[:, 1] / c.kld_cell_m).astype(np.int64)
+        it = np.floor((se2.wrap_angle(p[:, 2]) + np.pi) / c.kld_angle_rad).astype(np.int64) % n_th
+        ix -= ix.min()
+        iy -= iy.min()
+        ny = int(iy.max()) + 3
+        key = (ix * ny + iy) * n_th + it
+        ukeys, inv = np.unique(key, return_inverse=True)
+        if len(ukeys) == 1:
+            return weighted_pose_stats(p, self.weights)
+        ubx, rem = np.divmod(ukeys, ny * n_th)
+        uby, ubt = np.divmod(rem, n_th)
+        rows, cols = [], []
+        for dx in (-1, 0, 1):
+            for dy in (-1, 0, 1):
+                for dt in (-1, 0, 1):
+                    if dx == dy == dt == 0:
+                        continue
+                    nk = ((ubx + dx) * ny + (uby + dy)) * n_th + (ubt + dt) % n_th
+                    pos = np.searchsorted(ukeys, nk)
+                    pos = np.minimum(pos, len(ukeys) - 1)
+                    hit = (ukeys[pos] == nk) & (ubx + dx >= 0) & (uby + dy >= 0)
+                    rows.append(np.nonzero(hit)[0])
+                    cols.append(pos[hit])
+        r = np.concatenate(rows)
+        cidx = np.concatenate(cols)
+        adj = coo_matrix((np.ones(len(r)), (r, cidx)), shape=(len(ukeys), len(ukeys)))
+        _, label = connected_components(adj, directed=False)
+        plabel = label[inv]
+        cw = np.bincount(plabel, weights=self.weights)
+        best = plabel == int(np.argmax(cw))
+        return weighted_pose_stats(p[best], self.weights[best])
+
+    def mean_beam_loglik(self, pose: ArrayLike, ranges_m: ArrayLike) -> float:
+        """Mean per-beam log-likelihood of a scan at ``pose`` (``scan_loglik``)."""
+        r, a = self._beams_of(ranges_m)
+        if len(r) == 0:
+            return float("nan")
+        d = endpoint_distances(np.asarray(pose, float)[None, :], r, a, self.mount, self.grid)
+        return float(np.mean(np.log(beam_likelihoods(d, self.lf))))
+
+
+@register_localizer("static-mcl")
+class StaticMCL(Localizer):
+    """AMCL-faithful MCL on a map that never changes (the baseline of every comparison).
+
+    ``config``: ``"tuned"`` or ``"nav2-default"``; ``map_source``: ``"first-run"`` (build the
+    map by static SLAM on the experiment's first run) or ``"prior-walls"`` (the walls the
+    prior grants); ``overrides``: individual :class:`MCLConfig` fields to change;
+    ``global_localization``: start every run from particles spread over the free space.
+    """
+
+    def __init__(
+        self,
+        laser: LaserSpec,
+        rng: np.random.Generator,
+        config: str = "tuned",
+        map_source: str = "first-run",
+        overrides: dict[str, Any] | None = None,
+        global_localization: bool = False,
+        **params: Any,
+    ) -> None:
+        super().__init__(laser, rng, **params)
+        if config not in CONFIGS:
+            raise ValueError(f"static-mcl: unknown config {config!r}; known: {sorted(CONFIGS)}")
+        if map_source not in MAP_SOURCES:
+            raise ValueError(f"static-mcl: unknown map_source {map_source!r}; known: {MAP_SOURCES}")
+        cfg = CONFIGS[config]
+        if overrides:
+            unknown = set(overrides) - set(asdict(cfg))
+            if unknown:
+                raise ValueError(f"static-mcl: unknown overrides {sorted(unknown)}")
+            cfg = replace(cfg, **overrides)
+        self.config_name = config
+        self.config = cfg
+        self.map_source = map_source
+        self.global_localization = bool(global_localization)
+        self.grid: OccupancyGrid | None = None
+        self.static_map: StaticMap | None = None
+        self.filter: AMCLFilter | None = None
+        self._mapper: FirstRunMapper | None = None
+        self._odom_at_update: FloatArray | None = None
+        self._est_at_update = np.zeros(3)
+        self._cov = np.eye(3)
+        self._n_updates = 0
+
+    # -- map -----------------------------------------------------------------------------
+    def set_map(self, grid: OccupancyGrid) -> None:
+        """Use ``grid`` as the (fixed) map."""
+        self.grid = grid
+        self.filter = AMCLFilter(grid, self.laser, self.config)
+
+    def begin_run(self, prior: Prior) -> None:
+        self._mapper = None
+        self._odom_at_update = None
+        self._n_updates = 0
+        if self.grid is None and self.map_source == "prior-walls":
+            if prior.walls is None or len(prior.walls) == 0:
+                raise ValueError("static-mcl map_source='prior-walls' needs prior.walls")
+            seed = None if prior.initial_pose is None else np.asarray(prior.initial_pose)[:2]
+            self.set_map(OccupancyGrid.from_segments(prior.walls, free_seed_xy_m=seed))
+        if self.grid is None:  # first-run SLAM map still to build: map during this run
+            start = np.zeros(3) if prior.initial_pose is None else np.asarray(prior.initial_pose)
+            self._mapper = FirstRunMapper(self.laser, start)
+            return
+        assert self.filter is not None
+        if prior.initial_pose is None or self.global_localization:
+            self.filter.init_uniform(self.rng)
+        else:
+            cov = (
+                np.asarray(prior.initial_pose_cov, float)
+                if prior.initial_pose_cov is not None
+                else np.diag([self.config.init_sigma_xy**2] * 2 + [self.config.init_sigma_theta**2])
+            )
+            self.filter.init_gaussian(prior.initial_pose, cov, self.rng)
+        self._est_at_update, self._cov = self.filter.estimate()
+
+    def end_run(self) -> None:
+        if self._mapper is not None:
+            self.static_map = self._mapper.finish()
+            self.set_map(self.static_map.grid)
+            self._mapper = None
+
+    # -- filtering -----------------------------------------------------------------------
+    def update(self, odom: Odometry, scan: Scan) -> PoseEstimate:
+        pose_odom = np.asarray(odom.pose, dtype=np.float64)
+        if self._mapper is not None:
+            est = self._mapper.update(odom, scan)
+            est.extras["lambda_min"] = float(np.linalg.eigvalsh(np.linalg.inv(est.cov))[0])
+            return est
+        f = self.filter
+        if f is None:
+            raise RuntimeError("static-mcl: update() before begin_run()")
+        c = self.config
+        do_update = False
+        if self._odom_at_update is None:
+            do_update = True  # AMCL: the first scan after init is always integrated
+        else:
+            delta = pose_odom - self._odom_at_update
+            delta[2] = se2.wrap_angle(delta[2])
+            if (
+                abs(delta[0]) > c.update_min_d
+                or abs(delta[1]) > c.update_min_d
+                or (abs(delta[2]) > c.update_min_a)
+            ):
+                do_update = True
+                f.predict(self._odom_at_update, pose_odom, self.rng)
+        if do_update:
+            f.correct(scan.ranges_m)
+            self._n_updates += 1
+            if self._n_updates % max(1, c.resample_interval) == 0:
+                f.resample(self.rng)
+            self._est_at_update, self._cov = f.estimate()
+            self._odom_at_update = pose_odom.copy()
+        mean = se2.compose(self._est_at_update, se2.between(self._odom_at_update, pose_odom))
+        cov = self._cov + 1e-9 * np.eye(3)
+        extras = {
+            "scan_loglik": f.mean_beam_loglik(mean, scan.ranges_m),
+            "lambda_min": float(np.linalg.eigvalsh(np.linalg.inv(cov))[0]),
+            "n_particles": len(f.particles),
+        }
+        return PoseEstimate(mean=mean, cov=cov, extras=extras)

@@ -1,0 +1,269 @@
+"""static-mcl (AMCL-faithful MCL): the parts in closed form, then tracking/global/kidnap runs."""
+
+from __future__ import annotations
+
+import pickle
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from dynmap_sim import se2
+from dynmap_sim.agent.grid import OccupancyGrid
+from dynmap_sim.agent.localization.kld_sampling import kld_prefix_size, kld_sample_count
+from dynmap_sim.agent.localization.likelihood_field import (
+    LikelihoodFieldParams,
+    likelihood_field_prob_logweights,
+    select_beams,
+)
+from dynmap_sim.agent.localization.motion_model import decompose_odometry, sample_odometry_motion
+from dynmap_sim.agent.localization.particle_filter import (
+    NAV2_DEFAULT,
+    TUNED,
+    AMCLFilter,
+    StaticMCL,
+    weighted_pose_stats,
+)
+from dynmap_sim.agent.localization.resampling import low_variance_resample
+from dynmap_sim.agent.localizer import make_localizer
+from dynmap_sim.types import LaserSpec, Odometry, Prior, Scan
+
+LASER = LaserSpec(
+    name="test-urg",
+    n_beams=241,
+    angle_min_rad=-2.0862,
+    angle_increment_rad=(2.0923 + 2.0862) / 240,
+    range_min_m=0.02,
+    range_max_m=5.6,
+    scan_period_s=0.1,
+    time_increment_s=0.0,
+)
+
+
+def raycast(pose, angles, segs, max_range):
+    th = pose[2] + angles
+    d = np.stack([np.cos(th), np.sin(th)], axis=1)
+    e = segs[:, 2:] - segs[:, :2]
+    w = segs[:, :2] - pose[:2]
+    den = d[:, None, 0] * e[None, :, 1] - d[:, None, 1] * e[None, :, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (w[None, :, 0] * e[None, :, 1] - w[None, :, 1] * e[None, :, 0]) / den
+        u = (w[None, :, 0] * d[:, None, 1] - w[None, :, 1] * d[:, None, 0]) / den
+    t = np.where((np.abs(den) > 1e-12) & (t > 0) & (u >= 0) & (u <= 1), t, np.inf)
+    r = t.min(axis=1)
+    r[r > max_range] = np.inf
+    return r
+
+
+def room():
+    pts = np.array([[0, 0], [8, 0], [8, 3], [5, 3], [5, 6], [0, 6]], float)
+    walls = np.concatenate([pts, np.roll(pts, -1, axis=0)], axis=1)
+    pillar = np.array([[2, 2], [2.4, 2], [2.4, 2.4], [2, 2.4]], float)
+    pil = np.concatenate([pillar, np.roll(pillar, -1, axis=0)], axis=1)
+    cup = np.array([[6.5, 0.0, 6.5, 0.6], [6.5, 0.6, 7.3, 0.6], [7.3, 0.6, 7.3, 0.0]])
+    box = np.array([[1.0, 4.5, 1.8, 4.5], [1.8, 4.5, 1.8, 5.0], [1.8, 5.0, 1.0, 5.0]])
+    return np.concatenate([walls, pil, cup, box])
+
+
+def path(laps=1, step=0.05, start=0):
+    corners = np.roll(np.array([[1.0, 1.0], [4.0, 1.0], [4.0, 3.8], [1.0, 3.8]]), -start, axis=0)
+    out, th = [], float(np.arctan2(*(corners[1] - corners[0])[::-1]))
+    for _ in range(laps):
+        for c in range(4):
+            a, b = corners[c], corners[(c + 1) % 4]
+            heading = np.arctan2(b[1] - a[1], b[0] - a[0])
+            dth = se2.wrap_angle(heading - th)
+            for k in range(int(np.ceil(abs(dth) / 0.1))):
+                th += np.sign(dth) * min(0.1, abs(dth) - k * 0.1)
+                out.append([a[0], a[1], th])
+            th = heading
+            n = int(np.hypot(*(b - a)) / step)
+            out += [[*(a + (b - a) * (k + 1) / n), th] for k in range(n)]
+    return np.array(out)
+
+
+def odometry(truth, rng):
+    odo = [np.zeros(3)]
+    for k in range(1, len(truth)):
+        d = se2.between(truth[k - 1], truth[k])
+        dn = d * np.array([1.02, 1.02, 1.03])
+        dn[2] += 0.03 * np.hypot(d[0], d[1]) + rng.normal(0, 0.002)
+        odo.append(se2.compose(odo[-1], dn))
+    return np.array(odo)
+
+
+# -- motion model ------------------------------------------------------------------------
+def test_decompose_turn_in_place_has_no_rot1():
+    assert decompose_odometry([0, 0, 0], [0.001, 0, 0.5]) == pytest.approx((0.0, 0.001, 0.5))
+    r1, t, r2 = decompose_odometry([1, 1, 0], [1, 2, 0])
+    assert (r1, t, r2) == pytest.approx((np.pi / 2, 1.0, -np.pi / 2))
+
+
+def test_motion_noise_is_standard_deviation():
+    rng = np.random.default_rng(0)
+    p0 = np.zeros((200_000, 3))
+    out = sample_odometry_motion(p0, [0, 0, 0], [1.0, 0, 0], (0.0, 0.0, 0.04, 0.0), rng)
+    # Pure translation of 1 m, alpha3 = 0.04 -> sd(trans) = sqrt(0.04) * 1 = 0.2 m.
+    assert out[:, 0].mean() == pytest.approx(1.0, abs=0.003)
+    assert out[:, 0].std() == pytest.approx(0.2, rel=0.02)
+    assert np.abs(out[:, 2]).max() == 0.0
+    # Driving backwards is not a half turn: rot noise stays small with alpha1 only.
+    back = sample_odometry_motion(p0[:1000], [0, 0, 0], [-1.0, 0, 0], (0.1, 0, 0, 0), rng)
+    assert np.abs(back[:, 2]).max() < 1e-9
+
+
+# -- resampling and KLD ------------------------------------------------------------------
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.floats(0.0, 1.0), min_size=1, max_size=40), st.integers(1, 200))
+def test_low_variance_counts_are_floor_or_ceil(ws, n):
+    w = np.array(ws) + 1e-3
+    idx = low_variance_resample(w, n, np.random.default_rng(1))
+    counts = np.bincount(idx, minlength=len(w))
+    expect = n * w / w.sum()
+    assert len(idx) == n
+    assert np.all(counts >= np.floor(expect - 1e-9)) and np.all(counts <= np.ceil(expect + 1e-9))
+
+
+def test_kld_bound_closed_form():
+    # k = 10 bins, eps = 0.05, z = 2.326: Fox 2003 eq. 13.
+    k, eps, z = 10, 0.05, 2.326
+    b = 2 / (9 * (k - 1))
+    expect = np.ceil((k - 1) / (2 * eps) * (1 - b + np.sqrt(b) * z) ** 3)
+    assert kld_sample_count(k, eps, z, 1, 10**6) == expect
+    assert kld_sample_count(1, eps, z, 5, 100) == 100
+    # One bin: AMCL's pf_resample_limit returns max_samples; with two bins the loop stops
+    # once the count exceeds the bound for k = 2 (ceil(10 * 1.874^3) = 66).
+    assert kld_prefix_size(np.zeros(1000, np.int64), eps, z, 50, 1000) == 1000
+    assert kld_sample_count(2, eps, z, 1, 1000) == 66
+    assert kld_prefix_size(np.r_[0, np.ones(999, np.int64)], eps, z, 50, 1000) == 67
+    assert kld_prefix_size(np.r_[0, np.ones(999, np.int64)], eps, z, 100, 1000) == 101
+    # Many distinct bins: needs more particles.
+    assert kld_prefix_size(np.arange(1000), eps, z, 50, 1000) > 200
+
+
+# -- likelihood field --------------------------------------------------------------------
+def test_select_beams_like_amcl():
+    b = select_beams(683, 60)
+    assert len(b) == 60 and b[0] == 0 and b[-1] == 682
+
+
+def test_beam_skipping_ignores_unmapped_obstacle_and_falls_back():
+    params = LikelihoodFieldParams(z_hit=0.9, z_rand=0.1, sigma_hit=0.1, do_beamskip=True)
+    d = np.zeros((100, 10))
+    d[:, 3] = 1.0  # every particle sees beam 3 far from the map: a person
+    lw, use = likelihood_field_prob_logweights(d, params)
+    assert not use[3] and use.sum() == 9
+    d2 = np.ones((100, 10))  # all beams disagree: diverged, so use them all
+    _, use2 = likelihood_field_prob_logweights(d2, params)
+    assert use2.all()
+
+
+def test_weighted_stats_circular_mean():
+    p = np.array([[0, 0, np.pi - 0.1], [2, 0, -np.pi + 0.1]])
+    mean, cov = weighted_pose_stats(p, np.array([0.5, 0.5]))
+    assert mean[0] == pytest.approx(1.0)
+    assert abs(se2.wrap_angle(mean[2] - np.pi)) < 1e-9
+    assert cov[0, 0] == pytest.approx(1.0)
+    assert cov[2, 2] == pytest.approx(-2 * np.log(np.cos(0.1)))
+
+
+def test_estimate_picks_heaviest_cluster():
+    grid = OccupancyGrid.from_segments(room(), free_seed_xy_m=(1, 1))
+    f = AMCLFilter(grid, LASER, TUNED)
+    a = np.tile([1.0, 1.0, 0.0], (300, 1))
+    b = np.tile([4.0, 3.0, 1.0], (100, 1))
+    f.particles = np.concatenate([a, b])
+    f.weights = np.r_[np.full(300, 0.001), np.full(100, 0.007)]
+    mean, _ = f.estimate()
+    assert mean == pytest.approx([4.0, 3.0, 1.0])
+
+
+# -- whole filter ------------------------------------------------------------------------
+def _run(loc, truth, odo, segs, rng, t0=0, kidnap_at=None):
+    errs = []
+    for k in range(len(truth)):
+        r = raycast(truth[k], LASER.angles(), segs, LASER.range_max_m)
+        r = (r + rng.normal(0, 0.01, r.shape)).astype(np.float32)
+        est = loc.update(Odometry(odo[k], 0.1 * (k + t0)), Scan(r, 0.1 * (k + t0)))
+        errs.append(np.hypot(*(est.mean[:2] - truth[k, :2])))
+    return np.array(errs), est
+
+
+@pytest.mark.parametrize("config", ["tuned", "nav2-default"])
+def test_tracking_on_prior_walls(config):
+    segs = room()
+    rng = np.random.default_rng(5)
+    truth = path(laps=1)
+    odo = odometry(truth, rng)
+    loc = make_localizer(
+        "static-mcl",
+        laser=LASER,
+        rng=np.random.default_rng(0),
+        config=config,
+        map_source="prior-walls",
+    )
+    loc.begin_run(Prior(initial_pose=truth[0], walls=segs))
+    errs, est = _run(loc, truth, odo, segs, rng)
+    assert errs.mean() < 0.05 and errs.max() < 0.2
+    assert np.isfinite(est.extras["scan_loglik"])
+    assert np.all(np.linalg.eigvalsh(est.cov) > 0)
+
+
+def test_first_run_map_then_localize_and_pickle():
+    segs = room()
+    rng = np.random.default_rng(7)
+    truth = path(laps=1)
+    loc = StaticMCL(LASER, np.random.default_rng(1), config="tuned", map_source="first-run")
+    loc.begin_run(Prior(initial_pose=truth[0], first_run=True))
+    errs, _ = _run(loc, truth, odometry(truth, rng), segs, rng)
+    assert errs.max() < 0.1  # the SLAM front end's estimates
+    loc.end_run()
+    assert loc.grid is not None
+    loc2 = pickle.loads(pickle.dumps(loc))
+    loc2.begin_run(Prior(initial_pose=truth[0], day=2, run=1))
+    errs, est = _run(loc2, truth, odometry(truth, rng), segs, rng)
+    assert errs.mean() < 0.05 and errs.max() < 0.2
+    assert est.extras["scan_loglik"] > np.log(0.1 / 5.6)
+
+
+def test_global_localization_and_kidnap_recovery():
+    segs = room()
+    rng = np.random.default_rng(11)
+    truth = path(laps=2)
+    odo = odometry(truth, rng)
+    loc = StaticMCL(
+        LASER,
+        np.random.default_rng(2),
+        config="tuned",
+        map_source="prior-walls",
+        global_localization=True,
+    )
+    loc.begin_run(Prior(initial_pose=truth[0], walls=segs))
+    errs, _ = _run(loc, truth, odo, segs, rng)
+    n_lap = len(path(laps=1))
+    assert np.all(errs[n_lap:] < 0.2)  # converged within the first lap
+    # Kidnapping: the robot is carried to the opposite corner; odometry does not notice.
+    truth2 = path(laps=1, start=2)
+    odo2 = odometry(truth2, rng)
+    odo2 = np.array([se2.compose(odo[-1], se2.between(odo2[0], o)) for o in odo2])
+    errs2, _ = _run(loc, truth2, odo2, segs, rng, t0=len(truth))
+    assert errs2[0] > 2.0  # it really was kidnapped
+    recovered = np.nonzero(errs2 < 0.2)[0]
+    assert len(recovered) and recovered[0] < 300  # within 30 s
+    assert np.all(errs2[recovered[0] + 50 :] < 0.2)
+
+
+def test_nav2_default_values():
+    c = NAV2_DEFAULT
+    assert (c.alpha1, c.alpha2, c.alpha3, c.alpha4) == (0.2, 0.2, 0.2, 0.2)
+    assert (c.max_beams, c.laser_likelihood_max_dist, c.sigma_hit) == (60, 2.0, 0.2)
+    assert (c.z_hit, c.z_rand, c.laser_model_type) == (0.5, 0.5, "likelihood_field")
+    assert (c.min_particles, c.max_particles, c.pf_err, c.pf_z) == (500, 2000, 0.05, 0.99)
+    assert (c.update_min_d, c.update_min_a) == (0.25, 0.2)
+    assert (c.recovery_alpha_slow, c.recovery_alpha_fast, c.do_beamskip) == (0.0, 0.0, False)
+    assert TUNED.do_beamskip and TUNED.recovery_alpha_fast == 0.1
+    with pytest.raises(ValueError, match="unknown config"):
+        StaticMCL(LASER, np.random.default_rng(0), config="fast")
+    with pytest.raises(ValueError, match="unknown overrides"):
+        StaticMCL(LASER, np.random.default_rng(0), overrides={"alpha9": 1.0})
