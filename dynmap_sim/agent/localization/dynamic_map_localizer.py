@@ -1,0 +1,379 @@
+"""``dynamic-map``: Biber & Duckett's localization on a dynamic map (§4.3–4.4), and its static
+variants ``static-map`` / ``static-map+stm`` (§5.3).
+
+Per scan ``z_t`` (with odometry):
+
+1. **Prediction**: ``x̂⁻ = x̂_{t−1} ⊕ Δodom`` with an odometry covariance ``C_O`` that grows
+   with the motion (the paper's was "acquired experimentally"; ours is a parameter).
+2. **Scan matching against the current map** built after the previous step, with the adaptive
+   odometry prior of eq. 9: minimise ``E_S + κ·E_O`` with κ = 0 first; while the result is not
+   within two standard deviations of the odometry prediction (Mahalanobis distance under
+   ``C_O`` ≤ 2), set κ to ``kappa0`` and double it. If no κ brings it back, the prediction is
+   used. The ICP is :func:`dynmap_sim.agent.mapping.scan_matcher.match_scan` (point-to-line,
+   its prior term is ``(x − x̂⁻)ᵀ κ C_O⁻¹ (x − x̂⁻)``).
+3. **Current map for t+1** from ``z_t`` at the posterior (:mod:`..maps.current_map`): greedy
+   timescale selection over the local maps within 4 m, safe mode.
+4. **Learning** (§4.4): λ1 learns ``z_t`` in the local maps within 2.5 m (a new local map where
+   there is none); the (pose, scan) pair is stored; λ2 learns the run in :meth:`end_run`,
+   λ3–λ5 the day in :meth:`end_day`.
+
+The first run (``prior.first_run``, or no local maps yet) is mapped by the static SLAM of
+:class:`~dynmap_sim.agent.mapping.first_run.FirstRunMapper`; its keyframes, thinned to one per
+``local_map_spacing_m``, become the initial local maps (§4), and the run's optimized
+trajectory feeds the first long-term update.
+
+Per scan ``PoseEstimate.extras``: ``scan_loglik`` (mean per-reading log-likelihood of the
+scan under the selected models), ``scan_lik`` (mean per-reading likelihood, Fig. 10),
+``lambda_min`` (smallest eigenvalue of the inverse covariance, Fig. 11), ``timescale`` (level
+of the best-fitting selection, 0 = λ1 … 4 = λ5, -1 none), ``timescales`` (levels of all
+selections, Figs. 12–13), ``safe_mode``, ``kappa`` (final κ of eq. 9), ``n_local_maps``.
+
+Static variants (§5.3): the map is learned exactly like ``dynamic-map`` until the end of day
+``freeze_after_day`` (1), then frozen — a snapshot of the dynamic map after the first day.
+``static-map`` then localizes with λ2–λ5 of the snapshot only; ``static-map+stm`` also keeps
+the short-term memory λ1 learning online.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from dynmap_sim import se2
+from dynmap_sim.agent.localizer import Localizer, register_localizer
+from dynmap_sim.agent.mapping.first_run import FirstRunMapper, scan_points_base
+from dynmap_sim.agent.mapping.scan_matcher import MatchResult, PointMap, match_scan
+from dynmap_sim.agent.maps.current_map import CurrentMap, SynthesisParams, synthesize_current_map
+from dynmap_sim.agent.maps.dynamic_map import DynamicMap
+from dynmap_sim.agent.maps.local_map import TABLE1
+from dynmap_sim.agent.maps.sample_set import to_mm
+from dynmap_sim.types import FloatArray, LaserSpec, Odometry, PoseEstimate, Prior, Scan
+
+_MODES = ("dynamic", "static", "static+stm")
+
+
+def lambda_min(cov: FloatArray) -> float:
+    """Smallest eigenvalue of the inverse of a 3x3 covariance (B&D §5.3, Fig. 11)."""
+    info = np.linalg.inv(0.5 * (cov + cov.T) + 1e-12 * np.eye(3))
+    return float(np.linalg.eigvalsh(0.5 * (info + info.T))[0])
+
+
+def odometry_covariance(
+    delta: FloatArray, sigma_xy0: float, k_xy: float, sigma_th0: float, k_th: float
+) -> FloatArray:
+    """``C_O`` of one odometry increment ``delta`` (robot frame) rotated to be added in the
+    map frame at heading 0: diagonal, std ``sigma0 + k·|motion|``."""
+    d = float(np.hypot(delta[0], delta[1]))
+    a = abs(float(delta[2]))
+    sxy = sigma_xy0 + k_xy * d + 0.5 * k_xy * a
+    sth = sigma_th0 + k_th * a + 0.5 * k_th * d
+    return np.diag([sxy**2, sxy**2, sth**2])
+
+
+class DynamicMapLocalizer(Localizer):
+    """Scan matching on a multi-timescale dynamic map (B&D §4); see the module docstring."""
+
+    def __init__(
+        self,
+        laser: LaserSpec,
+        rng: np.random.Generator,
+        mode: str = "dynamic",
+        freeze_after_day: int = 1,
+        select_radius_m: float = 4.0,
+        update_radius_m: float = 2.5,
+        local_map_spacing_m: float = 2.0,
+        min_readings: int = 20,
+        sigma_max_m: float = 0.05,
+        explained_density: float = 0.5,
+        sigma_min_m: float = 0.01,
+        odom_sigma_xy0_m: float = 0.01,
+        odom_k_xy: float = 0.1,
+        odom_sigma_th0_rad: float = 0.01,
+        odom_k_th: float = 0.1,
+        kappa0: float = 0.25,
+        max_kappa_doublings: int = 12,
+        max_match_points: int = 240,
+        max_correspondence_m: float = 0.3,
+        max_iterations: int = 20,
+        min_matched: int = 20,
+        map_voxel_m: float = 0.03,
+        **params: Any,
+    ) -> None:
+        super().__init__(laser, rng, **params)
+        if mode not in _MODES:
+            raise ValueError(f"mode must be one of {_MODES}, got {mode!r}")
+        self.mode = mode
+        self.freeze_after_day = int(freeze_after_day)
+        self.update_radius_m = float(update_radius_m)
+        self.local_map_spacing_m = float(local_map_spacing_m)
+        self.synthesis = SynthesisParams(
+            select_radius_m=float(select_radius_m),
+            min_readings=int(min_readings),
+            sigma_max_m=float(sigma_max_m),
+            explained_density=float(explained_density),
+            sigma_min_m=float(sigma_min_m),
+        )
+        self.odom_params = (
+            float(odom_sigma_xy0_m),
+            float(odom_k_xy),
+            float(odom_sigma_th0_rad),
+            float(odom_k_th),
+        )
+        self.kappa0 = float(kappa0)
+        self.max_kappa_doublings = int(max_kappa_doublings)
+        self.max_match_points = int(max_match_points)
+        self.max_correspondence_m = float(max_correspondence_m)
+        self.max_iterations = int(max_iterations)
+        self.min_matched = int(min_matched)
+        self.map_voxel_m = float(map_voxel_m)
+        self.dmap = DynamicMap(TABLE1, float(laser.range_max_m), self.update_radius_m)
+        self.frozen = False
+        self.days_done = 0
+        self._pose = np.zeros(3)
+        self._cov = np.diag([1e-4, 1e-4, 1e-4])
+        self._last_odom: FloatArray | None = None
+        self._mapper: FirstRunMapper | None = None
+        self._cmap_points = np.zeros((0, 2))
+        self._cmap: PointMap | None = None
+        # (pose, ranges in mm) pairs of the current run and of the current day (§4.4)
+        self._run_poses: list[FloatArray] = []
+        self._run_ranges: list[np.ndarray] = []
+        self._day_poses: list[FloatArray] = []
+        self._day_ranges: list[np.ndarray] = []
+        self.n_scans = 0
+        self.n_safe_mode = 0
+
+    # ------------------------------------------------------------------ pickling
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_cmap"] = None  # a KD-tree: rebuilt from _cmap_points on demand
+        return state
+
+    # ------------------------------------------------------------------ levels
+    @property
+    def selectable_levels(self) -> list[int]:
+        """Timescales the localization may select (static-map: λ2–λ5 only)."""
+        if self.frozen and self.mode == "static":
+            return [1, 2, 3, 4]
+        return [0, 1, 2, 3, 4]
+
+    @property
+    def learns_stm(self) -> bool:
+        return not self.frozen or self.mode == "static+stm"
+
+    @property
+    def learns_ltm(self) -> bool:
+        return not self.frozen
+
+    # ------------------------------------------------------------------ run protocol
+    def begin_run(self, prior: Prior) -> None:
+        self._pose = (
+            np.zeros(3)
+            if prior.initial_pose is None
+            else np.asarray(prior.initial_pose, dtype=np.float64).reshape(3).copy()
+        )
+        self._cov = (
+            np.diag([1e-4, 1e-4, 1e-4])
+            if prior.initial_pose_cov is None
+            else np.asarray(prior.initial_pose_cov, dtype=np.float64).copy()
+        )
+        self._last_odom = None
+        self._cmap_points = np.zeros((0, 2))
+        self._cmap = None
+        self._run_poses, self._run_ranges = [], []
+        self._mapper = None
+        if (prior.first_run or len(self.dmap) == 0) and not self.frozen:
+            self._mapper = FirstRunMapper(self.laser, self._pose)
+
+    def _points_map(self, pose: FloatArray, ranges_m: np.ndarray) -> FloatArray:
+        return se2.transform_points(pose, scan_points_base(self.laser, ranges_m))
+
+    def update(self, odom: Odometry, scan: Scan) -> PoseEstimate:
+        self.n_scans += 1
+        ranges = np.asarray(scan.ranges_m, dtype=np.float32)
+        if self._mapper is not None:
+            est = self._mapper.update(odom, scan)
+            self._store(est.mean, ranges)
+            est.extras.update(
+                lambda_min=lambda_min(est.cov),
+                timescale=-1,
+                timescales=(),
+                safe_mode=False,
+                n_local_maps=0,
+            )
+            return est
+        opose = np.asarray(odom.pose, dtype=np.float64)
+        pts_base = scan_points_base(self.laser, ranges)
+        kappa = 0.0
+        if self._last_odom is None:
+            self._last_odom = opose.copy()
+        else:
+            delta = se2.between(self._last_odom, opose)
+            self._last_odom = opose.copy()
+            pred = se2.compose(self._pose, delta)
+            c_o = odometry_covariance(delta, *self.odom_params)
+            pose, cov, kappa = self._match(pts_base, pred, c_o)
+            self._pose, self._cov = pose, cov
+        pts_map = se2.transform_points(self._pose, pts_base)
+        cur = synthesize_current_map(
+            self.dmap, self._pose, pts_map, self.selectable_levels, self.synthesis
+        )
+        self._set_current_map(cur)
+        if self.learns_stm:
+            self.dmap.learn_online(
+                self._pose, pts_map, self.rng, levels=[0], allow_new=not self.frozen
+            )
+        if self.learns_ltm:
+            self._store(self._pose, ranges)
+        self.n_safe_mode += int(cur.safe_mode)
+        extras = {
+            "scan_loglik": cur.scan_loglik,
+            "scan_lik": cur.scan_lik,
+            "lambda_min": lambda_min(self._cov),
+            "timescale": (4 if cur.safe_mode else cur.timescale),
+            "timescales": tuple(level for _, level in cur.selections),
+            "safe_mode": cur.safe_mode,
+            "kappa": kappa,
+            "n_local_maps": len(self.dmap),
+        }
+        return PoseEstimate(mean=self._pose.copy(), cov=self._cov.copy(), extras=extras)
+
+    # ------------------------------------------------------------------ eq. 9
+    def _match(
+        self, pts_base: FloatArray, pred: FloatArray, c_o: FloatArray
+    ) -> tuple[FloatArray, FloatArray, float]:
+        """Scan matching with the adaptive odometry prior (§4.3, eq. 9)."""
+        target = self._current_point_map()
+        if target is None or len(pts_base) < self.min_matched:
+            return pred, self._propagated_cov(c_o), float("nan")
+        step = max(1, int(np.ceil(len(pts_base) / self.max_match_points)))
+        pts = pts_base[::step]
+        info_o = np.linalg.inv(c_o)
+
+        def within(res: MatchResult) -> bool:
+            e = res.pose - pred
+            e[2] = float(se2.wrap_angle(e[2]))
+            return (
+                res.n_matched >= self.min_matched
+                and np.all(np.isfinite(res.pose))
+                and float(e @ info_o @ e) <= 4.0  # two standard deviations
+            )
+
+        kw = {"max_correspondence_m": self.max_correspondence_m}
+        res = match_scan(pts, target, pred, max_iterations=self.max_iterations, **kw)
+        kappa = 0.0
+        if not within(res):
+            kappa = self.kappa0
+            for _ in range(self.max_kappa_doublings):
+                res = match_scan(
+                    pts,
+                    target,
+                    pred,
+                    prior_mean=pred,
+                    prior_info=kappa * info_o,
+                    max_iterations=self.max_iterations,
+                    **kw,
+                )
+                if within(res):
+                    break
+                kappa *= 2.0
+            else:
+                return pred, self._propagated_cov(c_o), float("inf")
+        return res.pose, res.cov, kappa
+
+    def _propagated_cov(self, c_o: FloatArray) -> FloatArray:
+        c, s = np.cos(self._pose[2]), np.sin(self._pose[2])
+        rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        return self._cov + rot @ c_o @ rot.T
+
+    # ------------------------------------------------------------------ current map
+    def _set_current_map(self, cur: CurrentMap) -> None:
+        pts = cur.points
+        if len(pts) and self.map_voxel_m > 0:
+            key = np.floor(pts / self.map_voxel_m).astype(np.int64)
+            _, idx = np.unique(key[:, 0] * 1_000_003 + key[:, 1], return_index=True)
+            pts = pts[np.sort(idx)]
+        self._cmap_points = pts
+        self._cmap = None
+
+    def _current_point_map(self) -> PointMap | None:
+        if self._cmap is None and len(self._cmap_points) >= self.min_matched:
+            self._cmap = PointMap(self._cmap_points)
+        return self._cmap
+
+    # ------------------------------------------------------------------ learning (§4.4)
+    def _store(self, pose: FloatArray, ranges: np.ndarray) -> None:
+        r = np.where(np.isfinite(ranges), ranges, 0.0)
+        self._run_poses.append(np.asarray(pose, dtype=np.float64).copy())
+        self._run_ranges.append(to_mm(r))
+
+    def _stored_points(self, poses: list[FloatArray], ranges_mm: list[np.ndarray]) -> list:
+        out = []
+        for pose, r_mm in zip(poses, ranges_mm, strict=True):
+            r = r_mm.astype(np.float64) / 1000.0
+            r[r_mm == 0] = np.inf
+            out.append(self._points_map(pose, r))
+        return out
+
+    def end_run(self) -> None:
+        """λ2 learns the run offline; after the first run, the initial local maps are made."""
+        if self._mapper is not None:
+            smap = self._mapper.finish()
+            self._mapper = None
+            if len(smap.trajectory) == len(self._run_poses):
+                self._run_poses = [p.copy() for p in smap.trajectory]
+            self._init_local_maps(smap.keyframes)
+        if self.learns_ltm and self._run_poses:
+            pts = self._stored_points(self._run_poses, self._run_ranges)
+            self.dmap.learn_offline(
+                self.dmap.levels("run"), np.array(self._run_poses), pts, self.rng
+            )
+            self._day_poses += self._run_poses
+            self._day_ranges += self._run_ranges
+        self._run_poses, self._run_ranges = [], []
+
+    def end_day(self) -> None:
+        """λ3–λ5 learn the day offline; static variants freeze after ``freeze_after_day``."""
+        if self.learns_ltm and self._day_poses:
+            pts = self._stored_points(self._day_poses, self._day_ranges)
+            self.dmap.learn_offline(
+                self.dmap.levels("day"), np.array(self._day_poses), pts, self.rng
+            )
+        self._day_poses, self._day_ranges = [], []
+        self.days_done += 1
+        if self.mode != "dynamic" and self.days_done >= self.freeze_after_day:
+            self.frozen = True
+
+    def _init_local_maps(self, keyframes: list) -> None:
+        """Initial local maps from the first run's keyframes (§4), ``local_map_spacing_m``
+        apart; each is filled with its own keyframe scan."""
+        for kf in keyframes:
+            pose = np.asarray(kf.pose, dtype=np.float64)
+            if len(self.dmap.near(pose, self.local_map_spacing_m)):
+                continue
+            self.dmap.add_local_map(pose[:2], self._points_map(pose, kf.ranges_m), self.rng)
+
+
+@register_localizer("dynamic-map")
+class DynamicMapLocalization(DynamicMapLocalizer):
+    """Biber & Duckett's dynamic map (all five timescales, never frozen)."""
+
+    def __init__(self, laser: LaserSpec, rng: np.random.Generator, **params: Any) -> None:
+        super().__init__(laser, rng, mode="dynamic", **params)
+
+
+@register_localizer("static-map")
+class StaticMapLocalization(DynamicMapLocalizer):
+    """The dynamic map after day 1, frozen; localizes with λ2–λ5 only (§5.3)."""
+
+    def __init__(self, laser: LaserSpec, rng: np.random.Generator, **params: Any) -> None:
+        super().__init__(laser, rng, mode="static", **params)
+
+
+@register_localizer("static-map+stm")
+class StaticMapSTMLocalization(DynamicMapLocalizer):
+    """The frozen day-1 snapshot plus a live short-term memory λ1 (§5.3)."""
+
+    def __init__(self, laser: LaserSpec, rng: np.random.Generator, **params: Any) -> None:
+        super().__init__(laser, rng, mode="static+stm", **params)

@@ -1,0 +1,189 @@
+"""The ``dynamic-map`` localizer and its static variants (B&D §4.3–4.4, §5.3) on synthetic scans."""
+
+from __future__ import annotations
+
+import pickle
+
+import numpy as np
+import pytest
+
+from dynmap_sim import se2
+from dynmap_sim.agent.localization.dynamic_map_localizer import (
+    DynamicMapLocalizer,
+    lambda_min,
+)
+from dynmap_sim.agent.localizer import LOCALIZERS, make_localizer
+from dynmap_sim.types import LaserSpec, Odometry, Prior, Scan
+
+LASER = LaserSpec(
+    name="test-urg",
+    n_beams=241,
+    angle_min_rad=-2.0862,
+    angle_increment_rad=(2.0923 + 2.0862) / 240,
+    range_min_m=0.02,
+    range_max_m=5.6,
+    scan_period_s=0.1,
+    time_increment_s=0.0,
+)
+
+
+def _raycast(pose, angles, segs, max_range):
+    th = pose[2] + angles
+    d = np.stack([np.cos(th), np.sin(th)], axis=1)
+    p0 = segs[:, :2]
+    e = segs[:, 2:] - p0
+    w = p0 - pose[:2]
+    den = d[:, None, 0] * e[None, :, 1] - d[:, None, 1] * e[None, :, 0]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (w[None, :, 0] * e[None, :, 1] - w[None, :, 1] * e[None, :, 0]) / den
+        u = (w[None, :, 0] * d[:, None, 1] - w[None, :, 1] * d[:, None, 0]) / den
+    hit = (np.abs(den) > 1e-12) & (t > 0) & (u >= 0) & (u <= 1)
+    r = np.where(hit, t, np.inf).min(axis=1)
+    r[r > max_range] = np.inf
+    return r
+
+
+def _box(x0, y0, x1, y1):
+    c = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], float)
+    return np.concatenate([c, np.roll(c, -1, axis=0)], axis=1)
+
+
+def _world(cupboard: bool) -> np.ndarray:
+    """An L-shaped 8 m x 6 m room with a pillar (and, on later days, a cupboard)."""
+    pts = np.array([[0, 0], [8, 0], [8, 3], [5, 3], [5, 6], [0, 6]], float)
+    walls = np.concatenate([pts, np.roll(pts, -1, axis=0)], axis=1)
+    segs = [walls, _box(2.0, 2.0, 2.4, 2.4), _box(6.5, 0.0, 7.3, 0.6)]
+    if cupboard:
+        segs.append(_box(1.5, 4.3, 3.5, 4.8))
+    return np.concatenate(segs)
+
+
+def _path(step_m: float = 0.12) -> np.ndarray:
+    corners = np.array([[1.0, 1.0], [4.2, 1.0], [6.5, 1.5], [4.2, 1.2], [4.0, 3.8], [1.0, 3.6]])
+    poses, th = [], 0.0
+    for c in range(len(corners)):
+        a, b = corners[c], corners[(c + 1) % len(corners)]
+        heading = np.arctan2(b[1] - a[1], b[0] - a[0])
+        dth = (heading - th + np.pi) % (2 * np.pi) - np.pi
+        for k in range(int(np.ceil(abs(dth) / 0.15))):
+            th += np.sign(dth) * min(0.15, abs(dth) - k * 0.15)
+            poses.append([a[0], a[1], th])
+        th = heading
+        n = int(np.hypot(*(b - a)) / step_m)
+        poses += [[*(a + (b - a) * (k + 1) / n), th] for k in range(n)]
+    return np.array(poses)
+
+
+def _stream(truth, segs, rng, person: bool = False):
+    """(odometry, scan) pairs: drifting odometry and noisy scans (optionally a walking person)."""
+    odo = [np.zeros(3)]
+    for k in range(1, len(truth)):
+        d = se2.between(truth[k - 1], truth[k])
+        dn = d * np.array([1.02, 1.02, 1.03])
+        dn[2] += 0.03 * np.hypot(d[0], d[1]) + rng.normal(0, 0.002)
+        dn[:2] += rng.normal(0, 0.002, 2)
+        odo.append(se2.compose(odo[-1], dn))
+    out = []
+    for k, pose in enumerate(truth):
+        s = segs
+        if person:
+            px = 1.0 + 3.0 * (k / len(truth))
+            s = np.concatenate([segs, _box(px, 2.8, px + 0.3, 3.1)])
+        r = _raycast(pose, LASER.angles(), s, LASER.range_max_m)
+        r = (r + rng.normal(0, 0.01, r.shape)).astype(np.float32)
+        out.append((Odometry(odo[k], 0.1 * k), Scan(r, 0.1 * k)))
+    return out
+
+
+def _run(loc, truth, segs, rng, day, run, first=False, person=False):
+    loc.begin_run(Prior(initial_pose=truth[0].copy(), day=day, run=run, first_run=first))
+    ests = [loc.update(o, s) for o, s in _stream(truth, segs, rng, person)]
+    loc.end_run()
+    err = np.array([np.hypot(*(e.mean[:2] - t[:2])) for e, t in zip(ests, truth, strict=True)])
+    return ests, err
+
+
+@pytest.fixture(scope="module")
+def learned():
+    """dynamic-map and static-map after day 1 (3 runs) in the static world."""
+    rng = np.random.default_rng(0)
+    truth = _path()
+    locs = {
+        name: make_localizer(name, laser=LASER, rng=np.random.default_rng(1))
+        for name in ("dynamic-map", "static-map", "static-map+stm")
+    }
+    errs = {}
+    for name, loc in locs.items():
+        for run in (1, 2, 3):
+            _, errs[name, run] = _run(loc, truth, _world(False), rng, 1, run, first=(run == 1))
+        loc.end_day()
+    return locs, errs, truth
+
+
+def test_registered():
+    assert {"dynamic-map", "static-map", "static-map+stm"} <= set(LOCALIZERS.names())
+
+
+def test_first_run_builds_initial_local_maps_and_later_runs_localize(learned):
+    locs, errs, _ = learned
+    dyn = locs["dynamic-map"]
+    assert 3 <= len(dyn.dmap) <= 30
+    centres = dyn.dmap.centres
+    d = np.hypot(*(centres[:, None, :] - centres[None, :, :]).transpose(2, 0, 1))
+    assert d[np.triu_indices(len(centres), 1)].min() >= 2.0 - 1e-9  # spacing of the selection
+    for name in locs:
+        assert errs[name, 1].max() < 0.15  # first-run SLAM
+        for run in (2, 3):
+            assert np.mean(errs[name, run]) < 0.05, (name, run)
+            assert errs[name, run].max() < 0.15, (name, run)
+
+
+def test_extras_per_scan(learned):
+    locs, _, truth = learned
+    loc = locs["dynamic-map"]
+    rng = np.random.default_rng(5)
+    loc.begin_run(Prior(initial_pose=truth[0].copy(), day=2, run=1))
+    ests = [loc.update(o, s) for o, s in _stream(truth[:40], _world(False), rng)]
+    loc.end_run()
+    for e in ests[1:]:
+        x = e.extras
+        assert np.isfinite(x["scan_loglik"]) and 0 < x["scan_lik"]
+        assert x["lambda_min"] > 0
+        assert x["lambda_min"] == pytest.approx(lambda_min(e.cov))
+        assert x["timescale"] in range(5)
+        assert set(x["timescales"]) <= set(range(5))
+        assert isinstance(x["safe_mode"], bool)
+    assert np.mean([e.extras["safe_mode"] for e in ests]) < 0.1
+
+
+def test_dynamic_map_adapts_to_a_change_and_static_map_stays_frozen(learned):
+    locs = {k: pickle.loads(pickle.dumps(v)) for k, v in learned[0].items()}  # picklable
+    truth = learned[2]
+    rng = np.random.default_rng(7)
+    snap = {k: [s.samples_mm.copy() for s in v.dmap.local_maps[0].sub] for k, v in locs.items()}
+    assert locs["static-map"].frozen and locs["static-map+stm"].frozen
+    assert not locs["dynamic-map"].frozen
+    res = {}
+    for name, loc in locs.items():
+        lik = []
+        for day, run in ((2, 1), (2, 2), (3, 1)):
+            ests, err = _run(loc, truth, _world(True), rng, day, run, person=True)
+            assert np.mean(err) < 0.08, (name, day, run)
+            lik.append(np.mean([e.extras["scan_loglik"] for e in ests[1:]]))
+            if run == 2:
+                loc.end_day()
+        res[name] = lik
+    lm = {k: v.dmap.local_maps[0].sub for k, v in locs.items()}
+    for level in range(1, 5):  # the snapshot's long-term memory is frozen
+        assert np.array_equal(lm["static-map"][level].samples_mm, snap["static-map"][level])
+        assert np.array_equal(lm["static-map+stm"][level].samples_mm, snap["static-map+stm"][level])
+    assert not np.array_equal(lm["dynamic-map"][4].samples_mm, snap["dynamic-map"][4])
+    assert not np.array_equal(lm["static-map+stm"][0].samples_mm, snap["static-map+stm"][0])
+    assert np.array_equal(lm["static-map"][0].samples_mm, snap["static-map"][0])
+    # B&D Fig. 10: after the change the dynamic map explains the scans better than the snapshot
+    assert res["dynamic-map"][-1] > res["static-map"][-1]
+
+
+def test_bad_mode_is_rejected():
+    with pytest.raises(ValueError, match="mode"):
+        DynamicMapLocalizer(LASER, np.random.default_rng(0), mode="frozen")
