@@ -1,0 +1,294 @@
+"""Pedestrians steered by the social force model (Helbing & Molnár 1995, Phys. Rev. E 51).
+
+Each person ``i`` (unit mass) is driven toward a goal and repelled by the others, by static
+geometry and by the robot:
+
+* driving term ``(v0_i e_i - v_i) / tau``  (H&M eq. 2, relaxation time ``tau``);
+* person-person ``A exp((r_i + r_j - d_ij) / B) n_ij``  (H&M eq. 3-4, in the circular form
+  of Helbing, Farkas & Vicsek 2000);
+* obstacle ``A_w exp((r_i - d_iW) / B_w) n_iW`` from the closest point of every segment
+  within reach (H&M eq. 5);
+* robot: the same exponential from a disc of the robot's radius plus a comfort margin.
+
+The speed is capped at ``1.3 v0_i`` (H&M eq. 8). After the explicit Euler step a position
+correction keeps bodies out of walls and furniture and at least ``ROBOT_GAP_M`` away from
+the robot's body, so the simulation never shows a person inside a wall whatever the forces.
+A person who reaches a goal (or is stuck for ``STUCK_S``) picks a new one in line of sight.
+People are seen by the laser as two legs whose fore-aft offset follows the gait phase.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dynmap_sim.world.polygons import FloatArray, point_segment_distance, segments_cross
+from dynmap_sim.world.spec import PeopleSpec
+
+TAU_S = 0.5
+A_PEOPLE = 2.1
+B_PEOPLE = 0.3
+A_WALL = 4.0
+B_WALL = 0.12
+A_ROBOT = 6.0
+B_ROBOT = 0.25
+ROBOT_GAP_M = 0.10
+REACH_M = 1.2
+GOAL_TOL_M = 0.4
+STUCK_S = 4.0
+LEG_RADIUS_M = 0.06
+LEG_SPREAD_M = 0.10
+STRIDE_M = 1.2
+LEG_SWING_M = 0.12
+
+
+def profile_fraction(profile: tuple[tuple[float, float], ...], time_s: float) -> float:
+    """Fraction of a population present at ``time_s`` seconds since midnight."""
+    hours = np.array([h for h, _ in profile])
+    frac = np.array([f for _, f in profile])
+    return float(np.interp(time_s / 3600.0, hours, frac))
+
+
+@dataclass
+class Crowd:
+    """Live state of all people of a run. Arrays have one row per person."""
+
+    pos: FloatArray
+    vel: FloatArray
+    goal: FloatArray
+    v0: FloatArray
+    radius: FloatArray
+    population: NDArray[np.int64]
+    phase: FloatArray
+    stuck_s: FloatArray
+    ids: tuple[str, ...]
+
+    @property
+    def n(self) -> int:
+        """Number of people."""
+        return len(self.pos)
+
+
+class SocialForce:
+    """Social force stepping for the people of one run among fixed ``segments`` ``(N, 4)``."""
+
+    def __init__(
+        self,
+        populations: tuple[PeopleSpec, ...],
+        segments: FloatArray,
+        rng: np.random.Generator,
+    ) -> None:
+        self.populations = populations
+        self.rng = rng
+        self.segments = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
+
+    # -- sampling -----------------------------------------------------------------------
+    def _free(self, xy: FloatArray, r: float) -> bool:
+        if len(self.segments) == 0:
+            return True
+        return bool(point_segment_distance(xy[None, :], self.segments).min() > r + 0.05)
+
+    def _visible(self, a: FloatArray, b: FloatArray) -> bool:
+        if len(self.segments) == 0:
+            return True
+        return not bool(segments_cross(np.concatenate([a, b]), self.segments).any())
+
+    def _random_point(self, pop: PeopleSpec, r: float) -> FloatArray | None:
+        for _ in range(50):
+            box = pop.areas[int(self.rng.integers(len(pop.areas)))]
+            xy = np.array([self.rng.uniform(box[0], box[2]), self.rng.uniform(box[1], box[3])])
+            if self._free(xy, r):
+                return xy
+        return None
+
+    def pick_goal(self, pop: PeopleSpec, frm: FloatArray, r: float) -> FloatArray:
+        """A goal in line of sight of ``frm``: an attraction point or a free point of the areas."""
+        for _ in range(20):
+            if pop.goals:
+                g = np.array(pop.goals[int(self.rng.integers(len(pop.goals)))], dtype=float)
+            else:
+                g = self._random_point(pop, r)
+                if g is None:
+                    continue
+            if np.hypot(*(g - frm)) > GOAL_TOL_M and self._visible(frm, g):
+                return g
+        return frm.copy()
+
+    def spawn(
+        self, time_s: float, day_active: list[bool], keep_away: FloatArray | None = None
+    ) -> Crowd:
+        """Place the people present at ``time_s`` (profile x count) on free spots of their areas."""
+        pos, goal, v0, rad, popi, ids = [], [], [], [], [], []
+        for k, pop in enumerate(self.populations):
+            if not day_active[k]:
+                continue
+            n = int(round(pop.count * profile_fraction(pop.profile, time_s)))
+            for j in range(n):
+                xy = None
+                for _ in range(30):
+                    c = self._random_point(pop, pop.radius_m)
+                    if c is None:
+                        break
+                    ok = all(
+                        np.hypot(*(c - p)) > r + pop.radius_m + 0.1
+                        for p, r in zip(pos, rad, strict=True)
+                    )
+                    if keep_away is not None:
+                        ok = ok and np.hypot(*(c - keep_away)) > 1.0
+                    if ok:
+                        xy = c
+                        break
+                if xy is None:
+                    continue
+                pos.append(xy)
+                rad.append(pop.radius_m)
+                v0.append(self.rng.uniform(*pop.speed_mps))
+                goal.append(self.pick_goal(pop, xy, pop.radius_m))
+                popi.append(k)
+                ids.append(f"person:{pop.id}:{j}")
+        n = len(pos)
+        return Crowd(
+            pos=np.array(pos, dtype=np.float64).reshape(n, 2),
+            vel=np.zeros((n, 2)),
+            goal=np.array(goal, dtype=np.float64).reshape(n, 2),
+            v0=np.array(v0, dtype=np.float64),
+            radius=np.array(rad, dtype=np.float64),
+            population=np.array(popi, dtype=np.int64),
+            phase=self.rng.uniform(0, 2 * np.pi, n),
+            stuck_s=np.zeros(n),
+            ids=tuple(ids),
+        )
+
+    # -- dynamics -------------------------------------------------------------------------
+    def _near_segments(self, crowd: Crowd) -> FloatArray:
+        """Segments whose bounding box comes within ``REACH_M`` of any person (broad phase)."""
+        s = self.segments
+        lo = crowd.pos.min(axis=0) - REACH_M
+        hi = crowd.pos.max(axis=0) + REACH_M
+        keep = (
+            (np.maximum(s[:, 0], s[:, 2]) >= lo[0])
+            & (np.minimum(s[:, 0], s[:, 2]) <= hi[0])
+            & (np.maximum(s[:, 1], s[:, 3]) >= lo[1])
+            & (np.minimum(s[:, 1], s[:, 3]) <= hi[1])
+        )
+        return s[keep]
+
+    @staticmethod
+    def _closest(points: FloatArray, segs: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Distances ``(P, N)`` and unit vectors ``(P, N, 2)`` from segments to points."""
+        a = segs[None, :, 0:2]
+        d = segs[None, :, 2:4] - a
+        p = points[:, None, :]
+        dd = np.maximum(np.sum(d * d, axis=-1), 1e-18)
+        t = np.clip(np.sum((p - a) * d, axis=-1) / dd, 0.0, 1.0)
+        diff = p - (a + t[..., None] * d)
+        dist = np.hypot(diff[..., 0], diff[..., 1])
+        return dist, diff / np.maximum(dist, 1e-9)[..., None]
+
+    def step(
+        self,
+        crowd: Crowd,
+        dt_s: float,
+        robot_xy: FloatArray | None = None,
+        robot_radius_m: float = 0.2,
+    ) -> None:
+        """Advance ``crowd`` by ``dt_s`` seconds in place (explicit Euler + position correction)."""
+        n = crowd.n
+        if n == 0:
+            return
+        pos, vel = crowd.pos, crowd.vel
+        to_goal = crowd.goal - pos
+        dist_goal = np.hypot(to_goal[:, 0], to_goal[:, 1])
+        e = to_goal / np.maximum(dist_goal, 1e-9)[:, None]
+        force = (crowd.v0[:, None] * e - vel) / TAU_S
+        if n > 1:
+            diff = pos[:, None, :] - pos[None, :, :]
+            d = np.hypot(diff[..., 0], diff[..., 1])
+            np.fill_diagonal(d, np.inf)
+            rsum = crowd.radius[:, None] + crowd.radius[None, :]
+            mag = A_PEOPLE * np.exp((rsum - d) / B_PEOPLE)
+            force += np.sum((mag / np.maximum(d, 1e-9))[..., None] * diff, axis=1)
+        segs = self._near_segments(crowd)
+        if len(segs):
+            dist, nvec = self._closest(pos, segs)
+            mag = np.where(
+                dist < REACH_M, A_WALL * np.exp((crowd.radius[:, None] - dist) / B_WALL), 0
+            )
+            force += np.sum(mag[..., None] * nvec, axis=1)
+        if robot_xy is not None:
+            rd = pos - robot_xy[None, :]
+            dr = np.maximum(np.hypot(rd[:, 0], rd[:, 1]), 1e-9)
+            reach = crowd.radius + robot_radius_m + ROBOT_GAP_M
+            force += (A_ROBOT * np.exp((reach - dr) / B_ROBOT) / dr)[:, None] * rd
+        vel += dt_s * force
+        speed = np.hypot(vel[:, 0], vel[:, 1])
+        vmax = 1.3 * crowd.v0
+        vel *= np.minimum(1.0, vmax / np.maximum(speed, 1e-9))[:, None]
+        old = pos.copy()
+        pos += dt_s * vel
+        self._correct(crowd, segs, robot_xy, robot_radius_m)
+        moved = np.hypot(*(pos - old).T)
+        crowd.phase += 2 * np.pi * moved / STRIDE_M
+        # goals: arrival or stuck -> new goal in line of sight
+        crowd.stuck_s = np.where(moved < 0.1 * crowd.v0 * dt_s, crowd.stuck_s + dt_s, 0.0)
+        redo = np.flatnonzero((dist_goal < GOAL_TOL_M) | (crowd.stuck_s > STUCK_S))
+        for i in redo:
+            pop = self.populations[int(crowd.population[i])]
+            crowd.goal[i] = self.pick_goal(pop, pos[i], float(crowd.radius[i]))
+            crowd.stuck_s[i] = 0.0
+
+    def _correct(
+        self, crowd: Crowd, segs: FloatArray, robot_xy: FloatArray | None, robot_r: float
+    ) -> None:
+        """Push bodies out of the robot's comfort disc, each other, then walls (walls win)."""
+        pos = crowd.pos
+        if robot_xy is not None:
+            rd = pos - robot_xy[None, :]
+            dr = np.maximum(np.hypot(rd[:, 0], rd[:, 1]), 1e-9)
+            need = crowd.radius + robot_r + ROBOT_GAP_M
+            push = np.maximum(need - dr, 0.0)
+            pos += (push / dr)[:, None] * rd
+        if crowd.n > 1:
+            diff = pos[:, None, :] - pos[None, :, :]
+            d = np.hypot(diff[..., 0], diff[..., 1])
+            np.fill_diagonal(d, np.inf)
+            over = np.maximum(crowd.radius[:, None] + crowd.radius[None, :] - d, 0.0)
+            pos += 0.5 * np.sum((over / np.maximum(d, 1e-9))[..., None] * diff, axis=1)
+        if len(segs):
+            for _ in range(2):
+                dist, nvec = self._closest(pos, segs)
+                over = np.maximum(crowd.radius[:, None] - dist, 0.0)
+                if not over.any():
+                    break
+                j = np.argmax(over, axis=1)
+                rows = np.arange(crowd.n)
+                pos += over[rows, j][:, None] * nvec[rows, j]
+                # remove the velocity component into the obstacle
+                nv = nvec[rows, j]
+                vn = np.sum(crowd.vel * nv, axis=1)
+                hit = (over[rows, j] > 0) & (vn < 0)
+                crowd.vel[hit] -= vn[hit, None] * nv[hit]
+
+    @staticmethod
+    def legs(crowd: Crowd) -> tuple[FloatArray, NDArray[np.int32]]:
+        """Two leg circles per person ``(2P, 3)`` and the person index of each."""
+        n = crowd.n
+        sp = np.hypot(crowd.vel[:, 0], crowd.vel[:, 1])
+        h = np.where(
+            sp[:, None] > 1e-3, crowd.vel / np.maximum(sp, 1e-9)[:, None], np.array([1.0, 0.0])
+        )
+        lat = np.stack([-h[:, 1], h[:, 0]], axis=1)
+        swing = LEG_SWING_M * np.sin(crowd.phase) * np.minimum(sp / 0.5, 1.0)
+        out = np.empty((2 * n, 3))
+        out[0::2, :2] = crowd.pos + LEG_SPREAD_M * lat + swing[:, None] * h
+        out[1::2, :2] = crowd.pos - LEG_SPREAD_M * lat - swing[:, None] * h
+        out[:, 2] = LEG_RADIUS_M
+        return out, np.repeat(np.arange(n, dtype=np.int32), 2)
+
+    @staticmethod
+    def poses(crowd: Crowd) -> FloatArray:
+        """People poses ``(P, 3)``: position and heading of motion [m, rad]."""
+        th = np.arctan2(crowd.vel[:, 1], crowd.vel[:, 0])
+        return np.column_stack([crowd.pos, th])

@@ -1,0 +1,275 @@
+"""The schedule: what stands where at the start of any run (DESIGN.md §2).
+
+The state at slot ``t`` is a pure function of (world file, seed, t): start from the objects'
+initial state, collect every event *occurrence* at or before ``t`` (a ``present`` window
+contributes its start and its end, a recurring ``shuffle`` only its latest occurrence, a
+``grow`` its interpolated scale), and apply them in (slot, file order). Randomness of a
+shuffle occurrence comes from ``numpy.random.SeedSequence((seed, event index, day, run))``,
+never from a generator stepped through time, so runs can be visited in any order.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from dynmap_sim.world.calendar import Calendar
+from dynmap_sim.world.polygons import FloatArray, ccw, sat_separation, thick_segment, transform
+from dynmap_sim.world.spec import (
+    AddEvent,
+    DoorEvent,
+    GrowEvent,
+    InstallEvent,
+    MoveEvent,
+    ObjectSpec,
+    PresentEvent,
+    RemoveEvent,
+    ShuffleEvent,
+    WorldSpec,
+)
+
+_SHUFFLE_TRIES = 60
+_SHUFFLE_TAG = 0x5F1E
+
+
+@dataclass(frozen=True)
+class ObjectState:
+    """One object at one moment: ``polygon`` is its outline ``(K, 2)`` in the map frame [m].
+
+    ``circle`` is ``(x_m, y_m, r_m)`` for round objects (their polygon is a circumscribed
+    16-gon). ``blocks_route`` marks an object the schedule put on the route on purpose.
+    """
+
+    id: str
+    kind: str
+    group: str | None
+    polygon: FloatArray
+    circle: tuple[float, float, float] | None = None
+    blocks_route: bool = False
+    pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """State at the start of run ``(day, run)``: static walls and present objects, people."""
+
+    day: int
+    run: int
+    objects: tuple[ObjectState, ...]
+    people: FloatArray = field(default_factory=lambda: np.zeros((0, 3)))
+
+    def by_id(self) -> dict[str, ObjectState]:
+        """Objects keyed by id."""
+        return {o.id: o for o in self.objects}
+
+
+@dataclass
+class _State:
+    present: bool
+    pose: tuple[float, float, float]
+    scale: float = 1.0
+    open: bool = False
+    blocks_route: bool = False
+
+
+def wall_pieces(spec: WorldSpec) -> list[tuple[str, FloatArray]]:
+    """Each wall polyline segment as a capped rectangle ``(id, polygon)``.
+
+    A single-segment wall keeps its id; pieces of a polyline are ``<id>.<k>``.
+    """
+    out = []
+    for w in spec.walls:
+        n = len(w.points) - 1
+        for k in range(n):
+            pid = w.id if n == 1 else f"{w.id}.{k}"
+            out.append((pid, ccw(thick_segment(w.points[k], w.points[k + 1], w.thickness_m))))
+    return out
+
+
+class Schedule:
+    """Compiled schedule of a world: events resolved to slot indices, groups expanded."""
+
+    def __init__(self, spec: WorldSpec, calendar: Calendar) -> None:
+        self.spec = spec
+        self.calendar = calendar
+        self.objects: dict[str, ObjectSpec] = {o.id: o for o in spec.objects}
+        self.local: dict[str, FloatArray] = {o.id: o.local_vertices() for o in spec.objects}
+        self.groups: dict[str, list[str]] = {}
+        for o in spec.objects:
+            if o.group is not None:
+                self.groups.setdefault(o.group, []).append(o.id)
+        self.walls = wall_pieces(spec)
+        self._windowed: set[str] = set()
+        for ev in spec.schedule:
+            if isinstance(ev, PresentEvent):
+                self._windowed.update(self.groups.get(ev.group, []))
+
+    # -- time helpers -------------------------------------------------------------------
+    def _slot(self, when, run: int = 1) -> int:
+        day = self.calendar.day_of(when)
+        if day is None:
+            raise ValueError(f"{when} is outside the calendar")
+        return self.calendar.slot_index(day, min(run, self.calendar.runs_per_day))
+
+    def _end_slot(self, when) -> int:
+        return self._slot(when, self.calendar.runs_per_day)
+
+    def members(self, ev) -> list[str]:
+        """Object ids an event applies to."""
+        target = getattr(ev, "target", None)
+        if target is not None:
+            return [target]
+        return list(self.groups.get(ev.group, []))
+
+    # -- evaluation -----------------------------------------------------------------------
+    def occurrences(self, t: int) -> list[tuple[int, int, str, object]]:
+        """Event occurrences at or before slot ``t`` as ``(slot, order, what, payload)``."""
+        occ: list[tuple[int, int, str, object]] = []
+        last = self.calendar.n_slots - 1
+        for i, ev in enumerate(self.spec.schedule):
+            if isinstance(ev, PresentEvent):
+                s0, s1 = self._slot(ev.start), self._end_slot(ev.end)
+                if s0 <= t:
+                    occ.append((s0, i, "present", ev))
+                if s1 + 1 <= t:
+                    occ.append((s1 + 1, i, "absent", ev))
+            elif isinstance(ev, ShuffleEvent):
+                s0 = self._slot(ev.start)
+                s1 = last if ev.end is None else self._end_slot(ev.end)
+                if s0 <= t:
+                    s = s0 + ((min(t, s1) - s0) // ev.every_runs) * ev.every_runs
+                    occ.append((s, i, "shuffle", ev))
+            elif isinstance(ev, GrowEvent):
+                s0, s1 = self._slot(ev.start), self._end_slot(ev.end)
+                if s0 <= t:
+                    frac = 1.0 if s1 <= s0 else min(1.0, (t - s0) / (s1 - s0))
+                    occ.append(
+                        (s0, i, "grow", ev.scale_start + frac * (ev.scale_end - ev.scale_start))
+                    )
+            else:
+                s = self._slot(ev.at, ev.run)
+                if s <= t:
+                    occ.append((s, i, ev.action, ev))
+        occ.sort(key=lambda o: (o[0], o[1]))
+        return occ
+
+    def states(self, seed: int, t: int) -> dict[str, _State]:
+        """Per-object state at the start of slot ``t`` (pure in ``seed`` and ``t``)."""
+        st = {
+            oid: _State(present=o.present and oid not in self._windowed, pose=o.pose, open=o.open)
+            for oid, o in self.objects.items()
+        }
+        for slot, i, what, payload in self.occurrences(t):
+            ev = self.spec.schedule[i]
+            if what in ("add", "install"):
+                assert isinstance(ev, AddEvent | InstallEvent)
+                for oid in self.members(ev):
+                    st[oid].present = True
+                    st[oid].blocks_route = ev.blocks_route
+            elif what == "remove":
+                assert isinstance(ev, RemoveEvent)
+                for oid in self.members(ev):
+                    st[oid].present = False
+            elif what == "move":
+                assert isinstance(ev, MoveEvent)
+                st[ev.target].pose = ev.pose
+                st[ev.target].blocks_route = ev.blocks_route
+            elif what in ("open", "close"):
+                assert isinstance(ev, DoorEvent)
+                st[ev.target].open = what == "open"
+            elif what in ("present", "absent"):
+                assert isinstance(ev, PresentEvent)
+                for oid in self.members(ev):
+                    st[oid].present = what == "present"
+            elif what == "grow":
+                assert isinstance(ev, GrowEvent) and isinstance(payload, float)
+                st[ev.target].scale = payload
+            elif what == "shuffle":
+                assert isinstance(ev, ShuffleEvent)
+                self._shuffle(st, ev, i, seed, slot)
+        return st
+
+    def polygon(self, oid: str, s: _State) -> FloatArray | None:
+        """Outline of object ``oid`` in state ``s``, or ``None`` when it is absent."""
+        o = self.objects[oid]
+        if not s.present:
+            return None
+        pose = s.pose
+        if o.kind == "door" and s.open:
+            if o.open_pose is None:
+                return None
+            pose = o.open_pose
+        return transform(self.local[oid], pose, s.scale)
+
+    def _shuffle(self, st: dict[str, _State], ev: ShuffleEvent, idx: int, seed: int, slot: int):
+        """Seeded re-placement of a group inside ``ev.region`` without overlaps.
+
+        Members are placed in file order by rejection sampling (uniform position and, with
+        ``rotate``, heading) keeping ``min_gap_m`` from walls, other objects and members placed
+        before; a member that finds no free spot is carried away (absent) until re-added.
+        """
+        rs = self.calendar.slots[slot]
+        rng = np.random.default_rng(
+            np.random.SeedSequence((int(seed), _SHUFFLE_TAG, idx, rs.day, rs.run))
+        )
+        x0, y0, x1, y1 = ev.region
+        members = self.members(ev)
+        mset = set(members)
+        others = [p for _, p in self.walls]
+        for oid, s in st.items():
+            if oid in mset:
+                continue
+            p = self.polygon(oid, s)
+            if p is not None:
+                pmin, pmax = p.min(axis=0), p.max(axis=0)
+                if pmax[0] > x0 - 1 and pmin[0] < x1 + 1 and pmax[1] > y0 - 1 and pmin[1] < y1 + 1:
+                    others.append(p)
+        placed: list[FloatArray] = []
+        for oid in members:
+            s = st[oid]
+            local = self.local[oid] * s.scale
+            best = None
+            for _ in range(_SHUFFLE_TRIES):
+                th = float(rng.uniform(-np.pi, np.pi)) if ev.rotate else s.pose[2]
+                rot = transform(local, (0.0, 0.0, th))
+                lo, hi = rot.min(axis=0), rot.max(axis=0)
+                if hi[0] - lo[0] > x1 - x0 or hi[1] - lo[1] > y1 - y0:
+                    break
+                x = float(rng.uniform(x0 - lo[0], x1 - hi[0]))
+                y = float(rng.uniform(y0 - lo[1], y1 - hi[1]))
+                poly = rot + np.array([x, y])
+                if all(sat_separation(poly, q) >= ev.min_gap_m for q in others + placed):
+                    best = (x, y, th), poly
+                    break
+            if best is None:  # no free spot found: it is carried away for now
+                s.present = False
+                continue
+            s.pose = best[0]
+            placed.append(best[1])
+
+    def object_states(self, seed: int, t: int) -> tuple[ObjectState, ...]:
+        """Walls (static pieces) and present objects at slot ``t`` as :class:`ObjectState`."""
+        out = [ObjectState(id=pid, kind="wall", group=None, polygon=p) for pid, p in self.walls]
+        for oid, s in self.states(seed, t).items():
+            p = self.polygon(oid, s)
+            if p is None:
+                continue
+            o = self.objects[oid]
+            circle = None
+            if o.shape == "circle":
+                assert o.radius_m is not None
+                circle = (float(s.pose[0]), float(s.pose[1]), o.radius_m * s.scale)
+            p.setflags(write=False)
+            out.append(
+                ObjectState(
+                    id=oid,
+                    kind=o.kind,
+                    group=o.group,
+                    polygon=p,
+                    circle=circle,
+                    blocks_route=s.blocks_route,
+                    pose=tuple(float(v) for v in s.pose),  # type: ignore[arg-type]
+                )
+            )
+        return tuple(out)

@@ -1,0 +1,219 @@
+"""The live world: schedule state for the current run, pymunk space, people, geometry arrays.
+
+``World(spec, seed)`` jumps between runs with :meth:`World.reset` (the schedule is evaluated
+for that run, never simulated through the hours in between) and advances people and the clock
+with :meth:`World.step`. Geometry arrays and pymunk shapes of objects are rebuilt only on
+``reset``; a step only moves people. Time is kept as an integer count of microseconds since
+the run started, so weeks of stepping do not drift.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import pymunk
+
+from dynmap_sim.world.calendar import Calendar, RunSlot
+from dynmap_sim.world.geometry import GeometryView, StaticGeometry, build_static
+from dynmap_sim.world.people import Crowd, SocialForce
+from dynmap_sim.world.polygons import FloatArray, polygon_edges
+from dynmap_sim.world.schedule import ObjectState, Schedule, Snapshot
+from dynmap_sim.world.spec import WorldSpec
+
+#: pymunk collision types of the world's shapes.
+COLLISION_STATIC = 1
+COLLISION_PERSON = 2
+#: pymunk shape-filter category bits: walls and objects, people.
+CATEGORY_STATIC = 0b01
+CATEGORY_PERSON = 0b10
+_PEOPLE_TAG = 0x9E0913
+
+
+class World:
+    """A world file brought to life for one ``seed`` (see DESIGN.md §2 and common contracts)."""
+
+    def __init__(self, spec: WorldSpec, seed: int = 0) -> None:
+        self.spec = spec
+        self.seed = int(seed)
+        self.calendar = Calendar(spec.calendar)
+        self.schedule = Schedule(spec, self.calendar)
+        self.space = pymunk.Space()
+        self.space.gravity = (0.0, 0.0)
+        self._static_filter = pymunk.ShapeFilter(categories=CATEGORY_STATIC)
+        self._person_filter = pymunk.ShapeFilter(categories=CATEGORY_PERSON)
+        for _, poly in self.schedule.walls:
+            self.space.add(self._static_shape(poly, None))
+        ws = [polygon_edges(poly) for _, poly in self.schedule.walls]
+        self._wall_segments = np.concatenate(ws) if ws else np.zeros((0, 4))
+        self._wall_segments.setflags(write=False)
+        self._object_shapes: dict[str, tuple[Any, pymunk.Shape]] = {}
+        self._people_bodies: list[pymunk.Body] = []
+        self._snapshots: dict[tuple[int, int], Snapshot] = {}
+        self._static_version = 0
+        self.reset(1, 1)
+
+    # -- pymunk helpers -------------------------------------------------------------------
+    def _static_shape(self, poly: FloatArray, circle) -> pymunk.Shape:
+        body = self.space.static_body
+        if circle is not None:
+            shape: pymunk.Shape = pymunk.Circle(body, circle[2], offset=(circle[0], circle[1]))
+        else:
+            shape = pymunk.Poly(body, [tuple(v) for v in poly.tolist()])
+        shape.collision_type = COLLISION_STATIC
+        shape.filter = self._static_filter
+        shape.friction = 0.8
+        return shape
+
+    def _sync_objects(self, objects: tuple[ObjectState, ...]) -> None:
+        """Replace pymunk shapes of objects whose state changed (static index refreshed)."""
+        wanted = {o.id: o for o in objects if o.kind != "wall" or o.id in self.schedule.objects}
+        changed = False
+        for oid in list(self._object_shapes):
+            key, shape = self._object_shapes[oid]
+            o = wanted.get(oid)
+            if o is None or key != (o.pose, o.polygon.tobytes()):
+                self.space.remove(shape)
+                del self._object_shapes[oid]
+                changed = True
+        for oid, o in wanted.items():
+            if oid not in self._object_shapes:
+                shape = self._static_shape(o.polygon, o.circle)
+                self.space.add(shape)
+                self._object_shapes[oid] = ((o.pose, o.polygon.tobytes()), shape)
+                changed = True
+        if changed:
+            self.space.reindex_static()
+
+    # -- public API -----------------------------------------------------------------------
+    def reset(self, day: int, run: int) -> None:
+        """Jump the live state to the start of run ``(day, run)`` (1-based)."""
+        t = self.calendar.slot_index(day, run)
+        self.day, self.run = day, run
+        self.slot: RunSlot = self.calendar.slots[t]
+        objects = self.schedule.object_states(self.seed, t)
+        self.objects = objects
+        self._sync_objects(objects)
+        self._static: StaticGeometry = build_static(objects)
+        self._static_version += 1
+        self._time_us = 0
+        # people
+        self._forces, self._crowd = self._spawn(day, run, objects)
+        for b in self._people_bodies:
+            self.space.remove(b, *b.shapes)
+        self._people_bodies = []
+        for i in range(self._crowd.n):
+            body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+            body.position = tuple(self._crowd.pos[i])
+            shape = pymunk.Circle(body, float(self._crowd.radius[i]))
+            shape.collision_type = COLLISION_PERSON
+            shape.filter = self._person_filter
+            self.space.add(body, shape)
+            self._people_bodies.append(body)
+        n_obj = len(self._static.object_ids)
+        self._people_ids = self._crowd.ids
+        nl = 2 * self._crowd.n
+        self._circle_object = np.concatenate(
+            [self._static.circle_object, n_obj + np.repeat(np.arange(self._crowd.n), 2)]
+        ).astype(np.int32)
+        self._circle_class = np.concatenate(
+            [self._static.circle_class, np.full(nl, 5, dtype=np.int8)]
+        ).astype(np.int8)
+        self._object_ids = self._static.object_ids + self._people_ids
+        self._refresh_people()
+
+    def _spawn(self, day: int, run: int, objects: tuple[ObjectState, ...]):
+        segs = [polygon_edges(o.polygon) for o in objects]
+        segments = np.concatenate(segs) if segs else np.zeros((0, 4))
+        rng = np.random.default_rng(np.random.SeedSequence((self.seed, _PEOPLE_TAG, day, run)))
+        forces = SocialForce(self.spec.people, segments, rng)
+        active = []
+        for p in self.spec.people:
+            d0 = 1 if p.start is None else self.calendar.day_of(p.start) or 1
+            d1 = self.calendar.n_days if p.end is None else self.calendar.day_of(p.end) or 0
+            active.append(d0 <= day <= d1)
+        start = np.array(self.spec.robot.start[:2])
+        crowd = forces.spawn(self.calendar.slot(day, run).start_s, active, keep_away=start)
+        return forces, crowd
+
+    def _refresh_people(self) -> None:
+        legs, _ = SocialForce.legs(self._crowd)
+        circles = (
+            np.concatenate([self._static.circles, legs]) if len(legs) else self._static.circles
+        )
+        self._geometry = GeometryView(
+            segments=self._static.segments,
+            segment_object=self._static.segment_object,
+            segment_class=self._static.segment_class,
+            circles=circles,
+            circle_object=self._circle_object,
+            circle_class=self._circle_class,
+            object_ids=self._object_ids,
+            static_version=self._static_version,
+        )
+
+    def step(
+        self,
+        dt_s: float,
+        robot_pose: tuple[float, float, float] | FloatArray | None = None,
+        robot_radius_m: float = 0.2,
+    ) -> None:
+        """Advance the clock and people by ``dt_s`` seconds; people avoid the robot's disc."""
+        self._time_us += int(round(dt_s * 1e6))
+        if self._crowd.n == 0:
+            return
+        rxy = None if robot_pose is None else np.array(robot_pose[:2], dtype=np.float64)
+        self._forces.step(self._crowd, dt_s, rxy, robot_radius_m)
+        for body, p, v in zip(self._people_bodies, self._crowd.pos, self._crowd.vel, strict=True):
+            body.position = (p[0], p[1])
+            body.velocity = (v[0], v[1])
+        self._refresh_people()
+
+    @property
+    def time_s(self) -> float:
+        """Clock time now, seconds since midnight."""
+        return self.slot.start_s + self._time_us * 1e-6
+
+    @property
+    def elapsed_s(self) -> float:
+        """Seconds since the current run started."""
+        return self._time_us * 1e-6
+
+    @property
+    def geometry(self) -> GeometryView:
+        """Geometry arrays for sensors (people's legs refreshed every step)."""
+        return self._geometry
+
+    def wall_segments(self) -> FloatArray:
+        """Outline segments ``(N, 4)`` of the static walls only (the 'walls' prior)."""
+        return self._wall_segments
+
+    def people_poses(self) -> FloatArray:
+        """People poses ``(P, 3)`` [m, rad] now."""
+        return SocialForce.poses(self._crowd)
+
+    def people_radii(self) -> FloatArray:
+        """People body radii ``(P,)`` [m]."""
+        return self._crowd.radius.copy()
+
+    @property
+    def crowd(self) -> Crowd:
+        """Live people state (read-only by convention)."""
+        return self._crowd
+
+    def snapshot(self, day: int, run: int) -> Snapshot:
+        """State at the start of run ``(day, run)``: a pure function of (file, seed, day, run).
+
+        Does not touch the live state. ``people`` are the people's poses at the run start.
+        """
+        key = (day, run)
+        snap = self._snapshots.get(key)
+        if snap is None:
+            t = self.calendar.slot_index(day, run)
+            objects = self.schedule.object_states(self.seed, t)
+            _, crowd = self._spawn(day, run, objects)
+            people = SocialForce.poses(crowd)
+            people.setflags(write=False)
+            snap = Snapshot(day=day, run=run, objects=objects, people=people)
+            self._snapshots[key] = snap
+        return snap

@@ -1,0 +1,48 @@
+"""Both shipped worlds load and keep their promises (calendar, route, API shape)."""
+
+import numpy as np
+import pytest
+
+from dynmap_sim.types import BeamClass
+from dynmap_sim.world import World, load_world, resolve_world_path
+
+
+def test_lab_calendar_has_23_working_days_and_3_runs():
+    spec = load_world(resolve_world_path("lab"))
+    w = World(spec, seed=0)
+    assert w.calendar.n_days == 23
+    assert w.calendar.runs_per_day == 3
+    assert len(w.calendar.slots) == 69
+    assert all(s.date.weekday() < 5 for s in w.calendar.slots)
+    assert 100.0 <= spec.robot.route_length_m <= 130.0
+
+
+def test_apartment_calendar_has_28_days_one_run():
+    spec = load_world("apartment")
+    w = World(spec, seed=0)
+    assert w.calendar.n_days == 28
+    assert w.calendar.runs_per_day == 1
+    x0, y0, x1, y1 = spec.bounds
+    assert x1 - x0 >= 8.0 and y1 - y0 >= 10.0
+
+
+@pytest.mark.parametrize("name", ["lab", "apartment"])
+def test_world_api_shapes(name):
+    spec = load_world(name)
+    w = World(spec, seed=1)
+    assert spec.robot.route.shape[1] == 2
+    assert len(spec.robot.start) == 3
+    g = w.geometry
+    assert g.segments.dtype == np.float64 and g.segments.shape[1] == 4
+    assert g.segment_object.dtype == np.int32 and g.segment_class.dtype == np.int8
+    assert len(g.segment_object) == len(g.segments)
+    assert g.segment_object.max() < len(g.object_ids)
+    assert set(np.unique(g.segment_class)) <= {int(c) for c in BeamClass}
+    walls = w.wall_segments()
+    assert walls.shape[1] == 4 and len(walls) > 0
+    v = g.static_version
+    w.reset(w.calendar.n_days, 1)
+    assert w.geometry.static_version > v
+    w.step(0.1, robot_pose=spec.robot.start)
+    assert w.people_poses().shape[1] == 3
+    assert w.time_s == pytest.approx(w.calendar.slot(w.calendar.n_days, 1).start_s + 0.1)
