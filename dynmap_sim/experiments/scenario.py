@@ -331,6 +331,11 @@ def _semantic_errors(scn: Scenario) -> list[tuple[str, str]]:
         except (TypeError, ValueError) as exc:
             errors.append((f"localizers.{i}.params", f"rejected by {loc.name!r}: {exc}"))
     try:
+        env_kwargs(scn)
+    except (TypeError, ValueError) as exc:
+        where, _, msg = str(exc).partition(": ")
+        errors.append((where, msg))
+    try:
         spec = load_world(scn.world_path)
     except WorldFileError as exc:
         first = exc.errors[0] if exc.errors else ("", "")
@@ -343,6 +348,54 @@ def _semantic_errors(scn: Scenario) -> list[tuple[str, str]]:
             ("days", f"the world's calendar has {n_days} days; days {list(scn.days)} ask more")
         )
     return errors
+
+
+#: Robot presets: overrides of :class:`dynmap_sim.robot.diff_drive.RobotParams` defaults.
+ROBOT_PRESETS: dict[str, dict[str, Any]] = {"default": {}}
+
+
+def env_kwargs(scn: Scenario) -> dict[str, Any]:
+    """Keyword arguments of ``DynMapEnv`` for a scenario's robot, sensor and people.
+
+    ``[robot] overrides``: any ``RobotParams`` field (``radius_m``, ``max_v_mps``, ...), plus
+    ``wheels`` (``WheelGeometry``: ``e_d``, ``e_b``, ...) and ``encoder`` (``EncoderNoise``).
+    ``[sensor] overrides``: ``make_lidar`` overrides (``LaserSpec`` fields, ``beams``, ``mode``,
+    ``mount_pose``) and ``noise`` (``LidarNoise`` fields). Raises ValueError on bad values.
+    """
+    from dynmap_sim.robot.diff_drive import RobotParams
+    from dynmap_sim.sensors.lidar import make_lidar
+    from dynmap_sim.sensors.odometry import EncoderNoise, WheelGeometry
+
+    preset = scn.robot.preset or "default"
+    if preset not in ROBOT_PRESETS:
+        raise ValueError(f"robot.preset: unknown robot {preset!r}; known: {sorted(ROBOT_PRESETS)}")
+    rob = {**ROBOT_PRESETS[preset], **scn.robot.overrides}
+    try:
+        wheels = WheelGeometry(**dict(rob.pop("wheels", {})))  # type: ignore[arg-type]
+        encoder = EncoderNoise(**dict(rob.pop("encoder", {})))  # type: ignore[arg-type]
+        robot = RobotParams(wheels=wheels, **rob)  # type: ignore[arg-type]
+    except TypeError as exc:
+        raise ValueError(f"robot.overrides: {exc}") from None
+    except ValueError as exc:
+        raise ValueError(f"robot.overrides: {exc}") from None
+    sensor = scn.sensor.preset or "urg-04lx"
+    opts = dict(scn.sensor.overrides)
+    noise = opts.pop("noise", None)
+    if "mount_pose" in opts:
+        opts["mount_pose"] = tuple(opts["mount_pose"])  # type: ignore[arg-type]
+    try:
+        make_lidar(sensor, noise=noise, **opts)  # type: ignore[arg-type]
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"sensor: {exc}") from None
+    return {
+        "world": str(scn.world_path),
+        "sensor": sensor,
+        "people": scn.people,
+        "sensor_options": opts,
+        "lidar_noise": noise,
+        "robot": robot,
+        "encoder": encoder,
+    }
 
 
 def _calendar_days(spec: Any) -> int | None:

@@ -1,0 +1,398 @@
+"""The calendar loop: run a scenario's days and runs, localizers side by side (DESIGN.md §6).
+
+For every run of the chosen days: ``env.reset(seed, day, run)``, build the :class:`Prior`,
+``begin_run`` every localizer, let the driver drive while the *same* (odometry, scan) stream
+feeds all localizers, ``end_run``, and ``end_day`` after the day's last run. Each run's rows,
+summaries and a checkpoint (localizers, driver, RNG states, next run) are committed to the
+results database in one transaction, so an experiment killed at any moment resumes
+(``resume=True``) from its last finished run and ends with exactly the numbers of an unbroken
+one: each run's sensor noise derives from (seed, day, run) in the env, and everything else
+that carries over between runs is in the checkpoint.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import math
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dynmap_sim.agent.localizer import Localizer, make_localizer
+from dynmap_sim.errors import InputError
+from dynmap_sim.experiments.drivers import TourDriver, TourParams, clip_route
+from dynmap_sim.experiments.results import Checkpoint, ResultsDB, RunRecord
+from dynmap_sim.experiments.scenario import Scenario, env_kwargs
+from dynmap_sim.metrics import (
+    confusion_matrix,
+    heading_errors,
+    lost_stats,
+    position_errors,
+    rpe,
+    summarize,
+)
+from dynmap_sim.types import Odometry, Prior, Scan
+
+#: Steps between poses for the per-run RPE (1 s at the URG-04LX's 10 Hz).
+RPE_DELTA_STEPS = 10
+
+
+def default_out_dir(scenario: Scenario) -> Path:
+    """``results/<scenario name>`` under the current directory."""
+    return Path("results") / scenario.name
+
+
+def make_env(scenario: Scenario) -> Any:
+    """The env a scenario describes (world file, sensor and robot presets, people)."""
+    from dynmap_sim.env import DynMapEnv
+
+    try:
+        return DynMapEnv(**env_kwargs(scenario))
+    except (TypeError, ValueError, KeyError) as exc:
+        where = scenario.source_path or scenario.name
+        raise InputError(f"{where}: cannot build the env: {exc}") from None
+
+
+def experiment_hash(scenario: Scenario, seed: int, days: tuple[int, int]) -> str:
+    """Identity of an experiment: scenario content, world file, seed and day range."""
+    h = hashlib.sha256(scenario.content_hash().encode())
+    h.update(f"|seed={seed}|days={days[0]}-{days[1]}".encode())
+    return h.hexdigest()
+
+
+def localizer_seeds(seed: int, n: int) -> list[np.random.Generator]:
+    """One SeedSequence tree per experiment: child 0 is the runner's, 1.. the localizers'."""
+    children = np.random.SeedSequence(seed).spawn(n + 1)
+    return [np.random.Generator(np.random.PCG64(c)) for c in children]
+
+
+@dataclasses.dataclass
+class _Kidnap:
+    step: int
+    pose: np.ndarray | None  # None: random (drawn at the kidnapping from the runner's RNG)
+
+
+class ExperimentRunner:
+    """Holds an experiment's env, localizers, driver and results store (see module doc)."""
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        out_dir: Path,
+        days: tuple[int, int],
+        seed: int,
+        resume: bool,
+        overwrite: bool = False,
+        env: Any = None,
+    ) -> None:
+        self.scenario = scenario
+        self.out_dir = out_dir
+        self.seed = int(seed)
+        self.days = days
+        self.env = env if env is not None else make_env(scenario)
+        self.u = self.env.unwrapped
+        self.world = self.u.world
+        self.laser = self.u.laser_spec
+        self.spec = self.world.spec
+        self.slots = [s for s in self.world.calendar.slots if days[0] <= s.day <= days[1]]
+        if not self.slots:
+            raise InputError(
+                f"days {days[0]}-{days[1]}: the world's calendar has days "
+                f"1-{self.world.calendar.n_days}"
+            )
+        self.hash = experiment_hash(scenario, self.seed, days)
+        self.start_index = 0
+        state: dict[str, Any] | None = None
+        db_file = out_dir / "results.db"
+        if resume and db_file.exists():
+            self.db = ResultsDB.open(out_dir)
+            meta = self.db.meta()
+            if meta.get("experiment_hash") != self.hash:
+                self.db.close()
+                raise InputError(
+                    f"{db_file}: these results were made with another scenario content, seed "
+                    f"or day range (results: seed {meta.get('seed')}, days {meta.get('days')}; "
+                    f"asked: seed {self.seed}, days {list(days)}); use another --out"
+                )
+            cp = self.db.load_checkpoint(self.hash, self.seed)
+            if cp is not None:
+                self.start_index = cp.next_index
+                state = cp.state
+        else:
+            self.db = ResultsDB.create(out_dir, overwrite=overwrite)
+            self._write_meta()
+        self.state = state if state is not None else self._fresh_state()
+
+    # ------------------------------------------------------------------ setup
+    def _write_meta(self) -> None:
+        sc = self.scenario
+        self.db.set_meta(
+            scenario=sc.model_dump(mode="json"),
+            scenario_path=str(sc.source_path) if sc.source_path else None,
+            scenario_name=sc.name,
+            world=self.spec.name,
+            world_path=str(sc.world_path),
+            seed=self.seed,
+            days=list(self.days),
+            experiment_hash=self.hash,
+            laser=dataclasses.asdict(self.laser),
+            route=np.asarray(self.spec.robot.route, float).tolist(),
+            bounds=list(self.spec.bounds),
+            slots=[[s.day, s.run, s.date.isoformat(), s.start_s] for s in self.slots],
+            first_date=self.slots[0].date.isoformat(),
+            complete=False,
+        )
+        self.db.set_localizers([(loc.display, loc.name, dict(loc.params)) for loc in sc.localizers])
+
+    def _fresh_state(self) -> dict[str, Any]:
+        sc = self.scenario
+        rngs = localizer_seeds(self.seed, len(sc.localizers))
+        locs = [
+            make_localizer(c.name, laser=self.laser, rng=rngs[k + 1], **c.params)
+            for k, c in enumerate(sc.localizers)
+        ]
+        robot_params = getattr(self.u, "robot_params", None)
+        robot_radius = float(getattr(robot_params, "radius_m", 0.2))
+        d = sc.driver
+        params = TourParams(
+            speed_mps=d.speed_mps,
+            robot_radius_m=robot_radius,
+            clearance_m=d.clearance_m,
+            wait_for_people=d.wait_for_people,
+        )
+        route = clip_route(np.asarray(self.spec.robot.route, float), d.route_fraction)
+        return {"localizers": locs, "driver": TourDriver(route, params), "rng": rngs[0]}
+
+    # ------------------------------------------------------------------ running
+    def run(self, progress: bool = True) -> Path:
+        from tqdm.auto import tqdm
+
+        n = len(self.slots)
+        bar = tqdm(
+            total=n,
+            initial=self.start_index,
+            disable=not progress,
+            desc=self.scenario.name,
+            unit="run",
+        )
+        try:
+            for i in range(self.start_index, n):
+                slot = self.slots[i]
+                bar.set_postfix_str(f"day {slot.day} run {slot.run}")
+                self._run_slot(i)
+                bar.update(1)
+        finally:
+            bar.close()
+        self.db.set_meta(complete=True)
+        self.db.close()
+        self.env.close()
+        return self.out_dir
+
+    def _prior(self, i: int) -> Prior:
+        sc, slot = self.scenario, self.slots[i]
+        known = sc.prior.initial_pose == "known"
+        sxy, sth = sc.prior.initial_pose_sigma_xy_m, sc.prior.initial_pose_sigma_theta_rad
+        return Prior(
+            initial_pose=np.asarray(self.spec.robot.start, float).copy() if known else None,
+            initial_pose_cov=np.diag([sxy**2, sxy**2, sth**2]) if known else None,
+            walls=np.asarray(self.world.wall_segments(), float).copy()
+            if sc.prior.map == "walls"
+            else None,
+            bounds=tuple(float(b) for b in self.spec.bounds),  # type: ignore[arg-type]
+            day=slot.day,
+            run=slot.run,
+            first_run=i == 0,
+        )
+
+    def _kidnaps(self, day: int, run: int, rng: np.random.Generator) -> list[_Kidnap]:
+        dt_s = float(self.laser.scan_period_s)
+        out = []
+        driver: TourDriver = self.state["driver"]
+        route_len = float(np.sum(np.hypot(*np.diff(driver.route, axis=0).T)))
+        expected_s = route_len / self.scenario.driver.speed_mps
+        if self.scenario.driver.max_run_s is not None:
+            expected_s = min(expected_s, self.scenario.driver.max_run_s)
+        for k in self.scenario.kidnappings:
+            if (k.day, k.run) != (day, run):
+                continue
+            t = rng.uniform(0.2, 0.6) * expected_s if k.time_s == "random" else float(k.time_s)
+            pose = None if k.pose == "random" else np.asarray(k.pose, dtype=np.float64)
+            out.append(_Kidnap(max(1, int(round(t / dt_s))), pose))
+        return out
+
+    def _random_route_pose(self, rng: np.random.Generator) -> np.ndarray:
+        route = np.asarray(self.state["driver"].route, float)
+        seg = np.hypot(*np.diff(route, axis=0).T)
+        s = rng.uniform(0.0, seg.sum())
+        k = int(min(np.searchsorted(np.cumsum(seg), s), len(seg) - 1))
+        u = (s - (np.cumsum(seg)[k] - seg[k])) / max(seg[k], 1e-12)
+        xy = route[k] + u * (route[k + 1] - route[k])
+        return np.array([xy[0], xy[1], rng.uniform(-math.pi, math.pi)])
+
+    def _run_slot(self, i: int) -> None:
+        slot = self.slots[i]
+        sc = self.scenario
+        locs: list[Localizer] = self.state["localizers"]
+        driver: TourDriver = self.state["driver"]
+        rng: np.random.Generator = self.state["rng"]
+        n_loc = len(locs)
+        wall0 = time.perf_counter()
+        obs, info = self.env.reset(seed=self.seed, options={"day": slot.day, "run": slot.run})
+        geom = self.world.geometry
+        prior = self._prior(i)
+        for loc in locs:
+            loc.begin_run(prior)
+        start = np.asarray(info["truth"]["pose"], dtype=np.float64)
+        driver.begin_run(geom, start)
+        kidnaps = self._kidnaps(slot.day, slot.run, rng)
+        events: list[tuple[int, float, str, str]] = []
+        max_steps = (
+            int(round(sc.driver.max_run_s / self.laser.scan_period_s))
+            if sc.driver.max_run_s is not None
+            else None
+        )
+        t_l: list[float] = []
+        truth_l: list[np.ndarray] = []
+        coll_l: list[bool] = []
+        est_l: list[list[np.ndarray]] = [[] for _ in range(n_loc)]
+        cov_l: list[list[np.ndarray]] = [[] for _ in range(n_loc)]
+        ext_l: list[list[tuple[float, float, float, float]]] = [[] for _ in range(n_loc)]
+        confusion = np.zeros((n_loc, 4, 4), dtype=np.int64)
+        nan4 = (math.nan, math.nan, math.nan, math.nan)
+        terminated = truncated = False
+        collision = False
+        step = 0
+        progress_frac = 0.0
+        while True:
+            truth = info["truth"]
+            pose = np.asarray(truth["pose"], dtype=np.float64)
+            t_s = float(truth["time"][2])
+            odom = Odometry(pose=np.array(obs["odom"], dtype=np.float64), stamp_s=t_s)
+            scan = Scan(ranges_m=obs["scan"], stamp_s=t_s)
+            for k, loc in enumerate(locs):
+                est = loc.update(odom, scan)
+                est_l[k].append(est.mean)
+                cov_l[k].append(est.cov)
+                ex = est.extras
+                if ex:
+                    ext_l[k].append(
+                        (
+                            float(ex.get("scan_loglik", math.nan)),
+                            float(ex.get("lambda_min", math.nan)),
+                            float(ex.get("timescale", math.nan)),
+                            float(ex.get("safe_mode", math.nan)),
+                        )
+                    )
+                    pc = ex.get("point_classes")
+                    if pc is not None:
+                        confusion[k] += confusion_matrix(truth["beam_class"], pc)
+                else:
+                    ext_l[k].append(nan4)
+            t_l.append(t_s)
+            truth_l.append(pose)
+            coll_l.append(collision)
+            progress_frac = float(info.get("route_progress", progress_frac))
+            if terminated or truncated or driver.done:
+                break
+            if max_steps is not None and step >= max_steps:
+                events.append((step, t_s, "time_limit", f"stopped after {sc.driver.max_run_s} s"))
+                break
+            if kidnaps and kidnaps[0].step == step:
+                kp = kidnaps.pop(0)
+                target = kp.pose if kp.pose is not None else self._random_route_pose(rng)
+                free = driver._planner.nearest_free(target[:2], 1.0) if driver._planner else None
+                if free is None:
+                    events.append((step, t_s, "kidnap_skipped", "no free place near the target"))
+                else:
+                    new_pose = np.array([free[0], free[1], target[2]])
+                    self.u.teleport(new_pose)
+                    driver.notify_teleport(new_pose, t_s)
+                    events.append((step, t_s, "kidnap", f"to {np.round(new_pose, 3).tolist()}"))
+                    pose = new_pose
+            action = driver.act(pose, truth["people"], t_s)
+            obs, _, terminated, truncated, info = self.env.step(action)
+            collision = bool(info.get("collision", False))
+            step += 1
+        for loc in locs:
+            loc.end_run()
+        last_of_day = i + 1 == len(self.slots) or self.slots[i + 1].day != slot.day
+        if last_of_day:
+            for loc in locs:
+                loc.end_day()
+        events = sorted(events + driver.events, key=lambda e: e[0])
+        t = np.asarray(t_l, dtype=np.float64)
+        truth_a = np.asarray(truth_l, dtype=np.float64).reshape(-1, 3)
+        est_a = np.asarray(est_l, dtype=np.float64).reshape(n_loc, -1, 3)
+        cov_a = np.asarray(cov_l, dtype=np.float64).reshape(n_loc, -1, 3, 3)
+        cov_diag = np.diagonal(cov_a, axis1=2, axis2=3)
+        ext_a = np.asarray(ext_l, dtype=np.float64).reshape(n_loc, -1, 4)
+        rec = RunRecord(
+            day=slot.day,
+            run=slot.run,
+            date=slot.date.isoformat(),
+            start_s=float(slot.start_s),
+            t_s=t,
+            truth=truth_a,
+            collision=np.asarray(coll_l, dtype=bool),
+            estimates=est_a,
+            cov_diag=cov_diag,
+            extras=ext_a,
+            confusion=confusion,
+            terminated=bool(terminated or driver.done),
+            route_progress=progress_frac,
+            skipped_waypoints=driver.skipped_waypoints,
+            wall_s=time.perf_counter() - wall0,
+            events=events,
+            segments=np.asarray(geom.segments, dtype=np.float64),
+            segment_class=np.asarray(geom.segment_class, dtype=np.int8),
+        )
+        run_sum = [self._run_summary(k, rec) for k in range(n_loc)]
+        nxt = self.slots[i + 1] if i + 1 < len(self.slots) else None
+        cp = Checkpoint(
+            next_index=i + 1,
+            next_day=nxt.day if nxt else -1,
+            next_run=nxt.run if nxt else -1,
+            state=self.state,
+        )
+        self.db.write_run(rec, run_sum, last_of_day, cp, self.hash, self.seed)
+
+    @staticmethod
+    def _run_summary(k: int, rec: RunRecord) -> dict[str, float]:
+        err = position_errors(rec.truth, rec.estimates[k])
+        herr = heading_errors(rec.truth, rec.estimates[k])
+        s = summarize(err, herr, rec.extras[k, :, 0], rec.extras[k, :, 1])
+        lost = lost_stats(err, rec.t_s)
+        r = rpe(rec.truth, rec.estimates[k], delta=RPE_DELTA_STEPS)
+        out: dict[str, float] = {"loc": k, "day": rec.day, "run": rec.run}
+        out.update(s.to_dict())
+        out["n_lost_episodes"] = lost.n_episodes
+        out["n_recovered"] = lost.n_recovered
+        out["mean_time_to_recover_s"] = lost.mean_time_to_recover_s
+        out["rpe_m"] = r.translation.rmse
+        return out
+
+
+def run_experiment(
+    scenario: Scenario,
+    out_dir: str | Path | None = None,
+    days: tuple[int, int] | None = None,
+    seed: int | None = None,
+    resume: bool = False,
+    progress: bool = True,
+    overwrite: bool = False,
+) -> Path:
+    """Run ``scenario`` (optionally only ``days``, with ``seed``) into ``out_dir``; return it.
+
+    ``resume=True`` continues from the last checkpoint in ``out_dir`` (or starts when there is
+    none). ``overwrite=True`` replaces earlier results in ``out_dir``.
+    """
+    out = Path(out_dir) if out_dir is not None else default_out_dir(scenario)
+    days = tuple(days) if days is not None else scenario.days  # type: ignore[assignment]
+    if days[0] < 1 or days[1] < days[0]:
+        raise InputError(f"bad day range {days}")
+    seed = scenario.seeds[0] if seed is None else int(seed)
+    runner = ExperimentRunner(scenario, out, days, seed, resume=resume, overwrite=overwrite)
+    return runner.run(progress=progress)

@@ -1,0 +1,138 @@
+"""The runner's bookkeeping on a fast stand-in env: call order, same stream for all
+localizers, resume equivalence, kidnapping, summaries (the real env: test_end_to_end.py)."""
+
+import sqlite3
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+from fake_env import FakeEnv  # noqa: E402
+
+from dynmap_sim.errors import InputError  # noqa: E402
+from dynmap_sim.experiments.runner import ExperimentRunner  # noqa: E402
+from dynmap_sim.experiments.scenario import parse_scenario  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def scenario(tmp_path, **extra):
+    data = {
+        "name": "t",
+        "world": str(ROOT / "worlds" / "apartment.toml"),
+        "days": [1, 3],
+        "driver": {"max_run_s": 5.0},
+        "localizers": [
+            {"name": "fake_env:RecordingLocalizer", "label": "rec"},
+            {"name": "odometry", "label": "odo-a"},
+            {"name": "odometry", "label": "odo-b"},
+        ],
+    }
+    data.update(extra)
+    return parse_scenario(data, tmp_path / "s.toml")
+
+
+def run(scn, out, resume=False, env=None, stop_after=None):
+    env = env if env is not None else FakeEnv()
+    r = ExperimentRunner(scn, out, scn.days, 0, resume=resume, overwrite=not resume, env=env)
+    if stop_after is not None:  # simulate a crash after some runs
+        for i in range(r.start_index, stop_after):
+            r._run_slot(i)
+        r.db.close()
+        return r
+    r.run(progress=False)
+    return r
+
+
+def table(out, sql):
+    con = sqlite3.connect(out / "results.db")
+    try:
+        return con.execute(sql).fetchall()
+    finally:
+        con.close()
+
+
+def test_call_order_and_same_stream(tmp_path):
+    scn = scenario(tmp_path, days=[1, 2])
+    r = run(scn, tmp_path / "o")
+    calls = r.state["localizers"][0].calls
+    assert calls == [
+        ("begin_run", 1, 1, True),
+        ("end_run",),
+        ("end_day",),
+        ("begin_run", 2, 1, False),
+        ("end_run",),
+        ("end_day",),
+    ]
+    # the same class with the same params on the same stream gives the same numbers
+    a = table(tmp_path / "o", "SELECT x, y, theta FROM estimates WHERE loc=1 ORDER BY day, step")
+    b = table(tmp_path / "o", "SELECT x, y, theta FROM estimates WHERE loc=2 ORDER BY day, step")
+    assert a == b and len(a) == 2 * 51
+    # extras are stored; point classes are scored against the beam labels (all walls)
+    ex = table(
+        tmp_path / "o",
+        "SELECT scan_loglik, lambda_min, timescale, safe_mode FROM estimates WHERE loc=0 LIMIT 1",
+    )
+    assert ex == [(-1.5, 100.0, 2, 0)]
+    conf = table(tmp_path / "o", "SELECT confusion FROM point_classes WHERE loc=0")
+    c = sum(np.frombuffer(b, "<i8").reshape(4, 4) for (b,) in conf)
+    assert c[3, 3] == 8 * 2 * 51 and c.sum() == c[3, 3]
+    days = table(
+        tmp_path / "o", "SELECT day, loc, mean_scan_loglik FROM day_summaries ORDER BY day, loc"
+    )
+    assert [d[:2] for d in days] == [(1, 0), (1, 1), (1, 2), (2, 0), (2, 1), (2, 2)]
+    assert days[0][2] == -1.5 and days[1][2] is None
+
+
+def test_resume_gives_the_numbers_of_an_unbroken_run(tmp_path):
+    scn = scenario(tmp_path)
+    run(scn, tmp_path / "full")
+    run(scn, tmp_path / "broken", stop_after=2)
+    assert table(tmp_path / "broken", "SELECT count(*) FROM runs") == [(2,)]
+    env = FakeEnv()
+    r = run(scn, tmp_path / "broken", resume=True, env=env)
+    assert r.start_index == 2 and [x[1:] for x in env.resets] == [(3, 1)]
+    for sql in (
+        "SELECT * FROM estimates ORDER BY loc, day, run, step",
+        "SELECT * FROM scans ORDER BY day, run, step",
+        "SELECT * FROM day_summaries ORDER BY loc, day",
+        "SELECT loc, day, run, n_scans, mean_error_m, max_error_m FROM run_summaries "
+        "ORDER BY loc, day, run",
+    ):
+        assert table(tmp_path / "full", sql) == table(tmp_path / "broken", sql)
+    # the recording localizer's history spans the break: it was restored from the checkpoint
+    assert len(r.state["localizers"][0].calls) == 3 * 3
+
+
+def test_resume_refuses_other_seed_or_days(tmp_path):
+    scn = scenario(tmp_path)
+    run(scn, tmp_path / "o", stop_after=1)
+    with pytest.raises(InputError, match="another scenario content, seed or day range"):
+        ExperimentRunner(scn, tmp_path / "o", (1, 2), 0, resume=True, env=FakeEnv())
+    with pytest.raises(InputError, match="already holds results"):
+        ExperimentRunner(scn, tmp_path / "o", scn.days, 0, resume=False, env=FakeEnv())
+
+
+def test_kidnapping_teleports_the_robot_and_odometry_does_not_notice(tmp_path):
+    scn = scenario(
+        tmp_path,
+        days=[1, 1],
+        kidnappings=[{"day": 1, "time_s": 2.0, "pose": [6.0, 4.0, 0.0]}],
+    )
+    run(scn, tmp_path / "o")
+    ev = table(tmp_path / "o", "SELECT step, kind FROM events WHERE kind='kidnap'")
+    assert ev == [(20, "kidnap")]
+    err = [
+        e for (e,) in table(tmp_path / "o", "SELECT err_m FROM estimates WHERE loc=1 ORDER BY step")
+    ]
+    assert max(err[:20]) < 0.1 and min(err[21:]) > 1.0
+    x = table(tmp_path / "o", "SELECT x, y FROM scans WHERE step=21")[0]
+    assert abs(x[0] - 6.0) < 0.2 and abs(x[1] - 4.0) < 0.2
+
+
+def test_days_outside_the_calendar_are_refused(tmp_path):
+    scn = scenario(tmp_path)
+    with pytest.raises(InputError, match="calendar"):
+        ExperimentRunner(scn, tmp_path / "o", (40, 41), 0, resume=False, env=FakeEnv())
