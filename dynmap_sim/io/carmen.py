@@ -1,0 +1,245 @@
+"""Read CARMEN log files (plain or gzip) into the simulator's scan and odometry stream.
+
+Supported lines (CARMEN ``logger`` format, one message per line, ``#`` comments):
+
+* ``ODOM x y theta tv rv accel timestamp host logger_timestamp``
+* ``FLASER n r_1..r_n x y theta odom_x odom_y odom_theta timestamp host logger_timestamp``
+  (``RLASER`` the same for the rear laser) — the old format; ``x y theta`` is the laser's
+  pose (the *corrected* pose in the "-corrected" Radish logs), ``odom_*`` the robot's
+  odometry. The field of view is guessed from ``n`` as CARMEN does (181/361 beams: 180°,
+  180: 179°, 360: 179.5°, 401: 100°, otherwise 180°), centred on the laser's x axis;
+* ``ROBOTLASER1 type start_angle fov resolution max_range accuracy remission_mode n r_1..r_n
+  n_rem rem_1..rem_m laser_x laser_y laser_theta robot_x robot_y robot_theta tv rv
+  forward_safety side_safety turn_axis timestamp host logger_timestamp`` (``ROBOTLASER2``
+  the rear one); the laser's mount pose is the robot pose expressed in the laser pose;
+* ``RAWLASER1..4 type start_angle fov resolution max_range accuracy remission_mode n
+  r_1..r_n n_rem rem_1..rem_m timestamp host logger_timestamp`` (no poses).
+
+Ranges at or beyond the maximum range become ``+inf`` (no return), non-positive ones
+``NaN`` (REP-117). Odometry is linearly interpolated (heading unwrapped) to each scan's
+timestamp from the ``ODOM`` lines, or taken from the laser lines' odometry when the log has
+none. When laser lines carry poses, the robot poses they imply are the **reference**.
+"""
+
+from __future__ import annotations
+
+import gzip
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dynmap_sim import se2
+from dynmap_sim.errors import FileError
+from dynmap_sim.types import LaserSpec, Odometry, Scan
+
+FloatArray = NDArray[np.float64]
+
+#: Laser message types per laser id, in order of preference.
+LASER_TYPES: dict[int, tuple[str, ...]] = {
+    1: ("ROBOTLASER1", "FLASER", "RAWLASER1"),
+    2: ("ROBOTLASER2", "RLASER", "RAWLASER2"),
+    3: ("RAWLASER3",),
+    4: ("RAWLASER4",),
+}
+
+
+class CarmenLogError(FileError):
+    """A CARMEN log that cannot be read; names the file and ``line N.field``."""
+
+
+@dataclass
+class CarmenLog:
+    """One laser's scans with odometry at the scan times, and the reference poses if any.
+
+    ``ranges_m`` ``(T, n_beams)`` float32 (REP-117); ``stamps_s`` ``(T,)``; ``odometry``
+    ``(T, 3)`` in the odom frame; ``reference`` ``(T, 3)`` robot poses from the laser lines
+    (corrected in "-corrected" logs) or ``None``; ``message`` the laser line type used.
+    """
+
+    path: Path
+    laser: LaserSpec
+    stamps_s: FloatArray
+    ranges_m: NDArray[np.float32]
+    odometry: FloatArray
+    reference: FloatArray | None
+    message: str
+
+    def __len__(self) -> int:
+        return len(self.stamps_s)
+
+    def stream(self) -> list[tuple[Odometry, Scan]]:
+        """The ``(Odometry, Scan)`` pairs a localizer consumes, in time order."""
+        return [
+            (Odometry(self.odometry[k].copy(), float(t)), Scan(self.ranges_m[k], float(t)))
+            for k, t in enumerate(self.stamps_s)
+        ]
+
+
+def guess_fov_rad(n: int) -> float:
+    """CARMEN's field-of-view guess for old-style ``FLASER`` lines with ``n`` readings."""
+    table = {181: math.pi, 361: math.pi, 180: math.radians(179.0), 360: math.radians(179.5)}
+    table[401] = math.radians(100.0)
+    return table.get(n, math.pi)
+
+
+def _open_text(path: Path) -> list[str]:
+    try:
+        with open(path, "rb") as fh:
+            magic = fh.read(2)
+        opener = gzip.open if magic == b"\x1f\x8b" else open
+        with opener(path, "rt", encoding="utf-8", errors="replace") as fh:
+            return fh.read().splitlines()
+    except FileNotFoundError:
+        raise CarmenLogError(path, [("", "file not found")]) from None
+    except (OSError, EOFError) as exc:
+        raise CarmenLogError(path, [("", f"cannot read file: {exc}")]) from None
+
+
+@dataclass
+class _LaserMsg:
+    stamp: float
+    ranges: FloatArray
+    start: float
+    fov: float
+    res: float
+    max_range: float
+    laser_pose: FloatArray | None
+    robot_pose: FloatArray | None
+    odom_pose: FloatArray | None
+
+
+def _floats(tok: list[str], a: int, b: int, where: str, errs: list[tuple[str, str]]) -> FloatArray:
+    try:
+        return np.array([float(t) for t in tok[a:b]], dtype=np.float64)
+    except ValueError:
+        errs.append((where, f"expected numbers in fields {a}..{b - 1}"))
+        return np.zeros(max(b - a, 0))
+
+
+def _parse_laser(tok: list[str], where: str, errs: list[tuple[str, str]]) -> _LaserMsg | None:
+    kind = tok[0]
+    n_err = len(errs)
+    try:
+        if kind in ("FLASER", "RLASER"):
+            n = int(tok[1])
+            if len(tok) < 2 + n + 6 + 1:
+                errs.append((where, f"{kind} with {n} readings needs {n + 9} fields"))
+                return None
+            r = _floats(tok, 2, 2 + n, f"{where}.ranges", errs)
+            p = _floats(tok, 2 + n, 2 + n + 6, f"{where}.pose", errs)
+            stamp = float(tok[2 + n + 6])
+            fov = guess_fov_rad(n)
+            if len(errs) > n_err:
+                return None
+            return _LaserMsg(
+                stamp, r, -fov / 2, fov, fov / max(n - 1, 1), 80.0, p[:3], None, p[3:6]
+            )
+        # ROBOTLASERk / RAWLASERk
+        hdr = _floats(tok, 1, 7, f"{where}.header", errs)
+        n = int(tok[8])
+        r = _floats(tok, 9, 9 + n, f"{where}.ranges", errs)
+        n_rem = int(tok[9 + n])
+        i = 10 + n + n_rem
+        laser_pose = robot_pose = None
+        if kind.startswith("ROBOTLASER"):
+            poses = _floats(tok, i, i + 6, f"{where}.pose", errs)
+            laser_pose, robot_pose = poses[:3], poses[3:6]
+            i += 11
+        stamp = float(tok[i])
+        if len(errs) > n_err:
+            return None
+        return _LaserMsg(
+            stamp, r, hdr[1], hdr[2], hdr[3], hdr[4], laser_pose, robot_pose, robot_pose
+        )
+    except (ValueError, IndexError):
+        errs.append((where, f"malformed {kind} line"))
+        return None
+
+
+def interpolate_poses(t_src: FloatArray, poses: FloatArray, t: FloatArray) -> FloatArray:
+    """Poses ``(N, 3)`` at times ``t`` by linear interpolation (heading unwrapped), clamped."""
+    order = np.argsort(t_src, kind="stable")
+    ts, ps = t_src[order], poses[order]
+    th = np.unwrap(ps[:, 2])
+    out = np.column_stack(
+        [np.interp(t, ts, ps[:, 0]), np.interp(t, ts, ps[:, 1]), np.interp(t, ts, th)]
+    )
+    out[:, 2] = se2.wrap_angle(out[:, 2])
+    return out
+
+
+def read_carmen(path: str | Path, laser_id: int = 1, max_errors: int = 20) -> CarmenLog:
+    """Read one laser (``laser_id`` 1 = front, 2 = rear, 3/4 raw) of a CARMEN log."""
+    p = Path(path)
+    if laser_id not in LASER_TYPES:
+        raise CarmenLogError(p, [("laser_id", f"must be one of {sorted(LASER_TYPES)}")])
+    lines = _open_text(p)
+    errs: list[tuple[str, str]] = []
+    odom_t: list[float] = []
+    odom_p: list[FloatArray] = []
+    by_kind: dict[str, list[_LaserMsg]] = {k: [] for k in LASER_TYPES[laser_id]}
+    for ln, line in enumerate(lines, start=1):
+        tok = line.split()
+        if not tok or tok[0].startswith("#"):
+            continue
+        where = f"line {ln}"
+        if tok[0] == "ODOM":
+            v = _floats(tok, 1, 8, where, errs)
+            if len(tok) < 8:
+                errs.append((where, "ODOM needs x y theta tv rv accel timestamp"))
+                continue
+            odom_p.append(v[:3])
+            odom_t.append(float(v[6]))
+        elif tok[0] in by_kind:
+            msg = _parse_laser(tok, where, errs)
+            if msg is not None:
+                by_kind[tok[0]].append(msg)
+        if len(errs) >= max_errors:
+            break
+    if errs:
+        raise CarmenLogError(p, errs)
+    kind = next((k for k in LASER_TYPES[laser_id] if by_kind[k]), None)
+    if kind is None:
+        raise CarmenLogError(
+            p, [("", f"no laser lines of types {', '.join(LASER_TYPES[laser_id])}")]
+        )
+    msgs = by_kind[kind]
+    n = len(msgs[0].ranges)
+    bad = [i for i, m in enumerate(msgs) if len(m.ranges) != n]
+    if bad:
+        raise CarmenLogError(p, [(kind, f"{len(bad)} lines have a beam count other than {n}")])
+    m0 = msgs[0]
+    mount = (0.0, 0.0, 0.0)
+    if m0.laser_pose is not None and m0.robot_pose is not None:
+        off = se2.between(m0.robot_pose, m0.laser_pose)
+        mount = (float(off[0]), float(off[1]), float(off[2]))
+    max_range = float(m0.max_range) if m0.max_range > 0 else 80.0
+    laser = LaserSpec(
+        name=f"carmen-{kind.lower()}",
+        n_beams=n,
+        angle_min_rad=float(m0.start),
+        angle_increment_rad=float(m0.res if m0.res > 0 else m0.fov / max(n - 1, 1)),
+        range_min_m=0.0,
+        range_max_m=max_range,
+        scan_period_s=0.0,
+        time_increment_s=0.0,
+        mount_pose=mount,
+    )
+    stamps = np.array([m.stamp for m in msgs])
+    ranges = np.array([m.ranges for m in msgs], dtype=np.float64)
+    ranges = np.where(ranges >= max_range, np.inf, ranges)
+    ranges = np.where(ranges <= 0.0, np.nan, ranges).astype(np.float32)
+    if odom_t:
+        odo = interpolate_poses(np.array(odom_t), np.array(odom_p), stamps)
+    elif all(m.odom_pose is not None for m in msgs):
+        odo = np.array([m.odom_pose for m in msgs])
+    else:
+        raise CarmenLogError(p, [("ODOM", f"no ODOM lines and {kind} lines carry no odometry")])
+    reference = None
+    if all(m.laser_pose is not None for m in msgs):
+        lp = np.array([m.laser_pose for m in msgs])
+        reference = se2.compose(lp, np.broadcast_to(se2.inverse(np.array(mount)), lp.shape))
+    return CarmenLog(p, laser, stamps, ranges, odo, reference, kind)
