@@ -39,7 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynmap_sim.se2 import compose
-from dynmap_sim.sensors.raycast import SegmentCache, cast_scan, scan_bearings
+from dynmap_sim.sensors.raycast import SegmentCache, beam_directions, cast_scan
 from dynmap_sim.types import LaserSpec
 
 FloatArray = NDArray[np.float64]
@@ -196,12 +196,18 @@ class Lidar:
             )
         if not spec.angle_increment_rad > 0.0:
             raise ValueError("angle_increment_rad must be > 0")
+        if spec.n_beams * spec.angle_increment_rad > 2.0 * math.pi + 1e-9:
+            raise ValueError("the beams span more than a full turn")
         self.spec = spec
         self.noise = noise
         brng = np.random.default_rng(np.random.SeedSequence([bias_seed, 117]))
         self._bias_m = brng.uniform(-1.0, 1.0, spec.n_beams) * noise.systematic_m
+        self._cos, self._sin = beam_directions(
+            spec.angle_min_rad, spec.angle_increment_rad, spec.n_beams
+        )
         self._cache_key: tuple[int, int, int] | None = None
         self._cache: SegmentCache | None = None
+        self._labels_key: tuple[Any, ...] | None = None
         self._labels: tuple[NDArray[np.int32], NDArray[np.int8]] | None = None
 
     def _segments(self, geom: GeometryLike) -> SegmentCache:
@@ -211,20 +217,43 @@ class Lidar:
             self._cache_key = key
         return self._cache
 
+    def _label_tables(self, geom: GeometryLike) -> tuple[NDArray[np.int32], NDArray[np.int8]]:
+        """Object index and class per hit index (segments, circles, then -1 / NONE)."""
+        key = (
+            int(geom.static_version),
+            id(geom.segment_object),
+            id(geom.circle_object),
+            int(geom.circle_object.shape[0]),
+        )
+        if key != self._labels_key or self._labels is None:
+            obj = np.concatenate([geom.segment_object, geom.circle_object, [-1]]).astype(np.int32)
+            cls = np.concatenate([geom.segment_class, geom.circle_class, [0]]).astype(np.int8)
+            self._labels = (obj, cls)
+            self._labels_key = key
+        return self._labels
+
     def laser_pose(self, robot_pose: FloatArray) -> FloatArray:
         """The laser's pose in the map frame for a robot (``base_link``) pose."""
         return compose(np.asarray(robot_pose, dtype=np.float64), self.spec.mount_pose)
 
     def cast(self, robot_pose: FloatArray, geom: GeometryLike) -> tuple[FloatArray, NDArray]:
         """Noise-free ranges [m] (``+inf``: no hit) and hit indices (see ``cast_scan``)."""
-        lp = self.laser_pose(robot_pose)
+        x, y, th = float(robot_pose[0]), float(robot_pose[1]), float(robot_pose[2])
+        mx, my, myaw = self.spec.mount_pose
+        if mx or my or myaw:
+            c, s = math.cos(th), math.sin(th)
+            x, y, th = x + c * mx - s * my, y + s * mx + c * my, th + myaw
         spec = self.spec
-        b, cb, sb = scan_bearings(
-            float(lp[2]), spec.angle_min_rad, spec.angle_increment_rad, spec.n_beams
-        )
         circles = geom.circles if geom.circles.shape[0] else None
         return cast_scan(
-            (float(lp[0]), float(lp[1])), b, cb, sb, spec.range_max_m, self._segments(geom), circles
+            (x, y, th),
+            spec.angle_min_rad,
+            spec.angle_increment_rad,
+            self._cos,
+            self._sin,
+            spec.range_max_m,
+            self._segments(geom),
+            circles,
         )
 
     def scan(
@@ -232,27 +261,9 @@ class Lidar:
     ) -> LidarReading:
         """One noisy scan from the robot at ``robot_pose`` (map frame) with truth labels."""
         true_r, hit = self.cast(robot_pose, geom)
-        n_seg = geom.segments.shape[0]
-        obj = np.full(hit.shape[0], -1, dtype=np.int32)
-        cls = np.zeros(hit.shape[0], dtype=np.int8)
-        sh = hit >= 0
-        if sh.any():
-            h = hit[sh]
-            is_seg = h < n_seg
-            hs = np.minimum(h, n_seg - 1) if n_seg else np.zeros_like(h)
-            hc = np.maximum(h - n_seg, 0)
-            obj[sh] = np.where(
-                is_seg,
-                geom.segment_object[hs] if n_seg else -1,
-                geom.circle_object[hc] if geom.circles.shape[0] else -1,
-            )
-            cls[sh] = np.where(
-                is_seg,
-                geom.segment_class[hs] if n_seg else 0,
-                geom.circle_class[hc] if geom.circles.shape[0] else 0,
-            )
+        obj, cls = self._label_tables(geom)
         ranges = self.apply_noise(true_r, rng)
-        return LidarReading(ranges, true_r, obj, cls)
+        return LidarReading(ranges, true_r, obj[hit], cls[hit])
 
     def apply_noise(
         self, true_range_m: FloatArray, rng: np.random.Generator
@@ -266,28 +277,42 @@ class Lidar:
         r = np.asarray(true_range_m, dtype=np.float64)
         if r.shape[-1] != spec.n_beams:
             raise ValueError(f"expected (..., {spec.n_beams}) ranges, got shape {r.shape}")
-        hit = np.isfinite(r)
-        gauss = rng.standard_normal(r.shape)
-        u = rng.random((6, *r.shape))
-        sigma = np.maximum(nz.sigma_m, nz.sigma_rel * np.where(hit, r, 0.0))
-        out = np.where(hit, r + self._bias_m + sigma * gauss, np.inf)
+        hit = r <= spec.range_max_m
+        rh = np.where(hit, r, 0.0)
+        sigma = np.maximum(nz.sigma_rel * rh, nz.sigma_m) if nz.sigma_rel else nz.sigma_m
+        out = r + self._bias_m + sigma * rng.standard_normal(r.shape)  # inf stays inf
+        # one uniform per beam picks at most one of the rare events (disjoint intervals)
+        u = rng.random(r.shape)
+        p1 = nz.p_dropout
+        p2 = p1 + nz.p_short
+        p3 = p2 + nz.p_invalid
         if nz.p_mixed > 0.0:
             nxt = np.concatenate([r[..., 1:], r[..., -1:]], axis=-1)
             prv = np.concatenate([r[..., :1], r[..., :-1]], axis=-1)
             with np.errstate(invalid="ignore"):
-                jn = np.abs(nxt - r)
-                jp = np.abs(prv - r)
-                other = np.where(np.isfinite(jn) & (jn >= np.nan_to_num(jp, nan=-1.0)), nxt, prv)
-                jump = np.abs(other - r)
-            mixed = hit & np.isfinite(other) & (jump > nz.mixed_jump_m) & (u[0] < nz.p_mixed)
-            out = np.where(mixed, r + u[1] * (other - r), out)
-        if nz.p_short > 0.0:
-            short = hit & (u[2] < nz.p_short)
-            out = np.where(short, spec.range_min_m + u[5] * (r - spec.range_min_m), out)
-        out = np.where(out < spec.range_min_m, -np.inf, out)
-        out = np.where(out > spec.range_max_m, np.inf, out)
-        if nz.p_dropout > 0.0:
-            out = np.where(hit & (u[3] < nz.p_dropout), np.inf, out)
-        if nz.p_invalid > 0.0:
-            out = np.where(u[4] < nz.p_invalid, np.nan, out)
+                jn = np.abs(np.where(hit, nxt, 0.0) - rh)
+                jp = np.abs(np.where(hit, prv, 0.0) - rh)
+            other = np.where(jn >= jp, nxt, prv)
+            jump = np.abs(other - rh)
+            mixed = np.flatnonzero(
+                (jump > nz.mixed_jump_m) & (jump < np.inf) & hit & (u >= 1.0 - nz.p_mixed)
+            )
+            if mixed.size:
+                flat_out, flat_r, flat_o = out.reshape(-1), r.reshape(-1), other.reshape(-1)
+                w = rng.random(mixed.size)
+                flat_out[mixed] = flat_r[mixed] + w * (flat_o[mixed] - flat_r[mixed])
+        if p3 > 0.0:
+            rare = np.flatnonzero((u < p3) & hit)
+            if rare.size:
+                flat_out, flat_r, ur = out.reshape(-1), r.reshape(-1), u.reshape(-1)[rare]
+                rmin = spec.range_min_m
+                short = rng.random(rare.size)
+                val = np.where(
+                    ur < p1,
+                    np.inf,
+                    np.where(ur < p2, rmin + short * (flat_r[rare] - rmin), np.nan),
+                )
+                flat_out[rare] = val
+        out[out < spec.range_min_m] = -np.inf
+        out[out > spec.range_max_m] = np.inf
         return out.astype(np.float32)

@@ -16,6 +16,7 @@ segments and circles) to floating-point precision; see ``tests/sensors/test_rayc
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,24 +30,34 @@ _TWO_PI = 2.0 * np.pi
 
 @dataclass(frozen=True)
 class SegmentCache:
-    """Contiguous per-column copies of a ``(N, 4)`` segment array (built once per geometry)."""
+    """Per-geometry precomputation for :func:`cast_scan` (built once per static version).
 
-    x0: FloatArray
-    y0: FloatArray
-    dx: FloatArray
-    dy: FloatArray
-    dd: FloatArray  # squared length [m^2]; 0 for degenerate segments
+    ``data`` rows are ``x0, y0, dx, dy`` (contiguous, shape ``(4, N)``); ``bbox`` rows are
+    ``xmin, ymin, xmax, ymax`` of each segment, used by the range cull.
+    """
+
+    data: FloatArray
+    bbox: FloatArray
     n: int
 
     @classmethod
     def build(cls, segments: FloatArray) -> SegmentCache:
-        """Split ``segments`` rows ``x0, y0, x1, y1`` [m] into contiguous columns."""
+        """Precompute from ``segments`` rows ``x0, y0, x1, y1`` [m]."""
         seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
-        x0 = np.ascontiguousarray(seg[:, 0])
-        y0 = np.ascontiguousarray(seg[:, 1])
-        dx = seg[:, 2] - seg[:, 0]
-        dy = seg[:, 3] - seg[:, 1]
-        return cls(x0=x0, y0=y0, dx=dx, dy=dy, dd=dx * dx + dy * dy, n=seg.shape[0])
+        data = np.ascontiguousarray(
+            np.stack([seg[:, 0], seg[:, 1], seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]])
+        )
+        bbox = np.ascontiguousarray(
+            np.stack(
+                [
+                    np.minimum(seg[:, 0], seg[:, 2]),
+                    np.minimum(seg[:, 1], seg[:, 3]),
+                    np.maximum(seg[:, 0], seg[:, 2]),
+                    np.maximum(seg[:, 1], seg[:, 3]),
+                ]
+            )
+        )
+        return cls(data=data, bbox=bbox, n=seg.shape[0])
 
 
 def _beam_runs(
@@ -60,8 +71,9 @@ def _beam_runs(
     be conservative. Returns ``lo`` and ``count`` (``count = 0`` for an empty run), shape
     ``(2 K,)``.
     """
-    s = np.concatenate([start_rad, start_rad - _TWO_PI]) / inc_rad
-    e = s + np.concatenate([span_rad, span_rad]) / inc_rad
+    s = start_rad * (1.0 / inc_rad)
+    s = np.concatenate([s, s - _TWO_PI / inc_rad])
+    e = s + np.concatenate([span_rad, span_rad]) * (1.0 / inc_rad)
     lo = np.maximum(np.ceil(s).astype(np.int64) - 1, 0)
     hi = np.minimum(np.floor(e).astype(np.int64) + 1, n_beams - 1)
     return lo, np.maximum(hi - lo + 1, 0)
@@ -69,132 +81,125 @@ def _beam_runs(
 
 def _expand(lo: IntArray, count: IntArray) -> tuple[IntArray, IntArray]:
     """``(run index, beam index)`` of every pair in the runs ``lo[k] .. lo[k] + count[k] - 1``."""
-    total = int(count.sum())
     run = np.repeat(np.arange(count.shape[0]), count)
     first = np.cumsum(count) - count
-    beam = np.arange(total) + np.repeat(lo - first, count)
+    beam = np.arange(run.shape[0]) + (lo - first)[run]
     return run, beam
 
 
 def cast_scan(
-    origin_xy: tuple[float, float],
-    bearings_rad: FloatArray,
-    cos_b: FloatArray,
-    sin_b: FloatArray,
+    pose: tuple[float, float, float],
+    angle_min_rad: float,
+    angle_increment_rad: float,
+    cos_l: FloatArray,
+    sin_l: FloatArray,
     max_range_m: float,
     segments: SegmentCache,
     circles: FloatArray | None = None,
 ) -> tuple[FloatArray, IntArray]:
     """Cast all beams of one scan; return the true range [m] and the hit shape of each beam.
 
-    ``bearings_rad`` are the world-frame beam directions, evenly spaced and increasing
-    (``bearings_rad[i] = bearings_rad[0] + i * inc``), with ``cos_b``/``sin_b`` their cosines
-    and sines. ``circles`` rows are ``x, y, r`` [m]. The hit index is a row of the segments
-    (``0 .. N-1``), ``N + j`` for circle ``j``, or ``-1`` (no hit within ``max_range_m``,
-    range ``+inf``). Ranges are distances from ``origin_xy`` along the beam.
+    The sensor is at ``pose = (x, y, heading)`` in the map frame; beam ``i`` points at
+    ``angle_min_rad + i * angle_increment_rad`` in the sensor frame, and ``cos_l``/``sin_l``
+    are the cosines and sines of those sensor-frame angles. The geometry is moved into the
+    sensor frame (only the shapes within range). ``circles`` rows are ``x, y, r`` [m]. The
+    hit index is a row of the segments (``0 .. N-1``), ``N + j`` for circle ``j``, or ``-1``
+    (no hit within ``max_range_m``, range ``+inf``).
     """
-    ox, oy = float(origin_xy[0]), float(origin_xy[1])
-    n_beams = bearings_rad.shape[0]
-    inc = float(bearings_rad[1] - bearings_rad[0]) if n_beams > 1 else 1.0
-    base = float(bearings_rad[0])
+    ox, oy, heading = float(pose[0]), float(pose[1]), float(pose[2])
+    n_beams = cos_l.shape[0]
+    inc = float(angle_increment_rad)
+    base = float(angle_min_rad)
     r_max = float(max_range_m)
+    ch, sh = math.cos(heading), math.sin(heading)
 
-    # --- segments: range cull + bearing interval -------------------------------------
-    ax = segments.x0 - ox
-    ay = segments.y0 - oy
-    dx, dy, dd = segments.dx, segments.dy, segments.dd
-    with np.errstate(invalid="ignore", divide="ignore"):
-        tproj = np.clip(-(ax * dx + ay * dy) / dd, 0.0, 1.0)
-    px = ax + tproj * dx
-    py = ay + tproj * dy
-    near = (px * px + py * py <= r_max * r_max) & (dd > 0.0)
+    # --- segments: range cull (bounding boxes), then into the sensor frame ---------------
+    bb = segments.bbox
+    near = (bb[0] <= ox + r_max) & (bb[2] >= ox - r_max) & (bb[1] <= oy + r_max)
+    near &= bb[3] >= oy - r_max
     sidx = np.flatnonzero(near)
-    ax = ax[sidx]
-    ay = ay[sidx]
-    dx = dx[sidx]
-    dy = dy[sidx]
+    sx0, sy0, sdx, sdy = segments.data[:, sidx]
+    wx = sx0 - ox
+    wy = sy0 - oy
+    ax = ch * wx + sh * wy
+    ay = ch * wy - sh * wx
+    dx = ch * sdx + sh * sdy
+    dy = ch * sdy - sh * sdx
     bx = ax + dx
     by = ay + dy
     cross_ab = ax * by - ay * bx
     span = np.arctan2(np.abs(cross_ab), ax * bx + ay * by)
-    th_a = np.arctan2(ay, ax)
-    th_b = np.arctan2(by, bx)
-    start = np.where(cross_ab >= 0.0, th_a, th_b)
-    start = (start - base) % _TWO_PI
+    start = np.arctan2(np.where(cross_ab >= 0.0, ay, by), np.where(cross_ab >= 0.0, ax, bx))
+    n_s = sidx.shape[0]
 
     # --- circles ------------------------------------------------------------------------
     n_seg = segments.n
     if circles is not None and circles.shape[0] > 0:
-        cx = circles[:, 0] - ox
-        cy = circles[:, 1] - oy
+        wx = circles[:, 0] - ox
+        wy = circles[:, 1] - oy
         cr = circles[:, 2]
-        cd = np.hypot(cx, cy)
-        cnear = np.flatnonzero(cd - cr <= r_max)
-        cx = cx[cnear]
-        cy = cy[cnear]
+        cd2 = wx * wx + wy * wy
+        rr = r_max + cr
+        cnear = np.flatnonzero(cd2 <= rr * rr)
+        wx = wx[cnear]
+        wy = wy[cnear]
         cr = cr[cnear]
-        cd = cd[cnear]
-        inside = cd <= cr
+        cx = ch * wx + sh * wy
+        cy = ch * wy - sh * wx
+        c0 = cd2[cnear] - cr * cr  # < 0: the sensor is inside the circle
         with np.errstate(invalid="ignore", divide="ignore"):
-            half = np.where(inside, np.pi, np.arcsin(np.minimum(cr / cd, 1.0)))
-        cstart = (np.arctan2(cy, cx) - half - base) % _TWO_PI
-        cspan = 2.0 * half
+            half = np.where(c0 <= 0.0, np.pi, np.arcsin(np.minimum(cr / np.sqrt(cd2[cnear]), 1.0)))
+        start = np.concatenate([start, np.arctan2(cy, cx) - half])
+        span = np.concatenate([span, 2.0 * half])
+        n_c = cnear.shape[0]
     else:
-        cnear = np.empty(0, dtype=np.int64)
-        cx = cy = cr = cstart = cspan = np.empty(0)
+        n_c = 0
 
-    n_s = sidx.shape[0]
-    n_c = cnear.shape[0]
-    lo, count = _beam_runs(
-        np.concatenate([start, cstart]), np.concatenate([span, cspan]), inc, n_beams
-    )
+    lo, count = _beam_runs((start - base) % _TWO_PI, span, inc, n_beams)
     run, beam = _expand(lo, count)
-    shape_k = np.where(run >= n_s + n_c, run - (n_s + n_c), run)  # undo the wrap copy
+    n_sc = n_s + n_c
+    shape_k = run - n_sc * (run >= n_sc)  # undo the wrap copy
+    ux = cos_l[beam]
+    uy = sin_l[beam]
 
     ranges = np.full(n_beams, np.inf)
     hit = np.full(n_beams, -1, dtype=np.int64)
-    ux = cos_b[beam]
-    uy = sin_b[beam]
-
-    is_seg = shape_k < n_s
-    # segment pairs
-    ks = shape_k[is_seg]
-    bs = beam[is_seg]
-    uxs = ux[is_seg]
-    uys = uy[is_seg]
-    sdx = dx[ks]
-    sdy = dy[ks]
-    sax = ax[ks]
-    say = ay[ks]
-    denom = uxs * sdy - uys * sdx
+    if n_c:
+        is_seg = shape_k < n_s
+        ks = shape_k[is_seg]
+        bs = beam[is_seg]
+        uxs = ux[is_seg]
+        uys = uy[is_seg]
+    else:
+        ks, bs, uxs, uys = shape_k, beam, ux, uy
+    pax = ax[ks]
+    pay = ay[ks]
+    pdx = dx[ks]
+    pdy = dy[ks]
     with np.errstate(invalid="ignore", divide="ignore"):
-        t = (sax * sdy - say * sdx) / denom
-        s = (sax * uys - say * uxs) / denom
+        inv = 1.0 / (uxs * pdy - uys * pdx)
+        t = (pax * pdy - pay * pdx) * inv
+        s = (pax * uys - pay * uxs) * inv
     ok = (t >= 0.0) & (s >= 0.0) & (s <= 1.0)
-    t_all = [t[ok]]
-    b_all = [bs[ok]]
-    id_all = [sidx[ks[ok]]]
+    t_hit = t[ok]
+    b_hit = bs[ok]
+    id_hit = sidx[ks[ok]]
 
     if n_c:
-        kc = shape_k[~is_seg] - n_s
-        bc = beam[~is_seg]
+        notseg = ~is_seg
+        kc = shape_k[notseg] - n_s
+        bc = beam[notseg]
         ccx = cx[kc]
         ccy = cy[kc]
-        ccr = cr[kc]
-        b = ux[~is_seg] * ccx + uy[~is_seg] * ccy
-        c = ccx * ccx + ccy * ccy - ccr * ccr
-        disc = b * b - c
-        okc = disc >= 0.0
-        tc = b[okc] - np.sqrt(disc[okc])
-        tc = np.where(c[okc] <= 0.0, 0.0, tc)  # origin inside the circle
-        keep = tc >= 0.0
-        t_all.append(tc[keep])
-        b_all.append(bc[okc][keep])
-        id_all.append(n_seg + cnear[kc[okc][keep]])
+        cc0 = c0[kc]
+        b = ux[notseg] * ccx + uy[notseg] * ccy
+        disc = b * b - cc0
+        okc = (disc >= 0.0) & ((b >= 0.0) | (cc0 <= 0.0))
+        tc = np.where(cc0[okc] <= 0.0, 0.0, b[okc] - np.sqrt(disc[okc]))
+        t_hit = np.concatenate([t_hit, tc])
+        b_hit = np.concatenate([b_hit, bc[okc]])
+        id_hit = np.concatenate([id_hit, n_seg + cnear[kc[okc]]])
 
-    t_hit = np.concatenate(t_all) if n_c else t_all[0]
-    b_hit = np.concatenate(b_all) if n_c else b_all[0]
-    id_hit = np.concatenate(id_all) if n_c else id_all[0]
     np.minimum.at(ranges, b_hit, t_hit)
     win = t_hit == ranges[b_hit]
     hit[b_hit[win]] = id_hit[win]
@@ -204,9 +209,9 @@ def cast_scan(
     return ranges, hit
 
 
-def scan_bearings(
-    heading_rad: float, angle_min_rad: float, angle_increment_rad: float, n_beams: int
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """World-frame bearings of a scan and their cosines and sines."""
-    b = heading_rad + angle_min_rad + angle_increment_rad * np.arange(n_beams, dtype=np.float64)
-    return b, np.cos(b), np.sin(b)
+def beam_directions(
+    angle_min_rad: float, angle_increment_rad: float, n_beams: int
+) -> tuple[FloatArray, FloatArray]:
+    """Cosines and sines of the sensor-frame beam angles."""
+    a = angle_min_rad + angle_increment_rad * np.arange(n_beams, dtype=np.float64)
+    return np.cos(a), np.sin(a)

@@ -89,7 +89,7 @@ def test_dropouts_and_short_returns_rates():
     r = lidar.apply_noise(true, rng)
     assert np.mean(np.isposinf(r)) == pytest.approx(0.05, abs=0.005)
     short = np.isfinite(r) & (r < 3.999)
-    assert np.mean(short) == pytest.approx(0.1 * 0.95, abs=0.01)
+    assert np.mean(short) == pytest.approx(0.1, abs=0.01)
     assert np.all(r[short] >= lidar.spec.range_min_m)
 
 

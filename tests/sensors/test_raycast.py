@@ -6,9 +6,19 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from dynmap_sim.sensors.raycast import SegmentCache, cast_scan, scan_bearings
+from dynmap_sim.sensors.raycast import SegmentCache, beam_directions, cast_scan
 
 URG_INC = 2.0 * np.pi / 1024.0
+
+
+def cast(origin, heading, amin, inc, n, r_max, segs, circ):
+    """Our caster; also returns the world-frame beam directions for the pymunk reference."""
+    cl, sl = beam_directions(amin, inc, n)
+    r, hit = cast_scan(
+        (origin[0], origin[1], heading), amin, inc, cl, sl, r_max, SegmentCache.build(segs), circ
+    )
+    a = heading + amin + inc * np.arange(n)
+    return r, hit, np.cos(a), np.sin(a)
 
 
 def random_geometry(rng, n_seg=150, n_circ=30):
@@ -50,13 +60,11 @@ def test_matches_pymunk_on_random_geometry():
     rng = np.random.default_rng(3)
     segs, circ = random_geometry(rng)
     space = pymunk_space(segs, circ)
-    cache = SegmentCache.build(segs)
     n_hits = 0
     for _ in range(6):
         origin = rng.uniform(-3.0, 3.0, 2)
         heading = rng.uniform(-np.pi, np.pi)
-        b, cb, sb = scan_bearings(heading, -2.0862, URG_INC, 683)
-        ours, hit = cast_scan(origin, b, cb, sb, 5.6, cache, circ)
+        ours, hit, cb, sb = cast(origin, heading, -2.0862, URG_INC, 683, 5.6, segs, circ)
         ref = pymunk_ranges(space, origin, cb, sb, 5.6)
         np.testing.assert_array_equal(np.isinf(ours), np.isinf(ref))
         fin = np.isfinite(ref)
@@ -71,9 +79,7 @@ def test_full_circle_scanner_wraps():
     rng = np.random.default_rng(5)
     segs, circ = random_geometry(rng, 80, 10)
     space = pymunk_space(segs, circ)
-    cache = SegmentCache.build(segs)
-    b, cb, sb = scan_bearings(0.7, -np.pi, 2 * np.pi / 720, 720)
-    ours, _ = cast_scan((0.1, -0.2), b, cb, sb, 8.0, cache, circ)
+    ours, _, cb, sb = cast((0.1, -0.2), 0.7, -np.pi, 2 * np.pi / 720, 720, 8.0, segs, circ)
     ref = pymunk_ranges(space, (0.1, -0.2), cb, sb, 8.0)
     np.testing.assert_array_equal(np.isinf(ours), np.isinf(ref))
     fin = np.isfinite(ref)
@@ -98,8 +104,7 @@ def test_single_segment_matches_pymunk(x0, y0, x1, y1, heading):
     if np.hypot(x0 + t * (x1 - x0), y0 + t * (y1 - y0)) < 1e-3:
         return
     space = pymunk_space(segs, np.empty((0, 3)))
-    b, cb, sb = scan_bearings(heading, -np.pi / 2, np.pi / 180, 181)
-    ours, _ = cast_scan((0.0, 0.0), b, cb, sb, 10.0, SegmentCache.build(segs), None)
+    ours, _, cb, sb = cast((0.0, 0.0), heading, -np.pi / 2, np.pi / 180, 181, 10.0, segs, None)
     ref = pymunk_ranges(space, (0.0, 0.0), cb, sb, 10.0)
     # beams grazing an endpoint may legitimately differ by a rounding error: compare hits
     both = np.isfinite(ours) & np.isfinite(ref)
@@ -109,26 +114,23 @@ def test_single_segment_matches_pymunk(x0, y0, x1, y1, heading):
 
 def test_wall_three_metres_ahead():
     segs = np.array([[3.0, -5.0, 3.0, 5.0]])
-    b, cb, sb = scan_bearings(0.0, -0.1, 0.1, 3)
-    r, hit = cast_scan((0.0, 0.0), b, cb, sb, 5.6, SegmentCache.build(segs), None)
+    r, hit, _, _ = cast((0.0, 0.0), 0.0, -0.1, 0.1, 3, 5.6, segs, None)
     np.testing.assert_allclose(r, 3.0 / np.cos([-0.1, 0.0, 0.1]), rtol=1e-12)
     assert list(hit) == [0, 0, 0]
 
 
 def test_out_of_range_and_empty():
     segs = np.array([[10.0, -5.0, 10.0, 5.0]])
-    b, cb, sb = scan_bearings(0.0, -0.5, 0.01, 101)
-    r, hit = cast_scan((0.0, 0.0), b, cb, sb, 5.6, SegmentCache.build(segs), None)
+    r, hit, _, _ = cast((0.0, 0.0), 0.0, -0.5, 0.01, 101, 5.6, segs, None)
     assert np.all(np.isinf(r)) and np.all(hit == -1)
-    r, hit = cast_scan((0.0, 0.0), b, cb, sb, 5.6, SegmentCache.build(np.empty((0, 4))), None)
+    r, hit, _, _ = cast((0.0, 0.0), 0.0, -0.5, 0.01, 101, 5.6, np.empty((0, 4)), None)
     assert np.all(np.isinf(r))
 
 
 @pytest.mark.parametrize("inside", [False, True])
 def test_circle_hit_distance(inside):
     circ = np.array([[2.0, 0.0, 0.5]]) if not inside else np.array([[0.0, 0.0, 0.5]])
-    b, cb, sb = scan_bearings(0.0, 0.0, 0.01, 2)
-    r, hit = cast_scan((0.0, 0.0), b, cb, sb, 5.6, SegmentCache.build(np.empty((0, 4))), circ)
+    r, hit, _, _ = cast((0.0, 0.0), 0.0, 0.0, 0.01, 2, 5.6, np.empty((0, 4)), circ)
     expected = 0.0 if inside else 1.5
     assert r[0] == pytest.approx(expected, abs=1e-12)
     assert hit[0] == 0  # circle 0 after N = 0 segments
