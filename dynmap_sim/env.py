@@ -1,1 +1,358 @@
-"""The Gymnasium env (a thin shell over world, robot and sensors)."""
+"""The Gymnasium env: a thin shell over world, robot and sensors (DESIGN.md §1)."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any
+
+import gymnasium
+import numpy as np
+from gymnasium import spaces
+from numpy.typing import NDArray
+
+from dynmap_sim.robot.diff_drive import DiffDriveRobot, RobotParams
+from dynmap_sim.robot.route import RouteProgress
+from dynmap_sim.sensors.lidar import LidarNoise, make_lidar
+from dynmap_sim.sensors.odometry import EncoderNoise, WheelOdometry
+from dynmap_sim.types import LaserSpec
+from dynmap_sim.world import World, WorldSpec, load_world, resolve_world_path
+
+FloatArray = NDArray[np.float64]
+
+#: Tags that make each noise stream of a run independent (SeedSequence entropy words).
+_LIDAR, _ODOM, _SLIP = 0x1DA2, 0x0D0, 0x511
+
+
+class DynMapEnv(gymnasium.Env):
+    """A mobile robot driving its route through an indoor world that changes over weeks.
+
+    ## Description
+
+    The robot (a differential-drive disc) carries a laser scanner and wheel odometry in a
+    world whose furniture, doors and exhibits change on a calendar and where people walk
+    around (``dynmap_sim.world``). One episode is one *run* of the world's calendar: the
+    world is put into the state of that run (day, run of the day), the robot starts at the
+    world's start pose with its odometry at the origin, and it is driven along the world's
+    route. This class only wires the parts together: physics and bumper
+    (``dynmap_sim.robot.diff_drive``), laser (``dynmap_sim.sensors.lidar``), odometry
+    (``dynmap_sim.sensors.odometry``), schedule and people (``dynmap_sim.world``).
+
+    ## Observation
+
+    ``Dict``: ``"scan"`` — ``Box(-inf, inf, (n_beams,), float32)``, laser ranges [m] encoded
+    per REP-117 (``+inf`` no return, ``-inf`` closer than the minimum range; ``NaN`` invalid,
+    which the default noise model never produces); beam geometry in
+    ``env.unwrapped.laser_spec``. ``"odom"`` — ``Box(-inf, inf, (3,), float64)``, the wheel
+    odometry pose ``(x_m, y_m, theta_rad)`` in the odom frame (starts at 0 each run; drifts).
+
+    ## Action
+
+    ``Box([-v_max, -omega_max], [v_max, omega_max], (2,), float32)``: the commanded forward
+    speed [m/s] and turn rate [rad/s]. Out-of-range actions are **clipped** to the box (and
+    then rate-limited by the robot's acceleration limits); NaN or infinite actions raise a
+    ``ValueError``.
+
+    ## Reward
+
+    ``progress_m - collision_penalty * collision``: the metres of route progress made this
+    step (projection of the robot onto the route polyline, monotone, see
+    ``dynmap_sim.robot.route``) minus ``collision_penalty`` (default 1.0) for every step the
+    bumper is pressed.
+
+    ## Episode end
+
+    *Terminated* when the robot reaches the route's last waypoint (within
+    ``goal_tolerance_m``) after following the whole route. *Truncated* after
+    ``max_episode_steps`` steps (default: 3 x route length / 0.1 m/s / step period, i.e.
+    time enough to drive the route three times at 0.1 m/s).
+
+    ## Info
+
+    ``info["truth"]`` (never part of the observation): ``pose`` (map frame, float64 (3,)),
+    ``beam_class`` (int8 per beam, names in ``dynmap_sim.BEAM_CLASSES``), ``beam_object``
+    (int32 index into ``env.unwrapped.world.geometry.object_ids``, -1 nothing hit),
+    ``range_m`` (noise-free ranges), ``people`` ((P, 3) poses), ``time`` (day, run, seconds
+    since midnight). ``info["collision"]`` (bool), ``info["route_progress"]`` (fraction),
+    ``info["stamp_s"]`` (seconds since the run started).
+
+    ## Arguments
+
+    ``world``: ``"lab"``, ``"apartment"``, a path to a world TOML file, or a ``WorldSpec``.
+    ``sensor``: ``"urg-04lx"`` or ``"lms200"``; ``sensor_options``: preset overrides passed to
+    ``make_lidar`` (e.g. ``{"beams": 181, "mode": "cm", "mount_pose": (0.1, 0, 0)}``);
+    ``lidar_noise``: a ``LidarNoise``. ``people``: False removes all people. ``robot``:
+    ``RobotParams`` (limits, wheel geometry with UMBmark errors ``E_d``/``E_b``, slip);
+    ``encoder``: ``EncoderNoise``. ``dt_s``: step period (default the scan period).
+
+    ## Seeding and episodes
+
+    ``reset(seed=s, options={"day": d, "run": r})`` starts run ``(d, r)`` (1-based) of world
+    seed ``s``. A reset with a ``seed`` and no day/run starts the first run; without a seed
+    it starts the next run of the calendar (wrapping to the first). Lidar, odometry and slip
+    noise of a run come from ``SeedSequence([seed, day, run, tag])``, so a run is the same
+    whatever ran before it.
+
+    ## Worlds
+
+    ``dynmap_sim/Apartment-v0`` (Hentschel & Wagner 2011 §7, 28 days, 1 run a day),
+    ``dynmap_sim/Lab-v0`` (Biber & Duckett 2009 §5, 23 working days, 3 runs a day) and
+    ``dynmap_sim/World-v0`` (``world=PATH``).
+
+    ## Version history
+
+    * v0: first version.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+
+    def __init__(
+        self,
+        world: str | Path | WorldSpec = "lab",
+        sensor: str = "urg-04lx",
+        people: bool = True,
+        render_mode: str | None = None,
+        *,
+        sensor_options: dict[str, Any] | None = None,
+        lidar_noise: LidarNoise | None = None,
+        robot: RobotParams | None = None,
+        encoder: EncoderNoise | None = None,
+        dt_s: float | None = None,
+        max_episode_steps: int | None = None,
+        collision_penalty: float = 1.0,
+        goal_tolerance_m: float = 0.3,
+        render_size_px: int = 640,
+    ) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        spec = world if isinstance(world, WorldSpec) else load_world(resolve_world_path(world))
+        if not people:
+            spec = spec.model_copy(update={"people": ()})
+        self.spec_world = spec
+        self.render_mode = render_mode
+        self.lidar = make_lidar(sensor, noise=lidar_noise, **(sensor_options or {}))
+        self.laser_spec: LaserSpec = self.lidar.spec
+        self.robot_params = robot if robot is not None else RobotParams()
+        self.encoder = encoder if encoder is not None else EncoderNoise()
+        self.dt_s = float(dt_s) if dt_s is not None else self.laser_spec.scan_period_s
+        if not (math.isfinite(self.dt_s) and self.dt_s > 0.0):
+            raise ValueError(f"dt_s must be > 0, got {dt_s!r}")
+        self.collision_penalty = float(collision_penalty)
+        self.route = RouteProgress(spec.robot.route, goal_tolerance_m=goal_tolerance_m)
+        if max_episode_steps is None:
+            max_episode_steps = max(100, math.ceil(3.0 * self.route.length_m / 0.1 / self.dt_s))
+        self.max_episode_steps = int(max_episode_steps)
+        self.render_size_px = int(render_size_px)
+
+        p = self.robot_params
+        n = self.laser_spec.n_beams
+        self.observation_space = spaces.Dict(
+            {
+                "scan": spaces.Box(-np.inf, np.inf, (n,), np.float32),
+                "odom": spaces.Box(-np.inf, np.inf, (3,), np.float64),
+            }
+        )
+        high = np.array([p.max_v_mps, p.max_omega_radps], dtype=np.float32)
+        self.action_space = spaces.Box(-high, high, (2,), np.float32)
+        self._act_lo = (-high).astype(np.float64)
+        self._act_hi = high.astype(np.float64)
+
+        self.world_seed = 0
+        self.world = World(spec, seed=0)
+        self.robot = DiffDriveRobot(self.world.space, p, tuple(spec.robot.start))
+        self.odometry = WheelOdometry(p.wheels, self.encoder)
+        self._slot = -1  # index of the current run in the calendar (-1: none yet)
+        self._started = False
+        self._last: dict[str, Any] | None = None
+
+    # -- Gymnasium API ----------------------------------------------------------------------
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        super().reset(seed=seed)
+        if seed is None and not self._started:
+            seed = int(self.np_random.integers(2**31))
+        if seed is not None and int(seed) != self.world_seed:
+            self.world_seed = int(seed)
+            self.world = World(self.spec_world, seed=self.world_seed)
+            self.robot.attach(self.world.space)
+        cal = self.world.calendar
+        options = options or {}
+        if "day" in options or "run" in options:
+            day = self._option_int(options, "day", 1)
+            run = self._option_int(options, "run", 1)
+            try:
+                self._slot = cal.slot_index(day, run)
+            except ValueError as exc:
+                raise ValueError(f"reset options: {exc}") from None
+        elif seed is not None or not self._started:
+            self._slot = 0
+        else:
+            self._slot = (self._slot + 1) % cal.n_slots
+        self._started = True
+        slot = cal.slots[self._slot]
+        self.world.reset(slot.day, slot.run)
+        self._rng_lidar, self._rng_odom, self._rng_slip = (
+            np.random.default_rng(np.random.SeedSequence([self.world_seed, slot.day, slot.run, t]))
+            for t in (_LIDAR, _ODOM, _SLIP)
+        )
+        self.robot.set_pose(tuple(self.spec_world.robot.start))
+        self.odometry.reset()
+        self.route.reset()
+        self._steps = 0
+        pose = self.robot.pose
+        self.route.update(float(pose[0]), float(pose[1]))
+        return self._observe(pose, collision=False)
+
+    @staticmethod
+    def _option_int(options: dict[str, Any], key: str, default: int) -> int:
+        v = options.get(key, default)
+        if isinstance(v, bool) or not isinstance(v, int | np.integer):
+            raise ValueError(f"reset options: {key!r} must be an integer, got {v!r}")
+        return int(v)
+
+    def step(self, action: Any) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        if not self._started:
+            raise RuntimeError("call reset() before step()")
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != (2,):
+            raise ValueError(f"action must have shape (2,) = (v_mps, omega_radps), got {a.shape}")
+        if not np.isfinite(a).all():
+            raise ValueError(f"action must be finite (v_mps, omega_radps), got {a.tolist()}")
+        v = min(max(float(a[0]), self._act_lo[0]), self._act_hi[0])
+        w = min(max(float(a[1]), self._act_lo[1]), self._act_hi[1])
+        res = self.robot.step(v, w, self.dt_s, self._rng_slip)
+        self.odometry.update(res.dphi_left_rad, res.dphi_right_rad, self._rng_odom)
+        pose = self.robot.pose
+        self.world.step(self.dt_s, robot_pose=pose, robot_radius_m=self.robot_params.radius_m)
+        self._steps += 1
+        x, y = float(pose[0]), float(pose[1])
+        gained = self.route.update(x, y)
+        reward = gained - (self.collision_penalty if res.collision else 0.0)
+        terminated = self.route.done(x, y)
+        truncated = self._steps >= self.max_episode_steps and not terminated
+        obs, info = self._observe(pose, res.collision)
+        return obs, float(reward), terminated, truncated, info
+
+    def _observe(
+        self, pose: FloatArray, collision: bool
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        reading = self.lidar.scan(pose, self.world.geometry, self._rng_lidar)
+        slot = self.world.slot
+        obs = {"scan": reading.ranges_m, "odom": self.odometry.pose}
+        info = {
+            "truth": {
+                "pose": pose,
+                "beam_class": reading.beam_class,
+                "beam_object": reading.beam_object,
+                "range_m": reading.true_range_m,
+                "people": self.world.people_poses(),
+                "time": (slot.day, slot.run, self.world.time_s),
+            },
+            "collision": bool(collision),
+            "route_progress": self.route.fraction,
+            "stamp_s": self.world.elapsed_s,
+        }
+        self._last = {"pose": pose, "reading": reading}
+        return obs, info
+
+    # -- extras ---------------------------------------------------------------------------
+    def teleport(self, pose: Any) -> None:
+        """Kidnap the robot: move the true robot to ``pose`` (map frame); odometry is unaware."""
+        p = np.asarray(pose, dtype=np.float64)
+        if p.shape != (3,) or not np.isfinite(p).all():
+            raise ValueError(f"teleport pose must be 3 finite numbers (x, y, theta), got {pose!r}")
+        self.robot.set_pose(p)
+
+    @property
+    def day_run(self) -> tuple[int, int]:
+        """``(day, run)`` of the current episode (1-based)."""
+        slot = self.world.slot
+        return slot.day, slot.run
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode != "rgb_array":
+            return None
+        return _render(self)
+
+
+# -- rendering: a tiny numpy rasterizer (no matplotlib state, ~ms per frame) -------------------
+_CLASS_RGB = np.array(
+    [
+        [120, 120, 120],  # none
+        [20, 20, 20],  # wall
+        [150, 90, 40],  # furniture
+        [230, 140, 0],  # exhibit
+        [40, 150, 60],  # door
+        [210, 30, 30],  # person
+        [60, 60, 200],  # robot
+    ],
+    dtype=np.uint8,
+)
+
+
+def _render(env: DynMapEnv) -> np.ndarray:
+    xmin, ymin, xmax, ymax = env.spec_world.bounds
+    size = env.render_size_px
+    scale = size / max(xmax - xmin, ymax - ymin)
+    w = max(1, int(math.ceil((xmax - xmin) * scale)))
+    h = max(1, int(math.ceil((ymax - ymin) * scale)))
+    img = np.full((h, w, 3), 255, dtype=np.uint8)
+
+    def px(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        c = np.floor((xy[..., 0] - xmin) * scale).astype(np.int64)
+        r = np.floor((ymax - xy[..., 1]) * scale).astype(np.int64)
+        return r, c
+
+    def put(r: np.ndarray, c: np.ndarray, rgb: np.ndarray) -> None:
+        ok = (r >= 0) & (r < h) & (c >= 0) & (c < w)
+        img[r[ok], c[ok]] = rgb if rgb.ndim == 1 else rgb[ok]
+
+    def lines(seg: np.ndarray, rgb: np.ndarray) -> None:
+        if seg.shape[0] == 0:
+            return
+        n = np.ceil(np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]) * scale).astype(int) + 2
+        k = np.repeat(np.arange(seg.shape[0]), n)
+        t = (np.arange(k.shape[0]) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n - 1, n)
+        xy = seg[k, :2] + t[:, None] * (seg[k, 2:] - seg[k, :2])
+        put(*px(xy), rgb if rgb.ndim == 1 else rgb[k])
+
+    def discs(circ: np.ndarray, rgb: np.ndarray) -> None:
+        for i in range(circ.shape[0]):
+            x, y, rad = circ[i]
+            rr = max(rad * scale, 1.0)
+            r0, c0 = px(np.array([x, y]))
+            ys, xs = np.mgrid[-int(rr) : int(rr) + 1, -int(rr) : int(rr) + 1]
+            m = ys * ys + xs * xs <= rr * rr
+            put(r0 + ys[m], c0 + xs[m], rgb if rgb.ndim == 1 else rgb[i])
+
+    route = env.spec_world.robot.route
+    lines(np.hstack([route[:-1], route[1:]]), np.array([200, 200, 235], np.uint8))
+    g = env.world.geometry
+    lines(g.segments, _CLASS_RGB[g.segment_class])
+    discs(g.circles, _CLASS_RGB[g.circle_class])
+    if env._last is not None:
+        pose = env._last["pose"]
+        reading = env._last["reading"]
+        discs(
+            np.array([[pose[0], pose[1], env.robot_params.radius_m]]),
+            np.array([60, 60, 200], np.uint8),
+        )
+        head = np.array(
+            [
+                [
+                    pose[0],
+                    pose[1],
+                    pose[0] + 0.4 * math.cos(pose[2]),
+                    pose[1] + 0.4 * math.sin(pose[2]),
+                ]
+            ]
+        )
+        lines(head, np.array([255, 255, 0], np.uint8))
+        lp = env.lidar.laser_pose(pose)
+        r = reading.ranges_m.astype(np.float64)
+        ok = np.isfinite(r)
+        ang = lp[2] + env.laser_spec.angles()[ok]
+        pts = np.stack([lp[0] + r[ok] * np.cos(ang), lp[1] + r[ok] * np.sin(ang)], axis=-1)
+        put(*px(pts), np.array([0, 170, 255], np.uint8))
+    return img

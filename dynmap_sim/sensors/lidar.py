@@ -14,15 +14,21 @@ the first surface it hits):
    has ``sigma_m = 0.005`` and a *systematic* error of up to ±15 mm: a fixed per-beam bias,
    uniform in ``±systematic_m``, drawn once when the sensor is built (``bias_seed``), i.e. a
    property of the physical unit that stays the same across runs.
-2. **Mixed pixels** — where two neighbouring beams' true ranges differ by more than
+2. **Mixed pixels** — where a beam's true range differs from a neighbour's by more than
    ``mixed_jump_m`` the spot straddles an edge; with probability ``p_mixed`` such a beam reads
    a range uniformly between the two surfaces.
-3. **Spurious short returns** — with probability ``p_short`` a beam reads a range uniform in
-   ``[range_min, r]`` (dust, a passing hand; the "short" term of the beam model).
-4. **Max-range dropouts** — with probability ``p_dropout`` a beam that hit something returns
+3. **Max-range dropouts** — with probability ``p_dropout`` a beam that hit something returns
    nothing (``+inf``), e.g. black or specular surfaces.
-5. **Invalid readings** — with probability ``p_invalid`` a beam reads ``NaN``. This is **0 by
-   default** (Gymnasium's ``Box.contains`` rejects NaN, so ``check_env`` would fail).
+4. **Spurious short returns** — with probability ``p_short`` a beam that hit something reads a
+   range uniform in ``[range_min, r]`` (dust, a passing hand; the "short" term of the beam
+   model).
+5. **Invalid readings** — with probability ``p_invalid`` a beam that hit something reads
+   ``NaN``. This is **0 by default**: Gymnasium's ``Box.contains`` rejects NaN, so
+   ``check_env`` would fail on an observation holding one.
+
+Events 2-5 are mutually exclusive per beam (one uniform draw per beam is split into disjoint
+intervals), so each happens with exactly its probability; ``p_mixed + p_dropout + p_short +
+p_invalid`` must not exceed 1.
 
 Readings follow REP-117: ``+inf`` no return within ``range_max``, ``-inf`` a return closer than
 ``range_min``, ``NaN`` invalid. The truth labels (:class:`LidarReading` ``beam_object``,
@@ -79,6 +85,8 @@ class LidarNoise:
             v = getattr(self, name)
             if not (0.0 <= v <= 1.0):
                 raise ValueError(f"LidarNoise.{name} must be a probability in [0, 1], got {v!r}")
+        if self.p_dropout + self.p_short + self.p_invalid + self.p_mixed > 1.0:
+            raise ValueError("LidarNoise: p_dropout + p_short + p_invalid + p_mixed must be <= 1")
 
 
 #: Noise-free model (for exact-geometry tests and ground-truth scans).

@@ -114,7 +114,9 @@ def test_rep117_encodings():
     assert np.isposinf(r[4])
     # NaN only when asked for; never by default
     assert not np.any(np.isnan(make_lidar().apply_noise(np.full((80, 683), 2.0), rng)))
-    bad = make_lidar("urg-04lx", noise={"p_invalid": 0.5}).apply_noise(np.full(683, 2.0), rng)
+    bad = make_lidar("urg-04lx", noise={"p_invalid": 0.5, "p_mixed": 0.0}).apply_noise(
+        np.full(683, 2.0), rng
+    )
     assert 0.4 < np.mean(np.isnan(bad)) < 0.6
 
 

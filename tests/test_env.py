@@ -1,0 +1,170 @@
+"""The Gymnasium env: checker, determinism, vector envs, episodes, action handling."""
+
+import warnings
+
+import gymnasium
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import dynmap_sim  # noqa: F401  (registers the envs)
+from dynmap_sim.env import DynMapEnv
+from dynmap_sim.registration import WORLDS_DIR
+from dynmap_sim.types import BEAM_CLASSES, LaserSpec
+
+
+@pytest.fixture(scope="module")
+def apartment():
+    env = DynMapEnv(world="apartment")
+    yield env
+    env.close()
+
+
+@pytest.mark.parametrize(
+    "env_id, kwargs",
+    [
+        ("dynmap_sim/Apartment-v0", {}),
+        ("dynmap_sim/Lab-v0", {}),
+        ("dynmap_sim/World-v0", {"world": str(WORLDS_DIR / "apartment.toml")}),
+    ],
+)
+def test_check_env_passes_for_every_registered_env(env_id, kwargs):
+    env = gymnasium.make(env_id, render_mode="rgb_array", **kwargs)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the checker warns about infinite Box bounds
+        check_env(env.unwrapped, skip_render_check=False)
+    env.reset(seed=0)
+    env.step(np.array([0.2, 0.1], np.float32))
+    frame = env.render()
+    assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[2] == 3
+    env.close()
+
+
+def rollout(seed, n=500):
+    env = DynMapEnv(world="lab")
+    env.action_space.seed(seed)
+    obs, info = env.reset(seed=seed, options={"day": 4, "run": 2})
+    out = [obs["scan"], obs["odom"], info["truth"]["pose"]]
+    for _ in range(n):
+        obs, r, term, trunc, info = env.step(env.action_space.sample())
+        out += [obs["scan"], obs["odom"], info["truth"]["pose"], np.array([r])]
+        if term or trunc:
+            obs, info = env.reset()
+    return out
+
+
+def test_same_seed_same_rollout():
+    a, b = rollout(7), rollout(7)
+    assert len(a) == len(b)
+    for x, y in zip(a, b, strict=True):
+        np.testing.assert_array_equal(x, y)
+    c = rollout(8, n=5)
+    assert not all(np.array_equal(x, y) for x, y in zip(a[: len(c)], c, strict=False))
+
+
+def test_async_vector_env():
+    envs = gymnasium.make_vec("dynmap_sim/Apartment-v0", num_envs=2, vectorization_mode="async")
+    try:
+        obs, info = envs.reset(seed=[1, 2])
+        assert obs["scan"].shape == (2, 683) and obs["odom"].shape == (2, 3)
+        for _ in range(3):
+            obs, rew, term, trunc, info = envs.step(np.array([[0.3, 0.0], [0.2, 0.1]], np.float32))
+        assert rew.shape == (2,)
+    finally:
+        envs.close()
+
+
+@pytest.mark.parametrize("bad", [[np.nan, 0.0], [0.0, np.inf], [-np.inf, 1.0]])
+def test_non_finite_action_raises(apartment, bad):
+    apartment.reset(seed=0)
+    with pytest.raises(ValueError, match="finite"):
+        apartment.step(np.array(bad, np.float32))
+
+
+def test_wrong_shape_and_bad_options_raise(apartment):
+    apartment.reset(seed=0)
+    with pytest.raises(ValueError, match="shape"):
+        apartment.step(np.zeros(3))
+    with pytest.raises(ValueError, match="day 99"):
+        apartment.reset(options={"day": 99})
+    with pytest.raises(ValueError, match="integer"):
+        apartment.reset(options={"day": "one"})
+
+
+def test_out_of_range_action_is_clipped(apartment):
+    apartment.reset(seed=0)
+    for _ in range(30):
+        apartment.step(np.array([100.0, 0.0], np.float32))
+    assert apartment.robot.twist[0] == pytest.approx(apartment.robot_params.max_v_mps)
+
+
+def test_episode_is_one_run_and_next_run_without_options():
+    env = DynMapEnv(world="lab", people=False)
+    obs, info = env.reset(seed=3)
+    assert info["truth"]["time"][:2] == (1, 1)
+    _, info = env.reset()
+    assert info["truth"]["time"][:2] == (1, 2)
+    _, info = env.reset(options={"day": 5, "run": 3})
+    assert info["truth"]["time"][:2] == (5, 3)
+    assert info["truth"]["time"][2] == env.world.calendar.slot(5, 3).start_s
+    _, info = env.reset()
+    assert info["truth"]["time"][:2] == (6, 1)
+    np.testing.assert_array_equal(obs["odom"], 0.0)
+    np.testing.assert_allclose(info["truth"]["pose"], env.spec_world.robot.start)
+    assert info["truth"]["people"].shape == (0, 3)
+
+
+def test_observation_and_truth_contents(apartment):
+    obs, info = apartment.reset(seed=0)
+    spec = apartment.laser_spec
+    assert isinstance(spec, LaserSpec) and obs["scan"].shape == (spec.n_beams,)
+    assert obs["scan"].dtype == np.float32 and obs["odom"].dtype == np.float64
+    assert not np.isnan(obs["scan"]).any()
+    t = info["truth"]
+    assert t["beam_class"].dtype == np.int8 and t["beam_object"].dtype == np.int32
+    assert set(np.unique(t["beam_class"])) <= set(range(len(BEAM_CLASSES)))
+    hit = t["beam_object"] >= 0
+    assert hit.any() and np.all(t["beam_class"][~hit] == 0)
+    # noise-free ranges agree with the readings within the noise
+    ok = np.isfinite(obs["scan"]) & np.isfinite(t["range_m"])
+    assert np.median(np.abs(obs["scan"][ok] - t["range_m"][ok])) < 0.05
+    # fresh arrays every step
+    obs2, *_ = apartment.step(np.zeros(2, np.float32))
+    assert obs2["scan"] is not obs["scan"] and not np.shares_memory(obs2["odom"], obs["odom"])
+
+
+def test_driving_the_route_with_truth_terminates():
+    """A pure-pursuit driver on the true pose finishes the apartment route: terminated."""
+    env = DynMapEnv(world="apartment", people=False)
+    obs, info = env.reset(seed=0)
+    route = env.spec_world.robot.route
+    k = 1
+    total, bumps = 0.0, 0
+    for _ in range(env.max_episode_steps):
+        x, y, th = info["truth"]["pose"]
+        while k < len(route) - 1 and np.hypot(*(route[k] - (x, y))) < 0.4:
+            k += 1
+        gx, gy = route[k]
+        bearing = np.arctan2(gy - y, gx - x) - th
+        err = np.arctan2(np.sin(bearing), np.cos(bearing))
+        v = 0.5 if abs(err) < 0.5 else 0.05
+        obs, r, term, trunc, info = env.step(np.array([v, 2.0 * err], np.float32))
+        total += r
+        bumps += info["collision"]
+        if term or trunc:
+            break
+    assert term and not trunc
+    assert info["route_progress"] > 0.95
+    # reward = route progress [m] minus the collision penalty per bumper step
+    assert total == pytest.approx(env.route.progress_m - env.collision_penalty * bumps)
+    assert env.route.progress_m > env.route.length_m - 0.7
+
+
+def test_teleport_moves_truth_not_odometry(apartment):
+    apartment.reset(seed=0)
+    apartment.teleport((4.0, 3.0, 0.5))
+    obs, _, _, _, info = apartment.step(np.zeros(2, np.float32))
+    np.testing.assert_allclose(info["truth"]["pose"], (4.0, 3.0, 0.5), atol=1e-9)
+    np.testing.assert_allclose(obs["odom"], 0.0, atol=1e-9)
+    with pytest.raises(ValueError, match="teleport"):
+        apartment.teleport((np.nan, 0.0, 0.0))
