@@ -167,6 +167,8 @@ class World:
         for body, p, v in zip(self._people_bodies, self._crowd.pos, self._crowd.vel, strict=True):
             body.position = (p[0], p[1])
             body.velocity = (v[0], v[1])
+            # the space is never stepped: refresh the shapes' cached positions for queries
+            self.space.reindex_shapes_for_body(body)
         self._refresh_people()
 
     @property
