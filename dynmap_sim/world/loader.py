@@ -182,6 +182,10 @@ def check_world(spec: WorldSpec) -> list[tuple[str, str]]:
         lo, hi = poly.min(axis=0), poly.max(axis=0)
         if lo[0] < bx0 or lo[1] < by0 or hi[0] > bx1 or hi[1] > by1:
             errs.append((loc, f"object {oid!r} is outside the world bounds"))
+    for i, w in enumerate(spec.walls):
+        for k, (x, y) in enumerate(w.points):
+            if not (bx0 <= x <= bx1 and by0 <= y <= by1):
+                errs.append((f"walls.{i}.points.{k}", "point outside the world bounds"))
     route = np.array(spec.robot.waypoints, dtype=np.float64)
     for k in range(len(route) - 1):
         seg = _segment_poly(route[k], route[k + 1])
@@ -206,6 +210,9 @@ def check_world(spec: WorldSpec) -> list[tuple[str, str]]:
         for k, (x0, y0, x1, y1) in enumerate(p.areas):
             if x0 < bx0 or y0 < by0 or x1 > bx1 or y1 > by1:
                 errs.append((f"people.{i}.areas.{k}", "area is outside the world bounds"))
+        for k, (x, y) in enumerate(p.goals):
+            if not (bx0 <= x <= bx1 and by0 <= y <= by1):
+                errs.append((f"people.{i}.goals.{k}", "goal outside the world bounds"))
         for key in ("start", "end"):
             when = getattr(p, key)
             if when is not None and cal.day_of(when) is None:

@@ -36,6 +36,7 @@ A_ROBOT = 6.0
 B_ROBOT = 0.25
 ROBOT_GAP_M = 0.10
 REACH_M = 1.2
+CELL_M = 1.0
 GOAL_TOL_M = 0.4
 STUCK_S = 4.0
 LEG_RADIUS_M = 0.06
@@ -83,6 +84,48 @@ class SocialForce:
         self.populations = populations
         self.rng = rng
         self.segments = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
+        self._build_grid()
+
+    def _build_grid(self) -> None:
+        """Uniform grid (cell ``CELL_M``) listing, per cell, the segments within ``REACH_M``.
+
+        Rows are padded with a far-away dummy segment so that a step gathers a dense
+        ``(P, K)`` block of candidate segments per person (broad phase).
+        """
+        s = self.segments
+        far = np.array([[1e6, 1e6, 1e6 + 1.0, 1e6]])
+        self._segs_ext = np.concatenate([s, far])
+        if len(s) == 0:
+            self._origin = np.zeros(2)
+            self._shape = (1, 1)
+            self._cells = np.zeros((1, 1), dtype=np.int64)
+            return
+        lo = np.minimum(s[:, :2], s[:, 2:]).min(axis=0) - REACH_M
+        hi = np.maximum(s[:, :2], s[:, 2:]).max(axis=0) + REACH_M
+        nx, ny = (np.ceil((hi - lo) / CELL_M).astype(int) + 1).tolist()
+        self._origin, self._shape = lo, (nx, ny)
+        smin = np.minimum(s[:, :2], s[:, 2:]) - REACH_M - lo
+        smax = np.maximum(s[:, :2], s[:, 2:]) + REACH_M - lo
+        i0 = np.floor(smin / CELL_M).astype(int)
+        i1 = np.floor(smax / CELL_M).astype(int)
+        lists: list[list[int]] = [[] for _ in range(nx * ny)]
+        for k in range(len(s)):
+            for ix in range(max(i0[k, 0], 0), min(i1[k, 0], nx - 1) + 1):
+                for iy in range(max(i0[k, 1], 0), min(i1[k, 1], ny - 1) + 1):
+                    lists[ix * ny + iy].append(k)
+        kmax = max(1, max(len(c) for c in lists))
+        cells = np.full((nx * ny, kmax), len(s), dtype=np.int64)
+        for c, idx in enumerate(lists):
+            cells[c, : len(idx)] = idx
+        self._cells = cells
+
+    def _candidates(self, pos: FloatArray) -> FloatArray:
+        """Candidate segments ``(P, K, 4)`` near each person (padded with a far dummy)."""
+        nx, ny = self._shape
+        ij = np.floor((pos - self._origin) / CELL_M).astype(np.int64)
+        ix = np.clip(ij[:, 0], 0, nx - 1)
+        iy = np.clip(ij[:, 1], 0, ny - 1)
+        return self._segs_ext[self._cells[ix * ny + iy]]
 
     # -- sampling -----------------------------------------------------------------------
     def _free(self, xy: FloatArray, r: float) -> bool:
@@ -162,29 +205,18 @@ class SocialForce:
         )
 
     # -- dynamics -------------------------------------------------------------------------
-    def _near_segments(self, crowd: Crowd) -> FloatArray:
-        """Segments whose bounding box comes within ``REACH_M`` of any person (broad phase)."""
-        s = self.segments
-        lo = crowd.pos.min(axis=0) - REACH_M
-        hi = crowd.pos.max(axis=0) + REACH_M
-        keep = (
-            (np.maximum(s[:, 0], s[:, 2]) >= lo[0])
-            & (np.minimum(s[:, 0], s[:, 2]) <= hi[0])
-            & (np.maximum(s[:, 1], s[:, 3]) >= lo[1])
-            & (np.minimum(s[:, 1], s[:, 3]) <= hi[1])
-        )
-        return s[keep]
-
     @staticmethod
     def _closest(points: FloatArray, segs: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Distances ``(P, N)`` and unit vectors ``(P, N, 2)`` from segments to points."""
-        a = segs[None, :, 0:2]
-        d = segs[None, :, 2:4] - a
+        """Distances ``(P, K)`` and unit vectors ``(P, K, 2)`` from per-person segments
+        ``(P, K, 4)`` to the points ``(P, 2)``."""
+        a = segs[..., 0:2]
+        d = segs[..., 2:4] - a
         p = points[:, None, :]
-        dd = np.maximum(np.sum(d * d, axis=-1), 1e-18)
-        t = np.clip(np.sum((p - a) * d, axis=-1) / dd, 0.0, 1.0)
-        diff = p - (a + t[..., None] * d)
-        dist = np.hypot(diff[..., 0], diff[..., 1])
+        pa = p - a
+        dd = np.maximum(np.einsum("pki,pki->pk", d, d), 1e-18)
+        t = np.clip(np.einsum("pki,pki->pk", pa, d) / dd, 0.0, 1.0)
+        diff = pa - t[..., None] * d
+        dist = np.sqrt(np.einsum("pki,pki->pk", diff, diff))
         return dist, diff / np.maximum(dist, 1e-9)[..., None]
 
     def step(
@@ -210,8 +242,8 @@ class SocialForce:
             rsum = crowd.radius[:, None] + crowd.radius[None, :]
             mag = A_PEOPLE * np.exp((rsum - d) / B_PEOPLE)
             force += np.sum((mag / np.maximum(d, 1e-9))[..., None] * diff, axis=1)
-        segs = self._near_segments(crowd)
-        if len(segs):
+        segs = self._candidates(pos)
+        if segs.shape[1]:
             dist, nvec = self._closest(pos, segs)
             mag = np.where(
                 dist < REACH_M, A_WALL * np.exp((crowd.radius[:, None] - dist) / B_WALL), 0
@@ -256,7 +288,7 @@ class SocialForce:
             np.fill_diagonal(d, np.inf)
             over = np.maximum(crowd.radius[:, None] + crowd.radius[None, :] - d, 0.0)
             pos += 0.5 * np.sum((over / np.maximum(d, 1e-9))[..., None] * diff, axis=1)
-        if len(segs):
+        if segs.shape[1]:
             for _ in range(2):
                 dist, nvec = self._closest(pos, segs)
                 over = np.maximum(crowd.radius[:, None] - dist, 0.0)

@@ -141,15 +141,50 @@ def points_in_convex(points: FloatArray, poly: FloatArray) -> NDArray[np.bool_]:
     return np.all(cross > 0, axis=1)
 
 
+def segment_pair_distances(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Distances ``(A, B)`` [m] between every segment of ``a`` ``(A, 4)`` and ``b`` ``(B, 4)``."""
+
+    def pt_seg(p: FloatArray, s: FloatArray) -> FloatArray:  # p (A,1,2) or (1,B,2); s likewise
+        s0 = s[..., 0:2]
+        d = s[..., 2:4] - s0
+        dd = np.maximum(np.sum(d * d, axis=-1), 1e-18)
+        t = np.clip(np.sum((p - s0) * d, axis=-1) / dd, 0.0, 1.0)
+        q = p - (s0 + t[..., None] * d)
+        return np.hypot(q[..., 0], q[..., 1])
+
+    A, B = a[:, None, :], b[None, :, :]
+    dist = np.minimum.reduce(
+        [
+            pt_seg(A[..., 0:2], B),
+            pt_seg(A[..., 2:4], B),
+            pt_seg(B[..., 0:2], A),
+            pt_seg(B[..., 2:4], A),
+        ]
+    )
+
+    def orient(p, q, r):
+        return (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (
+            r[..., 0] - p[..., 0]
+        )
+
+    o1 = orient(A[..., 0:2], A[..., 2:4], B[..., 0:2])
+    o2 = orient(A[..., 0:2], A[..., 2:4], B[..., 2:4])
+    o3 = orient(B[..., 0:2], B[..., 2:4], A[..., 0:2])
+    o4 = orient(B[..., 0:2], B[..., 2:4], A[..., 2:4])
+    return np.where((o1 * o2 < 0) & (o3 * o4 < 0), 0.0, dist)
+
+
 def polyline_clearance(route: FloatArray, polygons: list[FloatArray]) -> FloatArray:
     """Clearance [m] of a route polyline ``(K, 2)`` from each convex polygon (0 if it enters)."""
     route = np.asarray(route, dtype=np.float64)
+    if not polygons:
+        return np.zeros(0)
     legs = np.concatenate([route[:-1], route[1:]], axis=1)
-    out = np.empty(len(polygons))
-    for k, poly in enumerate(polygons):
-        edges = polygon_edges(poly)
-        d = min(float(segment_segment_distance(leg, edges).min()) for leg in legs)
-        if d > 0 and points_in_convex(route[:1], ccw(poly)).any():
-            d = 0.0
-        out[k] = d
+    edges = [polygon_edges(p) for p in polygons]
+    starts = np.cumsum([0] + [len(e) for e in edges[:-1]])
+    d = segment_pair_distances(legs, np.concatenate(edges)).min(axis=0)
+    out = np.minimum.reduceat(d, starts)
+    for k, poly in enumerate(polygons):  # a route wholly inside a polygon crosses no edge
+        if out[k] > 0 and points_in_convex(route[:1], ccw(poly)).any():
+            out[k] = 0.0
     return out

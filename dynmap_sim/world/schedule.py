@@ -225,7 +225,8 @@ class Schedule:
                 pmin, pmax = p.min(axis=0), p.max(axis=0)
                 if pmax[0] > x0 - 1 and pmin[0] < x1 + 1 and pmax[1] > y0 - 1 and pmin[1] < y1 + 1:
                     others.append(p)
-        placed: list[FloatArray] = []
+        boxes = [np.concatenate([q.min(axis=0), q.max(axis=0)]) for q in others]
+        gap = ev.min_gap_m
         for oid in members:
             s = st[oid]
             local = self.local[oid] * s.scale
@@ -239,14 +240,26 @@ class Schedule:
                 x = float(rng.uniform(x0 - lo[0], x1 - hi[0]))
                 y = float(rng.uniform(y0 - lo[1], y1 - hi[1]))
                 poly = rot + np.array([x, y])
-                if all(sat_separation(poly, q) >= ev.min_gap_m for q in others + placed):
-                    best = (x, y, th), poly
+                box = np.array([lo[0] + x, lo[1] + y, hi[0] + x, hi[1] + y])
+                ok = True
+                if boxes:  # broad phase on bounding boxes, SAT only for near ones
+                    bb = np.array(boxes)
+                    near = np.flatnonzero(
+                        (bb[:, 0] < box[2] + gap)
+                        & (bb[:, 2] > box[0] - gap)
+                        & (bb[:, 1] < box[3] + gap)
+                        & (bb[:, 3] > box[1] - gap)
+                    )
+                    ok = all(sat_separation(poly, others[k]) >= gap for k in near)
+                if ok:
+                    best = (x, y, th), poly, box
                     break
             if best is None:  # no free spot found: it is carried away for now
                 s.present = False
                 continue
             s.pose = best[0]
-            placed.append(best[1])
+            others.append(best[1])
+            boxes.append(best[2])
 
     def object_states(self, seed: int, t: int) -> tuple[ObjectState, ...]:
         """Walls (static pieces) and present objects at slot ``t`` as :class:`ObjectState`."""

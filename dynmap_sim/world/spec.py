@@ -26,11 +26,12 @@ Box = tuple[float, float, float, float]
 When = int | dt.date
 Weekday = Literal["mon", "tue", "wed", "thu", "fri", "sat", "sun"]
 WEEKDAYS: tuple[str, ...] = ("mon", "tue", "wed", "thu", "fri", "sat", "sun")
+MAX_EXTENT_M = 1000.0
 _HHMM = re.compile(r"^([01]?\d|2[0-3]):([0-5]\d)$")
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 def _check_box(v: Box) -> Box:
@@ -43,7 +44,7 @@ class CalendarSpec(_Model):
     """Start date, working days and run times (DESIGN.md §2)."""
 
     start: dt.date = Field(description="date of the first working day (or earlier)")
-    n_days: int = Field(gt=0, description="number of working days in the experiment")
+    n_days: int = Field(gt=0, le=1000, description="number of working days in the experiment")
     weekdays: tuple[Weekday, ...] = Field(
         default=("mon", "tue", "wed", "thu", "fri"), description="weekdays that are working days"
     )
@@ -76,7 +77,9 @@ class CalendarSpec(_Model):
 class RobotSpec(_Model):
     """Start pose and the route the operator drives, both in the map frame [m, rad]."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
+    model_config = ConfigDict(
+        extra="forbid", frozen=True, allow_inf_nan=False, populate_by_name=True
+    )
 
     start: Pose = Field(description="start pose [x_m, y_m, theta_rad]")
     waypoints: tuple[Point, ...] = Field(
@@ -355,4 +358,7 @@ class WorldSpec(_Model):
     @field_validator("bounds")
     @classmethod
     def _bounds(cls, v: Box) -> Box:
-        return _check_box(v)
+        _check_box(v)
+        if v[2] - v[0] > MAX_EXTENT_M or v[3] - v[1] > MAX_EXTENT_M:
+            raise ValueError(f"a world is at most {MAX_EXTENT_M:.0f} m across")
+        return v

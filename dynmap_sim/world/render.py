@@ -1,0 +1,126 @@
+"""Draw world states with matplotlib (Agg): walls, objects coloured by kind, people, route."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.axes import Axes  # noqa: E402
+from matplotlib.patches import Circle, Patch, Polygon  # noqa: E402
+
+from dynmap_sim.world.schedule import Snapshot  # noqa: E402
+from dynmap_sim.world.spec import WorldSpec  # noqa: E402
+from dynmap_sim.world.world import World  # noqa: E402
+
+KIND_COLOURS: dict[str, str] = {
+    "wall": "#333333",
+    "furniture": "#8c6d46",
+    "exhibit": "#d62728",
+    "door": "#2ca02c",
+    "robot": "#1f77b4",
+    "person": "#ff7f0e",
+}
+
+
+def draw_snapshot(ax: Axes, spec: WorldSpec, snap: Snapshot, title: str | None = None) -> None:
+    """Draw one snapshot on ``ax``."""
+    for o in snap.objects:
+        colour = KIND_COLOURS.get(o.kind, "#777777")
+        edge = "black" if o.blocks_route else colour
+        if o.circle is not None:
+            x, y, r = o.circle
+            ax.add_patch(Circle((x, y), r, facecolor=colour, edgecolor=edge, lw=0.6))
+        else:
+            ax.add_patch(Polygon(o.polygon, closed=True, facecolor=colour, edgecolor=edge, lw=0.6))
+    route = spec.robot.route
+    ax.plot(route[:, 0], route[:, 1], "-", color="#9467bd", lw=0.9, alpha=0.8)
+    sx, sy, sth = spec.robot.start
+    ax.plot([sx], [sy], "o", color="#9467bd", ms=4)
+    ax.arrow(sx, sy, 0.5 * np.cos(sth), 0.5 * np.sin(sth), width=0.04, color="#9467bd")
+    for px, py, _ in snap.people:
+        ax.add_patch(Circle((px, py), 0.22, facecolor=KIND_COLOURS["person"], alpha=0.8))
+    x0, y0, x1, y1 = spec.bounds
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
+    ax.set_aspect("equal")
+    ax.tick_params(labelsize=6)
+    if title:
+        ax.set_title(title, fontsize=8)
+
+
+def _title(world: World, day: int, run: int) -> str:
+    slot = world.calendar.slot(day, run)
+    h, m = divmod(int(slot.start_s) // 60, 60)
+    return f"day {day} run {run}  {slot.date.isoformat()} {h:02d}:{m:02d}"
+
+
+def _legend(fig) -> None:
+    handles = [Patch(facecolor=c, label=k) for k, c in KIND_COLOURS.items()]
+    fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=7, frameon=False)
+
+
+def render_snapshot(
+    spec: WorldSpec, seed: int = 0, day: int = 1, run: int = 1, out_path: str | Path = "world.png"
+) -> Path:
+    """Draw the state at the start of ``(day, run)`` to ``out_path`` (PNG/PDF/SVG)."""
+    world = World(spec, seed=seed)
+    snap = world.snapshot(day, run)
+    x0, y0, x1, y1 = spec.bounds
+    w = 8.0
+    fig, ax = plt.subplots(figsize=(w, w * (y1 - y0) / (x1 - x0) + 0.8))
+    draw_snapshot(ax, spec, snap, f"{spec.name}: {_title(world, day, run)}")
+    _legend(fig)
+    out = Path(out_path)
+    fig.savefig(out, dpi=120, bbox_inches="tight")
+    plt.close(fig)
+    return out
+
+
+def sheet_slots(world: World, n_panels: int = 12) -> list[tuple[int, int]]:
+    """Runs to show on a sheet: the first run and the runs where the objects change.
+
+    When there are more change points than panels, they are subsampled evenly.
+    """
+    slots = world.calendar.slots
+    if len(slots) <= n_panels:
+        return [(s.day, s.run) for s in slots]
+    picks, prev = [], None
+    for s in slots:
+        objs = world.snapshot(s.day, s.run).objects
+        sig = tuple((o.id, o.pose) for o in objs)
+        if sig != prev:
+            picks.append((s.day, s.run))
+        prev = sig
+    if len(picks) < n_panels:
+        extra = [(s.day, s.run) for s in slots if (s.day, s.run) not in picks]
+        idx = np.linspace(0, len(extra) - 1, n_panels - len(picks)).round().astype(int)
+        picks = sorted(set(picks) | {extra[i] for i in idx})
+    idx = np.linspace(0, len(picks) - 1, n_panels).round().astype(int)
+    return [picks[i] for i in sorted(set(idx.tolist()))]
+
+
+def render_sheet(spec: WorldSpec, seed: int = 0, out_path: str | Path = "sheet.png") -> Path:
+    """Draw a grid of snapshots spread over the whole calendar to ``out_path``."""
+    world = World(spec, seed=seed)
+    picks = sheet_slots(world)
+    ncol = 4
+    nrow = int(np.ceil(len(picks) / ncol))
+    x0, y0, x1, y1 = spec.bounds
+    pw = 4.0
+    ph = pw * (y1 - y0) / (x1 - x0) + 0.4
+    fig, axes = plt.subplots(nrow, ncol, figsize=(pw * ncol, ph * nrow + 0.6), squeeze=False)
+    for ax in axes.flat:
+        ax.set_axis_off()
+    for ax, (day, run) in zip(axes.flat, picks, strict=False):
+        ax.set_axis_on()
+        draw_snapshot(ax, spec, world.snapshot(day, run), _title(world, day, run))
+    fig.suptitle(f"{spec.name} (seed {seed})", fontsize=10)
+    _legend(fig)
+    out = Path(out_path)
+    fig.savefig(out, dpi=100, bbox_inches="tight")
+    plt.close(fig)
+    return out

@@ -1,0 +1,38 @@
+"""The shipped routes keep clear of every wall and object at every run (unless marked)."""
+
+import pytest
+
+from dynmap_sim.world import World, load_world
+from dynmap_sim.world.route import (
+    ROUTE_CLEARANCE_M,
+    route_blocked,
+    route_clearance_m,
+    route_clearances,
+)
+
+
+@pytest.mark.parametrize("name,seeds", [("lab", (0,)), ("apartment", (0, 1))])
+def test_route_clearance_over_the_whole_calendar(name, seeds):
+    spec = load_world(name)
+    for seed in seeds:
+        w = World(spec, seed=seed)
+        for slot in w.calendar.slots:
+            snap = w.snapshot(slot.day, slot.run)
+            c = route_clearance_m(snap, spec.robot.route)
+            assert c >= ROUTE_CLEARANCE_M, (name, seed, slot.day, slot.run, c)
+
+
+def test_apartment_route_blocked_from_day_22_on_purpose():
+    spec = load_world("apartment")
+    w = World(spec, seed=0)
+    for day in range(1, 29):
+        snap = w.snapshot(day, 1)
+        assert route_blocked(snap) == (day >= 22), day
+        if day >= 22:
+            assert route_clearances(snap, spec.robot.route)["route_blocker"] == 0.0
+
+
+def test_start_pose_is_on_the_route():
+    for name in ("lab", "apartment"):
+        spec = load_world(name)
+        assert tuple(spec.robot.route[0]) == pytest.approx(spec.robot.start[:2])
