@@ -162,6 +162,7 @@ class ExperimentRunner:
             robot_radius_m=robot_radius,
             clearance_m=d.clearance_m,
             wait_for_people=d.wait_for_people,
+            dt_s=float(self.laser.scan_period_s),
         )
         route = clip_route(np.asarray(self.spec.robot.route, float), d.route_fraction)
         return {"localizers": locs, "driver": TourDriver(route, params), "rng": rngs[0]}
@@ -312,7 +313,7 @@ class ExperimentRunner:
                     driver.notify_teleport(new_pose, t_s)
                     events.append((step, t_s, "kidnap", f"to {np.round(new_pose, 3).tolist()}"))
                     pose = new_pose
-            action = driver.act(pose, truth["people"], t_s)
+            action = driver.act(pose, truth["people"], t_s, bumped=collision)
             obs, _, terminated, truncated, info = self.env.step(action)
             collision = bool(info.get("collision", False))
             step += 1

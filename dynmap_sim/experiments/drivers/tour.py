@@ -65,6 +65,9 @@ class TourParams:
     person_cone_rad: float = 1.0
     snap_waypoint_m: float = 0.4
     grid_resolution_m: float = 0.05
+    backoff_s: float = 1.0
+    backoff_mps: float = 0.1
+    dt_s: float = 0.1
 
 
 @dataclass
@@ -86,6 +89,7 @@ class TourDriver:
     _seg: int = 0
     _waiting: bool = False
     _step: int = 0
+    _backoff: int = 0
 
     # ----------------------------------------------------------------- planning
     def begin_run(self, geometry: Any, start_pose: FloatArray) -> None:
@@ -94,6 +98,7 @@ class TourDriver:
         self.skipped_waypoints = 0
         self._step = 0
         self._waiting = False
+        self._backoff = 0
         p = self.params
         seg = np.asarray(geometry.segments, dtype=np.float64).reshape(-1, 4)
         circles = np.asarray(geometry.circles, dtype=np.float64).reshape(-1, 3)
@@ -146,12 +151,24 @@ class TourDriver:
     def done(self) -> bool:
         return self._plan is None or self._seg >= len(self._plan.vertices) - 1
 
-    def act(self, pose: FloatArray, people: FloatArray, t_s: float) -> NDArray[np.float32]:
-        """The command ``[v_mps, omega_radps]`` for the true ``pose`` and people ``(P, >=2)``."""
+    def act(
+        self, pose: FloatArray, people: FloatArray, t_s: float, bumped: bool = False
+    ) -> NDArray[np.float32]:
+        """The command ``[v_mps, omega_radps]`` for the true ``pose`` and people ``(P, >=2)``.
+
+        ``bumped``: the bumper was pressed in the last step; the operator backs off for
+        ``backoff_s`` before going on (a person walked into the robot, say).
+        """
         self._step += 1
         p = self.params
         if self.done:
             return np.zeros(2, dtype=np.float32)
+        if bumped and self._backoff == 0:
+            self._backoff = max(1, int(round(p.backoff_s / p.dt_s)))
+            self.events.append((self._step, t_s, "bump", "bumper pressed; backing off"))
+        if self._backoff > 0:
+            self._backoff -= 1
+            return np.array([-p.backoff_mps, 0.0], dtype=np.float32)
         assert self._plan is not None and self._planner is not None
         verts = self._plan.vertices
         xy = pose[:2]
