@@ -7,7 +7,6 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from dynmap_sim.world import World, WorldFileError, parse_world
-from tests.world.conftest import BASE
 
 VALUES = st.one_of(
     st.none(),
@@ -33,9 +32,6 @@ def _paths(node, prefix=()):
             yield from _paths(v, (*prefix, i))
 
 
-PATHS = [p for p in _paths(BASE) if p]
-
-
 def _mutate(data, path, op, value):
     node = data
     for key in path[:-1]:
@@ -49,23 +45,29 @@ def _mutate(data, path, op, value):
         node[last] = value
 
 
-@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(
-    st.lists(
-        st.tuples(st.sampled_from(PATHS), st.sampled_from(["set", "delete", "extra"]), VALUES),
-        min_size=1,
-        max_size=3,
-    )
+@settings(
+    max_examples=150,
+    deadline=None,
+    suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
 )
-def test_mutated_world_loads_or_raises_world_file_error(mutations):
-    data = copy.deepcopy(BASE)
+@given(data=st.data())
+def test_mutated_world_loads_or_raises_world_file_error(base_world, data):
+    paths = [p for p in _paths(base_world) if p]
+    mutations = data.draw(
+        st.lists(
+            st.tuples(st.sampled_from(paths), st.sampled_from(["set", "delete", "extra"]), VALUES),
+            min_size=1,
+            max_size=3,
+        )
+    )
+    world_data = copy.deepcopy(base_world)
     for path, op, value in mutations:
         try:
-            _mutate(data, path, op, value)
+            _mutate(world_data, path, op, value)
         except (KeyError, IndexError, TypeError):
             continue  # the path no longer exists after an earlier mutation
     try:
-        spec = parse_world(data, "fuzz.toml")
+        spec = parse_world(world_data, "fuzz.toml")
     except WorldFileError as exc:
         assert exc.errors and all(isinstance(m, str) for _, m in exc.errors)
         return
