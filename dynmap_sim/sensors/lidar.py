@@ -26,9 +26,8 @@ the first surface it hits):
    ``NaN``. This is **0 by default**: Gymnasium's ``Box.contains`` rejects NaN, so
    ``check_env`` would fail on an observation holding one.
 
-Events 2-5 are mutually exclusive per beam (one uniform draw per beam is split into disjoint
-intervals), so each happens with exactly its probability; ``p_mixed + p_dropout + p_short +
-p_invalid`` must not exceed 1.
+Events 3-5 are mutually exclusive per beam (one uniform draw per beam is split into disjoint
+intervals), so each happens with exactly its probability, and they override a mixed pixel.
 
 Readings follow REP-117: ``+inf`` no return within ``range_max``, ``-inf`` a return closer than
 ``range_min``, ``NaN`` invalid. The truth labels (:class:`LidarReading` ``beam_object``,
@@ -85,8 +84,8 @@ class LidarNoise:
             v = getattr(self, name)
             if not (0.0 <= v <= 1.0):
                 raise ValueError(f"LidarNoise.{name} must be a probability in [0, 1], got {v!r}")
-        if self.p_dropout + self.p_short + self.p_invalid + self.p_mixed > 1.0:
-            raise ValueError("LidarNoise: p_dropout + p_short + p_invalid + p_mixed must be <= 1")
+        if self.p_dropout + self.p_short + self.p_invalid > 1.0:
+            raise ValueError("LidarNoise: p_dropout + p_short + p_invalid must be <= 1")
 
 
 #: Noise-free model (for exact-geometry tests and ground-truth scans).
@@ -286,41 +285,45 @@ class Lidar:
         if r.shape[-1] != spec.n_beams:
             raise ValueError(f"expected (..., {spec.n_beams}) ranges, got shape {r.shape}")
         hit = r <= spec.range_max_m
-        rh = np.where(hit, r, 0.0)
-        sigma = np.maximum(nz.sigma_rel * rh, nz.sigma_m) if nz.sigma_rel else nz.sigma_m
+        sigma = (
+            np.maximum(nz.sigma_rel * np.where(hit, r, 0.0), nz.sigma_m)
+            if nz.sigma_rel
+            else nz.sigma_m
+        )
         out = r + self._bias_m + sigma * rng.standard_normal(r.shape)  # inf stays inf
+        flat_out = out.reshape(-1)
+        flat_r = r.reshape(-1)
+        if nz.p_mixed > 0.0:
+            # depth discontinuities between neighbours i, i+1 (NaN for no-hit beams: no edge)
+            rn = np.where(hit, r, np.nan)
+            with np.errstate(invalid="ignore"):
+                edge = np.abs(rn[..., 1:] - rn[..., :-1]) > nz.mixed_jump_m
+            e = np.flatnonzero(edge)
+            if e.size:
+                # flat index of the left beam of each edge (rows are n_beams long)
+                left = e + e // (spec.n_beams - 1)
+                beams = np.concatenate([left, left + 1])
+                others = np.concatenate([left + 1, left])
+                pick = rng.random(beams.size) < nz.p_mixed
+                beams, others = beams[pick], others[pick]
+                w = rng.random(beams.size)
+                flat_out[beams] = flat_r[beams] + w * (flat_r[others] - flat_r[beams])
         # one uniform per beam picks at most one of the rare events (disjoint intervals)
-        u = rng.random(r.shape)
         p1 = nz.p_dropout
         p2 = p1 + nz.p_short
         p3 = p2 + nz.p_invalid
-        if nz.p_mixed > 0.0:
-            nxt = np.concatenate([r[..., 1:], r[..., -1:]], axis=-1)
-            prv = np.concatenate([r[..., :1], r[..., :-1]], axis=-1)
-            with np.errstate(invalid="ignore"):
-                jn = np.abs(np.where(hit, nxt, 0.0) - rh)
-                jp = np.abs(np.where(hit, prv, 0.0) - rh)
-            other = np.where(jn >= jp, nxt, prv)
-            jump = np.abs(other - rh)
-            mixed = np.flatnonzero(
-                (jump > nz.mixed_jump_m) & (jump < np.inf) & hit & (u >= 1.0 - nz.p_mixed)
-            )
-            if mixed.size:
-                flat_out, flat_r, flat_o = out.reshape(-1), r.reshape(-1), other.reshape(-1)
-                w = rng.random(mixed.size)
-                flat_out[mixed] = flat_r[mixed] + w * (flat_o[mixed] - flat_r[mixed])
         if p3 > 0.0:
+            u = rng.random(r.shape)
             rare = np.flatnonzero((u < p3) & hit)
             if rare.size:
-                flat_out, flat_r, ur = out.reshape(-1), r.reshape(-1), u.reshape(-1)[rare]
+                ur = u.reshape(-1)[rare]
                 rmin = spec.range_min_m
                 short = rng.random(rare.size)
-                val = np.where(
+                flat_out[rare] = np.where(
                     ur < p1,
                     np.inf,
                     np.where(ur < p2, rmin + short * (flat_r[rare] - rmin), np.nan),
                 )
-                flat_out[rare] = val
         out[out < spec.range_min_m] = -np.inf
         out[out > spec.range_max_m] = np.inf
         return out.astype(np.float32)
