@@ -55,6 +55,43 @@ class LikelihoodFieldParams:
     beam_skip_error_threshold: float = 0.9
 
 
+def endpoint_cells(
+    particles: FloatArray,
+    ranges_m: FloatArray,
+    angles_rad: FloatArray,
+    mount_pose: ArrayLike,
+    grid: OccupancyGrid,
+) -> NDArray[np.intp]:
+    """Flat cell index ``(P, B)`` of each beam's end point; ``H * W`` (one past the last
+    cell) where the end point falls outside the grid. Computed in float32 for speed."""
+    mx, my, myaw = (float(v) for v in mount_pose)
+    th = particles[:, 2]
+    c64, s64 = np.cos(th), np.sin(th)
+    inv_res = 1.0 / grid.resolution_m
+    # Laser origin per particle, in cell units relative to the grid origin.
+    lx = ((particles[:, 0] + c64 * mx - s64 * my - grid.origin_xy_m[0]) * inv_res).astype(
+        np.float32
+    )
+    ly = ((particles[:, 1] + s64 * mx + c64 * my - grid.origin_xy_m[1]) * inv_res).astype(
+        np.float32
+    )
+    c = c64.astype(np.float32)[:, None]
+    s = s64.astype(np.float32)[:, None]
+    bx = (ranges_m * np.cos(angles_rad + myaw) * inv_res).astype(np.float32)[None, :]
+    by = (ranges_m * np.sin(angles_rad + myaw) * inv_res).astype(np.float32)[None, :]
+    hx = c * bx - s * by
+    hx += lx[:, None]
+    hy = s * bx + c * by
+    hy += ly[:, None]
+    h, w = grid.shape
+    ix = np.floor(hx, out=hx).astype(np.intp)
+    iy = np.floor(hy, out=hy).astype(np.intp)
+    inside = (ix >= 0) & (ix < w) & (iy >= 0) & (iy < h)
+    flat = iy * w + ix
+    flat[~inside] = h * w
+    return flat
+
+
 def endpoint_distances(
     particles: FloatArray,
     ranges_m: FloatArray,
@@ -62,24 +99,25 @@ def endpoint_distances(
     mount_pose: ArrayLike,
     grid: OccupancyGrid,
 ) -> NDArray[np.float32]:
-    """Distance-field value ``(P, B)`` at each beam's end point for each particle pose."""
-    mx, my, myaw = (float(v) for v in mount_pose)
-    c = np.cos(particles[:, 2])[:, None]
-    s = np.sin(particles[:, 2])[:, None]
-    lx = particles[:, 0:1] + c * mx - s * my
-    ly = particles[:, 1:2] + s * mx + c * my
-    bx = (ranges_m * np.cos(angles_rad + myaw))[None, :]
-    by = (ranges_m * np.sin(angles_rad + myaw))[None, :]
-    inv_res = 1.0 / grid.resolution_m
-    hx = (lx + c * bx - s * by - grid.origin_xy_m[0]) * inv_res
-    hy = (ly + s * bx + c * by - grid.origin_xy_m[1]) * inv_res
-    h, w = grid.shape
-    ix = np.floor(hx).astype(np.intp)
-    iy = np.floor(hy).astype(np.intp)
-    inside = (ix >= 0) & (ix < w) & (iy >= 0) & (iy < h)
-    flat = np.where(inside, iy * w + ix, 0)
-    d = np.take(grid.dist_m.ravel(), flat)
-    return np.where(inside, d, np.float32(grid.max_dist_m))
+    """Distance-field value ``(P, B)`` at each beam's end point (``max_dist_m`` outside)."""
+    flat = endpoint_cells(particles, ranges_m, angles_rad, mount_pose, grid)
+    table = np.append(grid.dist_m.ravel(), np.float32(grid.max_dist_m))
+    return np.take(table, flat)
+
+
+class LikelihoodTable:
+    """Per-cell beam likelihood tables for one grid and one parameter set (AMCL precomputes
+    the distance map; we also precompute ``p`` and ``log p`` so the hot loop is a gather).
+    The last entry is the value outside the grid (distance ``max_dist_m``)."""
+
+    def __init__(self, grid: OccupancyGrid, params: LikelihoodFieldParams) -> None:
+        d = np.append(grid.dist_m.ravel(), np.float32(grid.max_dist_m)).astype(np.float64)
+        p = beam_likelihoods(d, params)
+        self.p = p.astype(np.float32)
+        self.logp = np.log(p).astype(np.float32)
+        self.logp_skip = float(
+            np.log(beam_likelihoods(np.array([params.beam_skip_distance]), params)[0])
+        )
 
 
 def beam_likelihoods(d: ArrayLike, params: LikelihoodFieldParams) -> FloatArray:
@@ -100,6 +138,30 @@ def likelihood_field_weights(d: ArrayLike, params: LikelihoodFieldParams) -> Flo
     """AMCL ``likelihood_field``: ``w = 1 + sum_k p_k^3`` per particle ``(P,)``."""
     p = beam_likelihoods(d, params)
     return 1.0 + np.sum(p * p * p, axis=1)
+
+
+def likelihood_field_weights_cells(flat: NDArray[np.intp], table: LikelihoodTable) -> FloatArray:
+    """:func:`likelihood_field_weights` from end-point cells and a precomputed table."""
+    p = np.take(table.p, flat)
+    return 1.0 + np.sum((p * p * p).astype(np.float64), axis=1)
+
+
+def likelihood_field_prob_cells(
+    flat: NDArray[np.intp], table: LikelihoodTable, params: LikelihoodFieldParams
+) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """:func:`likelihood_field_prob_logweights` from end-point cells and a precomputed table.
+
+    ``d < beam_skip_distance`` is ``log p > log p(beam_skip_distance)`` (p falls with d).
+    """
+    logp = np.take(table.logp, flat)
+    n_beams = flat.shape[1]
+    use = np.ones(n_beams, dtype=bool)
+    if params.do_beamskip and n_beams > 0:
+        frac_close = np.mean(logp > table.logp_skip, axis=0)
+        use = frac_close > params.beam_skip_threshold
+        if int(np.sum(~use)) >= n_beams * params.beam_skip_error_threshold:
+            use[:] = True
+    return logp[:, use].sum(axis=1, dtype=np.float64), use
 
 
 def likelihood_field_prob_logweights(

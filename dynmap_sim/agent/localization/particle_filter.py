@@ -11,7 +11,9 @@ Table 8.4 "KLD_Sampling_MCL"; Fox 2003) exactly as nav2_amcl composes it:
   ``likelihood_field_prob`` with beam skipping;
 * ``w_slow``/``w_fast`` running averages of the mean weight (Table 8.3 lines 10-11); during
   resampling each draw is a uniformly random pose in the map's free space with probability
-  ``max(0, 1 - w_fast / w_slow)``, after which both averages are reset (as ``pf.c`` does);
+  ``max(0, 1 - w_fast / w_slow)``, after which nav2's ``pf.c`` resets both averages
+  (``recovery_reset``; the ``tuned`` config keeps them, as Table 8.3 does, so that a filter
+  that converged to a wrong place after an injection keeps injecting);
 * KLD-sampling picks the number of particles (0.5 m x 0.5 m x 10 degree bins,
   :mod:`.kld_sampling`), low-variance resampling draws them (:mod:`.resampling`);
 * the estimate is the mean of the heaviest cluster of particles (clusters are connected
@@ -38,10 +40,12 @@ from dynmap_sim.agent.grid import OccupancyGrid
 from dynmap_sim.agent.localization.kld_sampling import bin_keys, kld_prefix_size
 from dynmap_sim.agent.localization.likelihood_field import (
     LikelihoodFieldParams,
+    LikelihoodTable,
     beam_likelihoods,
+    endpoint_cells,
     endpoint_distances,
-    likelihood_field_prob_logweights,
-    likelihood_field_weights,
+    likelihood_field_prob_cells,
+    likelihood_field_weights_cells,
     select_beams,
     valid_beams,
 )
@@ -82,6 +86,12 @@ class MCLConfig:
     kld_angle_rad: float = float(np.deg2rad(10.0))
     recovery_alpha_slow: float = 0.0
     recovery_alpha_fast: float = 0.0
+    #: ``pf.c`` resets w_slow and w_fast to 0 after injecting random poses; Table 8.3 does not.
+    recovery_reset: bool = True
+    #: ``pf.c`` divides the sum of ``w_prev * p`` (already normalized) by the particle count
+    #: again, so its ``w_avg`` scales with 1/N and jumps when KLD changes N; Table 8.3's
+    #: average of the measurement likelihood does not (``False``).
+    recovery_w_avg_per_sample: bool = True
     resample_interval: int = 1
     update_min_d: float = 0.25
     update_min_a: float = 0.2
@@ -111,6 +121,8 @@ TUNED = MCLConfig(
     pf_z=2.326,
     recovery_alpha_slow=0.001,
     recovery_alpha_fast=0.1,
+    recovery_reset=False,
+    recovery_w_avg_per_sample=False,
     update_min_d=0.1,
     update_min_a=0.1,
     init_sigma_xy=0.2,
@@ -173,6 +185,7 @@ class AMCLFilter:
             beam_skip_threshold=config.beam_skip_threshold,
             beam_skip_error_threshold=config.beam_skip_error_threshold,
         )
+        self.table = LikelihoodTable(grid, self.lf)
         self.free_xy = grid.free_points()
         if len(self.free_xy) == 0:
             raise ValueError("the map has no free cells to draw random poses from")
@@ -224,19 +237,19 @@ class AMCLFilter:
         r, a = self._beams_of(ranges_m)
         if len(r) == 0:
             return
-        d = endpoint_distances(self.particles, r, a, self.mount, self.grid)
+        cells = endpoint_cells(self.particles, r, a, self.mount, self.grid)
         if self.config.laser_model_type == "likelihood_field_prob":
-            logp, _ = likelihood_field_prob_logweights(d, self.lf)
+            logp, _ = likelihood_field_prob_cells(cells, self.table, self.lf)
         else:
-            logp = np.log(likelihood_field_weights(d, self.lf))
+            logp = np.log(likelihood_field_weights_cells(cells, self.table))
         logw = np.log(np.maximum(self.weights, 1e-300)) + logp
         m = float(logw.max())
         total_scaled = float(np.sum(np.exp(logw - m)))
         total = np.exp(m) * total_scaled
         self.weights = np.exp(logw - m) / total_scaled
+        c = self.config
         if total > 0 and np.isfinite(total):
-            w_avg = total / len(self.particles)
-            c = self.config
+            w_avg = total / len(self.particles) if c.recovery_w_avg_per_sample else total
             self.w_slow = (
                 w_avg
                 if self.w_slow == 0
@@ -271,7 +284,7 @@ class AMCLFilter:
         self.particles = np.concatenate(parts)
         self.weights = np.full(len(self.particles), 1.0 / len(self.particles))
         self.n_random_injected += n_rand
-        if w_diff > 0:
+        if w_diff > 0 and self.config.recovery_reset:
             self.w_slow = self.w_fast = 0.0
 
     def estimate(self) -> tuple[FloatArray, FloatArray]:
