@@ -46,8 +46,10 @@ def actions(n: int) -> np.ndarray:
     )
 
 
-def env_rate(people: bool, day: int, run: int, steps: int) -> tuple[float, int]:
-    env = DynMapEnv(world="lab", people=people)
+def env_rate(
+    people: bool, day: int, run: int, steps: int, backend: str = "numpy"
+) -> tuple[float, int]:
+    env = DynMapEnv(world="lab", people=people, sensor_options={"backend": backend})
     env.reset(seed=0, options={"day": day, "run": run})
     acts = actions(steps)
     for a in acts[:50]:  # warm-up (caches, allocator)
@@ -158,6 +160,10 @@ def main() -> None:
 
     rate_empty, _ = env_rate(False, day, run, args.steps)
     rate_crowd, n_people = env_rate(True, day, run, args.steps)
+    rate_empty_nb = rate_crowd_nb = None
+    if us_ray_numba is not None:
+        rate_empty_nb, _ = env_rate(False, day, run, args.steps, "numba")
+        rate_crowd_nb, _ = env_rate(True, day, run, args.steps, "numba")
 
     rows = [
         (
@@ -182,6 +188,20 @@ def main() -> None:
         ("lidar us/ray, naive pymunk", us_ray_naive, float("nan"), float("nan")),
     ]
     if us_ray_numba is not None:
+        rows += [
+            (
+                "env steps/s, lab, no people, numba lidar",
+                rate_empty_nb,
+                TARGET_ENV_STEPS,
+                rate_empty_nb / TARGET_ENV_STEPS,
+            ),
+            (
+                "env steps/s, lab, lunch crowd, numba lidar",
+                rate_crowd_nb,
+                TARGET_ENV_STEPS,
+                rate_crowd_nb / TARGET_ENV_STEPS,
+            ),
+        ]
         rows.append(
             (
                 "lidar us/ray, numba",
@@ -218,6 +238,8 @@ def main() -> None:
         "n_people": n_people,
         "env_steps_per_s_no_people": rate_empty,
         "env_steps_per_s_crowd": rate_crowd,
+        "env_steps_per_s_no_people_numba": rate_empty_nb,
+        "env_steps_per_s_crowd_numba": rate_crowd_nb,
         "naive_scans_per_s": naive_scans_per_s,
         "env_over_naive_no_people": ratio_empty,
         "env_over_naive_crowd": ratio_crowd,

@@ -146,6 +146,7 @@ def make_lidar(
     mount_pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
     noise: LidarNoise | dict[str, float] | None = None,
     bias_seed: int = 0,
+    backend: str = "numpy",
     **overrides: Any,
 ) -> Lidar:
     """A :class:`Lidar` from a preset name, with overrides.
@@ -154,7 +155,7 @@ def make_lidar(
     ``mode`` (``"mm"``: 8.19 m, ``"cm"``: 81.9 m) select the variant. Any
     :class:`~dynmap_sim.types.LaserSpec` field (``n_beams``, ``range_max_m``, ...) may be
     overridden by keyword; ``noise`` is a :class:`LidarNoise` or a dict of fields to change in
-    the preset's noise model.
+    the preset's noise model. ``backend`` is ``"numpy"`` or ``"numba"`` (extra ``fast``).
     """
     variant = {k: overrides.pop(k) for k in ("beams", "mode") if k in overrides}
     if sensor == "urg-04lx":
@@ -172,7 +173,9 @@ def make_lidar(
     spec = replace(spec, mount_pose=tuple(float(v) for v in mount_pose), **overrides)
     if isinstance(noise, dict):
         noise = replace(preset_noise, **noise)
-    return Lidar(spec, noise if noise is not None else preset_noise, bias_seed=bias_seed)
+    return Lidar(
+        spec, noise if noise is not None else preset_noise, bias_seed=bias_seed, backend=backend
+    )
 
 
 @dataclass
@@ -193,7 +196,22 @@ class LidarReading:
 class Lidar:
     """A laser scanner mounted on the robot at ``spec.mount_pose`` (``base_link`` frame)."""
 
-    def __init__(self, spec: LaserSpec, noise: LidarNoise, bias_seed: int = 0) -> None:
+    def __init__(
+        self, spec: LaserSpec, noise: LidarNoise, bias_seed: int = 0, backend: str = "numpy"
+    ) -> None:
+        if backend == "numpy":
+            self._cast = cast_scan
+        elif backend == "numba":
+            from dynmap_sim.sensors.raycast_numba import cast_scan_numba, numba_available
+
+            if not numba_available():
+                raise ValueError(
+                    'lidar backend "numba" needs numba: pip install "dynmap-sim[fast]"'
+                )
+            self._cast = cast_scan_numba
+        else:
+            raise ValueError(f'lidar backend must be "numpy" or "numba", got {backend!r}')
+        self.backend = backend
         if spec.n_beams < 2:
             raise ValueError(f"a laser scanner needs at least 2 beams, got {spec.n_beams}")
         if not (0.0 <= spec.range_min_m < spec.range_max_m and math.isfinite(spec.range_max_m)):
@@ -252,7 +270,7 @@ class Lidar:
             x, y, th = x + c * mx - s * my, y + s * mx + c * my, th + myaw
         spec = self.spec
         circles = geom.circles if geom.circles.shape[0] else None
-        return cast_scan(
+        return self._cast(
             (x, y, th),
             spec.angle_min_rad,
             spec.angle_increment_rad,
