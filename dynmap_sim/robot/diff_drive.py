@@ -12,7 +12,7 @@ The chain from command to motion is the one a real robot has:
    ``omega_body = omega_wheels (1 - s_w)``, ``s ~ N(slip_mean, slip_sigma)`` clipped to
    ``[-0.5, 0.5]``;
 4. the body is a circle moved by *swept-circle collision* against the world's pymunk space:
-   each substep casts the disc along its displacement (``Space.segment_query_first`` with the
+   each substep casts the disc along its displacement (``Shape.segment_query`` with the
    robot's radius, which is exactly the swept disc), stops at the first contact and slides the
    rest of the way along the obstacle's surface. A person who walks into the robot is handled
    by a nearest-point query: the robot may only move away from it. The body stays a kinematic
@@ -89,6 +89,28 @@ class StepResult:
     collision: bool
     v_mps: float
     omega_radps: float
+
+
+def _sweep(
+    space: pymunk.Space, x: float, y: float, dx: float, dy: float, r: float, flt: pymunk.ShapeFilter
+) -> pymunk.SegmentQueryInfo | None:
+    """First contact of a disc of radius ``r`` swept from ``(x, y)`` by ``(dx, dy)``.
+
+    ``Space.segment_query_first`` is not used on purpose: its broad phase tests the *thin*
+    segment against shapes' bounding boxes, ignoring the radius, so it misses an obstacle
+    the disc grazes sideways. Candidates come from a bounding-box query of the whole swept
+    capsule instead; each is then queried exactly.
+    """
+    x1, y1 = x + dx, y + dy
+    bb = pymunk.BB(min(x, x1) - r, min(y, y1) - r, max(x, x1) + r, max(y, y1) + r)
+    best = None
+    for shape in space.bb_query(bb, flt):
+        if shape.sensor:
+            continue
+        q = shape.segment_query((x, y), (x1, y1), r)
+        if q is not None and (best is None or q.alpha < best.alpha):
+            best = q
+    return best
 
 
 class DiffDriveRobot:
@@ -198,16 +220,17 @@ class DiffDriveRobot:
         r = self.params.radius_m
         x, y = self._x, self._y
         flt = self._filter
-        near = space.point_query_nearest((x, y), r - _SKIN_M, flt)
-        if near is not None:
-            # overlapping (a person stepped into us): only moves away from it are allowed
-            gx, gy = near.gradient
-            if near.distance < 0.0:
-                gx, gy = -gx, -gy
-            into = dx * gx + dy * gy
-            if into < 0.0:
-                dx -= into * gx
-                dy -= into * gy
+        overlaps = [q for q in space.point_query((x, y), r - _SKIN_M, flt) if not q.shape.sensor]
+        if overlaps:
+            # overlapping (a person stepped into us): only moves away from them are allowed
+            for q in overlaps:
+                gx, gy = q.gradient
+                if q.distance < 0.0:
+                    gx, gy = -gx, -gy
+                into = dx * gx + dy * gy
+                if into < 0.0:
+                    dx -= into * gx
+                    dy -= into * gy
             self._x, self._y = x + dx, y + dy
             return True
         contact = False
@@ -215,7 +238,7 @@ class DiffDriveRobot:
             length = math.hypot(dx, dy)
             if length < 1e-12:
                 break
-            hit = space.segment_query_first((x, y), (x + dx, y + dy), r, flt)
+            hit = _sweep(space, x, y, dx, dy, r, flt)
             if hit is None:
                 x += dx
                 y += dy
