@@ -224,9 +224,7 @@ class DiffDriveRobot:
         if overlaps:
             # overlapping (a person stepped into us): only moves away from them are allowed
             for q in overlaps:
-                gx, gy = q.gradient
-                if q.distance < 0.0:
-                    gx, gy = -gx, -gy
+                gx, gy = q.gradient  # points out of the shape, inside or outside it
                 into = dx * gx + dy * gy
                 if into < 0.0:
                     dx -= into * gx

@@ -103,3 +103,16 @@ def test_person_stepping_into_the_robot_is_a_bump_and_blocks_only_that_way():
     robot.set_pose((0.0, 0.0, math.pi))
     res = robot.step(0.5, 0.0, 0.1, None)
     assert res.collision and robot.pose[0] == pytest.approx(-0.01)  # backing away is allowed
+
+
+def test_deep_overlap_escapes_outwards():
+    space = pymunk.Space()
+    person = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
+    person.position = (0.1, 0.0)  # the robot's centre is inside the person's disc
+    space.add(person, pymunk.Circle(person, 0.25))
+    robot = DiffDriveRobot(space, RobotParams(slip_sigma=0.0), pose=(0.0, 0.0, 0.0))
+    robot.step(0.5, 0.0, 0.1, None)
+    assert robot.pose[0] == 0.0  # towards the person's centre: blocked
+    robot.set_pose((0.0, 0.0, math.pi))
+    robot.step(0.5, 0.0, 0.1, None)
+    assert robot.pose[0] == pytest.approx(-0.01)  # away: allowed
