@@ -80,7 +80,8 @@ class DynMapEnv(gymnasium.Env):
 
     ``world``: ``"lab"``, ``"apartment"``, a path to a world TOML file, or a ``WorldSpec``.
     ``sensor``: ``"urg-04lx"`` or ``"lms200"``; ``sensor_options``: preset overrides passed to
-    ``make_lidar`` (e.g. ``{"beams": 181, "mode": "cm", "mount_pose": (0.1, 0, 0)}``);
+    ``make_lidar`` (e.g. ``{"beams": 181, "mode": "cm", "mount_pose": (0.1, 0, 0)}``, or
+    ``{"backend": "numba"}`` for the compiled ray caster of the ``fast`` extra);
     ``lidar_noise``: a ``LidarNoise``. ``people``: False removes all people. ``robot``:
     ``RobotParams`` (limits, wheel geometry with UMBmark errors ``E_d``/``E_b``, slip);
     ``encoder``: ``EncoderNoise``. ``dt_s``: step period (default the scan period).
@@ -102,6 +103,9 @@ class DynMapEnv(gymnasium.Env):
     ## Version history
 
     * v0: first version.
+
+    The env pickles (world, robot, odometry and noise-stream states included), so a run can
+    be checkpointed and resumed bit for bit.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
@@ -143,6 +147,7 @@ class DynMapEnv(gymnasium.Env):
             max_episode_steps = max(100, math.ceil(3.0 * self.route.length_m / 0.1 / self.dt_s))
         self.max_episode_steps = int(max_episode_steps)
         self.render_size_px = int(render_size_px)
+        self.metadata = {**self.metadata, "render_fps": max(1, round(1.0 / self.dt_s))}
 
         p = self.robot_params
         n = self.laser_spec.n_beams
