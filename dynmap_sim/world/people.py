@@ -80,10 +80,12 @@ class SocialForce:
         populations: tuple[PeopleSpec, ...],
         segments: FloatArray,
         rng: np.random.Generator,
+        broad_phase: bool = True,
     ) -> None:
         self.populations = populations
         self.rng = rng
         self.segments = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
+        self.broad_phase = broad_phase
         self._build_grid()
 
     def _build_grid(self) -> None:
@@ -106,21 +108,30 @@ class SocialForce:
         self._origin, self._shape = lo, (nx, ny)
         smin = np.minimum(s[:, :2], s[:, 2:]) - REACH_M - lo
         smax = np.maximum(s[:, :2], s[:, 2:]) + REACH_M - lo
-        i0 = np.floor(smin / CELL_M).astype(int)
-        i1 = np.floor(smax / CELL_M).astype(int)
-        lists: list[list[int]] = [[] for _ in range(nx * ny)]
-        for k in range(len(s)):
-            for ix in range(max(i0[k, 0], 0), min(i1[k, 0], nx - 1) + 1):
-                for iy in range(max(i0[k, 1], 0), min(i1[k, 1], ny - 1) + 1):
-                    lists[ix * ny + iy].append(k)
-        kmax = max(1, max(len(c) for c in lists))
-        cells = np.full((nx * ny, kmax), len(s), dtype=np.int64)
-        for c, idx in enumerate(lists):
-            cells[c, : len(idx)] = idx
+        i0 = np.clip(np.floor(smin / CELL_M).astype(np.int64), 0, [nx - 1, ny - 1])
+        i1 = np.clip(np.floor(smax / CELL_M).astype(np.int64), 0, [nx - 1, ny - 1])
+        ncx = i1[:, 0] - i0[:, 0] + 1
+        ncy = i1[:, 1] - i0[:, 1] + 1
+        npairs = ncx * ncy
+        seg = np.repeat(np.arange(len(s)), npairs)
+        j = np.arange(int(npairs.sum())) - np.repeat(np.cumsum(npairs) - npairs, npairs)
+        cell = (i0[seg, 0] + j // ncy[seg]) * ny + (i0[seg, 1] + j % ncy[seg])
+        order = np.argsort(cell, kind="stable")
+        cell_sorted = cell[order]
+        counts = np.bincount(cell, minlength=nx * ny)
+        first = np.cumsum(counts) - counts
+        rank = np.arange(len(cell)) - first[cell_sorted]
+        cells = np.full((nx * ny, max(1, int(counts.max()))), len(s), dtype=np.int64)
+        cells[cell_sorted, rank] = seg[order]
         self._cells = cells
 
     def _candidates(self, pos: FloatArray) -> FloatArray:
-        """Candidate segments ``(P, K, 4)`` near each person (padded with a far dummy)."""
+        """Candidate segments ``(P, K, 4)`` near each person (padded with a far dummy).
+
+        Without ``broad_phase`` every segment is a candidate (the naive reference).
+        """
+        if not self.broad_phase:
+            return np.broadcast_to(self.segments, (len(pos), *self.segments.shape))
         nx, ny = self._shape
         ij = np.floor((pos - self._origin) / CELL_M).astype(np.int64)
         ix = np.clip(ij[:, 0], 0, nx - 1)

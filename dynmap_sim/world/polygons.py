@@ -67,24 +67,38 @@ def thick_segment(p0, p1, thickness_m: float) -> FloatArray:
     return np.array([a - h * n, b - h * n, b + h * n, a + h * n])
 
 
-def _axes(poly: FloatArray) -> FloatArray:
-    e = np.roll(poly, -1, axis=0) - poly
+def edge_normals(poly: FloatArray) -> FloatArray:
+    """Unit outward-or-inward edge normals ``(K, 2)`` of a polygon (one for a segment)."""
+    e = np.empty_like(poly)
+    e[:-1] = poly[1:] - poly[:-1]
+    e[-1] = poly[0] - poly[-1]
     if len(poly) == 2:
         e = e[:1]
-    n = np.stack([-e[:, 1], e[:, 0]], axis=1)
+    n = np.empty_like(e)
+    n[:, 0] = -e[:, 1]
+    n[:, 1] = e[:, 0]
     norm = np.hypot(n[:, 0], n[:, 1])
-    return n[norm > 0] / norm[norm > 0, None]
+    ok = norm > 0
+    return n[ok] / norm[ok, None]
 
 
-def sat_separation(a: FloatArray, b: FloatArray) -> float:
+def sat_separation(
+    a: FloatArray, b: FloatArray, a_axes: FloatArray | None = None, b_axes: FloatArray | None = None
+) -> float:
     """Largest gap [m] between the projections of convex ``a`` and ``b`` over SAT axes.
 
     Positive: the shapes are separated by at least that much (a lower bound on their distance).
     Negative: they overlap; ``-value`` is the penetration depth along the best axis.
+    ``a_axes``/``b_axes`` are the polygons' :func:`edge_normals` when already known.
     """
-    axes = np.concatenate([_axes(a), _axes(b)])
-    pa = a @ axes.T
-    pb = b @ axes.T
+    axes = np.concatenate(
+        [
+            edge_normals(a) if a_axes is None else a_axes,
+            edge_normals(b) if b_axes is None else b_axes,
+        ]
+    ).T
+    pa = a @ axes
+    pb = b @ axes
     gap = np.maximum(pb.min(axis=0) - pa.max(axis=0), pa.min(axis=0) - pb.max(axis=0))
     return float(gap.max())
 
@@ -130,7 +144,11 @@ def segments_cross(s: FloatArray, segments: FloatArray) -> NDArray[np.bool_]:
 
 def polygon_edges(poly: FloatArray) -> FloatArray:
     """Closed outline of ``poly`` as segments ``(K, 4)`` rows ``x0, y0, x1, y1``."""
-    return np.concatenate([poly, np.roll(poly, -1, axis=0)], axis=1)
+    out = np.empty((len(poly), 4))
+    out[:, :2] = poly
+    out[:-1, 2:] = poly[1:]
+    out[-1, 2:] = poly[0]
+    return out
 
 
 def points_in_convex(points: FloatArray, poly: FloatArray) -> NDArray[np.bool_]:

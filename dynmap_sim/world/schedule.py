@@ -15,7 +15,14 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from dynmap_sim.world.calendar import Calendar
-from dynmap_sim.world.polygons import FloatArray, ccw, sat_separation, thick_segment, transform
+from dynmap_sim.world.polygons import (
+    FloatArray,
+    ccw,
+    edge_normals,
+    sat_separation,
+    thick_segment,
+    transform,
+)
 from dynmap_sim.world.spec import (
     AddEvent,
     DoorEvent,
@@ -226,6 +233,7 @@ class Schedule:
                 if pmax[0] > x0 - 1 and pmin[0] < x1 + 1 and pmax[1] > y0 - 1 and pmin[1] < y1 + 1:
                     others.append(p)
         boxes = [np.concatenate([q.min(axis=0), q.max(axis=0)]) for q in others]
+        normals = [edge_normals(q) for q in others]
         gap = ev.min_gap_m
         for oid in members:
             s = st[oid]
@@ -234,6 +242,7 @@ class Schedule:
             for _ in range(_SHUFFLE_TRIES):
                 th = float(rng.uniform(-np.pi, np.pi)) if ev.rotate else s.pose[2]
                 rot = transform(local, (0.0, 0.0, th))
+                rot_axes = edge_normals(rot)
                 lo, hi = rot.min(axis=0), rot.max(axis=0)
                 if hi[0] - lo[0] > x1 - x0 or hi[1] - lo[1] > y1 - y0:
                     break
@@ -250,9 +259,11 @@ class Schedule:
                         & (bb[:, 1] < box[3] + gap)
                         & (bb[:, 3] > box[1] - gap)
                     )
-                    ok = all(sat_separation(poly, others[k]) >= gap for k in near)
+                    ok = all(
+                        sat_separation(poly, others[k], rot_axes, normals[k]) >= gap for k in near
+                    )
                 if ok:
-                    best = (x, y, th), poly, box
+                    best = (x, y, th), poly, box, rot_axes
                     break
             if best is None:  # no free spot found: it is carried away for now
                 s.present = False
@@ -260,6 +271,7 @@ class Schedule:
             s.pose = best[0]
             others.append(best[1])
             boxes.append(best[2])
+            normals.append(best[3])
 
     def object_states(self, seed: int, t: int) -> tuple[ObjectState, ...]:
         """Walls (static pieces) and present objects at slot ``t`` as :class:`ObjectState`."""

@@ -123,8 +123,9 @@ class World:
         self._refresh_people()
 
     def _spawn(self, day: int, run: int, objects: tuple[ObjectState, ...]):
-        segs = [polygon_edges(o.polygon) for o in objects]
-        segments = np.concatenate(segs) if segs else np.zeros((0, 4))
+        static = self._static if objects is self.objects else build_static(objects)
+        segs = [static.segments] + [polygon_edges(o.polygon) for o in objects if o.circle]
+        segments = np.concatenate(segs)
         rng = np.random.default_rng(np.random.SeedSequence((self.seed, _PEOPLE_TAG, day, run)))
         forces = SocialForce(self.spec.people, segments, rng)
         active = []
