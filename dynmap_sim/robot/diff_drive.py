@@ -92,22 +92,18 @@ class StepResult:
 
 
 def _sweep(
-    space: pymunk.Space, x: float, y: float, dx: float, dy: float, r: float, flt: pymunk.ShapeFilter
+    shapes: list[pymunk.Shape], x: float, y: float, dx: float, dy: float, r: float
 ) -> pymunk.SegmentQueryInfo | None:
-    """First contact of a disc of radius ``r`` swept from ``(x, y)`` by ``(dx, dy)``.
+    """First contact among ``shapes`` of a disc of radius ``r`` swept by ``(dx, dy)``.
 
     ``Space.segment_query_first`` is not used on purpose: its broad phase tests the *thin*
     segment against shapes' bounding boxes, ignoring the radius, so it misses an obstacle
-    the disc grazes sideways. Candidates come from a bounding-box query of the whole swept
-    capsule instead; each is then queried exactly.
+    the disc grazes sideways. The candidates come from a bounding-box query around the
+    whole step instead (:meth:`DiffDriveRobot.step`); each is queried exactly here.
     """
-    x1, y1 = x + dx, y + dy
-    bb = pymunk.BB(min(x, x1) - r, min(y, y1) - r, max(x, x1) + r, max(y, y1) + r)
     best = None
-    for shape in space.bb_query(bb, flt):
-        if shape.sensor:
-            continue
-        q = shape.segment_query((x, y), (x1, y1), r)
+    for shape in shapes:
+        q = shape.segment_query((x, y), (x + dx, y + dy), r)
         if q is not None and (best is None or q.alpha < best.alpha):
             best = q
     return best
@@ -197,11 +193,22 @@ class DiffDriveRobot:
             wb *= 1.0 - p.slip_mean
         n_sub = max(1, math.ceil(abs(vb) * dt_s / p.max_substep_m - 1e-9))
         h = dt_s / n_sub
+        # broad phase once per step: every shape the disc could touch during the step
+        assert self.space is not None
+        reach = abs(vb) * dt_s + p.radius_m + 2.0 * _SKIN_M
+        x, y = self._x, self._y
+        bb = pymunk.BB(x - reach, y - reach, x + reach, y + reach)
+        shapes = [s for s in self.space.bb_query(bb, self._filter) if not s.sensor]
         contact = False
         th = self._th
         for _ in range(n_sub):
             a = th + 0.5 * wb * h  # midpoint heading over the substep
-            contact |= self._move(vb * h * math.cos(a), vb * h * math.sin(a))
+            dx, dy = vb * h * math.cos(a), vb * h * math.sin(a)
+            if shapes:
+                contact |= self._move(shapes, dx, dy)
+            else:
+                self._x += dx
+                self._y += dy
             th += wb * h
         self._th = math.remainder(th, 2.0 * math.pi)
         body = self.body
@@ -209,34 +216,33 @@ class DiffDriveRobot:
         body.angle = self._th
         body.velocity = (vb * math.cos(th), vb * math.sin(th))
         body.angular_velocity = wb
-        assert self.space is not None
         self.space.reindex_shapes_for_body(body)
         return StepResult(wl * dt_s, wr * dt_s, contact, vb, wb)
 
-    def _move(self, dx: float, dy: float) -> bool:
-        """Sweep the disc by ``(dx, dy)`` [m], sliding along obstacles; True on contact."""
-        space = self.space
-        assert space is not None
+    def _move(self, shapes: list[pymunk.Shape], dx: float, dy: float) -> bool:
+        """Sweep the disc by ``(dx, dy)`` [m] among ``shapes``, sliding; True on contact."""
         r = self.params.radius_m
         x, y = self._x, self._y
-        flt = self._filter
-        overlaps = [q for q in space.point_query((x, y), r - _SKIN_M, flt) if not q.shape.sensor]
-        if overlaps:
-            # overlapping (a person stepped into us): only moves away from them are allowed
-            for q in overlaps:
+        free = []
+        for shape in shapes:
+            q = shape.point_query((x, y))
+            if q.distance < r - _SKIN_M:
+                # overlapping (a person stepped into us): only moves away from it are allowed
                 gx, gy = q.gradient  # points out of the shape, inside or outside it
                 into = dx * gx + dy * gy
                 if into < 0.0:
                     dx -= into * gx
                     dy -= into * gy
-            self._x, self._y = x + dx, y + dy
-            return True
-        contact = False
+            else:
+                free.append(shape)
+        overlap = len(free) < len(shapes)
+        shapes = free
+        contact = overlap
         for _ in range(3):
             length = math.hypot(dx, dy)
             if length < 1e-12:
                 break
-            hit = _sweep(space, x, y, dx, dy, r, flt)
+            hit = _sweep(shapes, x, y, dx, dy, r)
             if hit is None:
                 x += dx
                 y += dy
