@@ -180,7 +180,7 @@ def cast_scan(
         inv = 1.0 / (uxs * pdy - uys * pdx)
         t = (pax * pdy - pay * pdx) * inv
         s = (pax * uys - pay * uxs) * inv
-    ok = (t >= 0.0) & (s >= 0.0) & (s <= 1.0)
+    ok = (t >= 0.0) & (t <= r_max) & (s >= 0.0) & (s <= 1.0)
     t_hit = t[ok]
     b_hit = bs[ok]
     id_hit = sidx[ks[ok]]
@@ -196,16 +196,15 @@ def cast_scan(
         disc = b * b - cc0
         okc = (disc >= 0.0) & ((b >= 0.0) | (cc0 <= 0.0))
         tc = np.where(cc0[okc] <= 0.0, 0.0, b[okc] - np.sqrt(disc[okc]))
+        near_c = tc <= r_max
+        tc = tc[near_c]
         t_hit = np.concatenate([t_hit, tc])
-        b_hit = np.concatenate([b_hit, bc[okc]])
-        id_hit = np.concatenate([id_hit, n_seg + cnear[kc[okc]]])
+        b_hit = np.concatenate([b_hit, bc[okc][near_c]])
+        id_hit = np.concatenate([id_hit, n_seg + cnear[kc[okc][near_c]]])
 
     np.minimum.at(ranges, b_hit, t_hit)
     win = t_hit == ranges[b_hit]
     hit[b_hit[win]] = id_hit[win]
-    far = ranges > r_max
-    ranges[far] = np.inf
-    hit[far] = -1
     return ranges, hit
 
 
