@@ -200,3 +200,17 @@ def test_env_pickles_and_resumes_bit_for_bit():
         np.testing.assert_array_equal(o1["scan"], o2["scan"])
         np.testing.assert_array_equal(o1["odom"], o2["odom"])
         assert r1 == r2
+
+
+def test_world_spec_and_lms200_options():
+    from dynmap_sim.world import load_world, resolve_world_path
+
+    spec = load_world(resolve_world_path("apartment"))
+    env = DynMapEnv(world=spec, sensor="lms200", sensor_options={"beams": 181, "mode": "cm"})
+    obs, info = env.reset(seed=0)
+    assert env.laser_spec.n_beams == 181 and env.laser_spec.range_max_m == 81.9
+    assert obs["scan"].shape == (181,) and env.observation_space["scan"].shape == (181,)
+    assert env.dt_s == env.laser_spec.scan_period_s
+    assert env.metadata["render_fps"] == round(1 / env.dt_s)
+    with pytest.raises(ValueError, match="unknown laser scanner"):
+        DynMapEnv(world=spec, sensor="kinect")
