@@ -36,7 +36,7 @@ from dynmap_sim.world.spec import (
     WorldSpec,
 )
 
-_SHUFFLE_TRIES = 60
+_SHUFFLE_TRIES = 200
 _SHUFFLE_TAG = 0x5F1E
 
 
@@ -80,6 +80,11 @@ class _State:
     blocks_route: bool = False
 
 
+def _area(poly: FloatArray) -> float:
+    x, y = poly[:, 0], poly[:, 1]
+    return 0.5 * abs(float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)))
+
+
 def wall_pieces(spec: WorldSpec) -> list[tuple[str, FloatArray]]:
     """Each wall polyline segment as a capped rectangle ``(id, polygon)``.
 
@@ -102,6 +107,7 @@ class Schedule:
         self.calendar = calendar
         self.objects: dict[str, ObjectSpec] = {o.id: o for o in spec.objects}
         self.local: dict[str, FloatArray] = {o.id: o.local_vertices() for o in spec.objects}
+        self._areas = {oid: _area(p) for oid, p in self.local.items()}
         self.groups: dict[str, list[str]] = {}
         for o in spec.objects:
             if o.group is not None:
@@ -212,9 +218,10 @@ class Schedule:
     def _shuffle(self, st: dict[str, _State], ev: ShuffleEvent, idx: int, seed: int, slot: int):
         """Seeded re-placement of a group inside ``ev.region`` without overlaps.
 
-        Members are placed in file order by rejection sampling (uniform position and, with
-        ``rotate``, heading) keeping ``min_gap_m`` from walls, other objects and members placed
-        before; a member that finds no free spot is carried away (absent) until re-added.
+        Members are placed largest first (ties in file order) by rejection sampling (uniform
+        position and, with ``rotate``, heading) keeping ``min_gap_m`` from walls, other objects
+        and members placed before; a member that finds no free spot is carried away (absent)
+        until re-added.
         """
         rs = self.calendar.slots[slot]
         rng = np.random.default_rng(
@@ -223,6 +230,7 @@ class Schedule:
         x0, y0, x1, y1 = ev.region
         members = self.members(ev)
         mset = set(members)
+        members.sort(key=lambda oid: -self._areas[oid])  # largest first packs best
         others = [p for _, p in self.walls]
         for oid, s in st.items():
             if oid in mset:

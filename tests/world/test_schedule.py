@@ -145,3 +145,19 @@ def test_apartment_story():
     # week 3 only: two people
     assert len(w.snapshot(15, 1).people) == 2
     assert len(w.snapshot(14, 1).people) == 0 and len(w.snapshot(22, 1).people) == 0
+
+
+def test_world_pickles_and_continues_identically(lab):
+    import pickle
+
+    w = World(lab, seed=3)
+    w.reset(5, 2)
+    for _ in range(20):
+        w.step(0.1, robot_pose=(13.0, 2.0, 0.0))
+    w2 = pickle.loads(pickle.dumps(w))
+    for _ in range(30):
+        w.step(0.1, robot_pose=(13.0, 2.0, 0.0))
+        w2.step(0.1, robot_pose=(13.0, 2.0, 0.0))
+    np.testing.assert_array_equal(w.people_poses(), w2.people_poses())
+    np.testing.assert_array_equal(w.geometry.circles, w2.geometry.circles)
+    assert w.time_s == w2.time_s
