@@ -155,6 +155,12 @@ def test_driving_the_route_with_truth_terminates():
             break
     assert term and not trunc
     assert info["route_progress"] > 0.95
+    # odometry drifts: mapped through the start pose it is near the truth, but not on it
+    from dynmap_sim.se2 import compose
+
+    odo_in_map = compose(env.spec_world.robot.start, obs["odom"])
+    drift = np.hypot(*(odo_in_map[:2] - info["truth"]["pose"][:2]))
+    assert 1e-3 < drift < 0.05 * env.route.length_m
     # reward = route progress [m] minus the collision penalty per bumper step
     assert total == pytest.approx(env.route.progress_m - env.collision_penalty * bumps)
     assert env.route.progress_m > env.route.length_m - 0.7
