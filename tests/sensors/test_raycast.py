@@ -134,3 +134,32 @@ def test_circle_hit_distance(inside):
     expected = 0.0 if inside else 1.5
     assert r[0] == pytest.approx(expected, abs=1e-12)
     assert hit[0] == 0  # circle 0 after N = 0 segments
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    tx=st.floats(-20, 20),
+    ty=st.floats(-20, 20),
+    rot=st.floats(-np.pi, np.pi),
+    seed=st.integers(0, 1000),
+)
+def test_ranges_invariant_under_rigid_motion_of_world_and_sensor(tx, ty, rot, seed):
+    """Moving the whole scene (geometry and sensor) rigidly leaves every range unchanged."""
+    rng = np.random.default_rng(seed)
+    segs, circ = random_geometry(rng, 60, 10)
+    origin = rng.uniform(-2.0, 2.0, 2)
+    heading = rng.uniform(-np.pi, np.pi)
+    c, s = np.cos(rot), np.sin(rot)
+
+    def move(xy):
+        return np.stack(
+            [c * xy[..., 0] - s * xy[..., 1] + tx, s * xy[..., 0] + c * xy[..., 1] + ty], -1
+        )
+
+    segs2 = np.concatenate([move(segs[:, :2]), move(segs[:, 2:])], axis=1)
+    circ2 = np.column_stack([move(circ[:, :2]), circ[:, 2]])
+    r1, h1, _, _ = cast(origin, heading, -2.0862, URG_INC, 683, 5.6, segs, circ)
+    r2, h2, _, _ = cast(move(origin), heading + rot, -2.0862, URG_INC, 683, 5.6, segs2, circ2)
+    fin = np.isfinite(r1) & np.isfinite(r2)
+    assert np.mean(np.isfinite(r1) == np.isfinite(r2)) > 0.995  # grazing beams may flip
+    assert np.max(np.abs(r1[fin] - r2[fin]), initial=0.0) < 1e-6
