@@ -72,9 +72,13 @@ class DynMapEnv(gymnasium.Env):
     ``info["truth"]`` (never part of the observation): ``pose`` (map frame, float64 (3,)),
     ``beam_class`` (int8 per beam, names in ``dynmap_sim.BEAM_CLASSES``), ``beam_object``
     (int32 index into ``env.unwrapped.world.geometry.object_ids``, -1 nothing hit),
-    ``range_m`` (noise-free ranges), ``people`` ((P, 3) poses), ``time`` (day, run, seconds
-    since midnight). ``info["collision"]`` (bool), ``info["route_progress"]`` (fraction),
-    ``info["stamp_s"]`` (seconds since the run started).
+    ``range_m`` (noise-free ranges), ``people`` (``(max_people, 3)`` poses of the people on
+    the floor, in a fixed order within a run, padded with rows ``(inf, inf, 0)`` — nobody,
+    infinitely far away — so that the shape never changes, which vector envs need; NaN is not
+    used because ``check_env`` compares infos with ``==``), ``n_people`` (how many rows are
+    real), ``time`` (day, run, seconds since midnight). ``info["collision"]`` (bool),
+    ``info["route_progress"]`` (fraction), ``info["stamp_s"]`` (seconds since the run
+    started).
 
     ## Arguments
 
@@ -147,6 +151,11 @@ class DynMapEnv(gymnasium.Env):
             max_episode_steps = max(100, math.ceil(3.0 * self.route.length_m / 0.1 / self.dt_s))
         self.max_episode_steps = int(max_episode_steps)
         self.render_size_px = int(render_size_px)
+        # fixed-size people array (vector envs need equal info shapes): the most people the
+        # world's populations can ever put on the floor at once
+        self.max_people = sum(
+            math.ceil(pop.count * max(1.0, *(f for _, f in pop.profile))) for pop in spec.people
+        )
         self.metadata = {**self.metadata, "render_fps": max(1, round(1.0 / self.dt_s))}
 
         p = self.robot_params
@@ -244,6 +253,7 @@ class DynMapEnv(gymnasium.Env):
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         reading = self.lidar.scan(pose, self.world.geometry, self._rng_lidar)
         slot = self.world.slot
+        people, n_people = self._people()
         obs = {"scan": reading.ranges_m, "odom": self.odometry.pose}
         info = {
             "truth": {
@@ -251,7 +261,8 @@ class DynMapEnv(gymnasium.Env):
                 "beam_class": reading.beam_class,
                 "beam_object": reading.beam_object,
                 "range_m": reading.true_range_m,
-                "people": self.world.people_poses(),
+                "n_people": n_people,
+                "people": people,
                 "time": (slot.day, slot.run, self.world.time_s),
             },
             "collision": bool(collision),
@@ -260,6 +271,15 @@ class DynMapEnv(gymnasium.Env):
         }
         self._last = {"pose": pose, "reading": reading}
         return obs, info
+
+    def _people(self) -> tuple[FloatArray, int]:
+        """People poses padded to ``max_people`` rows ``(inf, inf, 0)``, and their number."""
+        poses = self.world.people_poses()
+        out = np.zeros((self.max_people, 3))
+        out[:, :2] = np.inf
+        n = min(poses.shape[0], self.max_people)
+        out[:n] = poses[:n]
+        return out, n
 
     # -- extras ---------------------------------------------------------------------------
     def teleport(self, pose: Any) -> None:

@@ -111,7 +111,7 @@ def test_episode_is_one_run_and_next_run_without_options():
     assert info["truth"]["time"][:2] == (6, 1)
     np.testing.assert_array_equal(obs["odom"], 0.0)
     np.testing.assert_allclose(info["truth"]["pose"], env.spec_world.robot.start)
-    assert info["truth"]["people"].shape == (0, 3)
+    assert info["truth"]["people"].shape == (0, 3) and info["truth"]["n_people"] == 0
 
 
 def test_observation_and_truth_contents(apartment):
@@ -220,3 +220,19 @@ def test_world_spec_and_lms200_options():
     assert env.metadata["render_fps"] == round(1 / env.dt_s)
     with pytest.raises(ValueError, match="unknown laser scanner"):
         DynMapEnv(world=spec, sensor="kinect")
+
+
+def test_vector_env_with_different_crowds():
+    """People arrays keep one shape (padded), so sub-envs in different runs batch."""
+    from gymnasium.vector import SyncVectorEnv
+
+    envs = SyncVectorEnv([lambda: DynMapEnv(world="lab"), lambda: DynMapEnv(world="lab")])
+    envs.reset(seed=[0, 0])
+    envs.envs[1].reset(seed=0, options={"day": 1, "run": 2})  # the lunch crowd
+    *_, info = envs.step(np.zeros((2, 2), np.float32))
+    people, n = info["truth"]["people"], info["truth"]["n_people"]
+    assert people.shape[0] == 2 and n[0] < n[1]
+    for k in range(2):
+        assert np.all(np.isfinite(people[k, : n[k]]))
+        assert np.all(np.isposinf(people[k, n[k] :, :2]))
+    envs.close()
