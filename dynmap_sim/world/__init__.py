@@ -19,6 +19,12 @@ from dynmap_sim.world.loader import (
     resolve_world_path,
     world_json_schema,
 )
+from dynmap_sim.world.route import (
+    ROUTE_CLEARANCE_M,
+    route_blocked,
+    route_clearance_m,
+    route_clearances,
+)
 from dynmap_sim.world.schedule import ObjectState, Snapshot
 from dynmap_sim.world.spec import WorldSpec
 from dynmap_sim.world.world import (
@@ -34,6 +40,7 @@ __all__ = [
     "CATEGORY_STATIC",
     "COLLISION_PERSON",
     "COLLISION_STATIC",
+    "ROUTE_CLEARANCE_M",
     "Calendar",
     "GeometryView",
     "ObjectState",
@@ -45,5 +52,8 @@ __all__ = [
     "load_world",
     "parse_world",
     "resolve_world_path",
+    "route_blocked",
+    "route_clearance_m",
+    "route_clearances",
     "world_json_schema",
 ]

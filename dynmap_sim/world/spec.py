@@ -302,7 +302,8 @@ class PeopleSpec(_Model):
     Up to ``count`` people walk inside ``areas`` between ``goals`` (attraction points; random
     points of the areas if empty). ``profile`` gives, as ``[[hour, fraction], ...]`` linearly
     interpolated, the fraction of ``count`` present at a time of day; ``start``/``end``
-    restrict the days they come.
+    restrict the days they come. The number present in a run is fixed at the run's start
+    time (runs last minutes; the profile changes over hours).
     """
 
     id: str = Field(min_length=1)

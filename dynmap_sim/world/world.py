@@ -199,6 +199,10 @@ class World:
         """People body radii ``(P,)`` [m]."""
         return self._crowd.radius.copy()
 
+    def route_blocked(self) -> bool:
+        """True if the schedule blocks the route on purpose in the current run."""
+        return any(o.blocks_route for o in self.objects)
+
     @property
     def crowd(self) -> Crowd:
         """Live people state (read-only by convention)."""

@@ -28,6 +28,8 @@ def test_apartment_route_blocked_from_day_22_on_purpose():
     for day in range(1, 29):
         snap = w.snapshot(day, 1)
         assert route_blocked(snap) == (day >= 22), day
+        w.reset(day, 1)
+        assert w.route_blocked() == (day >= 22)
         if day >= 22:
             assert route_clearances(snap, spec.robot.route)["route_blocker"] == 0.0
 
