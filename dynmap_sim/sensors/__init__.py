@@ -1,1 +1,29 @@
-"""Simulated sensors: laser scanners and wheel odometry (DESIGN.md §4)."""
+"""Simulated sensors: laser scanners and wheel odometry (DESIGN.md §4).
+
+* :mod:`~dynmap_sim.sensors.raycast` — exact batched ray casting (numpy), and
+  :mod:`~dynmap_sim.sensors.raycast_numba` its optional compiled twin (extra ``fast``);
+* :mod:`~dynmap_sim.sensors.lidar` — URG-04LX / LMS200 presets, noise model, truth labels;
+* :mod:`~dynmap_sim.sensors.odometry` — wheel encoders with UMBmark systematic errors.
+"""
+
+from dynmap_sim.sensors.lidar import (
+    NOISELESS,
+    PRESETS,
+    Lidar,
+    LidarNoise,
+    LidarReading,
+    make_lidar,
+)
+from dynmap_sim.sensors.odometry import EncoderNoise, WheelGeometry, WheelOdometry
+
+__all__ = [
+    "NOISELESS",
+    "PRESETS",
+    "EncoderNoise",
+    "Lidar",
+    "LidarNoise",
+    "LidarReading",
+    "WheelGeometry",
+    "WheelOdometry",
+    "make_lidar",
+]
