@@ -160,6 +160,8 @@ class World:
         robot_radius_m: float = 0.2,
     ) -> None:
         """Advance the clock and people by ``dt_s`` seconds; people avoid the robot's disc."""
+        if not (np.isfinite(dt_s) and 0.0 <= dt_s <= 10.0):
+            raise ValueError(f"dt_s must be a finite time step in [0, 10] s, not {dt_s!r}")
         self._time_us += int(round(dt_s * 1e6))
         if self._crowd.n == 0:
             return

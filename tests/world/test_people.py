@@ -120,3 +120,19 @@ def test_legs_are_seen_as_two_circles_per_person():
     legs = g.circles[person]
     centres = np.repeat(w.people_poses()[:, :2], 2, axis=0)
     assert np.all(np.hypot(*(legs[:, :2] - centres).T) + legs[:, 2] <= 0.22 + 1e-9)
+
+
+def test_step_rejects_bad_time_steps():
+    w = World(load_world("apartment"), seed=0)
+    for bad in (float("nan"), -0.1, float("inf")):
+        with pytest.raises(ValueError, match="dt_s"):
+            w.step(bad)
+
+
+def test_clock_does_not_drift():
+    w = World(load_world("apartment"), seed=0)
+    w.reset(3, 1)
+    for _ in range(36000):  # one hour of 0.1 s steps (nobody at home: cheap)
+        w.step(0.1)
+    assert w.elapsed_s == 3600.0
+    assert w.time_s == w.calendar.slot(3, 1).start_s + 3600.0
