@@ -1,8 +1,10 @@
 """Progress of the robot along its route (a waypoint polyline), for rewards and episode ends.
 
 The robot's position is projected onto the route polyline, searching only from the segment
-it is on to a few segments ahead, so a route that returns to its start (a tour) or passes a
-place twice is followed in order. Progress is the largest arc length [m] reached so far.
+it is on to a few segments ahead, and accepting at most ``max_gain_m`` of new progress per
+update, so a route that returns to its start (a tour) or passes a place twice is followed in
+order and cutting across a loop earns nothing. Progress is the largest arc length [m] reached
+so far.
 """
 
 from __future__ import annotations
@@ -16,7 +18,13 @@ from numpy.typing import ArrayLike
 class RouteProgress:
     """Monotone arc-length progress along ``route`` ``(K, 2)`` [m]."""
 
-    def __init__(self, route: ArrayLike, lookahead: int = 3, goal_tolerance_m: float = 0.3):
+    def __init__(
+        self,
+        route: ArrayLike,
+        lookahead: int = 3,
+        goal_tolerance_m: float = 0.3,
+        max_gain_m: float = 2.0,
+    ):
         pts = np.asarray(route, dtype=np.float64).reshape(-1, 2)
         if pts.shape[0] < 1:
             raise ValueError("a route needs at least one waypoint")
@@ -27,6 +35,7 @@ class RouteProgress:
         self.length_m = self._cum[-1]
         self.lookahead = int(lookahead)
         self.goal_tolerance_m = float(goal_tolerance_m)
+        self.max_gain_m = float(max_gain_m)
         self.reset()
 
     def reset(self) -> None:
@@ -54,8 +63,11 @@ class RouteProgress:
             t = min(max(t, 0.0), 1.0)
             ex, ey = x0 + t * dx - x_m, y0 + t * dy - y_m
             d2 = ex * ex + ey * ey
+            s = self._cum[k] + t * L
+            if k > self._k and s - self.progress_m > self.max_gain_m:
+                continue  # too far ahead along the route for one update
             if d2 < best_d2 - 1e-12:
-                best_d2, best_k, best_s = d2, k, self._cum[k] + t * L
+                best_d2, best_k, best_s = d2, k, s
         self._k = best_k
         gained = max(best_s - self.progress_m, 0.0)
         self.progress_m += gained
