@@ -123,6 +123,51 @@ def test_ate_equals_evo_ape(ci_results, tmp_path):
     assert ours == pytest.approx(stats["rmse"], rel=1e-6, abs=1e-9)
 
 
+@pytest.mark.skipif(_evo_ape() is None, reason="evo is not installed (GPL: external tool only)")
+def test_rpe_equals_evo_rpe(tmp_path):
+    """One run (no pairs across runs): our RPE over 10 frames equals evo_rpe --all_pairs."""
+    import json
+    import shutil
+    import zipfile
+
+    from dynmap_sim.metrics import rpe
+
+    out = tmp_path / "one"
+    run_experiment(load_scenario(CI), out_dir=out, days=(1, 1), progress=False)
+    export_tum(out, tmp_path)
+    truth = np.loadtxt(tmp_path / "truth.tum")
+    est = np.loadtxt(tmp_path / "odometry.tum")
+    head = lambda q: 2.0 * np.arctan2(q[:, 6], q[:, 7])  # noqa: E731
+    ours = rpe(
+        np.column_stack([truth[:, 1:3], head(truth)]),
+        np.column_stack([est[:, 1:3], head(est)]),
+        delta=10,
+    ).translation.rmse
+    zip_path = tmp_path / "rpe.zip"
+    subprocess.run(
+        [
+            shutil.which("evo_rpe"),
+            "tum",
+            str(tmp_path / "truth.tum"),
+            str(tmp_path / "odometry.tum"),
+            "--delta",
+            "10",
+            "--delta_unit",
+            "f",
+            "--all_pairs",
+            "--save_results",
+            str(zip_path),
+            "--no_warnings",
+        ],
+        check=True,
+        capture_output=True,
+        text=True,
+    )
+    with zipfile.ZipFile(zip_path) as z:
+        stats = json.loads(z.read("stats.json"))
+    assert ours == pytest.approx(stats["rmse"], rel=1e-6, abs=1e-9)
+
+
 def _tables(db):
     con = sqlite3.connect(db)
     try:
