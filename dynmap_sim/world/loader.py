@@ -56,12 +56,24 @@ def world_json_schema() -> dict[str, Any]:
     return schema
 
 
+_ACTIONS = ("add", "remove", "install", "move", "open", "close", "present", "shuffle", "grow")
+
+
+def _drop_action_tag(loc: str) -> str:
+    """``schedule.1.shuffle.region`` -> ``schedule.1.region`` (pydantic adds the union tag)."""
+    parts = loc.split(".")
+    if len(parts) >= 3 and parts[0] == "schedule" and parts[2] in _ACTIONS:
+        del parts[2]
+    return ".".join(parts)
+
+
 def parse_world(data: dict[str, Any], path: str | Path = "<world>") -> WorldSpec:
     """Validate a world already read into a dict; raises :class:`WorldFileError`."""
     try:
         spec = WorldSpec.model_validate(data)
     except ValidationError as exc:
-        raise WorldFileError(path, pydantic_errors(exc)) from None
+        errors = [(_drop_action_tag(loc), msg) for loc, msg in pydantic_errors(exc)]
+        raise WorldFileError(path, errors) from None
     errors = check_world(spec)
     if errors:
         raise WorldFileError(path, errors)

@@ -16,14 +16,51 @@ import re
 from typing import Annotated, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    PlainValidator,
+    WithJsonSchema,
+    field_validator,
+    model_validator,
+)
 
 from dynmap_sim.world.polygons import FloatArray
 
 Point = tuple[float, float]
 Pose = tuple[float, float, float]
 Box = tuple[float, float, float, float]
-When = int | dt.date
+
+
+def _when(v: object) -> int | dt.date:
+    """A calendar moment: a 1-based working-day number or a date."""
+    if isinstance(v, dt.datetime):
+        return v.date()
+    if isinstance(v, dt.date):
+        return v
+    if isinstance(v, int) and not isinstance(v, bool):
+        if v < 1:
+            raise ValueError("day numbers start at 1")
+        return v
+    if isinstance(v, str):
+        try:
+            return dt.date.fromisoformat(v)
+        except ValueError:
+            pass
+    raise ValueError("expected a working-day number (1, 2, ...) or a date like 2007-10-23")
+
+
+When = Annotated[
+    int | dt.date,
+    PlainValidator(_when),
+    WithJsonSchema(
+        {
+            "anyOf": [{"type": "integer", "minimum": 1}, {"type": "string", "format": "date"}],
+            "description": "working day (1-based) or date",
+        }
+    ),
+]
 Weekday = Literal["mon", "tue", "wed", "thu", "fri", "sat", "sun"]
 WEEKDAYS: tuple[str, ...] = ("mon", "tue", "wed", "thu", "fri", "sat", "sun")
 MAX_EXTENT_M = 1000.0

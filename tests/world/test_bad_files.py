@@ -1,0 +1,133 @@
+"""One bad world file per kind of mistake: each gives the expected field and message.
+
+Each case edits the valid ``data/room.toml`` (replacing one line) and loads the file through
+:func:`load_world`, the same path the CLI takes.
+"""
+
+from pathlib import Path
+
+import pytest
+
+from dynmap_sim.world import WorldFileError, load_world
+
+ROOM = Path(__file__).parent / "data" / "room.toml"
+
+# (case, text to replace, replacement, field path, message fragment)
+CASES = [
+    (
+        "negative size",
+        "size = [1.0, 0.6]",
+        "size = [1.0, -0.6]",
+        "objects.0.size",
+        "sizes must be > 0",
+    ),
+    (
+        "unknown field",
+        'kind = "exhibit"',
+        'kind = "exhibit"\ncolour = "red"',
+        "objects.3.colour",
+        "Extra inputs are not permitted",
+    ),
+    ("unknown kind", 'kind = "exhibit"', 'kind = "statue"', "objects.3.kind", "Input should be"),
+    ("wrong type", "n_days = 10", 'n_days = "ten"', "calendar.n_days", "valid integer"),
+    (
+        "bad clock time",
+        'runs = ["09:00", "14:00"]',
+        'runs = ["9 am", "14:00"]',
+        "calendar.runs",
+        "HH:MM",
+    ),
+    (
+        "runs out of order",
+        'runs = ["09:00", "14:00"]',
+        'runs = ["14:00", "09:00"]',
+        "calendar.runs",
+        "strictly increasing",
+    ),
+    (
+        "bad region",
+        "region = [0.4, 2.4, 2.8, 3.8]",
+        "region = [2.8, 2.4, 0.4, 3.8]",
+        "schedule.1.region",
+        "xmax > xmin",
+    ),
+    ("duplicate id", 'id = "chair_2"', 'id = "chair_1"', "objects.2.id", "duplicate id 'chair_1'"),
+    (
+        "unknown group",
+        'group = "expo"\nstart',
+        'group = "expos"\nstart',
+        "schedule.0.group",
+        "unknown group 'expos'",
+    ),
+    (
+        "unknown target",
+        'target = "door"',
+        'target = "gate"',
+        "schedule.2.target",
+        "unknown object id 'gate'",
+    ),
+    ("day outside the calendar", "end = 5", "end = 12", "schedule.0.end", "outside the calendar"),
+    (
+        "date outside the calendar",
+        "start = 2024-01-03",
+        "start = 2023-12-20",
+        "schedule.0.start",
+        "outside the calendar",
+    ),
+    ("run beyond the day's runs", "run = 2", "run = 3", "schedule.2.run", "2 per day"),
+    (
+        "object inside a wall",
+        "pose = [3.0, 3.0, 0.0]",
+        "pose = [3.0, 3.9, 0.0]",
+        "objects.0",
+        "inside wall 'outer.2'",
+    ),
+    (
+        "route through a wall",
+        "[5.0, 3.0]]",
+        "[5.0, 3.0], [7.0, 3.0]]",
+        "robot.route.2",
+        "goes through wall",
+    ),
+    (
+        "start inside a wall",
+        "start = [1.0, 1.0, 0.0]",
+        "start = [0.05, 1.0, 0.0]",
+        "robot.start",
+        "inside wall",
+    ),
+    (
+        "door event on a non-door",
+        'target = "door"',
+        'target = "table"',
+        "schedule.2.target",
+        "is not a door",
+    ),
+    ("end before start", "end = 5", "end = 2", "schedule.0.end", "before start"),
+    (
+        "people area outside",
+        "areas = [[0.5, 0.5, 5.5, 2.2]]",
+        "areas = [[0.5, 0.5, 9.5, 2.2]]",
+        "people.0.areas.0",
+        "outside the world bounds",
+    ),
+]
+
+
+def test_the_room_is_valid():
+    spec = load_world(ROOM)
+    assert spec.name == "room"
+
+
+@pytest.mark.parametrize("case,old,new,loc,msg", CASES, ids=[c[0] for c in CASES])
+def test_bad_file(tmp_path, case, old, new, loc, msg):
+    text = ROOM.read_text()
+    assert old in text, case
+    bad = tmp_path / "bad.toml"
+    bad.write_text(text.replace(old, new, 1))
+    with pytest.raises(WorldFileError) as info:
+        load_world(bad)
+    err = info.value
+    assert err.path == str(bad)
+    assert any(lo == loc and msg in m for lo, m in err.errors), err.errors
+    assert f"{loc}: " in str(err)
