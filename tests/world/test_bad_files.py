@@ -111,6 +111,14 @@ CASES = [
         "people.0.areas.0",
         "outside the world bounds",
     ),
+    ("bad calendar moment", "at = 4", 'at = "soon"', "schedule.2.at", "working-day number"),
+    (
+        "unknown action",
+        'action = "open"',
+        'action = "teleport"',
+        "schedule.2",
+        "does not match any of the expected tags",
+    ),
 ]
 
 
