@@ -1,0 +1,140 @@
+"""The runner's overhead over the bare env + driver + localizer loop (target: ratio <= 1.10).
+
+Both loops run the same scenario (same seed, days, driver and localizers). The reference is
+the minimum a caller needs: ``env.reset``, the driver's action, ``env.step``, every
+localizer's ``update`` and the run/day hooks. The runner adds the per-scan bookkeeping, the
+metrics, the SQLite writes, the checkpoint after every run and the progress bar.
+
+    python benchmarks/bench_runner.py                       # ci-apartment, whole route, days 1-3
+    python benchmarks/bench_runner.py --scenario worlds/scenarios/ci-apartment-mcl.toml
+
+Prints absolute times and the ratio; the best of ``--repeat`` runs of each loop counts.
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from dynmap_sim.agent.localizer import make_localizer
+from dynmap_sim.experiments.drivers import TourDriver, TourParams, clip_route
+from dynmap_sim.experiments.runner import localizer_seeds, make_env, run_experiment
+from dynmap_sim.experiments.scenario import load_scenario
+from dynmap_sim.types import Odometry, Prior, Scan
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def bare_loop(scenario, days, seed):
+    """env + driver + localizers, nothing stored. Returns (wall seconds, scans)."""
+    env = make_env(scenario)
+    u = env.unwrapped
+    spec = u.world.spec
+    rngs = localizer_seeds(seed, len(scenario.localizers))
+    locs = [
+        make_localizer(c.name, laser=u.laser_spec, rng=rngs[k + 1], **c.params)
+        for k, c in enumerate(scenario.localizers)
+    ]
+    d = scenario.driver
+    params = TourParams(
+        speed_mps=d.speed_mps,
+        robot_radius_m=u.robot_params.radius_m,
+        clearance_m=d.clearance_m,
+        wait_for_people=d.wait_for_people,
+        dt_s=u.laser_spec.scan_period_s,
+    )
+    driver = TourDriver(clip_route(np.asarray(spec.robot.route, float), d.route_fraction), params)
+    slots = [s for s in u.world.calendar.slots if days[0] <= s.day <= days[1]]
+    max_steps = (
+        None if d.max_run_s is None else int(round(d.max_run_s / u.laser_spec.scan_period_s))
+    )
+    n = 0
+    t0 = time.perf_counter()
+    for i, slot in enumerate(slots):
+        obs, info = env.reset(seed=seed, options={"day": slot.day, "run": slot.run})
+        prior = Prior(
+            initial_pose=np.asarray(spec.robot.start, float),
+            initial_pose_cov=np.diag([0.05**2, 0.05**2, 0.05**2]),
+            walls=u.world.wall_segments() if scenario.prior.map == "walls" else None,
+            bounds=tuple(spec.bounds),
+            day=slot.day,
+            run=slot.run,
+            first_run=i == 0,
+        )
+        for loc in locs:
+            loc.begin_run(prior)
+        driver.begin_run(u.world.geometry, info["truth"]["pose"])
+        step, term, trunc, coll = 0, False, False, False
+        while True:
+            t = float(info["truth"]["time"][2])
+            odom, scan = Odometry(np.array(obs["odom"], float), t), Scan(obs["scan"], t)
+            for loc in locs:
+                loc.update(odom, scan)
+            n += 1
+            if term or trunc or driver.done or (max_steps is not None and step >= max_steps):
+                break
+            a = driver.act(info["truth"]["pose"], info["truth"]["people"], t, bumped=coll)
+            obs, _, term, trunc, info = env.step(a)
+            coll = bool(info["collision"])
+            step += 1
+        for loc in locs:
+            loc.end_run()
+        if i + 1 == len(slots) or slots[i + 1].day != slot.day:
+            for loc in locs:
+                loc.end_day()
+    wall = time.perf_counter() - t0
+    env.close()
+    return wall, n
+
+
+def runner_loop(scenario, days, seed):
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        out = run_experiment(scenario, out_dir=Path(tmp) / "r", days=days, seed=seed, progress=True)
+        wall = time.perf_counter() - t0
+        import sqlite3
+
+        con = sqlite3.connect(out / "results.db")
+        n = con.execute("SELECT count(*) FROM scans").fetchone()[0]
+        con.close()
+    return wall, n
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scenario", default=str(ROOT / "worlds/scenarios/ci-apartment.toml"))
+    ap.add_argument("--days", default="1-3")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument(
+        "--keep-time-limit",
+        action="store_true",
+        help="keep the scenario's max_run_s (default: drive whole routes)",
+    )
+    args = ap.parse_args()
+    scn = load_scenario(args.scenario)
+    if not args.keep_time_limit:
+        scn = scn.model_copy(update={"driver": scn.driver.model_copy(update={"max_run_s": None})})
+        scn._source = load_scenario(args.scenario).source_path
+    a, _, b = args.days.partition("-")
+    days = (int(a), int(b or a))
+    bare, run = [], []
+    for _ in range(args.repeat):
+        bare.append(bare_loop(scn, days, args.seed))
+        run.append(runner_loop(scn, days, args.seed))
+    tb, nb = min(bare)
+    tr, nr = min(run)
+    assert nb == nr, f"the loops saw different scan counts: {nb} vs {nr}"
+    print(f"scenario {scn.name}, days {days[0]}-{days[1]}, localizers {', '.join(scn.labels)}")
+    print(f"scans: {nr}")
+    print(f"bare env + driver + localizers: {tb:8.3f} s  ({1e3 * tb / nb:.3f} ms/scan)")
+    print(f"runner (store, metrics, ckpt):  {tr:8.3f} s  ({1e3 * tr / nr:.3f} ms/scan)")
+    print(f"overhead ratio runner / bare:   {tr / tb:8.3f}  (target <= 1.10)")
+
+
+if __name__ == "__main__":
+    main()
