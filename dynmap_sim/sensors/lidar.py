@@ -124,10 +124,10 @@ def _lms200(beams: int = 361, mode: str = "mm", **over: Any) -> tuple[LaserSpec,
         n_beams=beams,
         angle_min_rad=-math.pi / 2.0,
         angle_increment_rad=inc,
-        range_min_m=0.0 if mode == "mm" else 0.0,
+        range_min_m=0.0,
         range_max_m=8.19 if mode == "mm" else 81.9,
         scan_period_s=0.2,
-        time_increment_s=(1.0 / 75.0) / 360.0 * (2.0 if beams == 361 else 1.0) / 2.0,
+        time_increment_s=(1.0 / 75.0) * inc / (2.0 * math.pi),  # mirror at 75 Hz
     )
     noise = (
         LidarNoise(sigma_m=0.005, sigma_rel=0.0, systematic_m=0.015)
