@@ -21,6 +21,7 @@ from dynmap_sim.world.schedule import wall_pieces
 from dynmap_sim.world.spec import (
     AddEvent,
     DoorEvent,
+    GrowEvent,
     InstallEvent,
     MoveEvent,
     PresentEvent,
@@ -167,6 +168,16 @@ def check_world(spec: WorldSpec) -> list[tuple[str, str]]:
             bx0, by0, bx1, by1 = spec.bounds
             if x0 < bx0 or y0 < by0 or x1 > bx1 or y1 > by1:
                 errs.append((f"{loc}.region", "region is outside the world bounds"))
+            for o in spec.objects:
+                if o.group == group:
+                    theta = 0.0 if ev.rotate else o.pose[2]
+                    v = transform(o.local_vertices(), (0.0, 0.0, theta))
+                    w, h = v.max(axis=0) - v.min(axis=0)
+                    fits = (w <= x1 - x0 and h <= y1 - y0) or (
+                        ev.rotate and h <= x1 - x0 and w <= y1 - y0
+                    )
+                    if not fits:
+                        errs.append((f"{loc}.region", f"{o.id!r} does not fit in the region"))
 
     # geometry: objects inside walls, route/start through walls
     walls = wall_pieces(spec)
@@ -180,11 +191,15 @@ def check_world(spec: WorldSpec) -> list[tuple[str, str]]:
         if isinstance(ev, MoveEvent) and ev.target in objects:
             poses.append((f"schedule.{i}.pose", ev.target, ev.pose))
     bx0, by0, bx1, by1 = spec.bounds
+    scale = {oid: 1.0 for oid in objects}
+    for ev in spec.schedule:
+        if isinstance(ev, GrowEvent) and ev.target in scale:
+            scale[ev.target] = max(scale[ev.target], ev.scale_start, ev.scale_end)
     for loc, oid, pose in poses:
         o = objects.get(oid)
         if o is None:
             continue
-        poly = transform(o.local_vertices(), pose)
+        poly = transform(o.local_vertices(), pose, scale[oid])
         if o.kind != "wall":
             for pid, wp in walls:
                 depth = -sat_separation(poly, wp)

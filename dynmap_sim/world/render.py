@@ -81,26 +81,34 @@ def render_snapshot(
 
 
 def sheet_slots(world: World, n_panels: int = 12) -> list[tuple[int, int]]:
-    """Runs to show on a sheet: the first run and the runs where the objects change.
+    """Runs to show on a sheet: the first run and the runs where something changes.
 
-    When there are more change points than panels, they are subsampled evenly.
+    Groups shuffled more often than once a day are ignored when looking for changes (they
+    change every run); with more change points than panels they are subsampled evenly, with
+    fewer the sheet is filled with evenly spaced runs.
     """
     slots = world.calendar.slots
     if len(slots) <= n_panels:
         return [(s.day, s.run) for s in slots]
+    rpd = world.calendar.runs_per_day
+    frequent = {
+        ev.group
+        for ev in world.spec.schedule
+        if ev.action == "shuffle" and ev.every_runs < rpd  # type: ignore[union-attr]
+    }
     picks, prev = [], None
     for s in slots:
         objs = world.snapshot(s.day, s.run).objects
-        sig = tuple((o.id, o.pose) for o in objs)
+        sig = tuple((o.id, o.pose) for o in objs if o.group not in frequent or o.group is None)
         if sig != prev:
             picks.append((s.day, s.run))
         prev = sig
-    if len(picks) < n_panels:
-        extra = [(s.day, s.run) for s in slots if (s.day, s.run) not in picks]
-        idx = np.linspace(0, len(extra) - 1, n_panels - len(picks)).round().astype(int)
-        picks = sorted(set(picks) | {extra[i] for i in idx})
-    idx = np.linspace(0, len(picks) - 1, n_panels).round().astype(int)
-    return [picks[i] for i in sorted(set(idx.tolist()))]
+    if len(picks) > n_panels:
+        idx = np.linspace(0, len(picks) - 1, n_panels).round().astype(int)
+        return [picks[i] for i in sorted(set(idx.tolist()))]
+    extra = [(s.day, s.run) for s in slots if (s.day, s.run) not in picks]
+    idx = np.linspace(0, len(extra) - 1, n_panels - len(picks)).round().astype(int)
+    return sorted(set(picks) | {extra[i] for i in idx})
 
 
 def render_sheet(spec: WorldSpec, seed: int = 0, out_path: str | Path = "sheet.png") -> Path:

@@ -253,7 +253,7 @@ class Schedule:
                 rot_axes = edge_normals(rot)
                 lo, hi = rot.min(axis=0), rot.max(axis=0)
                 if hi[0] - lo[0] > x1 - x0 or hi[1] - lo[1] > y1 - y0:
-                    break
+                    continue  # this heading does not fit: draw another
                 x = float(rng.uniform(x0 - lo[0], x1 - hi[0]))
                 y = float(rng.uniform(y0 - lo[1], y1 - hi[1]))
                 poly = rot + np.array([x, y])

@@ -111,6 +111,13 @@ CASES = [
         "people.0.areas.0",
         "outside the world bounds",
     ),
+    (
+        "shuffled object does not fit",
+        "region = [0.4, 2.4, 2.8, 3.8]",
+        "region = [0.4, 2.4, 2.8, 2.8]",
+        "schedule.1.region",
+        "'chair_1' does not fit in the region",
+    ),
     ("bad calendar moment", "at = 4", 'at = "soon"', "schedule.2.at", "working-day number"),
     (
         "unknown action",

@@ -176,3 +176,9 @@ def test_file_errors(tmp_path):
 def test_shipped_schema_is_current():
     shipped = json.loads((ROOT / "worlds" / "world.schema.json").read_text())
     assert shipped == json.loads(json.dumps(world_json_schema()))
+
+
+def test_growing_into_a_wall(base_world):
+    base_world["schedule"][3]["scale_end"] = 4.0  # the plant at 0.5 m from the wall, r 0.2
+    ok, errs = has(errors_of(base_world), "objects.5", "inside wall")
+    assert ok, errs
