@@ -230,31 +230,37 @@ class Lidar:
         self._cos, self._sin = beam_directions(
             spec.angle_min_rad, spec.angle_increment_rad, spec.n_beams
         )
-        self._cache_key: tuple[int, int, int] | None = None
+        self._cache_key: tuple[int, np.ndarray] | None = None
         self._cache: SegmentCache | None = None
-        self._labels_key: tuple[Any, ...] | None = None
+        self._labels_key: tuple[np.ndarray, ...] | None = None
         self._labels: tuple[NDArray[np.int32], NDArray[np.int8]] | None = None
 
     def _segments(self, geom: GeometryLike) -> SegmentCache:
-        key = (int(geom.static_version), id(geom.segments), int(geom.segments.shape[0]))
-        if key != self._cache_key or self._cache is None:
+        """Broad-phase data of the segments, rebuilt when the geometry changes.
+
+        The key holds the source array itself (not its ``id``), so a freed array's id being
+        reused by another world's array cannot serve stale geometry.
+        """
+        key = (int(geom.static_version), geom.segments)
+        ck = self._cache_key
+        if ck is None or ck[0] != key[0] or ck[1] is not key[1] or self._cache is None:
             self._cache = SegmentCache.build(geom.segments)
             self._cache_key = key
         return self._cache
 
     def _label_tables(self, geom: GeometryLike) -> tuple[NDArray[np.int32], NDArray[np.int8]]:
         """Object index and class per hit index (segments, circles, then -1 / NONE)."""
-        key = (
-            int(geom.static_version),
-            id(geom.segment_object),
-            id(geom.circle_object),
-            int(geom.circle_object.shape[0]),
-        )
-        if key != self._labels_key or self._labels is None:
+        src = (geom.segment_object, geom.segment_class, geom.circle_object, geom.circle_class)
+        lk = self._labels_key
+        if (
+            lk is None
+            or self._labels is None
+            or any(a is not b for a, b in zip(lk, src, strict=True))
+        ):
             obj = np.concatenate([geom.segment_object, geom.circle_object, [-1]]).astype(np.int32)
             cls = np.concatenate([geom.segment_class, geom.circle_class, [0]]).astype(np.int8)
             self._labels = (obj, cls)
-            self._labels_key = key
+            self._labels_key = src
         return self._labels
 
     def laser_pose(self, robot_pose: FloatArray) -> FloatArray:
