@@ -236,3 +236,13 @@ def test_vector_env_with_different_crowds():
         assert np.all(np.isfinite(people[k, : n[k]]))
         assert np.all(np.isposinf(people[k, n[k] :, :2]))
     envs.close()
+
+
+def test_new_seed_new_world_no_stale_caches():
+    a = DynMapEnv(world="lab")
+    a.reset(seed=1, options={"day": 4, "run": 1})
+    a.step(np.array([0.3, 0.0], np.float32))
+    oa, ia = a.reset(seed=2, options={"day": 9, "run": 2})
+    ob, ib = DynMapEnv(world="lab").reset(seed=2, options={"day": 9, "run": 2})
+    np.testing.assert_array_equal(oa["scan"], ob["scan"])
+    np.testing.assert_array_equal(ia["truth"]["beam_object"], ib["truth"]["beam_object"])
