@@ -6,7 +6,47 @@ radians, seconds); times of day are ``"HH:MM"``; a calendar moment (``at``, ``st
 ``end``) is either a 1-based working-day number or a TOML date (``2007-10-23``), which maps
 to the first working day on or after it. Structural checks live here; cross-references and
 geometry (objects inside walls, routes through walls, dates outside the calendar) are checked
-by :mod:`dynmap_sim.world.loader`.
+by :mod:`dynmap_sim.world.loader`. A minimal file::
+
+    name = "room"
+    bounds = [-0.5, -0.5, 6.5, 4.5]            # xmin, ymin, xmax, ymax [m]
+
+    [calendar]
+    start = 2024-01-01                         # first working day (or earlier)
+    n_days = 10                                # working days
+    weekdays = ["mon", "tue", "wed", "thu", "fri"]
+    runs = ["09:00", "14:00"]                  # runs per day and their clock times
+
+    [robot]
+    start = [1.0, 1.0, 0.0]                    # x_m, y_m, theta_rad
+    route = [[1.0, 1.0], [5.0, 1.0], [5.0, 3.0]]
+
+    [[walls]]                                  # a polyline with thickness -> closed outlines
+    id = "outer"
+    points = [[0, 0], [6, 0], [6, 4], [0, 4], [0, 0]]
+    thickness_m = 0.2
+
+    [[objects]]                                # box | polygon (convex) | circle, with a pose
+    id = "poster"
+    kind = "exhibit"                           # furniture | exhibit | door | robot | wall
+    group = "expo"
+    size = [0.6, 0.1]
+    pose = [4.0, 2.0, 0.0]
+
+    [[schedule]]                               # add | remove | install | move | open | close
+    action = "present"                         # | present | shuffle | grow
+    group = "expo"
+    start = 3
+    end = 5
+
+    [[people]]
+    id = "walkers"
+    count = 3
+    areas = [[0.5, 0.5, 5.5, 2.2]]
+    profile = [[8.0, 0.2], [12.5, 1.0], [18.0, 0.2]]   # [hour, fraction of count]
+
+Set ``blocks_route = true`` on an ``add``/``install``/``move`` that puts an object on the
+route on purpose (H&W day 22); the route clearance check and the driver then know it.
 """
 
 from __future__ import annotations

@@ -182,3 +182,15 @@ def test_growing_into_a_wall(base_world):
     base_world["schedule"][3]["scale_end"] = 4.0  # the plant at 0.5 m from the wall, r 0.2
     ok, errs = has(errors_of(base_world), "objects.5", "inside wall")
     assert ok, errs
+
+
+def test_docstring_example_is_a_valid_world():
+    import textwrap
+    import tomllib
+
+    import dynmap_sim.world.spec as spec_module
+
+    doc = spec_module.__doc__
+    example = doc[doc.index("A minimal file::") + 16 : doc.index("Set ``blocks_route")]
+    spec = parse_world(tomllib.loads(textwrap.dedent(example)))
+    assert spec.name == "room" and spec.people[0].count == 3
