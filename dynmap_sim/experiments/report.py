@@ -280,6 +280,9 @@ def _fig_trajectories(db: ResultsDB, path: Path) -> Path:
                     color=_CLASS_COLORS.get(int(c), "black"),
                     lw=1,
                 )
+        route = np.asarray(db.meta().get("route") or np.zeros((0, 2)), float).reshape(-1, 2)
+        if len(route):
+            ax.plot(route[:, 0], route[:, 1], ":", color="gray", lw=1, label="route")
         for k, label in enumerate(db.labels()):
             d = db.per_scan(k, day, run)
             if k == 0:
@@ -324,6 +327,42 @@ def _fig_likelihood(db: ResultsDB, path: Path) -> Path | None:
     return path
 
 
+def _fig_timescales(db: ResultsDB, path: Path) -> Path | None:
+    """Share of scans per chosen timescale and day (cf. B&D Figs. 12-13)."""
+    import matplotlib.pyplot as plt
+
+    rows = db.query(
+        "SELECT loc, day, timescale, count(*) FROM estimates WHERE timescale IS NOT NULL "
+        "GROUP BY loc, day, timescale ORDER BY loc, day, timescale"
+    )
+    if not rows:
+        return None
+    labels = db.labels()
+    locs = sorted({int(r[0]) for r in rows})
+    fig, axes = plt.subplots(len(locs), 1, figsize=(8, 2.8 * len(locs)), squeeze=False)
+    for ax, k in zip(axes[:, 0], locs, strict=True):
+        mine = [r for r in rows if int(r[0]) == k]
+        days = sorted({int(r[1]) for r in mine})
+        levels = sorted({int(r[2]) for r in mine})
+        share = np.zeros((len(levels), len(days)))
+        for _, day, lev, n in mine:
+            share[levels.index(int(lev)), days.index(int(day))] = n
+        share /= np.maximum(share.sum(axis=0, keepdims=True), 1)
+        bottom = np.zeros(len(days))
+        for j, lev in enumerate(levels):
+            name = "none" if lev < 0 else f"λ{lev + 1}"
+            ax.bar(days, share[j], bottom=bottom, label=name)
+            bottom += share[j]
+        ax.set_title(f"{labels[k]}: chosen timescale per day", fontsize="small")
+        ax.set_ylabel("share of scans")
+        ax.legend(fontsize="x-small", ncol=6)
+    axes[-1, 0].set_xlabel("day")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def write_report(out_dir: str | Path) -> list[Path]:
     """Write figures, ``summary.md`` and ``per_day.csv`` into a results folder."""
     import matplotlib
@@ -344,6 +383,9 @@ def write_report(out_dir: str | Path) -> list[Path]:
         lik = _fig_likelihood(db, out / "likelihood_certainty.png")
         if lik is not None:
             figs.append(lik)
+        ts = _fig_timescales(db, out / "timescale_usage.png")
+        if ts is not None:
+            figs.append(ts)
         written.append(_summary_md(db, out / "summary.md", figs))
         written += figs
     return written

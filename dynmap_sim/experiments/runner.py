@@ -319,11 +319,14 @@ class ExperimentRunner:
             step += 1
         for loc in locs:
             loc.end_run()
+        driver_events, skipped = list(driver.events), driver.skipped_waypoints
+        finished = driver.done
+        driver.end_run()
         last_of_day = i + 1 == len(self.slots) or self.slots[i + 1].day != slot.day
         if last_of_day:
             for loc in locs:
                 loc.end_day()
-        events = sorted(events + driver.events, key=lambda e: e[0])
+        events = sorted(events + driver_events, key=lambda e: e[0])
         t = np.asarray(t_l, dtype=np.float64)
         truth_a = np.asarray(truth_l, dtype=np.float64).reshape(-1, 3)
         est_a = np.asarray(est_l, dtype=np.float64).reshape(n_loc, -1, 3)
@@ -342,9 +345,9 @@ class ExperimentRunner:
             cov_diag=cov_diag,
             extras=ext_a,
             confusion=confusion,
-            terminated=bool(terminated or driver.done),
+            terminated=bool(terminated or finished),
             route_progress=progress_frac,
-            skipped_waypoints=driver.skipped_waypoints,
+            skipped_waypoints=skipped,
             wall_s=time.perf_counter() - wall0,
             events=events,
             segments=np.asarray(geom.segments, dtype=np.float64),

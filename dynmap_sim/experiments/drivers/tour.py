@@ -140,6 +140,11 @@ class TourDriver:
         self.skipped_waypoints += 1
         self.events.append((self._step, t_s, "skip_waypoint", f"waypoint {k}: {why}"))
 
+    def end_run(self) -> None:
+        """Drop the run's grid and plan (they are rebuilt next run; keeps checkpoints small)."""
+        self._planner = None
+        self._plan = None
+
     def notify_teleport(self, pose: FloatArray, t_s: float) -> None:
         """The true robot was moved (kidnapping): replan from there to the rest of the route."""
         assert self._plan is not None
