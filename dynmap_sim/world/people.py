@@ -35,8 +35,8 @@ B_WALL = 0.12
 A_ROBOT = 6.0
 B_ROBOT = 0.25
 ROBOT_GAP_M = 0.10
-REACH_M = 1.2
-CELL_M = 1.0
+REACH_M = 1.0
+CELL_M = 0.5
 GOAL_TOL_M = 0.4
 STUCK_S = 4.0
 LEG_RADIUS_M = 0.06
@@ -96,7 +96,11 @@ class SocialForce:
         """
         s = self.segments
         far = np.array([[1e6, 1e6, 1e6 + 1.0, 1e6]])
-        self._segs_ext = np.concatenate([s, far])
+        ext = np.concatenate([s, far])
+        d = ext[:, 2:4] - ext[:, 0:2]
+        inv = 1.0 / np.maximum(np.sum(d * d, axis=1), 1e-18)
+        # per segment: x0, y0, dx, dy, 1 / |d|^2 (gathered per person each step)
+        self._segdata = np.column_stack([ext[:, 0], ext[:, 1], d[:, 0], d[:, 1], inv])
         if len(s) == 0:
             self._origin = np.zeros(2)
             self._shape = (1, 1)
@@ -126,17 +130,18 @@ class SocialForce:
         self._cells = cells
 
     def _candidates(self, pos: FloatArray) -> FloatArray:
-        """Candidate segments ``(P, K, 4)`` near each person (padded with a far dummy).
+        """Candidate segments near each person as ``(P, K, 5)`` rows ``x0, y0, dx, dy,
+        1/|d|^2`` (padded with a far dummy).
 
         Without ``broad_phase`` every segment is a candidate (the naive reference).
         """
         if not self.broad_phase:
-            return np.broadcast_to(self.segments, (len(pos), *self.segments.shape))
+            return np.broadcast_to(self._segdata[:-1], (len(pos), *self._segdata[:-1].shape))
         nx, ny = self._shape
         ij = np.floor((pos - self._origin) / CELL_M).astype(np.int64)
-        ix = np.clip(ij[:, 0], 0, nx - 1)
-        iy = np.clip(ij[:, 1], 0, ny - 1)
-        return self._segs_ext[self._cells[ix * ny + iy]]
+        ix = np.minimum(np.maximum(ij[:, 0], 0), nx - 1)  # (np.clip is slow on tiny arrays)
+        iy = np.minimum(np.maximum(ij[:, 1], 0), ny - 1)
+        return self._segdata[self._cells[ix * ny + iy]]
 
     # -- sampling -----------------------------------------------------------------------
     def _free(self, xy: FloatArray, r: float) -> bool:
@@ -217,18 +222,20 @@ class SocialForce:
 
     # -- dynamics -------------------------------------------------------------------------
     @staticmethod
-    def _closest(points: FloatArray, segs: FloatArray) -> tuple[FloatArray, FloatArray]:
-        """Distances ``(P, K)`` and unit vectors ``(P, K, 2)`` from per-person segments
-        ``(P, K, 4)`` to the points ``(P, 2)``."""
-        a = segs[..., 0:2]
-        d = segs[..., 2:4] - a
-        p = points[:, None, :]
-        pa = p - a
-        dd = np.maximum(np.einsum("pki,pki->pk", d, d), 1e-18)
-        t = np.clip(np.einsum("pki,pki->pk", pa, d) / dd, 0.0, 1.0)
-        diff = pa - t[..., None] * d
-        dist = np.sqrt(np.einsum("pki,pki->pk", diff, diff))
-        return dist, diff / np.maximum(dist, 1e-9)[..., None]
+    def _closest(points: FloatArray, segs: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Distances ``(P, K)`` and unit vectors (x, y components, each ``(P, K)``) from the
+        closest points of per-person segments ``(P, K, 5)`` to the points ``(P, 2)``."""
+        ax = points[:, 0:1] - segs[..., 0]
+        ay = points[:, 1:2] - segs[..., 1]
+        dx, dy = segs[..., 2], segs[..., 3]
+        t = (ax * dx + ay * dy) * segs[..., 4]
+        np.maximum(t, 0.0, out=t)
+        np.minimum(t, 1.0, out=t)
+        qx = ax - t * dx
+        qy = ay - t * dy
+        dist = np.sqrt(qx * qx + qy * qy)
+        inv = 1.0 / np.maximum(dist, 1e-9)
+        return dist, qx * inv, qy * inv
 
     def step(
         self,
@@ -255,11 +262,11 @@ class SocialForce:
             force += np.sum((mag / np.maximum(d, 1e-9))[..., None] * diff, axis=1)
         segs = self._candidates(pos)
         if segs.shape[1]:
-            dist, nvec = self._closest(pos, segs)
-            mag = np.where(
-                dist < REACH_M, A_WALL * np.exp((crowd.radius[:, None] - dist) / B_WALL), 0
-            )
-            force += np.sum(mag[..., None] * nvec, axis=1)
+            dist, nx, ny = self._closest(pos, segs)
+            mag = A_WALL * np.exp((crowd.radius[:, None] - np.minimum(dist, 50.0)) / B_WALL)
+            mag[dist > REACH_M] = 0.0
+            force[:, 0] += np.sum(mag * nx, axis=1)
+            force[:, 1] += np.sum(mag * ny, axis=1)
         if robot_xy is not None:
             rd = pos - robot_xy[None, :]
             dr = np.maximum(np.hypot(rd[:, 0], rd[:, 1]), 1e-9)
@@ -300,18 +307,19 @@ class SocialForce:
             over = np.maximum(crowd.radius[:, None] + crowd.radius[None, :] - d, 0.0)
             pos += 0.5 * np.sum((over / np.maximum(d, 1e-9))[..., None] * diff, axis=1)
         if segs.shape[1]:
+            rows = np.arange(crowd.n)
             for _ in range(2):
-                dist, nvec = self._closest(pos, segs)
+                dist, nx, ny = self._closest(pos, segs)
                 over = np.maximum(crowd.radius[:, None] - dist, 0.0)
                 if not over.any():
                     break
                 j = np.argmax(over, axis=1)
-                rows = np.arange(crowd.n)
-                pos += over[rows, j][:, None] * nvec[rows, j]
+                depth = over[rows, j]
+                nv = np.column_stack([nx[rows, j], ny[rows, j]])
+                pos += depth[:, None] * nv
                 # remove the velocity component into the obstacle
-                nv = nvec[rows, j]
                 vn = np.sum(crowd.vel * nv, axis=1)
-                hit = (over[rows, j] > 0) & (vn < 0)
+                hit = (depth > 0) & (vn < 0)
                 crowd.vel[hit] -= vn[hit, None] * nv[hit]
 
     @staticmethod

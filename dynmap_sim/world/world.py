@@ -167,11 +167,13 @@ class World:
             return
         rxy = None if robot_pose is None else np.array(robot_pose[:2], dtype=np.float64)
         self._forces.step(self._crowd, dt_s, rxy, robot_radius_m)
-        for body, p, v in zip(self._people_bodies, self._crowd.pos, self._crowd.vel, strict=True):
-            body.position = (p[0], p[1])
-            body.velocity = (v[0], v[1])
+        reindex = self.space.reindex_shapes_for_body
+        pos, vel = self._crowd.pos.tolist(), self._crowd.vel.tolist()
+        for body, p, v in zip(self._people_bodies, pos, vel, strict=True):
+            body.position = p
+            body.velocity = v
             # the space is never stepped: refresh the shapes' cached positions for queries
-            self.space.reindex_shapes_for_body(body)
+            reindex(body)
         self._refresh_people()
 
     @property
