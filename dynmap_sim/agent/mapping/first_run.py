@@ -62,13 +62,27 @@ def scan_points_base(laser: LaserSpec, ranges_m: ArrayLike) -> FloatArray:
     return se2.transform_points(np.asarray(laser.mount_pose, dtype=np.float64), pts)
 
 
-def voxel_downsample(points: FloatArray, voxel_m: float) -> FloatArray:
-    """One point (the first) per ``voxel_m`` square cell."""
+def range_weights(points_base: FloatArray, rel_noise: float = 0.01, min_sigma_m: float = 0.01):
+    """Relative inverse variances ``(sigma_min / sigma(r))^2`` of points for ICP, with the
+    range noise ``sigma(r) = max(min_sigma_m, rel_noise * r)`` (URG-04LX datasheet)."""
+    r = np.hypot(points_base[:, 0], points_base[:, 1])
+    return (min_sigma_m / np.maximum(min_sigma_m, rel_noise * r)) ** 2
+
+
+def voxel_downsample(points: FloatArray, voxel_m: float, mean: bool = False) -> FloatArray:
+    """One point per ``voxel_m`` square cell: the first one, or (``mean``) the centroid."""
     if len(points) == 0:
         return points
     key = np.floor(points / voxel_m).astype(np.int64)
-    _, idx = np.unique(key[:, 0] * 1_000_003 + key[:, 1], return_index=True)
-    return points[np.sort(idx)]
+    _, idx, inv = np.unique(
+        key[:, 0] * 1_000_003 + key[:, 1], return_index=True, return_inverse=True
+    )
+    if not mean:
+        return points[np.sort(idx)]
+    cnt = np.bincount(inv)
+    cx = np.bincount(inv, weights=points[:, 0]) / cnt
+    cy = np.bincount(inv, weights=points[:, 1]) / cnt
+    return np.column_stack([cx, cy])
 
 
 class FirstRunMapper:
@@ -81,22 +95,52 @@ class FirstRunMapper:
         keyframe_dist_m: float = 0.3,
         keyframe_angle_rad: float = 0.3,
         local_map_keyframes: int = 12,
+        local_map_radius_m: float = 0.0,
         voxel_m: float = 0.03,
         max_correspondence_m: float = 0.3,
-        loop_radius_m: float = 2.0,
+        loop_radius_m: float = 3.0,
         loop_min_gap: int = 15,
+        loop_max_angle_rad: float = 2.0,
+        loop_min_overlap: float = 0.35,
         resolution_m: float = 0.05,
+        range_weighting: bool = False,
+        voxel_mean: bool = True,
+        odom_prior: bool = True,
+        max_neighbours: int = 8,
+        graph_rounds: int = 2,
+        map_max_range_m: float = 100.0,
+        k_normal: int = 6,
+        odom_sigma: tuple[float, float, float, float, float, float] = (
+            0.005,
+            0.05,
+            0.01,
+            0.002,
+            0.05,
+            0.02,
+        ),
     ) -> None:
         self.laser = laser
         self.initial_pose = np.asarray(initial_pose, dtype=np.float64).reshape(3).copy()
         self.keyframe_dist_m = float(keyframe_dist_m)
         self.keyframe_angle_rad = float(keyframe_angle_rad)
         self.local_map_keyframes = int(local_map_keyframes)
+        self.local_map_radius_m = float(local_map_radius_m)
         self.voxel_m = float(voxel_m)
         self.max_correspondence_m = float(max_correspondence_m)
         self.loop_radius_m = float(loop_radius_m)
         self.loop_min_gap = int(loop_min_gap)
+        self.loop_max_angle_rad = float(loop_max_angle_rad)
+        self.loop_min_overlap = float(loop_min_overlap)
         self.resolution_m = float(resolution_m)
+        self.range_weighting = bool(range_weighting)
+        self.voxel_mean = bool(voxel_mean)
+        self.odom_prior = bool(odom_prior)
+        self.max_neighbours = int(max_neighbours)
+        self.graph_rounds = int(graph_rounds)
+        self._kf_maps: dict[int, PointMap | None] | None = None
+        self.map_max_range_m = float(map_max_range_m)
+        self.k_normal = int(k_normal)
+        self.odom_sigma = tuple(float(v) for v in odom_sigma)
         self.pose = self.initial_pose.copy()
         self.cov = np.diag([1e-6, 1e-6, 1e-6])
         self._last_odom: FloatArray | None = None
@@ -114,17 +158,25 @@ class FirstRunMapper:
         self.keyframes.append(
             Keyframe(self.pose.copy(), np.asarray(ranges, np.float32).copy(), self.n_scans)
         )
-        self._kf_points.append(voxel_downsample(pts, self.voxel_m))
+        near = np.hypot(pts[:, 0], pts[:, 1]) <= self.map_max_range_m
+        self._kf_points.append(voxel_downsample(pts[near], self.voxel_m))
         self._seq_cov.append(self.cov.copy())
         self._rebuild_local_map()
 
     def _rebuild_local_map(self) -> None:
-        sel = range(max(0, len(self.keyframes) - self.local_map_keyframes), len(self.keyframes))
+        n = len(self.keyframes)
+        recent = set(range(max(0, n - self.local_map_keyframes), n))
+        if self.local_map_radius_m > 0:
+            kp = np.array([k.pose[:2] for k in self.keyframes])
+            near = np.nonzero(np.hypot(*(kp - kp[-1]).T) < self.local_map_radius_m)[0]
+            recent |= set(near.tolist())
+        # Oldest first: the voxel filter keeps the first point, i.e. the least drifted one.
+        sel = sorted(recent)
         pts = np.concatenate(
             [se2.transform_points(self.keyframes[k].pose, self._kf_points[k]) for k in sel]
         )
-        pts = voxel_downsample(pts, self.voxel_m)
-        self._local = PointMap(pts) if len(pts) >= 3 else None
+        pts = voxel_downsample(pts, self.voxel_m, mean=self.voxel_mean)
+        self._local = PointMap(pts, k_normal=self.k_normal) if len(pts) >= 3 else None
 
     def update(self, odom: Odometry, scan: Scan) -> PoseEstimate:
         """Fuse one odometry reading and scan; return the front end's pose estimate."""
@@ -140,19 +192,21 @@ class FirstRunMapper:
             pred = se2.compose(self.pose, delta)
             d = float(np.hypot(delta[0], delta[1]))
             a = abs(float(delta[2]))
-            sig_xy = 0.02 + 0.2 * d + 0.02 * a
-            sig_th = 0.01 + 0.1 * a + 0.1 * d
+            sig_xy = self.odom_sigma[0] + self.odom_sigma[1] * d + self.odom_sigma[2] * a
+            sig_th = self.odom_sigma[3] + self.odom_sigma[4] * a + self.odom_sigma[5] * d
             q = np.diag([sig_xy**2, sig_xy**2, sig_th**2])
             accepted = False
             if self._local is not None and len(pts) >= 20:
+                sub = pts[:: max(1, len(pts) // 400)]
                 res = match_scan(
-                    pts[:: max(1, len(pts) // 400)],
+                    sub,
                     self._local,
                     pred,
                     prior_mean=pred,
-                    prior_info=np.linalg.inv(q),
+                    prior_info=np.linalg.inv(q) if self.odom_prior else None,
                     max_correspondence_m=self.max_correspondence_m,
                     max_iterations=20,
+                    weights=range_weights(sub) if self.range_weighting else None,
                 )
                 n_used = len(pts[:: max(1, len(pts) // 400)])
                 if res.n_matched >= max(15, 0.3 * n_used) and res.rmse_m < 0.08:
@@ -186,45 +240,50 @@ class FirstRunMapper:
             edges.append(Edge(k, k + 1, z, np.diag([1 / sxy**2, 1 / sxy**2, 1 / sth**2])))
         return edges
 
-    def _loop_edges(self, poses: FloatArray) -> list[Edge]:
+    def _keyframe_map(self, k: int) -> PointMap | None:
+        """Point map of keyframe ``k`` in its own frame (built once, cached)."""
+        if self._kf_maps is None:
+            self._kf_maps = {}
+        if k not in self._kf_maps:
+            pts = self._kf_points[k]
+            self._kf_maps[k] = PointMap(pts, k_normal=self.k_normal) if len(pts) >= 20 else None
+        return self._kf_maps[k]
+
+    def _match_edges(self, poses: FloatArray) -> list[Edge]:
+        """Pairwise ICP edges between keyframes near each other in the current estimate.
+
+        Every keyframe is matched against up to ``max_neighbours`` earlier keyframes within
+        ``loop_radius_m`` (spread over the sequence; those far back in the sequence are loop
+        closures). A match is kept if it converges with a small residual and enough overlap.
+        """
         edges: list[Edge] = []
-        k_all = len(poses)
-        info = np.diag([1 / 0.03**2, 1 / 0.03**2, 1 / 0.01**2])
-        last_i = -(10**9)
-        for i in range(k_all):
-            if i - last_i < 3:  # at most one closure per few keyframes
-                continue
-            cand = np.arange(0, i - self.loop_min_gap)
-            if len(cand) == 0:
-                continue
+        info = np.diag([1 / 0.01**2, 1 / 0.01**2, 1 / 0.005**2])
+        for i in range(1, len(poses)):
+            cand = np.arange(0, i)
             dist = np.hypot(*(poses[cand, :2] - poses[i, :2]).T)
             dth = np.abs(se2.wrap_angle(poses[cand, 2] - poses[i, 2]))
-            ok = (dist < self.loop_radius_m) & (dth < 1.2)
-            if not ok.any():
-                continue
-            j = int(cand[ok][np.argmin(dist[ok])])
-            sub = range(max(0, j - 2), min(k_all, j + 3))
-            tgt = voxel_downsample(
-                np.concatenate([se2.transform_points(poses[m], self._kf_points[m]) for m in sub]),
-                self.voxel_m,
-            )
+            cand = cand[(dist < self.loop_radius_m) & (dth < self.loop_max_angle_rad)]
+            if len(cand) > self.max_neighbours:
+                pick = np.linspace(0, len(cand) - 1, self.max_neighbours).round().astype(int)
+                cand = cand[np.unique(pick)]
             src = self._kf_points[i]
-            if len(tgt) < 20 or len(src) < 20:
+            if len(src) < 20:
                 continue
-            target = PointMap(tgt)
-            res = match_scan(src, target, poses[i], max_correspondence_m=0.5, max_iterations=40)
-            if res.converged:  # refine with tight gating
+            for j in cand:
+                target = self._keyframe_map(int(j))
+                if target is None:
+                    continue
+                init = se2.between(poses[j], poses[i])
+                res = match_scan(src, target, init, max_correspondence_m=0.5, max_iterations=30)
                 res = match_scan(src, target, res.pose, max_correspondence_m=0.15)
-            moved = float(np.hypot(*(res.pose[:2] - poses[i, :2])))
-            if (
-                res.converged
-                and res.n_matched >= 0.6 * len(src)
-                and res.rmse_m < 0.03
-                and moved < 1.0
-                and np.all(np.sqrt(np.diag(res.cov)[:2]) < 0.05)
-            ):
-                edges.append(Edge(j, i, se2.between(poses[j], res.pose), info))
-                last_i = i
+                moved = float(np.hypot(*(res.pose[:2] - init[:2])))
+                if (
+                    res.converged
+                    and res.n_matched >= max(60, self.loop_min_overlap * len(src))
+                    and res.rmse_m < 0.03
+                    and moved < 1.0
+                ):
+                    edges.append(Edge(int(j), i, res.pose, info))
         return edges
 
     def finish(self) -> StaticMap:
@@ -234,12 +293,12 @@ class FirstRunMapper:
         poses = np.array([k.pose for k in self.keyframes])
         seq = self._sequential_edges(poses)
         n_loops = 0
-        for _ in range(2):
-            loops = self._loop_edges(poses)
-            n_loops = len(loops)
-            if not loops:
+        for _ in range(self.graph_rounds):
+            matches = self._match_edges(poses)
+            n_loops = sum(1 for e in matches if e.j - e.i > self.loop_min_gap)
+            if not matches:
                 break
-            poses = optimize_pose_graph(poses, seq + loops, anchor=0)
+            poses = optimize_pose_graph(poses, seq + matches, anchor=0)
         kfs = [Keyframe(poses[m], k.ranges_m, k.scan_index) for m, k in enumerate(self.keyframes)]
         traj = np.array([se2.compose(poses[k], rel) for k, rel in self._ref])
         grid = OccupancyGrid.from_scans(

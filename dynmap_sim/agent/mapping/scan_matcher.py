@@ -98,14 +98,18 @@ def match_scan(
     sigma_floor_m: float = 0.01,
     tol_m: float = 1e-4,
     tol_rad: float = 1e-5,
+    weights: ArrayLike | None = None,
 ) -> MatchResult:
     """Align ``points_base`` ``(N, 2)`` (robot frame) to ``target``, starting at ``init_pose``.
 
     ``prior_mean`` ``(3,)`` and ``prior_info`` ``(3, 3)`` (an information matrix, i.e. an
-    inverse covariance) add a Gaussian prior on the pose (B&D eq. 9). Returns the pose of the
-    robot frame in the map frame with its covariance (see the module docstring).
+    inverse covariance) add a Gaussian prior on the pose (B&D eq. 9). ``weights`` ``(N,)``
+    (optional, relative inverse variances, e.g. ``(sigma_min / sigma(range))^2``) scale each
+    point's residual. Returns the pose of the robot frame in the map frame with its
+    covariance (see the module docstring).
     """
     pts = np.asarray(points_base, dtype=np.float64).reshape(-1, 2)
+    pw = None if weights is None else np.asarray(weights, dtype=np.float64).reshape(-1)
     pose = np.asarray(init_pose, dtype=np.float64).copy()
     lam = None if prior_info is None else np.asarray(prior_info, dtype=np.float64)
     mu = None
@@ -132,6 +136,8 @@ def match_scan(
             jac = np.column_stack([n[:, 0], n[:, 1], np.einsum("ij,ij->i", n, drp[ok])])
             a = np.abs(r)
             w = np.where(a <= huber_m, 1.0, huber_m / np.maximum(a, 1e-12))
+            if pw is not None:
+                w = w * pw[ok]
             h_scan = jac.T @ (jac * w[:, None])
             g = jac.T @ (w * r)
             rmse = float(np.sqrt(np.mean(r * r)))
