@@ -14,6 +14,7 @@ from pathlib import Path
 from dynmap_sim.experiments.results import ResultsDB
 from dynmap_sim.experiments.runner import run_experiment
 from dynmap_sim.experiments.scenario import Scenario, load_scenario
+from dynmap_sim.metrics import lost_stats
 
 
 @dataclass(frozen=True)
@@ -133,6 +134,10 @@ def evaluate(scenario: Scenario, out_dir: Path, seed: int) -> list[CheckRow]:
                 rows.append(
                     CheckRow(seed, label, "max error [m]", e.max_error_m, v, _le(v, e.max_error_m))
                 )
+            if e.max_time_to_recover_s is not None:
+                v, w = _worst_recovery(db, k)
+                lim = e.max_time_to_recover_s
+                rows.append(CheckRow(seed, label, "time to recover [s]", lim, v, _le(v, lim), w))
             if e.lost_fraction is not None:
                 r = db.query(
                     "SELECT avg(CASE WHEN err_m <= 0.5 THEN 0.0 ELSE 1.0 END) FROM estimates "
@@ -146,6 +151,19 @@ def evaluate(scenario: Scenario, out_dir: Path, seed: int) -> list[CheckRow]:
                     )
                 )
     return rows
+
+
+def _worst_recovery(db: ResultsDB, k: int) -> tuple[float, str]:
+    """Longest time to recover over all runs (inf when an episode never recovers)."""
+    d = db.per_scan(k)
+    worst, where = 0.0, ""
+    for day, run in sorted({(int(a), int(b)) for a, b in zip(d["day"], d["run"], strict=True)}):
+        m = (d["day"] == day) & (d["run"] == run)
+        ls = lost_stats(d["err_m"][m], d["t_s"][m])
+        v = math.inf if ls.n_recovered < ls.n_episodes else (ls.max_time_to_recover_s or 0.0)
+        if ls.n_episodes and (v > worst or not where):
+            worst, where = v, f"day {day} run {run}"
+    return worst, where
 
 
 def check_scenario(

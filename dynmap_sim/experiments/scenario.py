@@ -177,6 +177,9 @@ class LocalizerExpectation(_Strict):
         None, ge=0, le=1, description="fraction of scans with error > 0.5 m, overall"
     )
     mean_heading_error_rad: float | None = Field(None, gt=0)
+    max_time_to_recover_s: float | None = Field(
+        None, gt=0, description="every lost episode recovers within this time [s]"
+    )
 
 
 class Expectations(_Strict):

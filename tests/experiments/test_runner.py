@@ -136,3 +136,28 @@ def test_days_outside_the_calendar_are_refused(tmp_path):
     scn = scenario(tmp_path)
     with pytest.raises(InputError, match="calendar"):
         ExperimentRunner(scn, tmp_path / "o", (40, 41), 0, resume=False, env=FakeEnv())
+
+
+def test_check_rows_from_a_kidnapped_run(tmp_path):
+    from dynmap_sim.experiments.check import evaluate
+
+    scn = scenario(
+        tmp_path,
+        days=[1, 1],
+        kidnappings=[{"day": 1, "time_s": 2.0, "pose": [6.0, 4.0, 0.0]}],
+        expectations={
+            "no_collisions": True,
+            "localizers": {
+                "odo-a": {"max_time_to_recover_s": 10.0, "lost_fraction": 0.5},
+                "rec": {"mean_error_m": 10.0},
+            },
+        },
+    )
+    run(scn, tmp_path / "o")
+    rows = {(r.subject, r.criterion): r for r in evaluate(scn, tmp_path / "o", 0)}
+    assert rows[("robot", "collisions")].passed
+    rec = rows[("odo-a", "time to recover [s]")]
+    assert rec.measured == float("inf") and not rec.passed  # never recovers
+    lost = rows[("odo-a", "lost fraction")]
+    assert lost.measured == pytest.approx(30 / 51) and not lost.passed  # scans 21..50
+    assert rows[("rec", "mean error per day [m]")].passed
