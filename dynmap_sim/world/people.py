@@ -8,7 +8,9 @@ geometry and by the robot:
   of Helbing, Farkas & Vicsek 2000);
 * obstacle ``A_w exp((r_i - d_iW) / B_w) n_iW`` from the closest point of every segment
   within reach (H&M eq. 5);
-* robot: the same exponential from a disc of the robot's radius plus a comfort margin.
+* robot: the same exponential from a disc of the robot's radius plus a comfort margin, and
+  a sideways evasion term when the robot is ahead (people step aside early, to the right
+  when it is dead ahead), which keeps head-on corridor meetings from ending in a stand-off.
 
 The speed is capped at ``1.3 v0_i`` (H&M eq. 8). After the explicit Euler step a position
 correction keeps bodies out of walls and furniture and at least ``ROBOT_GAP_M`` away from
@@ -35,6 +37,8 @@ B_WALL = 0.12
 A_ROBOT = 6.0
 B_ROBOT = 0.25
 ROBOT_GAP_M = 0.10
+A_EVADE = 1.5
+B_EVADE = 0.8
 REACH_M = 1.0
 CELL_M = 0.5
 GOAL_TOL_M = 0.4
@@ -272,6 +276,14 @@ class SocialForce:
             dr = np.maximum(np.hypot(rd[:, 0], rd[:, 1]), 1e-9)
             reach = crowd.radius + robot_radius_m + ROBOT_GAP_M
             force += (A_ROBOT * np.exp((reach - dr) / B_ROBOT) / dr)[:, None] * rd
+            # evasion: a robot ahead makes people step aside early (to their right when it is
+            # dead ahead), so a head-on meeting in a corridor does not end in a stand-off
+            ahead = -(rd[:, 0] * e[:, 0] + rd[:, 1] * e[:, 1])
+            side = e[:, 0] * -rd[:, 1] - e[:, 1] * -rd[:, 0]  # > 0: robot on the left
+            sign = np.where(side < 0, -1.0, 1.0)  # +1: step right, away from it or dead ahead
+            mag = np.where(ahead > 0, A_EVADE * np.exp((reach - dr) / B_EVADE), 0.0)
+            force[:, 0] += mag * sign * e[:, 1]
+            force[:, 1] -= mag * sign * e[:, 0]
         vel += dt_s * force
         speed = np.hypot(vel[:, 0], vel[:, 1])
         vmax = 1.3 * crowd.v0

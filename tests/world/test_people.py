@@ -136,3 +136,30 @@ def test_clock_does_not_drift():
         w.step(0.1)
     assert w.elapsed_s == 3600.0
     assert w.time_s == w.calendar.slot(3, 1).start_s + 3600.0
+
+
+def test_head_on_meeting_in_a_corridor_ends_with_the_person_passing(base_world):
+    # a person walks exactly along the centre line at a robot standing on that line: the
+    # symmetric forces alone would make it stop; the evasion term makes it pass on its right
+    base_world["people"] = [
+        {
+            "id": "p",
+            "count": 1,
+            "areas": [[0.5, 2.0 - 1e-8, 0.9, 2.0 + 1e-8]],
+            "goals": [[5.4, 2.0]],
+            "speed_mps": [1.0, 1.0],
+        }
+    ]
+    base_world["objects"] = []
+    base_world["schedule"] = []
+    w = World(parse_world(base_world), seed=0)
+    robot = (3.0, 2.0, np.pi)
+    lowest_y = 2.0
+    for _ in range(80):
+        w.step(0.1, robot_pose=robot)
+        x, y = w.people_poses()[0, :2]
+        lowest_y = min(lowest_y, y)
+        if x > 3.5:
+            break
+    assert x > 3.5  # it got past the robot within 8 s
+    assert lowest_y < 1.5  # on its right (the robot was dead ahead)
