@@ -38,6 +38,7 @@ A_ROBOT = 6.0
 B_ROBOT = 0.25
 ROBOT_GAP_M = 0.10
 A_EVADE = 1.5
+KEEP_RIGHT_M = 0.15
 B_EVADE = 0.8
 REACH_M = 1.0
 CELL_M = 0.5
@@ -280,7 +281,8 @@ class SocialForce:
             # dead ahead), so a head-on meeting in a corridor does not end in a stand-off
             ahead = -(rd[:, 0] * e[:, 0] + rd[:, 1] * e[:, 1])
             side = e[:, 0] * -rd[:, 1] - e[:, 1] * -rd[:, 0]  # > 0: robot on the left
-            sign = np.where(side < 0, -1.0, 1.0)  # +1: step right, away from it or dead ahead
+            # +1: step right (keep-right convention), unless the robot is clearly on the right
+            sign = np.where(side < -KEEP_RIGHT_M, -1.0, 1.0)
             mag = np.where(ahead > 0, A_EVADE * np.exp((reach - dr) / B_EVADE), 0.0)
             force[:, 0] += mag * sign * e[:, 1]
             force[:, 1] -= mag * sign * e[:, 0]
