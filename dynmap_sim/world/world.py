@@ -92,10 +92,13 @@ class World:
         self.day, self.run = day, run
         self.slot: RunSlot = self.calendar.slots[t]
         objects = self.schedule.object_states(self.seed, t)
+        signature = tuple((o.id, o.polygon.tobytes()) for o in objects)
+        if signature != getattr(self, "_signature", None):  # rebuild only what changed
+            self._sync_objects(objects)
+            self._static: StaticGeometry = build_static(objects)
+            self._static_version += 1
+            self._signature = signature
         self.objects = objects
-        self._sync_objects(objects)
-        self._static: StaticGeometry = build_static(objects)
-        self._static_version += 1
         self._time_us = 0
         # people
         self._forces, self._crowd = self._spawn(day, run, objects)

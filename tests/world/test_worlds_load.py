@@ -46,3 +46,19 @@ def test_world_api_shapes(name):
     w.step(0.1, robot_pose=spec.robot.start)
     assert w.people_poses().shape[1] == 3
     assert w.time_s == pytest.approx(w.calendar.slot(w.calendar.n_days, 1).start_s + 0.1)
+
+
+def test_static_version_changes_only_when_the_geometry_does():
+    w = World(load_world("apartment"), seed=0)
+    w.reset(1, 1)
+    v1 = w.geometry.static_version
+    w.reset(2, 1)  # week 1 is static: the lidar may keep its cached broad phase
+    assert w.geometry.static_version == v1
+    w.reset(8, 1)  # week 2: new obstacles
+    assert w.geometry.static_version > v1
+    v8 = w.geometry.static_version
+    segs8 = w.geometry.segments.copy()
+    w.reset(1, 1)
+    assert w.geometry.static_version > v8
+    w.reset(8, 1)
+    np.testing.assert_array_equal(w.geometry.segments, segs8)
