@@ -34,6 +34,8 @@ class World:
     """A world file brought to life for one ``seed`` (see DESIGN.md §2 and common contracts)."""
 
     def __init__(self, spec: WorldSpec, seed: int = 0) -> None:
+        if int(seed) < 0:
+            raise ValueError(f"seed must be a non-negative integer, not {seed!r}")
         self.spec = spec
         self.seed = int(seed)
         self.calendar = Calendar(spec.calendar)
