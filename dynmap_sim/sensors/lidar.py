@@ -230,6 +230,7 @@ class Lidar:
         self._cos, self._sin = beam_directions(
             spec.angle_min_rad, spec.angle_increment_rad, spec.n_beams
         )
+        self._u = self._cos + 1j * self._sin
         self._cache_key: tuple[int, np.ndarray] | None = None
         self._cache: SegmentCache | None = None
         self._labels_key: tuple[np.ndarray, ...] | None = None
@@ -285,6 +286,7 @@ class Lidar:
             spec.range_max_m,
             self._segments(geom),
             circles,
+            self._u,
         )
 
     def scan(

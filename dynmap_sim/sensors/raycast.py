@@ -32,10 +32,13 @@ _TWO_PI = 2.0 * np.pi
 class SegmentCache:
     """Per-geometry precomputation for :func:`cast_scan` (built once per static version).
 
-    ``data`` rows are ``x0, y0, dx, dy`` (contiguous, shape ``(4, N)``); ``bbox`` rows are
-    ``xmin, ymin, xmax, ymax`` of each segment, used by the range cull.
+    Points are complex numbers ``x + iy``: ``p0`` the segments' first endpoints, ``d`` their
+    direction vectors ``p1 - p0``; ``bbox`` rows are ``xmin, ymin, xmax, ymax`` of each
+    segment (range cull). ``data`` rows ``x0, y0, dx, dy`` serve the numba backend.
     """
 
+    p0: NDArray[np.complex128]
+    d: NDArray[np.complex128]
     data: FloatArray
     bbox: FloatArray
     n: int
@@ -44,9 +47,9 @@ class SegmentCache:
     def build(cls, segments: FloatArray) -> SegmentCache:
         """Precompute from ``segments`` rows ``x0, y0, x1, y1`` [m]."""
         seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
-        data = np.ascontiguousarray(
-            np.stack([seg[:, 0], seg[:, 1], seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]])
-        )
+        dx = seg[:, 2] - seg[:, 0]
+        dy = seg[:, 3] - seg[:, 1]
+        data = np.ascontiguousarray(np.stack([seg[:, 0], seg[:, 1], dx, dy]))
         bbox = np.ascontiguousarray(
             np.stack(
                 [
@@ -57,7 +60,9 @@ class SegmentCache:
                 ]
             )
         )
-        return cls(data=data, bbox=bbox, n=seg.shape[0])
+        return cls(
+            p0=seg[:, 0] + 1j * seg[:, 1], d=dx + 1j * dy, data=data, bbox=bbox, n=seg.shape[0]
+        )
 
 
 def _beam_runs(
@@ -96,40 +101,38 @@ def cast_scan(
     max_range_m: float,
     segments: SegmentCache,
     circles: FloatArray | None = None,
+    u_l: NDArray[np.complex128] | None = None,
 ) -> tuple[FloatArray, IntArray]:
     """Cast all beams of one scan; return the true range [m] and the hit shape of each beam.
 
     The sensor is at ``pose = (x, y, heading)`` in the map frame; beam ``i`` points at
     ``angle_min_rad + i * angle_increment_rad`` in the sensor frame, and ``cos_l``/``sin_l``
-    are the cosines and sines of those sensor-frame angles. The geometry is moved into the
-    sensor frame (only the shapes within range). ``circles`` rows are ``x, y, r`` [m]. The
-    hit index is a row of the segments (``0 .. N-1``), ``N + j`` for circle ``j``, or ``-1``
-    (no hit within ``max_range_m``, range ``+inf``).
+    are the cosines and sines of those sensor-frame angles (``u_l = cos_l + i sin_l`` may be
+    passed precomputed). The shapes within range are moved into the sensor frame; points are
+    complex numbers, so a rotation is one multiplication and ``conj(p) q`` holds both the dot
+    (real part) and the cross product (imaginary part) of ``p`` and ``q``. ``circles`` rows
+    are ``x, y, r`` [m]. The hit index is a row of the segments (``0 .. N-1``), ``N + j`` for
+    circle ``j``, or ``-1`` (no hit within ``max_range_m``, range ``+inf``).
     """
     ox, oy, heading = float(pose[0]), float(pose[1]), float(pose[2])
     n_beams = cos_l.shape[0]
+    if u_l is None:
+        u_l = cos_l + 1j * sin_l
     inc = float(angle_increment_rad)
-    base = float(angle_min_rad)
     r_max = float(max_range_m)
-    ch, sh = math.cos(heading), math.sin(heading)
+    rot = complex(math.cos(heading), -math.sin(heading))  # map -> sensor frame
 
-    # --- segments: range cull (bounding boxes), then into the sensor frame ---------------
+    # --- segments: range cull (bounding boxes), into the sensor frame, bearing interval ----
     bb = segments.bbox
     near = (bb[0] <= ox + r_max) & (bb[2] >= ox - r_max) & (bb[1] <= oy + r_max)
     near &= bb[3] >= oy - r_max
     sidx = np.flatnonzero(near)
-    sx0, sy0, sdx, sdy = segments.data[:, sidx]
-    wx = sx0 - ox
-    wy = sy0 - oy
-    ax = ch * wx + sh * wy
-    ay = ch * wy - sh * wx
-    dx = ch * sdx + sh * sdy
-    dy = ch * sdy - sh * sdx
-    bx = ax + dx
-    by = ay + dy
-    cross_ab = ax * by - ay * bx
-    span = np.arctan2(np.abs(cross_ab), ax * bx + ay * by)
-    start = np.arctan2(np.where(cross_ab >= 0.0, ay, by), np.where(cross_ab >= 0.0, ax, bx))
+    a = (segments.p0[sidx] - complex(ox, oy)) * rot  # first endpoint
+    d = segments.d[sidx] * rot
+    b = a + d  # second endpoint
+    ab = a.conjugate() * b  # imag: a x b (> 0: b is counter-clockwise of a)
+    span = np.abs(np.angle(ab))
+    start = np.angle(np.where(ab.imag >= 0.0, a, b))
     n_s = sidx.shape[0]
 
     # --- circles ------------------------------------------------------------------------
@@ -141,26 +144,23 @@ def cast_scan(
         cd2 = wx * wx + wy * wy
         rr = r_max + cr
         cnear = np.flatnonzero(cd2 <= rr * rr)
-        wx = wx[cnear]
-        wy = wy[cnear]
+        c = (wx[cnear] + 1j * wy[cnear]) * rot
         cr = cr[cnear]
-        cx = ch * wx + sh * wy
-        cy = ch * wy - sh * wx
-        c0 = cd2[cnear] - cr * cr  # < 0: the sensor is inside the circle
+        cd2 = cd2[cnear]
+        c0 = cd2 - cr * cr  # < 0: the sensor is inside the circle
         with np.errstate(invalid="ignore", divide="ignore"):
-            half = np.where(c0 <= 0.0, np.pi, np.arcsin(np.minimum(cr / np.sqrt(cd2[cnear]), 1.0)))
-        start = np.concatenate([start, np.arctan2(cy, cx) - half])
+            half = np.where(c0 <= 0.0, np.pi, np.arcsin(np.minimum(cr / np.sqrt(cd2), 1.0)))
+        start = np.concatenate([start, np.angle(c) - half])
         span = np.concatenate([span, 2.0 * half])
         n_c = cnear.shape[0]
     else:
         n_c = 0
 
-    lo, count = _beam_runs((start - base) % _TWO_PI, span, inc, n_beams)
+    lo, count = _beam_runs((start - angle_min_rad) % _TWO_PI, span, inc, n_beams)
     run, beam = _expand(lo, count)
     n_sc = n_s + n_c
     shape_k = run - n_sc * (run >= n_sc)  # undo the wrap copy
-    ux = cos_l[beam]
-    uy = sin_l[beam]
+    u = u_l[beam]
 
     ranges = np.full(n_beams, np.inf)
     hit = np.full(n_beams, -1, dtype=np.int64)
@@ -168,18 +168,15 @@ def cast_scan(
         is_seg = shape_k < n_s
         ks = shape_k[is_seg]
         bs = beam[is_seg]
-        uxs = ux[is_seg]
-        uys = uy[is_seg]
+        us = u[is_seg]
     else:
-        ks, bs, uxs, uys = shape_k, beam, ux, uy
-    pax = ax[ks]
-    pay = ay[ks]
-    pdx = dx[ks]
-    pdy = dy[ks]
+        ks, bs, us = shape_k, beam, u
+    pac = a[ks].conjugate()
+    pd = d[ks]
     with np.errstate(invalid="ignore", divide="ignore"):
-        inv = 1.0 / (uxs * pdy - uys * pdx)
-        t = (pax * pdy - pay * pdx) * inv
-        s = (pax * uys - pay * uxs) * inv
+        inv = 1.0 / (us.conjugate() * pd).imag  # 1 / (u x d)
+        t = (pac * pd).imag * inv  # (a x d) / (u x d)
+        s = (pac * us).imag * inv  # (a x u) / (u x d)
     ok = (t >= 0.0) & (t <= r_max) & (s >= 0.0) & (s <= 1.0)
     t_hit = t[ok]
     b_hit = bs[ok]
@@ -189,16 +186,13 @@ def cast_scan(
         notseg = ~is_seg
         kc = shape_k[notseg] - n_s
         bc = beam[notseg]
-        ccx = cx[kc]
-        ccy = cy[kc]
         cc0 = c0[kc]
-        b = ux[notseg] * ccx + uy[notseg] * ccy
-        disc = b * b - cc0
-        okc = (disc >= 0.0) & ((b >= 0.0) | (cc0 <= 0.0))
-        tc = np.where(cc0[okc] <= 0.0, 0.0, b[okc] - np.sqrt(disc[okc]))
+        bdot = (u[notseg].conjugate() * c[kc]).real  # u . c
+        disc = bdot * bdot - cc0
+        okc = (disc >= 0.0) & ((bdot >= 0.0) | (cc0 <= 0.0))
+        tc = np.where(cc0[okc] <= 0.0, 0.0, bdot[okc] - np.sqrt(disc[okc]))
         near_c = tc <= r_max
-        tc = tc[near_c]
-        t_hit = np.concatenate([t_hit, tc])
+        t_hit = np.concatenate([t_hit, tc[near_c]])
         b_hit = np.concatenate([b_hit, bc[okc][near_c]])
         id_hit = np.concatenate([id_hit, n_seg + cnear[kc[okc][near_c]]])
 

@@ -137,8 +137,12 @@ def cast_scan_numba(
     max_range_m: float,
     segments: SegmentCache,
     circles: FloatArray | None = None,
+    u_l: NDArray[np.complex128] | None = None,
 ) -> tuple[FloatArray, IntArray]:
-    """Same contract as :func:`dynmap_sim.sensors.raycast.cast_scan`, compiled with numba."""
+    """Same contract as :func:`dynmap_sim.sensors.raycast.cast_scan`, compiled with numba.
+
+    ``u_l`` (the numpy caster's complex beam directions) is accepted and ignored.
+    """
     if _kernel is None:
         raise RuntimeError('the numba backend needs numba: pip install "dynmap-sim[fast]"')
     n = cos_l.shape[0]
