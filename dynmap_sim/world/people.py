@@ -258,16 +258,20 @@ class SocialForce:
         dist_goal = np.hypot(to_goal[:, 0], to_goal[:, 1])
         e = to_goal / np.maximum(dist_goal, 1e-9)[:, None]
         force = (crowd.v0[:, None] * e - vel) / TAU_S
+        pair_gap = np.inf  # smallest gap between two bodies before the move [m]
         if n > 1:
             diff = pos[:, None, :] - pos[None, :, :]
             d = np.hypot(diff[..., 0], diff[..., 1])
             np.fill_diagonal(d, np.inf)
             rsum = crowd.radius[:, None] + crowd.radius[None, :]
+            pair_gap = float(np.min(d - rsum))
             mag = A_PEOPLE * np.exp((rsum - d) / B_PEOPLE)
             force += np.sum((mag / np.maximum(d, 1e-9))[..., None] * diff, axis=1)
         segs = self._candidates(pos)
+        wall_gap = np.full(n, np.inf)  # per person, gap to the nearest segment before the move
         if segs.shape[1]:
             dist, nx, ny = self._closest(pos, segs)
+            wall_gap = dist.min(axis=1) - crowd.radius
             mag = A_WALL * np.exp((crowd.radius[:, None] - np.minimum(dist, 50.0)) / B_WALL)
             mag[dist > REACH_M] = 0.0
             force[:, 0] += np.sum(mag * nx, axis=1)
@@ -292,7 +296,7 @@ class SocialForce:
         vel *= np.minimum(1.0, vmax / np.maximum(speed, 1e-9))[:, None]
         old = pos.copy()
         pos += dt_s * vel
-        self._correct(crowd, segs, robot_xy, robot_radius_m)
+        self._correct(crowd, segs, robot_xy, robot_radius_m, old, pair_gap, wall_gap)
         moved = np.hypot(*(pos - old).T)
         crowd.phase += 2 * np.pi * moved / STRIDE_M
         # goals: arrival or stuck -> new goal in line of sight
@@ -304,9 +308,20 @@ class SocialForce:
             crowd.stuck_s[i] = 0.0
 
     def _correct(
-        self, crowd: Crowd, segs: FloatArray, robot_xy: FloatArray | None, robot_r: float
+        self,
+        crowd: Crowd,
+        segs: FloatArray,
+        robot_xy: FloatArray | None,
+        robot_r: float,
+        old: FloatArray,
+        pair_gap: float,
+        wall_gap: FloatArray,
     ) -> None:
-        """Push bodies out of the robot's comfort disc, each other, then walls (walls win)."""
+        """Push bodies out of the robot's comfort disc, each other, then walls (walls win).
+
+        Distances are 1-Lipschitz in position, so a body that moved less than its gap before
+        the move (``pair_gap``, ``wall_gap`` [m]) cannot overlap: those checks are skipped.
+        """
         pos = crowd.pos
         if robot_xy is not None:
             rd = pos - robot_xy[None, :]
@@ -314,13 +329,17 @@ class SocialForce:
             need = crowd.radius + robot_r + ROBOT_GAP_M
             push = np.maximum(need - dr, 0.0)
             pos += (push / dr)[:, None] * rd
-        if crowd.n > 1:
+        delta = pos - old
+        disp = np.sqrt(delta[:, 0] ** 2 + delta[:, 1] ** 2)
+        if crowd.n > 1 and 2.0 * disp.max() >= pair_gap:
             diff = pos[:, None, :] - pos[None, :, :]
             d = np.hypot(diff[..., 0], diff[..., 1])
             np.fill_diagonal(d, np.inf)
             over = np.maximum(crowd.radius[:, None] + crowd.radius[None, :] - d, 0.0)
             pos += 0.5 * np.sum((over / np.maximum(d, 1e-9))[..., None] * diff, axis=1)
-        if segs.shape[1]:
+            delta = pos - old
+            disp = np.sqrt(delta[:, 0] ** 2 + delta[:, 1] ** 2)
+        if segs.shape[1] and bool(np.any(disp >= wall_gap)):
             rows = np.arange(crowd.n)
             for _ in range(2):
                 dist, nx, ny = self._closest(pos, segs)
