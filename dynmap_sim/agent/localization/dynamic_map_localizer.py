@@ -20,7 +20,10 @@ Per scan ``z_t`` (with odometry):
 The first run (``prior.first_run``, or no local maps yet) is mapped by the static SLAM of
 :class:`~dynmap_sim.agent.mapping.first_run.FirstRunMapper`; its keyframes, thinned to one per
 ``local_map_spacing_m``, become the initial local maps (§4), and the run's optimized
-trajectory feeds the first long-term update.
+trajectory feeds the first long-term update. With ``initial_map="walls"`` and a scenario that
+grants the wall segments, the first run instead scan-matches against the walls (same eq. 9
+scheme) and creates its local maps online — not in the paper, but it puts the dynamic map in
+the same frame as a static localizer given the walls.
 
 Per scan ``PoseEstimate.extras``: ``scan_loglik`` (mean per-reading log-likelihood of the
 scan under the selected models), ``scan_lik`` (mean per-reading likelihood, Fig. 10),
@@ -59,6 +62,17 @@ def lambda_min(cov: FloatArray) -> float:
     return float(np.linalg.eigvalsh(0.5 * (info + info.T))[0])
 
 
+def wall_points(walls: FloatArray, spacing_m: float) -> FloatArray:
+    """Points every ``spacing_m`` along wall segments ``(N, 4)`` (a granted prior map)."""
+    segs = np.asarray(walls, dtype=np.float64).reshape(-1, 4)
+    out = []
+    for x0, y0, x1, y1 in segs:
+        n = max(2, int(np.ceil(np.hypot(x1 - x0, y1 - y0) / spacing_m)) + 1)
+        t = np.linspace(0.0, 1.0, n)[:, None]
+        out.append(np.array([x0, y0]) + t * np.array([x1 - x0, y1 - y0]))
+    return np.concatenate(out) if out else np.zeros((0, 2))
+
+
 def odometry_covariance(
     delta: FloatArray, sigma_xy0: float, k_xy: float, sigma_th0: float, k_th: float
 ) -> FloatArray:
@@ -84,6 +98,7 @@ class DynamicMapLocalizer(Localizer):
         update_radius_m: float = 2.5,
         local_map_spacing_m: float = 2.0,
         min_readings: int = 20,
+        max_select_readings: int = 240,
         sigma_max_m: float = 0.05,
         explained_density: float = 0.5,
         sigma_min_m: float = 0.01,
@@ -93,16 +108,23 @@ class DynamicMapLocalizer(Localizer):
         odom_k_th: float = 0.1,
         kappa0: float = 0.25,
         max_kappa_doublings: int = 12,
-        max_match_points: int = 240,
+        max_match_points: int = 200,
         max_correspondence_m: float = 0.3,
         max_iterations: int = 20,
         min_matched: int = 20,
-        map_voxel_m: float = 0.03,
+        map_voxel_m: float = 0.05,
+        initial_map: str = "slam",
+        wall_spacing_m: float = 0.03,
         **params: Any,
     ) -> None:
         super().__init__(laser, rng, **params)
         if mode not in _MODES:
             raise ValueError(f"mode must be one of {_MODES}, got {mode!r}")
+        if initial_map not in ("slam", "walls"):
+            raise ValueError(f"initial_map must be 'slam' or 'walls', got {initial_map!r}")
+        self.initial_map = initial_map
+        self.wall_spacing_m = float(wall_spacing_m)
+        self._walls_pts: FloatArray | None = None
         self.mode = mode
         self.freeze_after_day = int(freeze_after_day)
         self.update_radius_m = float(update_radius_m)
@@ -113,6 +135,7 @@ class DynamicMapLocalizer(Localizer):
             sigma_max_m=float(sigma_max_m),
             explained_density=float(explained_density),
             sigma_min_m=float(sigma_min_m),
+            max_readings=int(max_select_readings),
         )
         self.odom_params = (
             float(odom_sigma_xy0_m),
@@ -183,8 +206,15 @@ class DynamicMapLocalizer(Localizer):
         self._cmap = None
         self._run_poses, self._run_ranges = [], []
         self._mapper = None
+        self._walls_pts = None
         if (prior.first_run or len(self.dmap) == 0) and not self.frozen:
-            self._mapper = FirstRunMapper(self.laser, self._pose)
+            if self.initial_map == "walls" and prior.walls is not None and len(prior.walls):
+                # The map granted as prior: the first run localizes against the known walls and
+                # creates its local maps online (§4.4 rule: none within 2.5 m -> a new one).
+                self._walls_pts = wall_points(prior.walls, self.wall_spacing_m)
+                self._cmap_points = self._walls_pts
+            else:
+                self._mapper = FirstRunMapper(self.laser, self._pose)
 
     def _points_map(self, pose: FloatArray, ranges_m: np.ndarray) -> FloatArray:
         return se2.transform_points(pose, scan_points_base(self.laser, ranges_m))
@@ -219,7 +249,8 @@ class DynamicMapLocalizer(Localizer):
         cur = synthesize_current_map(
             self.dmap, self._pose, pts_map, self.selectable_levels, self.synthesis
         )
-        self._set_current_map(cur)
+        if self._walls_pts is None:
+            self._set_current_map(cur)
         if self.learns_stm:
             self.dmap.learn_online(
                 self._pose, pts_map, self.rng, levels=[0], allow_new=not self.frozen

@@ -45,6 +45,8 @@ class SynthesisParams:
     min_outlier_ratio: float = 0.0
     #: Lowest per-reading density [1/m] used in sums, so one reading cannot dominate.
     density_floor: float = 1e-3
+    #: At most this many readings (evenly subsampled) enter the selection (0 = all).
+    max_readings: int = 0
 
 
 @dataclass
@@ -79,6 +81,8 @@ def synthesize_current_map(
     prm = SynthesisParams() if params is None else params
     levels = sorted(levels)  # ascending: the last one is the most long-term
     nearby = dmap.near(pose, prm.select_radius_m)
+    if prm.max_readings > 0 and len(points_map) > prm.max_readings:
+        points_map = points_map[:: int(np.ceil(len(points_map) / prm.max_readings))]
     n = len(points_map)
     if nearby.size == 0 or not levels:
         return CurrentMap(points=np.zeros((0, 2)), n_readings=n)

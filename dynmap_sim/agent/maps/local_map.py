@@ -18,7 +18,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from dynmap_sim.agent.maps.sample_set import SampleSets, mixture_log_likelihood, to_mm
+from dynmap_sim.agent.maps.sample_set import (
+    SampleSets,
+    mixture_log_likelihood,
+    table_log_likelihood,
+    to_mm,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -113,6 +118,9 @@ class LocalMap:
         """Per-reading ``log p(d)`` (eq. 6–8) of readings given in this map's polar frame."""
         ang, dist = polar
         ray = self.ray_index(ang, self.timescales[level].n_rays)
+        if sigma_min_m > 0.0:  # fast path (σ = 0 needs the exact point-mass handling)
+            tab = self.sub[level].model_table(self.max_range_m, sigma_min_m, min_outlier_ratio)
+            return table_log_likelihood(tab, ray, dist, self.max_range_m)
         return mixture_log_likelihood(
             self.sub[level].estimates(),
             ray,

@@ -68,6 +68,7 @@ class SampleSets:
         self.samples_mm = np.zeros((self.n_rays, self.n_samples), dtype=np.uint16)
         self.count = np.zeros(self.n_rays, dtype=np.uint16)
         self._est: RayEstimates | None = None
+        self._table: tuple[tuple[float, float, float], NDArray[np.float64]] | None = None
 
     # ------------------------------------------------------------------ memory
     @property
@@ -158,6 +159,7 @@ class SampleSets:
         self.samples_mm[uniq[g[keep]], slot[keep]] = v_s[keep]
         self.count[uniq] = (cnt + n_add).astype(np.uint16)
         self._est = None
+        self._table = None
 
     def update_m(
         self,
@@ -176,6 +178,31 @@ class SampleSets:
         if self._est is None:
             self._est = robust_estimates(self.samples_mm, self.count)
         return self._est
+
+    def model_table(
+        self, max_range_m: float, sigma_min_m: float = 0.0, min_outlier_ratio: float = 0.0
+    ) -> NDArray[np.float64]:
+        """Per-ray constants of eq. 6–8, ``(n_rays, 4)``: ``ρ``, ``1/(2σ²)``,
+        ``log((1 − p_o)/(σ√(2π)))`` and ``p_o/maxRange`` (cached until the next update).
+
+        Used by :func:`table_log_likelihood`, the fast path of the localizer. ``σ`` is
+        floored at ``max(sigma_min_m, 1 µm)``.
+        """
+        key = (float(max_range_m), float(sigma_min_m), float(min_outlier_ratio))
+        if self._table is not None and self._table[0] == key:
+            return self._table[1]
+        est = self.estimates()
+        has = est.count > 0
+        sig = np.where(has, np.maximum(np.nan_to_num(est.sigma_m), max(sigma_min_m, 1e-6)), 1.0)
+        po = np.where(has, np.maximum(est.outlier_ratio, min_outlier_ratio), 1.0)
+        tab = np.empty((self.n_rays, 4))
+        tab[:, 0] = np.where(has, est.rho_m, 0.0)
+        tab[:, 1] = 0.5 / (sig * sig)
+        with np.errstate(divide="ignore"):
+            tab[:, 2] = np.log(1.0 - po) - np.log(sig) + np.log(_INV_SQRT_2PI)
+        tab[:, 3] = po / max_range_m
+        self._table = (key, tab)
+        return tab
 
     def log_likelihood(
         self,
@@ -252,4 +279,19 @@ def mixture_log_likelihood(
         p_norm = np.where((sig == 0) & (range_m == rho), np.inf, p_norm)
         p = (1.0 - po) * p_norm + po * p_uni
         p = np.where(cnt > 0, p, p_uni)
+        return np.log(p)
+
+
+def table_log_likelihood(
+    table: NDArray[np.float64],
+    ray_idx: NDArray[np.int64],
+    range_m: NDArray[np.float64],
+    max_range_m: float,
+) -> NDArray[np.float64]:
+    """Eq. 6–8 from a :meth:`SampleSets.model_table` (one gather, few temporaries)."""
+    t = table[ray_idx]
+    z = range_m - t[:, 0]
+    p = np.exp(t[:, 2] - z * z * t[:, 1])
+    p += np.where((range_m >= 0.0) & (range_m <= max_range_m), t[:, 3], 0.0)
+    with np.errstate(divide="ignore"):
         return np.log(p)

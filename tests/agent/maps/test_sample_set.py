@@ -135,3 +135,24 @@ def test_age_distribution_follows_u_one_minus_u_power_t(n, u, seed):
     assert ks < 0.04, (ks, hist[:5], expect[:5])
     mean_age = np.sum(t * expect)
     assert ages.mean() == pytest.approx(mean_age, rel=0.1, abs=0.1)
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 2**31), sigma_min=st.sampled_from([0.001, 0.01, 0.05]))
+def test_table_likelihood_equals_direct_formula(seed, sigma_min):
+    from dynmap_sim.agent.maps.sample_set import mixture_log_likelihood, table_log_likelihood
+
+    rng = np.random.default_rng(seed)
+    s = SampleSets(50, 10, 0.5)
+    for _ in range(3):
+        ray = rng.integers(0, 40, 300)  # rays 40..49 stay empty
+        s.update(ray, rng.integers(100, 6000, 300), rng)
+    ray = rng.integers(0, 50, 200)
+    d = rng.uniform(-0.5, 7.0, 200)
+    direct = mixture_log_likelihood(
+        s.estimates(), ray, d, 5.6, sigma_min_m=sigma_min, min_outlier_ratio=0.01
+    )
+    fast = table_log_likelihood(s.model_table(5.6, sigma_min, 0.01), ray, d, 5.6)
+    fin = np.isfinite(direct)
+    assert np.array_equal(fin, np.isfinite(fast))
+    assert np.allclose(direct[fin], fast[fin], rtol=1e-9, atol=1e-9)
