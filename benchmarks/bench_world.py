@@ -159,7 +159,7 @@ def main() -> None:
     print()
     print(
         f"{'world':10s} {'day/run':>8s} {'people':>7s} {'segments':>9s} {'step us':>9s} "
-        f"{'naive us':>9s} {'speedup':>8s}"
+        f"{'cpu us':>8s} {'naive us':>9s} {'speedup':>8s}"
     )
     for s in steps:
         print(
