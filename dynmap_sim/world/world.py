@@ -31,7 +31,22 @@ _PEOPLE_TAG = 0x9E0913
 
 
 class World:
-    """A world file brought to life for one ``seed`` (see DESIGN.md §2 and common contracts)."""
+    """A world file brought to life for one ``seed`` (DESIGN.md §2).
+
+    * ``calendar`` (:class:`Calendar`: ``slots``, ``n_days``, ``runs_per_day``), ``slot``
+      (the current :class:`RunSlot`), ``day``, ``run``;
+    * ``reset(day, run)`` jumps to the start of a run; ``step(dt_s, robot_pose, robot_radius_m)``
+      advances people and the clock; ``time_s`` (since midnight), ``elapsed_s`` (in the run);
+    * ``geometry`` (:class:`GeometryView` for sensors), ``space`` (pymunk: walls and objects
+      as static shapes, people as kinematic circles; the space is never stepped here),
+      ``wall_segments()``, ``people_poses()``, ``people_radii()``, ``objects`` (current
+      :class:`ObjectState` tuple), ``route_blocked()``;
+    * ``snapshot(day, run)``: the state at the start of any run, a pure function of (file,
+      seed, day, run) that leaves the live state alone.
+
+    Randomness: shuffles draw from ``SeedSequence((seed, tag, event, day, run))`` and people
+    from ``SeedSequence((seed, tag, day, run))``, so any run is reproducible on its own.
+    """
 
     def __init__(self, spec: WorldSpec, seed: int = 0) -> None:
         if int(seed) < 0:
