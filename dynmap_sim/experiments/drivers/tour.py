@@ -18,6 +18,7 @@ the agent; the localizers never see any of it.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -176,37 +177,47 @@ class TourDriver:
             return np.array([-p.backoff_mps, 0.0], dtype=np.float32)
         assert self._plan is not None and self._planner is not None
         verts = self._plan.vertices
-        xy = pose[:2]
+        x, y, th = float(pose[0]), float(pose[1]), float(pose[2])
         # advance past reached vertices
-        while self._seg < len(verts) - 1 and np.hypot(*(verts[self._seg + 1] - xy)) < (
-            p.goal_tolerance_m
+        n_seg = len(verts) - 1
+        while (
+            self._seg < n_seg
+            and math.hypot(verts[self._seg + 1, 0] - x, verts[self._seg + 1, 1] - y)
+            < p.goal_tolerance_m
         ):
             self._seg += 1
         if self.done:
             return np.zeros(2, dtype=np.float32)
-        a, b = verts[self._seg], verts[self._seg + 1]
-        ab = b - a
-        len_ab = float(np.hypot(*ab))
-        u = float(np.clip(np.dot(xy - a, ab) / max(len_ab**2, 1e-12), 0.0, 1.0))
-        s = min(u * len_ab + p.lookahead_m, len_ab)
-        carrot = a + ab * (s / max(len_ab, 1e-12))
-        rel = se2.between(pose, np.array([carrot[0], carrot[1], 0.0]))
-        alpha = float(np.arctan2(rel[1], rel[0]))
-        dist = float(np.hypot(rel[0], rel[1]))
+        ax, ay = verts[self._seg]
+        bx, by = verts[self._seg + 1]
+        abx, aby = bx - ax, by - ay
+        len_ab = math.hypot(abx, aby)
+        u = min(max(((x - ax) * abx + (y - ay) * aby) / max(len_ab * len_ab, 1e-12), 0.0), 1.0)
+        s = min(u * len_ab + p.lookahead_m, len_ab) / max(len_ab, 1e-12)
+        dx, dy = ax + abx * s - x, ay + aby * s - y
+        # the carrot in the robot frame
+        c, sn = math.cos(th), math.sin(th)
+        rx, ry = c * dx + sn * dy, -sn * dx + c * dy
+        alpha = math.atan2(ry, rx)
+        dist = math.hypot(rx, ry)
         if abs(alpha) > p.turn_in_place_rad:
-            return np.array([0.0, np.sign(alpha) * p.max_omega_radps], dtype=np.float32)
+            return np.array([0.0, math.copysign(p.max_omega_radps, alpha)], dtype=np.float32)
         # speed: slower near obstacles, near the final goal, and for people ahead
-        clear = float(self._planner.grid.clearance_at(xy))
+        clear = float(self._planner.grid.clearance_at(np.array([x, y])))
         hard = self._planner.min_clearance_m
-        v = p.speed_mps * float(np.clip((clear - hard) / p.slow_down_m, 0.35, 1.0))
-        v *= float(np.clip(1.0 - abs(alpha) / p.turn_in_place_rad, 0.3, 1.0))
-        v = min(v, max(0.08, 1.2 * dist)) if self._seg == len(verts) - 2 else v
-        v *= self._people_factor(pose, people, t_s)
+        v = p.speed_mps * min(max((clear - hard) / p.slow_down_m, 0.35), 1.0)
+        v *= min(max(1.0 - abs(alpha) / p.turn_in_place_rad, 0.3), 1.0)
+        v = min(v, max(0.08, 1.2 * dist)) if self._seg == n_seg - 1 else v
+        if len(people):
+            v *= self._people_factor(pose, people, t_s)
+        elif self._waiting:
+            self._waiting = False
         if v == 0.0:
             return np.zeros(2, dtype=np.float32)
         # pure pursuit: curvature 2 sin(alpha) / L_d towards the carrot
-        kappa = 2.0 * np.sin(alpha) / max(dist, 1e-3)
-        omega = float(np.clip(max(v, 0.1) * kappa, -p.max_omega_radps, p.max_omega_radps))
+        kappa = 2.0 * math.sin(alpha) / max(dist, 1e-3)
+        w_max = p.max_omega_radps
+        omega = min(max(max(v, 0.1) * kappa, -w_max), w_max)
         return np.array([v, omega], dtype=np.float32)
 
     def _people_factor(self, pose: FloatArray, people: FloatArray, t_s: float) -> float:
