@@ -92,35 +92,3 @@ def build_static(objects: Iterable[ObjectState]) -> StaticGeometry:
         circle_class=_ro(np.array(ccls, dtype=np.int8)),
         object_ids=tuple(ids),
     )
-
-
-def with_people(
-    static: StaticGeometry,
-    legs: NDArray[np.float64],
-    leg_object: NDArray[np.int32],
-    people_ids: tuple[str, ...],
-    version: int,
-) -> GeometryView:
-    """A :class:`GeometryView` of ``static`` plus people's leg circles ``(L, 3)``.
-
-    ``leg_object`` indexes ``people_ids``; it is offset to follow the static object ids.
-    """
-    n = len(static.object_ids)
-    if len(legs):
-        circles = np.concatenate([static.circles, legs])
-        cobj = np.concatenate([static.circle_object, leg_object + n]).astype(np.int32)
-        ccls = np.concatenate(
-            [static.circle_class, np.full(len(legs), int(BeamClass.PERSON), np.int8)]
-        )
-    else:
-        circles, cobj, ccls = static.circles, static.circle_object, static.circle_class
-    return GeometryView(
-        segments=static.segments,
-        segment_object=static.segment_object,
-        segment_class=static.segment_class,
-        circles=circles,
-        circle_object=cobj,
-        circle_class=ccls,
-        object_ids=static.object_ids + people_ids,
-        static_version=version,
-    )

@@ -114,21 +114,6 @@ def point_segment_distance(points: FloatArray, segments: FloatArray) -> FloatArr
     return np.hypot(p[..., 0] - c[..., 0], p[..., 1] - c[..., 1])
 
 
-def segment_segment_distance(s: FloatArray, segments: FloatArray) -> FloatArray:
-    """Distances ``(N,)`` [m] between one segment ``s`` (4,) and segments ``(N, 4)``."""
-    if len(segments) == 0:
-        return np.zeros(0)
-    a0, a1 = s[:2], s[2:]
-    b0, b1 = segments[:, :2], segments[:, 2:]
-    # If they cross, distance is 0; otherwise it is the min endpoint-to-segment distance.
-    d1 = point_segment_distance(np.stack([a0, a1]), segments).min(axis=0)
-    d2 = point_segment_distance(b0, s[None, :])[:, 0]
-    d3 = point_segment_distance(b1, s[None, :])[:, 0]
-    dist = np.minimum(d1, np.minimum(d2, d3))
-    crosses = segments_cross(s, segments)
-    return np.where(crosses, 0.0, dist)
-
-
 def segments_cross(s: FloatArray, segments: FloatArray) -> NDArray[np.bool_]:
     """True where segment ``s`` (4,) properly intersects each of ``segments`` (N, 4)."""
 
