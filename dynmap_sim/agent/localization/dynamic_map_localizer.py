@@ -15,7 +15,10 @@ Per scan ``z_t`` (with odometry):
    timescale selection over the local maps within 4 m, safe mode.
 4. **Learning** (§4.4): λ1 learns ``z_t`` in the local maps within 2.5 m (a new local map where
    there is none); the (pose, scan) pair is stored; λ2 learns the run in :meth:`end_run`,
-   λ3–λ5 the day in :meth:`end_day`.
+   λ3–λ5 the day in :meth:`end_day`. For speed, the offline steps use a uniformly random
+   subset of the stored scans (``ltm_scans_per_run`` of a run for λ2, ``ltm_day_scans_per_run``
+   of each run for the day; 0 = all): the rule picks random measurements anyway, and a
+   random subset still holds far more than ``u·n`` measurements per ray.
 
 The first run (``prior.first_run``, or no local maps yet) is mapped by the static SLAM of
 :class:`~dynmap_sim.agent.mapping.first_run.FirstRunMapper`; its keyframes, thinned to one per
@@ -114,6 +117,8 @@ class DynamicMapLocalizer(Localizer):
         min_matched: int = 20,
         map_voxel_m: float = 0.05,
         initial_map: str = "slam",
+        ltm_scans_per_run: int = 800,
+        ltm_day_scans_per_run: int = 500,
         wall_spacing_m: float = 0.03,
         **params: Any,
     ) -> None:
@@ -123,6 +128,8 @@ class DynamicMapLocalizer(Localizer):
         if initial_map not in ("slam", "walls"):
             raise ValueError(f"initial_map must be 'slam' or 'walls', got {initial_map!r}")
         self.initial_map = initial_map
+        self.ltm_scans_per_run = int(ltm_scans_per_run)
+        self.ltm_day_scans_per_run = int(ltm_day_scans_per_run)
         self.wall_spacing_m = float(wall_spacing_m)
         self._walls_pts: FloatArray | None = None
         self.mode = mode
@@ -356,13 +363,20 @@ class DynamicMapLocalizer(Localizer):
                 self._run_poses = [p.copy() for p in smap.trajectory]
             self._init_local_maps(smap.keyframes)
         if self.learns_ltm and self._run_poses:
-            pts = self._stored_points(self._run_poses, self._run_ranges)
-            self.dmap.learn_offline(
-                self.dmap.levels("run"), np.array(self._run_poses), pts, self.rng
-            )
-            self._day_poses += self._run_poses
-            self._day_ranges += self._run_ranges
+            sel = self._random_subset(len(self._run_poses), self.ltm_scans_per_run)
+            poses = [self._run_poses[k] for k in sel]
+            pts = self._stored_points(poses, [self._run_ranges[k] for k in sel])
+            self.dmap.learn_offline(self.dmap.levels("run"), np.array(poses), pts, self.rng)
+            sel = self._random_subset(len(self._run_poses), self.ltm_day_scans_per_run)
+            self._day_poses += [self._run_poses[k] for k in sel]
+            self._day_ranges += [self._run_ranges[k] for k in sel]
         self._run_poses, self._run_ranges = [], []
+
+    def _random_subset(self, n: int, k: int) -> np.ndarray:
+        """``min(n, k)`` indices out of ``n``, uniformly at random, in time order."""
+        if k <= 0 or n <= k:
+            return np.arange(n)
+        return np.sort(self.rng.choice(n, size=k, replace=False))
 
     def end_day(self) -> None:
         """λ3–λ5 learn the day offline; static variants freeze after ``freeze_after_day``."""

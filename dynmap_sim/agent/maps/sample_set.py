@@ -127,7 +127,7 @@ class SampleSets:
             raise ValueError("ray index out of range")
         m = ray.size
         # Random order within each ray: "randomly chosen samples from M".
-        order = np.lexsort((rng.random(m), ray))
+        order = np.argsort(ray + rng.random(m))  # by ray, random within a ray
         r_s = ray[order]
         v_s = val[order]
         uniq, first, m_per = np.unique(r_s, return_index=True, return_counts=True)
