@@ -131,3 +131,20 @@ def test_bad_day_range_is_an_argument_error(capsys, days):
         main(["run", str(CI), "--days", days])
     assert ei.value.code == 2
     assert "day" in capsys.readouterr().err
+
+
+def test_check_runs_every_seed(capsys, tmp_path):
+    scn = tmp_path / "seeds.toml"
+    scn.write_text(
+        CI.read_text()
+        .replace('world = "apartment"', f'world = "{ROOT / "worlds" / "apartment.toml"}"')
+        .replace("days = [1, 3]", "days = [1, 1]")
+        .replace("seeds = [0]", "seeds = [0, 1]")
+        .replace("max_run_s = 20.0", "max_run_s = 4.0")
+    )
+    code, out, err = run_cli(capsys, "check", scn, "-q", "--out", tmp_path / "o")
+    assert code == 0, out + err
+    assert (tmp_path / "o" / "seed-0" / "results.db").is_file()
+    assert (tmp_path / "o" / "seed-1" / "results.db").is_file()
+    seeds = {line.split()[0] for line in out.splitlines()[3:] if line.strip()}
+    assert seeds == {"0", "1"}
