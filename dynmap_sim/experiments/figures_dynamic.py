@@ -1,0 +1,153 @@
+"""Figures of the dynamic-map experiment like Biber & Duckett's Figs. 10–13.
+
+* Fig. 10 — average likelihood of a range reading per day (we store the mean per-reading
+  log-likelihood ``scan_loglik``; the figure shows its daily mean), per localizer;
+* Fig. 11 — certainty: daily mean of ``λ_min`` of the inverse covariance, per localizer;
+* Fig. 12 — relative frequency with which each timescale was selected, overall;
+* Fig. 13 — daily usage frequency of λ1 (short-term) and λ5 (most long-term).
+
+``write_dynamic_figures(out_dir)`` reads ``results.db`` of an experiment folder and writes
+``dyn_likelihood_per_day.png``, ``dyn_lambda_min_per_day.png``, ``dyn_timescale_usage.png``
+and ``dyn_timescale_trend.png`` (only for localizers that report these extras). The
+aggregations are pure functions over arrays, tested on their own.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+N_TIMESCALES = 5
+
+
+def daily_means(day: NDArray[np.integer], values: NDArray[np.floating]) -> tuple[np.ndarray, ...]:
+    """Days with finite values, and the mean of ``values`` per such day."""
+    ok = np.isfinite(values)
+    days = np.unique(day[ok])
+    means = np.array([values[ok & (day == d)].mean() for d in days])
+    return days, means
+
+
+def timescale_usage(
+    timescale: NDArray[np.floating], n_timescales: int = N_TIMESCALES
+) -> NDArray[np.float64]:
+    """Relative frequency of each timescale index ``0..n-1`` among scans that chose one."""
+    t = timescale[np.isfinite(timescale)].astype(int)
+    t = t[(t >= 0) & (t < n_timescales)]
+    counts = np.bincount(t, minlength=n_timescales).astype(float)
+    return counts / max(counts.sum(), 1.0)
+
+
+def timescale_usage_per_day(
+    day: NDArray[np.integer], timescale: NDArray[np.floating], n_timescales: int = N_TIMESCALES
+) -> tuple[np.ndarray, np.ndarray]:
+    """Days and ``(n_days, n_timescales)`` relative usage per day (Fig. 13)."""
+    ok = np.isfinite(timescale) & (timescale >= 0)
+    days = np.unique(day[ok])
+    usage = np.array([timescale_usage(timescale[ok & (day == d)], n_timescales) for d in days])
+    return days, usage.reshape(len(days), n_timescales)
+
+
+def _plot_per_day(series, ylabel: str, title: str, path: Path, log: bool = False) -> Path:
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 3.6))
+    for label, days, means in series:
+        ax.plot(days, means, marker="o", ms=3, label=label)
+    ax.set_xlabel("day")
+    ax.set_ylabel(ylabel)
+    if log:
+        ax.set_yscale("log")
+    ax.set_title(title, fontsize="medium")
+    ax.legend(fontsize="small")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_timescale_usage(label: str, usage: np.ndarray, path: Path) -> Path:
+    """Fig. 12: bar chart of the relative selection frequency of λ1..λ5."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5, 3.2))
+    names = [f"λ{i + 1}" for i in range(len(usage))]
+    ax.bar(names, usage, color=["C3", "C0", "C0", "C0", "C0"][: len(usage)])
+    ax.set_ylabel("relative frequency")
+    ax.set_title(f"{label}: timescale selected (cf. B&D Fig. 12)", fontsize="medium")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_timescale_trend(label: str, days: np.ndarray, usage: np.ndarray, path: Path) -> Path:
+    """Fig. 13: usage of λ1 and λ5 per day."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 3.4))
+    ax.plot(days, usage[:, 0], marker="o", ms=3, label="λ1 (short-term memory)")
+    ax.plot(days, usage[:, -1], marker="s", ms=3, label=f"λ{usage.shape[1]} (most long-term)")
+    ax.set_xlabel("day")
+    ax.set_ylabel("usage frequency")
+    ax.set_title(f"{label}: usage of λ1 and λ5 over time (cf. B&D Fig. 13)", fontsize="medium")
+    ax.legend(fontsize="small")
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def write_dynamic_figures(out_dir: str | Path) -> list[Path]:
+    """Write the Fig. 10–13 look-alikes of an experiment folder; returns the files written."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    from dynmap_sim.experiments.results import ResultsDB
+
+    out = Path(out_dir)
+    written: list[Path] = []
+    with ResultsDB.open(out) as db:
+        labels = db.labels()
+        data = [(label, db.per_scan(k)) for k, label in enumerate(labels)]
+    lik = [(lb, *daily_means(d["day"], d["scan_loglik"])) for lb, d in data]
+    lik = [s for s in lik if len(s[1])]
+    if lik:
+        written.append(
+            _plot_per_day(
+                lik,
+                "mean log-likelihood per reading",
+                "Average scan likelihood per day (cf. B&D Fig. 10)",
+                out / "dyn_likelihood_per_day.png",
+            )
+        )
+    lam = [(lb, *daily_means(d["day"], d["lambda_min"])) for lb, d in data]
+    lam = [s for s in lam if len(s[1])]
+    if lam:
+        written.append(
+            _plot_per_day(
+                lam,
+                "mean λ_min of the inverse covariance",
+                "Certainty of the localization per day (cf. B&D Fig. 11)",
+                out / "dyn_lambda_min_per_day.png",
+                log=True,
+            )
+        )
+    for label, d in data:
+        if not np.any(np.isfinite(d["timescale"]) & (d["timescale"] >= 0)):
+            continue
+        safe = label.replace("/", "_").replace(" ", "_")
+        written.append(
+            plot_timescale_usage(
+                label, timescale_usage(d["timescale"]), out / f"dyn_timescale_usage_{safe}.png"
+            )
+        )
+        days, usage = timescale_usage_per_day(d["day"], d["timescale"])
+        written.append(
+            plot_timescale_trend(label, days, usage, out / f"dyn_timescale_trend_{safe}.png")
+        )
+    return written
