@@ -237,9 +237,10 @@ def check_world(spec: WorldSpec) -> list[tuple[str, str]]:
         for k, (x0, y0, x1, y1) in enumerate(p.areas):
             if x0 < bx0 or y0 < by0 or x1 > bx1 or y1 > by1:
                 errs.append((f"people.{i}.areas.{k}", "area is outside the world bounds"))
-        for k, (x, y) in enumerate(p.goals):
-            if not (bx0 <= x <= bx1 and by0 <= y <= by1):
-                errs.append((f"people.{i}.goals.{k}", "goal outside the world bounds"))
+        for key in ("goals", "route"):
+            for k, (x, y) in enumerate(getattr(p, key)):
+                if not (bx0 <= x <= bx1 and by0 <= y <= by1):
+                    errs.append((f"people.{i}.{key}.{k}", "point outside the world bounds"))
         for key in ("start", "end"):
             when = getattr(p, key)
             if when is not None and cal.day_of(when) is None:

@@ -15,13 +15,14 @@ geometry and by the robot:
 The speed is capped at ``1.3 v0_i`` (H&M eq. 8). After the explicit Euler step a position
 correction keeps bodies out of walls and furniture and at least ``ROBOT_GAP_M`` away from
 the robot's body, so the simulation never shows a person inside a wall whatever the forces.
-A person who reaches a goal (or is stuck for ``STUCK_S``) picks a new one in line of sight.
+A person who reaches a goal (or is stuck for ``STUCK_S``) picks a new one in line of sight,
+or, for a population with a ``route``, heads for the route's next waypoint (closed loop).
 People are seen by the laser as two legs whose fore-aft offset follows the gait phase.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -70,6 +71,8 @@ class Crowd:
     phase: FloatArray
     stuck_s: FloatArray
     ids: tuple[str, ...]
+    waypoint: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
+    """Index of the route waypoint each person heads for (-1: no route, free goals)."""
 
     @property
     def n(self) -> int:
@@ -184,15 +187,23 @@ class SocialForce:
         self, time_s: float, day_active: list[bool], keep_away: FloatArray | None = None
     ) -> Crowd:
         """Place the people present at ``time_s`` (profile x count) on free spots of their areas."""
-        pos, goal, v0, rad, popi, ids = [], [], [], [], [], []
+        pos, goal, v0, rad, popi, ids, wps = [], [], [], [], [], [], []
         for k, pop in enumerate(self.populations):
             if not day_active[k]:
                 continue
             n = int(round(pop.count * profile_fraction(pop.profile, time_s)))
             for j in range(n):
                 xy = None
+                wp = int(self.rng.integers(len(pop.route))) if pop.route else -1
                 for _ in range(30):
-                    c = self._random_point(pop, pop.radius_m)
+                    if wp >= 0:  # on a route: somewhere along the leg toward waypoint wp
+                        a = np.array(pop.route[wp - 1], dtype=float)
+                        b = np.array(pop.route[wp], dtype=float)
+                        c = a + self.rng.uniform(0.0, 1.0) * (b - a)
+                        if not self._free(c, pop.radius_m):
+                            continue
+                    else:
+                        c = self._random_point(pop, pop.radius_m)
                     if c is None:
                         break
                     ok = all(
@@ -209,7 +220,11 @@ class SocialForce:
                 pos.append(xy)
                 rad.append(pop.radius_m)
                 v0.append(self.rng.uniform(*pop.speed_mps))
-                goal.append(self.pick_goal(pop, xy, pop.radius_m))
+                if wp >= 0:
+                    goal.append(np.array(pop.route[wp], dtype=float))
+                else:
+                    goal.append(self.pick_goal(pop, xy, pop.radius_m))
+                wps.append(wp)
                 popi.append(k)
                 ids.append(f"person:{pop.id}:{j}")
         n = len(pos)
@@ -223,6 +238,7 @@ class SocialForce:
             phase=self.rng.uniform(0, 2 * np.pi, n),
             stuck_s=np.zeros(n),
             ids=tuple(ids),
+            waypoint=np.array(wps, dtype=np.int64),
         )
 
     # -- dynamics -------------------------------------------------------------------------
@@ -304,7 +320,11 @@ class SocialForce:
         redo = np.flatnonzero((dist_goal < GOAL_TOL_M) | (crowd.stuck_s > STUCK_S))
         for i in redo:
             pop = self.populations[int(crowd.population[i])]
-            crowd.goal[i] = self.pick_goal(pop, pos[i], float(crowd.radius[i]))
+            if pop.route:  # next waypoint of the (closed) route
+                crowd.waypoint[i] = (crowd.waypoint[i] + 1) % len(pop.route)
+                crowd.goal[i] = pop.route[int(crowd.waypoint[i])]
+            else:
+                crowd.goal[i] = self.pick_goal(pop, pos[i], float(crowd.radius[i]))
             crowd.stuck_s[i] = 0.0
 
     def _correct(

@@ -377,7 +377,8 @@ class PeopleSpec(_Model):
     """A population of pedestrians (Helbing & Molnár social force, see ``people.py``).
 
     Up to ``count`` people walk inside ``areas`` between ``goals`` (attraction points; random
-    points of the areas if empty). ``profile`` gives, as ``[[hour, fraction], ...]`` linearly
+    points of the areas if empty), or along a ``route`` of waypoints (a closed loop, each
+    person starting somewhere on it). ``profile`` gives, as ``[[hour, fraction], ...]`` linearly
     interpolated, the fraction of ``count`` present at a time of day; ``start``/``end``
     restrict the days they come. The number present in a run is fixed at the run's start
     time (runs last minutes; the profile changes over hours).
@@ -387,6 +388,9 @@ class PeopleSpec(_Model):
     count: int = Field(ge=0, le=40)
     areas: tuple[Box, ...] = Field(min_length=1)
     goals: tuple[Point, ...] = ()
+    route: tuple[Point, ...] = Field(
+        default=(), description="waypoints walked in order as a closed loop (instead of goals)"
+    )
     speed_mps: Point = (0.6, 1.3)
     radius_m: float = Field(default=0.22, gt=0.0, le=0.5)
     profile: tuple[Point, ...] = ((0.0, 1.0), (24.0, 1.0))
@@ -399,6 +403,14 @@ class PeopleSpec(_Model):
         for b in v:
             _check_box(b)
         return v
+
+    @model_validator(mode="after")
+    def _goals_or_route(self) -> PeopleSpec:
+        if self.goals and self.route:
+            raise ValueError("give either 'goals' or 'route', not both")
+        if len(self.route) == 1:
+            raise ValueError("a route needs at least 2 waypoints")
+        return self
 
     @field_validator("speed_mps")
     @classmethod

@@ -163,3 +163,39 @@ def test_head_on_meeting_in_a_corridor_ends_with_the_person_passing(base_world):
             break
     assert x > 3.5  # it got past the robot within 8 s
     assert lowest_y < 1.5  # on its right (the robot was dead ahead)
+
+
+def test_people_on_a_route_walk_its_waypoints_in_order(base_world):
+    loop = [[1.0, 0.8], [5.0, 0.8], [5.0, 3.0], [1.0, 3.0]]
+    base_world["people"] = [
+        {
+            "id": "guard",
+            "count": 1,
+            "areas": [[0.5, 0.5, 5.5, 3.5]],
+            "route": loop,
+            "speed_mps": [1.0, 1.0],
+        }
+    ]
+    base_world["objects"] = []
+    base_world["schedule"] = []
+    w = World(parse_world(base_world), seed=4)
+    visits = []
+    for _ in range(400):
+        w.step(0.1)
+        p = w.people_poses()[0, :2]
+        d = np.hypot(*(np.array(loop) - p).T)
+        k = int(np.argmin(d))
+        if d[k] < 0.45 and (not visits or visits[-1] != k):
+            visits.append(k)
+    assert len(visits) >= 6  # 40 s at 1 m/s on a 12.4 m loop: more than a lap
+    steps = [(b - a) % 4 for a, b in zip(visits, visits[1:], strict=False)]
+    assert all(s == 1 for s in steps), visits  # always the next waypoint of the loop
+
+
+def test_goals_and_route_are_exclusive(base_world):
+    from dynmap_sim.world import WorldFileError
+
+    base_world["people"][0]["goals"] = [[1.0, 1.0]]
+    base_world["people"][0]["route"] = [[1.0, 1.0], [2.0, 1.0]]
+    with pytest.raises(WorldFileError, match="either 'goals' or 'route'"):
+        parse_world(base_world)
