@@ -112,10 +112,16 @@ class ExperimentRunner:
             meta = self.db.meta()
             if meta.get("experiment_hash") != self.hash:
                 self.db.close()
+                if meta.get("seed") != self.seed or meta.get("days") != list(days):
+                    why = (
+                        f"seed {meta.get('seed')} and days {meta.get('days')}, not seed "
+                        f"{self.seed} and days {list(days)}"
+                    )
+                else:
+                    why = "another version of the scenario or its world file (they changed)"
                 raise InputError(
-                    f"{db_file}: these results were made with another scenario content, seed "
-                    f"or day range (results: seed {meta.get('seed')}, days {meta.get('days')}; "
-                    f"asked: seed {self.seed}, days {list(days)}); use another --out"
+                    f"{db_file}: these results were made with {why}; resume with the same "
+                    "inputs or start a new experiment with another --out"
                 )
             cp = self.db.load_checkpoint(self.hash, self.seed)
             if cp is not None:

@@ -109,7 +109,8 @@ def test_resume_gives_the_numbers_of_an_unbroken_run(tmp_path):
 def test_resume_refuses_other_seed_or_days(tmp_path):
     scn = scenario(tmp_path)
     run(scn, tmp_path / "o", stop_after=1)
-    with pytest.raises(InputError, match="another scenario content, seed or day range"):
+    msg = r"seed 0 and days \[1, 3\], not seed 0 and days \[1, 2\]"
+    with pytest.raises(InputError, match=msg):
         ExperimentRunner(scn, tmp_path / "o", (1, 2), 0, resume=True, env=FakeEnv())
     with pytest.raises(InputError, match="already holds results"):
         ExperimentRunner(scn, tmp_path / "o", scn.days, 0, resume=False, env=FakeEnv())
@@ -161,3 +162,13 @@ def test_check_rows_from_a_kidnapped_run(tmp_path):
     lost = rows[("odo-a", "lost fraction")]
     assert lost.measured == pytest.approx(30 / 51) and not lost.passed  # scans 21..50
     assert rows[("rec", "mean error per day [m]")].passed
+
+
+def test_resume_refuses_a_changed_world_file(tmp_path):
+    world = tmp_path / "world.toml"
+    world.write_text((ROOT / "worlds" / "apartment.toml").read_text())
+    scn = scenario(tmp_path, world=str(world))
+    run(scn, tmp_path / "o", stop_after=1)
+    world.write_text(world.read_text() + "\n# edited\n")
+    with pytest.raises(InputError, match="scenario or its world file"):
+        ExperimentRunner(scn, tmp_path / "o", scn.days, 0, resume=True, env=FakeEnv())
