@@ -13,7 +13,10 @@ Targets (DESIGN.md §7, issue 3): env step >= 10x the naive scan rate (about >= 
 steps/s), lidar <= 1 us/ray with numpy and <= 0.3 us/ray with numba. Prints a table and
 writes JSON (package version, platform, figures).
 
-    python benchmarks/bench_sim.py [--steps 3000] [--json benchmarks/results/bench_sim.json]
+    python benchmarks/bench_sim.py [--steps 3000] [--repeats 5] [--json PATH]
+
+Each figure is the best of ``--repeats`` equal chunks of its measurement (robust to a busy
+machine); the JSON goes to ``benchmarks/results/bench_sim.json`` by default.
 """
 
 from __future__ import annotations
@@ -37,8 +40,6 @@ TARGET_ENV_RATIO = 10.0
 TARGET_ENV_STEPS = 2500.0
 TARGET_US_PER_RAY_NUMPY = 1.0
 TARGET_US_PER_RAY_NUMBA = 0.3
-#: Every figure is the best of this many equal chunks of its measurement.
-REPEATS = 3
 
 
 def actions(n: int) -> np.ndarray:
@@ -49,7 +50,7 @@ def actions(n: int) -> np.ndarray:
 
 
 def env_rate(
-    people: bool, day: int, run: int, steps: int, backend: str = "numpy"
+    people: bool, day: int, run: int, steps: int, repeats: int, backend: str = "numpy"
 ) -> tuple[float, int]:
     env = DynMapEnv(world="lab", people=people, sensor_options={"backend": backend})
     env.reset(seed=0, options={"day": day, "run": run})
@@ -59,7 +60,7 @@ def env_rate(
     env.reset(seed=0, options={"day": day, "run": run})
     n_people = env.world.people_poses().shape[0]
     best = math.inf
-    for chunk in np.array_split(acts, REPEATS):  # best chunk: robust to a busy machine
+    for chunk in np.array_split(acts, repeats):  # best chunk: robust to a busy machine
         t0 = time.perf_counter()
         for a in chunk:
             _, _, term, trunc, _ = env.step(a)
@@ -127,6 +128,9 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=3000, help="env steps per measurement")
     ap.add_argument("--scans", type=int, default=300, help="lidar scans per measurement")
     ap.add_argument("--naive-scans", type=int, default=30, help="naive reference scans")
+    ap.add_argument(
+        "--repeats", type=int, default=5, help="each figure is the best of this many chunks"
+    )
     ap.add_argument("--json", type=Path, default=Path("benchmarks/results/bench_sim.json"))
     args = ap.parse_args()
 
@@ -141,7 +145,7 @@ def main() -> None:
     lidar = make_lidar("urg-04lx", noise=NOISELESS)
     lidar.cast(poses[0], geom)
     ours = [lidar.cast(p, geom)[0] for p in poses]
-    us_ray_numpy = best_time_per_item(lambda p: lidar.cast(p, geom), poses, REPEATS)
+    us_ray_numpy = best_time_per_item(lambda p: lidar.cast(p, geom), poses, args.repeats)
     us_ray_numpy *= 1e6 / spec.n_beams
 
     us_ray_numba = None
@@ -151,7 +155,7 @@ def main() -> None:
         if numba_available():
             lidar_nb = make_lidar("urg-04lx", noise=NOISELESS, backend="numba")
             lidar_nb.cast(poses[0], geom)
-            t_nb = best_time_per_item(lambda p: lidar_nb.cast(p, geom), poses, REPEATS)
+            t_nb = best_time_per_item(lambda p: lidar_nb.cast(p, geom), poses, args.repeats)
             us_ray_numba = t_nb * 1e6 / spec.n_beams
     except ImportError:
         pass
@@ -162,7 +166,7 @@ def main() -> None:
     sel = np.linspace(0, args.scans - 1, args.naive_scans).astype(int)
     ref = [naive_scan(space, poses[i], angles, spec.range_max_m) for i in sel]
     t_naive = best_time_per_item(
-        lambda p: naive_scan(space, p, angles, spec.range_max_m), poses[sel], REPEATS
+        lambda p: naive_scan(space, p, angles, spec.range_max_m), poses[sel], args.repeats
     )
     naive_scans_per_s = 1.0 / t_naive
     us_ray_naive = t_naive / spec.n_beams * 1e6
@@ -172,12 +176,12 @@ def main() -> None:
         assert np.array_equal(np.isfinite(r), np.isfinite(ours[i]))
         max_diff = max(max_diff, float(np.max(np.abs(r[both] - ours[i][both]), initial=0.0)))
 
-    rate_empty, _ = env_rate(False, day, run, args.steps)
-    rate_crowd, n_people = env_rate(True, day, run, args.steps)
+    rate_empty, _ = env_rate(False, day, run, args.steps, args.repeats)
+    rate_crowd, n_people = env_rate(True, day, run, args.steps, args.repeats)
     rate_empty_nb = rate_crowd_nb = None
     if us_ray_numba is not None:
-        rate_empty_nb, _ = env_rate(False, day, run, args.steps, "numba")
-        rate_crowd_nb, _ = env_rate(True, day, run, args.steps, "numba")
+        rate_empty_nb, _ = env_rate(False, day, run, args.steps, args.repeats, "numba")
+        rate_crowd_nb, _ = env_rate(True, day, run, args.steps, args.repeats, "numba")
 
     rows = [
         (
