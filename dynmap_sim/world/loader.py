@@ -43,9 +43,10 @@ def resolve_world_path(name_or_path: str | Path) -> Path:
     """``"lab"``/``"apartment"`` -> ``worlds/<name>.toml``; an existing path passes through."""
     p = Path(name_or_path)
     if p.suffix == "" and not p.exists():
-        cand = WORLDS_DIR / f"{p.name}.toml"
-        if cand.exists():
-            return cand
+        for folder in (WORLDS_DIR, Path.cwd() / "worlds"):  # source tree, then working dir
+            cand = folder / f"{p.name}.toml"
+            if cand.exists():
+                return cand
     return p
 
 
