@@ -163,11 +163,18 @@ class SocialForce:
         return not bool(segments_cross(np.concatenate([a, b]), self.segments).any())
 
     def _random_point(self, pop: PeopleSpec, r: float) -> FloatArray | None:
-        for _ in range(50):
-            box = pop.areas[int(self.rng.integers(len(pop.areas)))]
-            xy = np.array([self.rng.uniform(box[0], box[2]), self.rng.uniform(box[1], box[3])])
-            if self._free(xy, r):
-                return xy
+        """A uniformly drawn free point of the population's areas (up to 8 batches of 8)."""
+        boxes = np.array(pop.areas, dtype=np.float64)
+        for _ in range(8):
+            k = self.rng.integers(len(boxes), size=8)
+            u = self.rng.uniform(0.0, 1.0, size=(8, 2))
+            cand = boxes[k, :2] + u * (boxes[k, 2:] - boxes[k, :2])
+            if len(self.segments) == 0:
+                return cand[0]
+            free = point_segment_distance(cand, self.segments).min(axis=1) > r + 0.05
+            idx = np.flatnonzero(free)
+            if len(idx):
+                return cand[idx[0]].copy()
         return None
 
     def pick_goal(self, pop: PeopleSpec, frm: FloatArray, r: float) -> FloatArray:
