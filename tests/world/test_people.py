@@ -199,3 +199,11 @@ def test_goals_and_route_are_exclusive(base_world):
     base_world["people"][0]["route"] = [[1.0, 1.0], [2.0, 1.0]]
     with pytest.raises(WorldFileError, match="either 'goals' or 'route'"):
         parse_world(base_world)
+
+
+def test_people_area_with_no_free_spot_spawns_nobody(base_world):
+    # the whole area lies inside the table: nobody can stand there, and nothing hangs
+    base_world["people"] = [{"id": "p", "count": 5, "areas": [[2.8, 2.9, 3.2, 3.1]]}]
+    w = World(parse_world(base_world), seed=0)
+    assert w.crowd.n == 0
+    w.step(0.1)
