@@ -115,12 +115,6 @@ class Checkpoint:
     state: dict[str, Any]
 
 
-def _nan_to_none(a: np.ndarray) -> list[Any]:
-    out = a.astype(object)
-    out[~np.isfinite(a)] = None
-    return out.tolist()
-
-
 class ResultsDB:
     """One experiment's SQLite store (open with :meth:`create` or :meth:`open`)."""
 
@@ -218,44 +212,32 @@ class ResultsDB:
                 self.con.execute(f"DELETE FROM {table} WHERE day=? AND run=?", (d, r))
             self.con.execute("DELETE FROM runs WHERE day=? AND run=?", (d, r))
             self.con.execute("DELETE FROM events WHERE day=? AND run=?", (d, r))
-            scan_rows = zip(
-                [d] * n,
-                [r] * n,
-                steps.tolist(),
-                rec.t_s.tolist(),
-                rec.truth[:, 0].tolist(),
-                rec.truth[:, 1].tolist(),
-                rec.truth[:, 2].tolist(),
-                rec.collision.astype(int).tolist(),
-                strict=True,
+            # one float64 table per insert, converted once; SQLite stores NaN as NULL and
+            # turns whole-number reals into integers in INTEGER columns
+            ones = np.ones(n)
+            scan_tab = np.column_stack(
+                [d * ones, r * ones, steps, rec.t_s, rec.truth, rec.collision.astype(float)]
             )
-            self.con.executemany("INSERT INTO scans VALUES (?,?,?,?,?,?,?,?)", scan_rows)
+            self.con.executemany("INSERT INTO scans VALUES (?,?,?,?,?,?,?,?)", scan_tab.tolist())
             for k in range(n_loc):
                 est = rec.estimates[k]
                 err = position_errors(rec.truth, est) if n else np.zeros(0)
                 herr = heading_errors(rec.truth, est) if n else np.zeros(0)
-                ex = rec.extras[k]
-                cols = [
-                    [k] * n,
-                    [d] * n,
-                    [r] * n,
-                    steps.tolist(),
-                    est[:, 0].tolist(),
-                    est[:, 1].tolist(),
-                    est[:, 2].tolist(),
-                    _nan_to_none(err),
-                    _nan_to_none(herr),
-                    _nan_to_none(rec.cov_diag[k, :, 0]),
-                    _nan_to_none(rec.cov_diag[k, :, 1]),
-                    _nan_to_none(rec.cov_diag[k, :, 2]),
-                    _nan_to_none(ex[:, 0]),
-                    _nan_to_none(ex[:, 1]),
-                    _nan_to_none(ex[:, 2]),
-                    _nan_to_none(ex[:, 3]),
-                ]
+                tab = np.column_stack(
+                    [
+                        k * ones,
+                        d * ones,
+                        r * ones,
+                        steps,
+                        est,
+                        err,
+                        herr,
+                        rec.cov_diag[k],
+                        rec.extras[k],
+                    ]
+                )
                 self.con.executemany(
-                    "INSERT INTO estimates VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)",
-                    zip(*cols, strict=True),
+                    "INSERT INTO estimates VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)", tab.tolist()
                 )
                 self.con.execute(
                     "INSERT INTO point_classes VALUES (?,?,?,?)",
