@@ -310,7 +310,7 @@ class ExperimentRunner:
             if kidnaps and kidnaps[0].step == step:
                 kp = kidnaps.pop(0)
                 target = kp.pose if kp.pose is not None else self._random_route_pose(rng)
-                free = driver._planner.nearest_free(target[:2], 1.0) if driver._planner else None
+                free = driver.free_place_near(target[:2], 1.0)
                 if free is None:
                     events.append((step, t_s, "kidnap_skipped", "no free place near the target"))
                 else:

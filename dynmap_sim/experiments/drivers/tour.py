@@ -141,6 +141,12 @@ class TourDriver:
         self.skipped_waypoints += 1
         self.events.append((self._step, t_s, "skip_waypoint", f"waypoint {k}: {why}"))
 
+    def free_place_near(self, xy: FloatArray, max_dist_m: float = 1.0) -> FloatArray | None:
+        """The nearest place to ``xy`` where the robot fits (this run's grid), or None."""
+        if self._planner is None:
+            return None
+        return self._planner.nearest_free(np.asarray(xy, dtype=np.float64), max_dist_m)
+
     def end_run(self) -> None:
         """Drop the run's grid and plan (they are rebuilt next run; keeps checkpoints small)."""
         self._planner = None
