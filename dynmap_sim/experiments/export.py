@@ -42,12 +42,12 @@ def export_tum(out_dir: str | Path, tum_dir: str | Path) -> list[Path]:
     written: list[Path] = []
     with ResultsDB.open(out_dir) as db:
         first = dt.date.fromisoformat(db.meta()["first_date"])
+        dates = {
+            (int(a), int(b)): dt.date.fromisoformat(c)
+            for a, b, c in db.query("SELECT day, run, date FROM runs")
+        }
         for k, label in enumerate(db.labels()):
             d = db.per_scan(k)
-            dates = {
-                (int(a), int(b)): dt.date.fromisoformat(c)
-                for a, b, c in db.query("SELECT day, run, date FROM runs")
-            }
             offset = np.array(
                 [
                     (dates[(a, b)] - first).days * 86400.0
