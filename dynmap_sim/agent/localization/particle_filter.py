@@ -17,7 +17,9 @@ Table 8.4 "KLD_Sampling_MCL"; Fox 2003) exactly as nav2_amcl composes it:
 * KLD-sampling picks the number of particles (0.5 m x 0.5 m x 10 degree bins,
   :mod:`.kld_sampling`), low-variance resampling draws them (:mod:`.resampling`);
 * the estimate is the mean of the heaviest cluster of particles (clusters are connected
-  occupied bins, as ``pf_cluster_stats``), with a weighted covariance (circular for theta).
+  occupied bins, as ``pf_cluster_stats``), with a weighted covariance (circular for theta),
+  taken from the weighted set after the sensor update (AMCL takes it after resampling, when
+  freshly injected random poses weigh as much as the rest and can drag the mean).
 
 The map is either the first run's SLAM map (built by
 :class:`~dynmap_sim.agent.mapping.first_run.FirstRunMapper` on the experiment's first run,
@@ -113,10 +115,10 @@ TUNED = MCLConfig(
     max_beams=60,
     z_hit=0.9,
     z_rand=0.1,
-    sigma_hit=0.08,
+    sigma_hit=0.12,
     do_beamskip=True,
     min_particles=500,
-    max_particles=5000,
+    max_particles=8000,
     pf_err=0.01,
     pf_z=2.326,
     recovery_alpha_slow=0.001,
@@ -442,9 +444,11 @@ class StaticMCL(Localizer):
         if do_update:
             f.correct(scan.ranges_m)
             self._n_updates += 1
+            # The estimate is taken from the weighted set, before resampling: after it, the
+            # random poses just injected for recovery would weigh as much as the others.
+            self._est_at_update, self._cov = f.estimate()
             if self._n_updates % max(1, c.resample_interval) == 0:
                 f.resample(self.rng)
-            self._est_at_update, self._cov = f.estimate()
             self._odom_at_update = pose_odom.copy()
         mean = se2.compose(self._est_at_update, se2.between(self._odom_at_update, pose_odom))
         cov = self._cov + 1e-9 * np.eye(3)
