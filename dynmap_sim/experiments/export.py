@@ -57,5 +57,8 @@ def export_tum(out_dir: str | Path, tum_dir: str | Path) -> list[Path]:
             stamps = offset + d["t_s"]
             if k == 0:
                 written.append(write_tum(dst / "truth.tum", stamps, d["truth"]))
-            written.append(write_tum(dst / f"{_safe(label)}.tum", stamps, d["estimate"]))
+            name = _safe(label)
+            if name == "truth" or any(p.stem == name for p in written):
+                name = f"{name}-{k}"  # two labels that sanitize alike keep separate files
+            written.append(write_tum(dst / f"{name}.tum", stamps, d["estimate"]))
     return written
