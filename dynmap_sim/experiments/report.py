@@ -286,7 +286,9 @@ def _fig_trajectories(db: ResultsDB, path: Path) -> Path:
         for k, label in enumerate(db.labels()):
             d = db.per_scan(k, day, run)
             if k == 0:
-                ax.plot(d["truth"][:, 0], d["truth"][:, 1], "g-", lw=2, label="truth", alpha=0.6)
+                ax.plot(
+                    d["truth"][:, 0], d["truth"][:, 1], color="0.3", lw=3, label="truth", alpha=0.35
+                )
             ax.plot(d["estimate"][:, 0], d["estimate"][:, 1], lw=1, label=label)
         ax.set_aspect("equal")
         ax.set_title(f"day {day}, run {run}", fontsize="small")
