@@ -89,11 +89,14 @@ class SocialForce:
         segments: FloatArray,
         rng: np.random.Generator,
         broad_phase: bool = True,
+        outline_starts: NDArray[np.int64] | None = None,
     ) -> None:
         self.populations = populations
         self.rng = rng
         self.segments = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
         self.broad_phase = broad_phase
+        #: first segment of each closed outline in ``segments`` (for inside tests), or None
+        self.outline_starts = outline_starts
         self._build_grid()
 
     def _build_grid(self) -> None:
@@ -152,10 +155,31 @@ class SocialForce:
         return self._segdata[self._cells[ix * ny + iy]]
 
     # -- sampling -----------------------------------------------------------------------
-    def _free(self, xy: FloatArray, r: float) -> bool:
+    def _inside_any(self, points: FloatArray) -> NDArray[np.bool_]:
+        """True where points ``(P, 2)`` lie inside a closed outline (crossing-number parity of
+        a ray toward +x, counted per outline)."""
+        if self.outline_starts is None or len(self.segments) == 0:
+            return np.zeros(len(points), dtype=bool)
+        s = self.segments
+        y0, y1 = s[None, :, 1], s[None, :, 3]
+        py = points[:, 1:2]
+        straddle = (y0 > py) != (y1 > py)
+        t = (py - y0) / np.where(y1 == y0, 1.0, y1 - y0)
+        x_cross = s[None, :, 0] + t * (s[None, :, 2] - s[None, :, 0])
+        hits = (straddle & (x_cross > points[:, 0:1])).astype(np.int64)
+        per_outline = np.add.reduceat(hits, self.outline_starts, axis=1)
+        return np.any(per_outline % 2 == 1, axis=1)
+
+    def _free_mask(self, points: FloatArray, r: float) -> NDArray[np.bool_]:
+        """True where a body of radius ``r`` fits at ``points`` ``(P, 2)`` (clear of outlines
+        by 5 cm and not inside any)."""
         if len(self.segments) == 0:
-            return True
-        return bool(point_segment_distance(xy[None, :], self.segments).min() > r + 0.05)
+            return np.ones(len(points), dtype=bool)
+        clear = point_segment_distance(points, self.segments).min(axis=1) > r + 0.05
+        return clear & ~self._inside_any(points)
+
+    def _free(self, xy: FloatArray, r: float) -> bool:
+        return bool(self._free_mask(xy[None, :], r)[0])
 
     def _visible(self, a: FloatArray, b: FloatArray) -> bool:
         if len(self.segments) == 0:
@@ -171,8 +195,7 @@ class SocialForce:
             cand = boxes[k, :2] + u * (boxes[k, 2:] - boxes[k, :2])
             if len(self.segments) == 0:
                 return cand[0]
-            free = point_segment_distance(cand, self.segments).min(axis=1) > r + 0.05
-            idx = np.flatnonzero(free)
+            idx = np.flatnonzero(self._free_mask(cand, r))
             if len(idx):
                 return cand[idx[0]].copy()
         return None

@@ -143,11 +143,11 @@ class World:
         self._refresh_people()
 
     def _spawn(self, day: int, run: int, objects: tuple[ObjectState, ...]):
-        static = self._static if objects is self.objects else build_static(objects)
-        segs = [static.segments] + [polygon_edges(o.polygon) for o in objects if o.circle]
-        segments = np.concatenate(segs)
+        edges = [polygon_edges(o.polygon) for o in objects]  # circles as their 16-gons
+        segments = np.concatenate(edges) if edges else np.zeros((0, 4))
+        starts = np.cumsum([0] + [len(e) for e in edges[:-1]]).astype(np.int64)
         rng = np.random.default_rng(np.random.SeedSequence((self.seed, _PEOPLE_TAG, day, run)))
-        forces = SocialForce(self.spec.people, segments, rng)
+        forces = SocialForce(self.spec.people, segments, rng, outline_starts=starts)
         active = []
         for p in self.spec.people:
             d0 = 1 if p.start is None else self.calendar.day_of(p.start) or 1

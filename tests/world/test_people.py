@@ -207,3 +207,14 @@ def test_people_area_with_no_free_spot_spawns_nobody(base_world):
     w = World(parse_world(base_world), seed=0)
     assert w.crowd.n == 0
     w.step(0.1)
+
+
+def test_inside_test_agrees_with_convex_containment():
+    w = World(load_world("lab"), seed=0)
+    w.reset(4, 2)
+    pts = np.random.default_rng(0).uniform([-0.4, -0.4], [40.4, 16.4], (2000, 2))
+    ref = np.zeros(len(pts), dtype=bool)
+    for o in w.objects:
+        ref |= points_in_convex(pts, o.polygon)
+    assert ref.any()
+    np.testing.assert_array_equal(w._forces._inside_any(pts), ref)
