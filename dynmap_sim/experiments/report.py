@@ -102,6 +102,11 @@ def overall_stats(db: ResultsDB) -> list[dict[str, Any]]:
                 rpes.append(r.translation.rmse**2 * r.translation.n)
                 n_rpe += r.translation.n
         a = ate(d["truth"], d["estimate"]) if len(err) else None
+        t_row = db.query(
+            "SELECT sum(update_ms_per_scan * n_scans), sum(n_scans) FROM run_summaries "
+            "WHERE loc=? AND update_ms_per_scan IS NOT NULL",
+            (k,),
+        )[0]
         out.append(
             {
                 "localizer": label,
@@ -117,6 +122,7 @@ def overall_stats(db: ResultsDB) -> list[dict[str, Any]]:
                 "lost_episodes": n_ep,
                 "recovered": n_rec,
                 "mean_time_to_recover_s": sum(rec_times) / n_rec if n_rec else math.nan,
+                "update_ms_per_scan": t_row[0] / t_row[1] if t_row[1] else math.nan,
             }
         )
     return out
@@ -145,15 +151,16 @@ def _summary_md(db: ResultsDB, path: Path, figures: list[Path]) -> Path:
         "## Overall (position error in the map frame, no alignment)",
         "",
         "| localizer | ATE RMSE [m] | mean [m] | max [m] | mean heading [rad] | RPE 1 s [m] "
-        "| lost | lost episodes | recovered | mean time to recover [s] |",
-        "|---|---|---|---|---|---|---|---|---|---|",
+        "| lost | lost episodes | recovered | mean time to recover [s] | update [ms/scan] |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for s in overall_stats(db):
         lines.append(
             f"| {s['localizer']} | {_fmt(s['ate_rmse_m'])} | {_fmt(s['mean_error_m'])} "
             f"| {_fmt(s['max_error_m'])} | {_fmt(s['mean_heading_error_rad'])} "
             f"| {_fmt(s['rpe_1s_rmse_m'])} | {100.0 * s['lost_fraction']:.1f} % "
-            f"| {s['lost_episodes']} | {s['recovered']} | {_fmt(s['mean_time_to_recover_s'], 1)} |"
+            f"| {s['lost_episodes']} | {s['recovered']} | {_fmt(s['mean_time_to_recover_s'], 1)} "
+            f"| {_fmt(s['update_ms_per_scan'], 2)} |"
         )
     lines += [
         "",

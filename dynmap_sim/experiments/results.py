@@ -56,7 +56,7 @@ CREATE TABLE IF NOT EXISTS run_summaries (
     loc INTEGER, day INTEGER, run INTEGER, n_scans INTEGER, mean_error_m REAL,
     max_error_m REAL, rmse_m REAL, lost_fraction REAL, mean_heading_error_rad REAL,
     mean_scan_loglik REAL, mean_lambda_min REAL, n_lost_episodes INTEGER,
-    n_recovered INTEGER, mean_time_to_recover_s REAL, rpe_m REAL,
+    n_recovered INTEGER, mean_time_to_recover_s REAL, rpe_m REAL, update_ms_per_scan REAL,
     PRIMARY KEY (loc, day, run));
 CREATE TABLE IF NOT EXISTS day_summaries (
     loc INTEGER, day INTEGER, n_scans INTEGER, mean_error_m REAL, max_error_m REAL,
@@ -103,6 +103,7 @@ class RunRecord:
     events: list[tuple[int, float, str, str]]  # (step, t_s, kind, detail)
     segments: NDArray[np.float64] | None = None
     segment_class: NDArray[np.int8] | None = None
+    update_s: NDArray[np.float64] | None = None  # (L,) wall time spent in each update()
 
 
 @dataclass(frozen=True)
@@ -278,8 +279,9 @@ class ResultsDB:
                     "INSERT INTO run_summaries VALUES (:loc, :day, :run, :n_scans, "
                     ":mean_error_m, :max_error_m, :rmse_m, :lost_fraction, "
                     ":mean_heading_error_rad, :mean_scan_loglik, :mean_lambda_min, "
-                    ":n_lost_episodes, :n_recovered, :mean_time_to_recover_s, :rpe_m)",
-                    {k: _none_if_nan(v) for k, v in s.items()},
+                    ":n_lost_episodes, :n_recovered, :mean_time_to_recover_s, :rpe_m, "
+                    ":update_ms_per_scan)",
+                    {"update_ms_per_scan": None} | {k: _none_if_nan(v) for k, v in s.items()},
                 )
             for s in self._day_summaries(d, n_loc) if day_done else []:
                 self.con.execute(

@@ -268,6 +268,7 @@ class ExperimentRunner:
         cov_l: list[list[np.ndarray]] = [[] for _ in range(n_loc)]
         ext_l: list[list[tuple[float, float, float, float]]] = [[] for _ in range(n_loc)]
         confusion = np.zeros((n_loc, 4, 4), dtype=np.int64)
+        update_s = np.zeros(n_loc)
         nan4 = (math.nan, math.nan, math.nan, math.nan)
         terminated = truncated = False
         collision = False
@@ -280,7 +281,9 @@ class ExperimentRunner:
             odom = Odometry(pose=np.array(obs["odom"], dtype=np.float64), stamp_s=t_s)
             scan = Scan(ranges_m=obs["scan"], stamp_s=t_s)
             for k, loc in enumerate(locs):
+                t_up = time.perf_counter()
                 est = loc.update(odom, scan)
+                update_s[k] += time.perf_counter() - t_up
                 est_l[k].append(est.mean)
                 cov_l[k].append(est.cov)
                 ex = est.extras
@@ -358,6 +361,7 @@ class ExperimentRunner:
             events=events,
             segments=np.asarray(geom.segments, dtype=np.float64),
             segment_class=np.asarray(geom.segment_class, dtype=np.int8),
+            update_s=update_s,
         )
         run_sum = [self._run_summary(k, rec) for k in range(n_loc)]
         nxt = self.slots[i + 1] if i + 1 < len(self.slots) else None
@@ -382,6 +386,10 @@ class ExperimentRunner:
         out["n_recovered"] = lost.n_recovered
         out["mean_time_to_recover_s"] = lost.mean_time_to_recover_s
         out["rpe_m"] = r.translation.rmse
+        n = len(rec.t_s)
+        out["update_ms_per_scan"] = (
+            1e3 * float(rec.update_s[k]) / n if rec.update_s is not None and n else math.nan
+        )
         return out
 
 
