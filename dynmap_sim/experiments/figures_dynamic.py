@@ -151,3 +151,46 @@ def write_dynamic_figures(out_dir: str | Path) -> list[Path]:
             plot_timescale_trend(label, days, usage, out / f"dyn_timescale_trend_{safe}.png")
         )
     return written
+
+
+def plot_local_map_timescales(
+    dmap: object,
+    xy: tuple[float, float],
+    path: str | Path,
+    levels: tuple[int, ...] = (4, 3, 2, 1),
+    sigma_max_m: float = 0.10,
+    title: str = "",
+) -> Path:
+    """Like B&D Figs. 7 and 9: the sub-maps ``levels`` (default λ5, λ4, λ3, λ2) of the local
+    map nearest ``xy`` as points (medians of rays with ``σ < sigma_max_m``, as in §5.2).
+
+    ``dmap`` is a :class:`~dynmap_sim.agent.maps.dynamic_map.DynamicMap` (e.g. ``loc.dmap`` of
+    a ``dynamic-map`` localizer loaded from a checkpoint).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    from dynmap_sim.agent.maps.dynamic_map import DynamicMap
+
+    if not isinstance(dmap, DynamicMap) or len(dmap) == 0:
+        raise ValueError("plot_local_map_timescales needs a non-empty DynamicMap")
+    c = dmap.centres
+    i = int(np.argmin(np.hypot(*(c - np.asarray(xy, dtype=np.float64)).T)))
+    lm = dmap.local_maps[i]
+    fig, axes = plt.subplots(1, len(levels), figsize=(3.2 * len(levels), 3.4), squeeze=False)
+    for ax, level in zip(axes[0], levels, strict=True):
+        pts = lm.points(level, sigma_max_m)
+        ax.plot(pts[:, 0], pts[:, 1], ".", ms=1.5, color="k")
+        ax.plot(*lm.centre, "o", mfc="none", color="C3")
+        ax.set_aspect("equal")
+        ax.set_title(f"λ{level + 1} ({len(pts)} rays)", fontsize="small")
+        ax.tick_params(labelsize="x-small")
+    if title:
+        fig.suptitle(title, fontsize="medium")
+    fig.tight_layout()
+    out = Path(path)
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out

@@ -34,3 +34,17 @@ def test_plots_write_files(tmp_path):
     p1 = plot_timescale_usage("dm", np.array([0.4, 0.2, 0.1, 0.1, 0.2]), tmp_path / "a.png")
     p2 = plot_timescale_trend("dm", np.arange(1, 4), np.full((3, 5), 0.2), tmp_path / "b.png")
     assert p1.stat().st_size > 1000 and p2.stat().st_size > 1000
+
+
+def test_local_map_snapshot_figure(tmp_path):
+    from dynmap_sim.agent.maps.dynamic_map import DynamicMap
+    from dynmap_sim.experiments.figures_dynamic import plot_local_map_timescales
+
+    rng = np.random.default_rng(0)
+    dmap = DynamicMap()
+    a = np.linspace(0, 2 * np.pi, 500)
+    ring = np.stack([2 * np.cos(a), 2 * np.sin(a)], axis=1)
+    dmap.add_local_map([0.0, 0.0], ring, rng)
+    dmap.learn_offline([1, 2, 3, 4], np.zeros((3, 3)), [ring, ring, ring], rng)
+    p = plot_local_map_timescales(dmap, (0.1, 0.0), tmp_path / "fig9.png", title="t")
+    assert p.stat().st_size > 1000
