@@ -3,7 +3,8 @@
 The state at slot ``t`` is a pure function of (world file, seed, t): start from the objects'
 initial state, collect every event *occurrence* at or before ``t`` (a ``present`` window
 contributes its start and its end, a recurring ``shuffle`` only its latest occurrence, a
-``grow`` its interpolated scale), and apply them in (slot, file order). Randomness of a
+``grow`` its interpolated scale), and apply them in (slot, file order), shuffles last within
+a slot so that they place their group around whatever else changed in that run. Randomness of a
 shuffle occurrence comes from ``numpy.random.SeedSequence((seed, event index, day, run))``,
 never from a generator stepped through time, so runs can be visited in any order.
 """
@@ -164,7 +165,8 @@ class Schedule:
                 s = self._slot(ev.at, ev.run)
                 if s <= t:
                     occ.append((s, i, ev.action, ev))
-        occ.sort(key=lambda o: (o[0], o[1]))
+        # within one run, scheduled changes come first and shuffles then place around them
+        occ.sort(key=lambda o: (o[0], o[2] == "shuffle", o[1]))
         return occ
 
     def states(self, seed: int, t: int) -> dict[str, _State]:
