@@ -333,11 +333,12 @@ def _semantic_errors(scn: Scenario) -> list[tuple[str, str]]:
             make_localizer(loc.name, laser=_DUMMY_LASER, rng=rng, **loc.params)
         except (TypeError, ValueError) as exc:
             errors.append((f"localizers.{i}.params", f"rejected by {loc.name!r}: {exc}"))
-    try:
-        env_kwargs(scn)
-    except (TypeError, ValueError) as exc:
-        where, _, msg = str(exc).partition(": ")
-        errors.append((where, msg))
+    for check in (robot_kwargs, sensor_kwargs):
+        try:
+            check(scn)
+        except (TypeError, ValueError) as exc:
+            where, _, msg = str(exc).partition(": ")
+            errors.append((where, msg))
     try:
         spec = load_world(scn.world_path)
     except WorldFileError as exc:
@@ -357,16 +358,13 @@ def _semantic_errors(scn: Scenario) -> list[tuple[str, str]]:
 ROBOT_PRESETS: dict[str, dict[str, Any]] = {"default": {}}
 
 
-def env_kwargs(scn: Scenario) -> dict[str, Any]:
-    """Keyword arguments of ``DynMapEnv`` for a scenario's robot, sensor and people.
+def robot_kwargs(scn: Scenario) -> dict[str, Any]:
+    """``robot`` and ``encoder`` arguments of ``DynMapEnv`` (ValueError on bad values).
 
     ``[robot] overrides``: any ``RobotParams`` field (``radius_m``, ``max_v_mps``, ...), plus
     ``wheels`` (``WheelGeometry``: ``e_d``, ``e_b``, ...) and ``encoder`` (``EncoderNoise``).
-    ``[sensor] overrides``: ``make_lidar`` overrides (``LaserSpec`` fields, ``beams``, ``mode``,
-    ``mount_pose``) and ``noise`` (``LidarNoise`` fields). Raises ValueError on bad values.
     """
     from dynmap_sim.robot.diff_drive import RobotParams
-    from dynmap_sim.sensors.lidar import make_lidar
     from dynmap_sim.sensors.odometry import EncoderNoise, WheelGeometry
 
     preset = scn.robot.preset or "default"
@@ -377,10 +375,19 @@ def env_kwargs(scn: Scenario) -> dict[str, Any]:
         wheels = WheelGeometry(**dict(rob.pop("wheels", {})))  # type: ignore[arg-type]
         encoder = EncoderNoise(**dict(rob.pop("encoder", {})))  # type: ignore[arg-type]
         robot = RobotParams(wheels=wheels, **rob)  # type: ignore[arg-type]
-    except TypeError as exc:
+    except (TypeError, ValueError) as exc:
         raise ValueError(f"robot.overrides: {exc}") from None
-    except ValueError as exc:
-        raise ValueError(f"robot.overrides: {exc}") from None
+    return {"robot": robot, "encoder": encoder}
+
+
+def sensor_kwargs(scn: Scenario) -> dict[str, Any]:
+    """``sensor``, ``sensor_options`` and ``lidar_noise`` arguments of ``DynMapEnv``.
+
+    ``[sensor] overrides``: ``make_lidar`` overrides (``LaserSpec`` fields, ``beams``,
+    ``mode``, ``mount_pose``) and ``noise`` (``LidarNoise`` fields). ValueError on bad values.
+    """
+    from dynmap_sim.sensors.lidar import make_lidar
+
     sensor = scn.sensor.preset or "urg-04lx"
     opts = dict(scn.sensor.overrides)
     noise = opts.pop("noise", None)
@@ -390,14 +397,16 @@ def env_kwargs(scn: Scenario) -> dict[str, Any]:
         make_lidar(sensor, noise=noise, **opts)  # type: ignore[arg-type]
     except (TypeError, ValueError) as exc:
         raise ValueError(f"sensor: {exc}") from None
+    return {"sensor": sensor, "sensor_options": opts, "lidar_noise": noise}
+
+
+def env_kwargs(scn: Scenario) -> dict[str, Any]:
+    """Keyword arguments of ``DynMapEnv`` for a scenario's world, robot, sensor and people."""
     return {
         "world": str(scn.world_path),
-        "sensor": sensor,
         "people": scn.people,
-        "sensor_options": opts,
-        "lidar_noise": noise,
-        "robot": robot,
-        "encoder": encoder,
+        **robot_kwargs(scn),
+        **sensor_kwargs(scn),
     }
 
 

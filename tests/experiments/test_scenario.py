@@ -167,3 +167,37 @@ def test_json_schema():
     json.dumps(schema)
     assert {"world", "days", "localizers", "expectations"} <= set(schema["properties"])
     assert schema.get("additionalProperties") is False
+
+
+def test_robot_and_sensor_overrides_are_checked(tmp_path):
+    p = write(
+        tmp_path,
+        """
+name = "x"
+world = "apartment"
+days = [1, 2]
+[sensor]
+preset = "urg-04lx"
+overrides = { foo = 1 }
+[robot.overrides]
+radius_m = -1
+[[localizers]]
+name = "odometry"
+""",
+    )
+    with pytest.raises(ScenarioFileError) as ei:
+        load_scenario(p)
+    errs = dict(ei.value.errors)
+    assert "radius_m" in errs["robot.overrides"]
+    assert "foo" in errs["sensor"]
+    ok = write(
+        tmp_path,
+        'name = "y"\nworld = "apartment"\ndays = [1, 1]\n[sensor]\npreset = "lms200"\n'
+        "overrides = { beams = 361, noise = { p_dropout = 0.0 } }\n"
+        '[robot.overrides]\nwheels = { e_d = 1.01 }\n[[localizers]]\nname = "odometry"\n',
+        "ok.toml",
+    )
+    from dynmap_sim.experiments.scenario import env_kwargs
+
+    kw = env_kwargs(load_scenario(ok))
+    assert kw["sensor"] == "lms200" and kw["robot"].wheels.e_d == 1.01
