@@ -15,7 +15,8 @@ geometry and by the robot:
 The speed is capped at ``1.3 v0_i`` (H&M eq. 8). After the explicit Euler step a position
 correction keeps bodies out of walls and furniture and at least ``ROBOT_GAP_M`` away from
 the robot's body, so the simulation never shows a person inside a wall whatever the forces.
-A person who reaches a goal (or is stuck for ``STUCK_S``) picks a new one in line of sight,
+A person who reaches a goal, gets no closer to it by ``PROGRESS_M`` for ``STUCK_S``, or finds
+the robot standing on it picks a new one in line of sight,
 or, for a population with a ``route``, heads for the route's next waypoint (closed loop).
 People are seen by the laser as two legs whose fore-aft offset follows the gait phase.
 """
@@ -45,6 +46,8 @@ REACH_M = 1.0
 CELL_M = 0.5
 GOAL_TOL_M = 0.4
 STUCK_S = 4.0
+PROGRESS_M = 0.2
+PAUSE_S = 2.0
 LEG_RADIUS_M = 0.06
 LEG_SPREAD_M = 0.10
 STRIDE_M = 1.2
@@ -73,6 +76,8 @@ class Crowd:
     ids: tuple[str, ...]
     waypoint: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
     """Index of the route waypoint each person heads for (-1: no route, free goals)."""
+    best_goal_m: FloatArray = field(default_factory=lambda: np.zeros(0))
+    """Closest each person has come to its current goal [m] (progress for stuck detection)."""
 
     @property
     def n(self) -> int:
@@ -200,8 +205,15 @@ class SocialForce:
                 return cand[idx[0]].copy()
         return None
 
-    def pick_goal(self, pop: PeopleSpec, frm: FloatArray, r: float) -> FloatArray:
-        """A goal in line of sight of ``frm``: an attraction point or a free point of the areas."""
+    def pick_goal(
+        self,
+        pop: PeopleSpec,
+        frm: FloatArray,
+        r: float,
+        avoid: tuple[FloatArray, float] | None = None,
+    ) -> FloatArray:
+        """A goal in line of sight of ``frm``: an attraction point or a free point of the areas,
+        not within ``avoid = (centre, radius_m) + r`` (the robot's disc)."""
         for _ in range(20):
             if pop.goals:
                 g = np.array(pop.goals[int(self.rng.integers(len(pop.goals)))], dtype=float)
@@ -209,6 +221,8 @@ class SocialForce:
                 g = self._random_point(pop, r)
                 if g is None:
                     continue
+            if avoid is not None and np.hypot(*(g - avoid[0])) < avoid[1] + r:
+                continue
             if np.hypot(*(g - frm)) > GOAL_TOL_M and self._visible(frm, g):
                 return g
         return frm.copy()
@@ -269,6 +283,7 @@ class SocialForce:
             stuck_s=np.zeros(n),
             ids=tuple(ids),
             waypoint=np.array(wps, dtype=np.int64),
+            best_goal_m=np.hypot(*(np.reshape(goal, (n, 2)) - np.reshape(pos, (n, 2))).T),
         )
 
     # -- dynamics -------------------------------------------------------------------------
@@ -345,17 +360,29 @@ class SocialForce:
         self._correct(crowd, segs, robot_xy, robot_radius_m, old, pair_gap, wall_gap)
         moved = np.hypot(*(pos - old).T)
         crowd.phase += 2 * np.pi * moved / STRIDE_M
-        # goals: arrival or stuck -> new goal in line of sight
-        crowd.stuck_s = np.where(moved < 0.1 * crowd.v0 * dt_s, crowd.stuck_s + dt_s, 0.0)
-        redo = np.flatnonzero((dist_goal < GOAL_TOL_M) | (crowd.stuck_s > STUCK_S))
-        for i in redo:
+        # goals: arrival, no progress for STUCK_S, or the robot standing on the goal -> new goal
+        gd = np.hypot(crowd.goal[:, 0] - pos[:, 0], crowd.goal[:, 1] - pos[:, 1])
+        progress = gd < crowd.best_goal_m - PROGRESS_M
+        crowd.best_goal_m = np.where(progress, gd, crowd.best_goal_m)
+        crowd.stuck_s = np.where(progress, 0.0, crowd.stuck_s + dt_s)
+        redo = (gd < GOAL_TOL_M) | (crowd.stuck_s > STUCK_S)
+        avoid = None
+        if robot_xy is not None:
+            reach_goal = crowd.radius + robot_radius_m + ROBOT_GAP_M + 0.1
+            redo |= np.hypot(*(crowd.goal - robot_xy[None, :]).T) < reach_goal
+            avoid = (robot_xy, robot_radius_m + ROBOT_GAP_M + 0.1)
+        redo &= crowd.stuck_s >= 0.0  # negative: pausing after a failed goal search
+        for i in np.flatnonzero(redo):
             pop = self.populations[int(crowd.population[i])]
             if pop.route:  # next waypoint of the (closed) route
                 crowd.waypoint[i] = (crowd.waypoint[i] + 1) % len(pop.route)
                 crowd.goal[i] = pop.route[int(crowd.waypoint[i])]
             else:
-                crowd.goal[i] = self.pick_goal(pop, pos[i], float(crowd.radius[i]))
+                crowd.goal[i] = self.pick_goal(pop, pos[i], float(crowd.radius[i]), avoid)
             crowd.stuck_s[i] = 0.0
+            if np.array_equal(crowd.goal[i], pos[i]):  # no goal found: pause, then retry
+                crowd.stuck_s[i] = -PAUSE_S
+            crowd.best_goal_m[i] = float(np.hypot(*(crowd.goal[i] - pos[i])))
 
     def _correct(
         self,

@@ -218,3 +218,28 @@ def test_inside_test_agrees_with_convex_containment():
         ref |= points_in_convex(pts, o.polygon)
     assert ref.any()
     np.testing.assert_array_equal(w._forces._inside_any(pts), ref)
+
+
+def test_a_robot_standing_on_a_persons_goal_does_not_cause_a_deadlock(base_world):
+    # the person wants to go where the robot stands (and the robot waits for people ahead):
+    # it must give up that goal and walk elsewhere rather than stand in front of the robot
+    base_world["people"] = [
+        {
+            "id": "p",
+            "count": 1,
+            "areas": [[0.5, 1.5, 1.5, 2.5]],
+            "goals": [[4.5, 2.0], [1.0, 1.0]],
+            "speed_mps": [1.0, 1.0],
+        }
+    ]
+    base_world["objects"] = []
+    base_world["schedule"] = []
+    w = World(parse_world(base_world), seed=1)
+    robot = np.array([4.5, 2.0, np.pi])
+    w.crowd.goal[0] = robot[:2]
+    goals = set()
+    for _ in range(200):
+        w.step(0.1, robot_pose=robot)
+        goals.add(tuple(np.round(w.crowd.goal[0], 2)))
+    assert (1.0, 1.0) in goals
+    assert np.hypot(*(w.people_poses()[0, :2] - robot[:2])) > 1.5
