@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import math
+import pickle
 import time
 from pathlib import Path
 from typing import Any
@@ -371,7 +372,23 @@ class ExperimentRunner:
             next_run=nxt.run if nxt else -1,
             state=self.state,
         )
-        self.db.write_run(rec, run_sum, last_of_day, cp, self.hash, self.seed)
+        try:
+            self.db.write_run(rec, run_sum, last_of_day, cp, self.hash, self.seed)
+        except (pickle.PicklingError, TypeError, AttributeError) as exc:
+            self._explain_unpicklable(exc)
+            raise
+
+    def _explain_unpicklable(self, exc: Exception) -> None:
+        """Turn a checkpoint pickling failure into a clear error naming the localizer."""
+        for label, loc in zip(self.scenario.labels, self.state["localizers"], strict=True):
+            try:
+                pickle.dumps(loc)
+            except Exception as err:  # noqa: BLE001 - any failure is the answer
+                raise InputError(
+                    f"localizer {label!r} ({type(loc).__module__}.{type(loc).__qualname__}) "
+                    f"cannot be pickled for the checkpoint after each run: {err}. Localizers "
+                    "must be picklable (no lambdas, open files or threads in their state)."
+                ) from exc
 
     @staticmethod
     def _run_summary(k: int, rec: RunRecord) -> dict[str, float]:

@@ -99,3 +99,11 @@ class RecordingLocalizer(Localizer):
 
     def end_day(self):
         self.calls.append(("end_day",))
+
+
+class UnpicklableLocalizer(RecordingLocalizer):
+    """Holds a lambda: cannot be checkpointed."""
+
+    def __init__(self, laser, rng, **params):
+        super().__init__(laser, rng, **params)
+        self.hook = lambda x: x

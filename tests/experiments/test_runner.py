@@ -172,3 +172,17 @@ def test_resume_refuses_a_changed_world_file(tmp_path):
     world.write_text(world.read_text() + "\n# edited\n")
     with pytest.raises(InputError, match="scenario or its world file"):
         ExperimentRunner(scn, tmp_path / "o", scn.days, 0, resume=True, env=FakeEnv())
+
+
+def test_an_unpicklable_localizer_is_named(tmp_path):
+    scn = scenario(
+        tmp_path,
+        days=[1, 1],
+        localizers=[
+            {"name": "odometry"},
+            {"name": "fake_env:UnpicklableLocalizer", "label": "bad one"},
+        ],
+    )
+    with pytest.raises(InputError, match="'bad one'.*cannot be pickled"):
+        run(scn, tmp_path / "o")
+    assert table(tmp_path / "o", "SELECT count(*) FROM runs") == [(0,)]
