@@ -1,8 +1,11 @@
 """Scenario files: what to run (world, days, seeds, robot, sensor, driver, localizers, prior,
 kidnappings) and what to expect (DESIGN.md §6).
 
-A scenario is TOML validated by pydantic v2 with ``extra="forbid"``. Every problem is reported
-at once, each with the file and the dotted field path, as :class:`ScenarioFileError`::
+A scenario is TOML validated by pydantic v2 with ``extra="forbid"``. Problems are reported as
+:class:`ScenarioFileError`, each with the file and the dotted field path: all field errors at
+once, then (when the fields are valid) all checks across fields and files at once (labels,
+expectation keys, kidnapping days, localizer parameters, robot and sensor overrides, the
+world file and its calendar)::
 
     name = "ci-apartment"
     world = "apartment"              # a shipped world name or a path relative to this file
