@@ -133,3 +133,13 @@ def test_planner_nearest_free_and_clearance():
     q = pl.nearest_free(np.array([5.0, 0.1]), 0.5)
     assert q is not None and q[1] == pytest.approx(0.25, abs=0.06)
     assert pl.nearest_free(np.array([5.0, 0.1]), 0.05) is None
+
+
+def test_padding_rows_of_absent_people_are_ignored():
+    geom = room()
+    route = np.array([[1.0, 2.0], [9.0, 2.0]])
+    d = TourDriver(route)
+    pad = np.array([[np.inf, np.inf, 0.0], [np.inf, np.inf, 0.0]])
+    poses = drive(d, geom, (1.0, 2.0, 0.0), people=lambda t: pad)
+    assert d.done and not any(e[2] == "wait_for_person" for e in d.events)
+    assert np.hypot(*(poses[-1, :2] - route[-1])) < 0.15

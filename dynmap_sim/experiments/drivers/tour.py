@@ -230,6 +230,7 @@ class TourDriver:
         """1 with nobody ahead, 0 (wait) when someone is within the stop distance ahead."""
         p = self.params
         ppl = np.asarray(people, dtype=np.float64).reshape(-1, np.shape(people)[-1] or 3)
+        ppl = ppl[np.isfinite(ppl[:, 0]) & np.isfinite(ppl[:, 1])]  # padding rows are inf
         factor = 1.0
         if p.wait_for_people and len(ppl):
             d = ppl[:, :2] - pose[:2]
