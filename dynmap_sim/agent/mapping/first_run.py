@@ -107,6 +107,7 @@ class FirstRunMapper:
         voxel_mean: bool = True,
         odom_prior: bool = True,
         max_neighbours: int = 8,
+        info_inflation: float = 20.0,
         graph_rounds: int = 2,
         map_max_range_m: float = 100.0,
         k_normal: int = 6,
@@ -136,6 +137,7 @@ class FirstRunMapper:
         self.voxel_mean = bool(voxel_mean)
         self.odom_prior = bool(odom_prior)
         self.max_neighbours = int(max_neighbours)
+        self.info_inflation = float(info_inflation)
         self.graph_rounds = int(graph_rounds)
         self._kf_maps: dict[int, PointMap | None] | None = None
         self.map_max_range_m = float(map_max_range_m)
@@ -207,6 +209,7 @@ class FirstRunMapper:
                     max_correspondence_m=self.max_correspondence_m,
                     max_iterations=20,
                     weights=range_weights(sub) if self.range_weighting else None,
+                    info_inflation=self.info_inflation,
                 )
                 n_used = len(pts[:: max(1, len(pts) // 400)])
                 if res.n_matched >= max(15, 0.3 * n_used) and res.rmse_m < 0.08:

@@ -99,14 +99,17 @@ def match_scan(
     tol_m: float = 1e-4,
     tol_rad: float = 1e-5,
     weights: ArrayLike | None = None,
+    info_inflation: float = 1.0,
 ) -> MatchResult:
     """Align ``points_base`` ``(N, 2)`` (robot frame) to ``target``, starting at ``init_pose``.
 
     ``prior_mean`` ``(3,)`` and ``prior_info`` ``(3, 3)`` (an information matrix, i.e. an
     inverse covariance) add a Gaussian prior on the pose (B&D eq. 9). ``weights`` ``(N,)``
     (optional, relative inverse variances, e.g. ``(sigma_min / sigma(range))^2``) scale each
-    point's residual. Returns the pose of the robot frame in the map frame with its
-    covariance (see the module docstring).
+    point's residual. ``info_inflation`` (>= 1) divides the scan's information, accounting for
+    residuals that are not independent (Censi 2007: ICP's covariance is optimistic), so that
+    the prior keeps its say in directions the scan constrains only weakly. Returns the pose
+    of the robot frame in the map frame with its covariance (see the module docstring).
     """
     pts = np.asarray(points_base, dtype=np.float64).reshape(-1, 2)
     pw = None if weights is None else np.asarray(weights, dtype=np.float64).reshape(-1)
@@ -144,7 +147,7 @@ def match_scan(
         else:
             rmse = float("inf")
         # Scale the scan term by the residual variance so scan and prior mix correctly.
-        sigma2 = max(rmse**2 if np.isfinite(rmse) else 0.0, sigma_floor_m**2)
+        sigma2 = max(rmse**2 if np.isfinite(rmse) else 0.0, sigma_floor_m**2) * info_inflation
         h = h_scan / sigma2
         grad = g / sigma2
         if lam is not None:
@@ -160,7 +163,7 @@ def match_scan(
         if np.hypot(delta[0], delta[1]) < tol_m and abs(delta[2]) < tol_rad:
             converged = True
             break
-    sigma2 = max(rmse**2 if np.isfinite(rmse) else 0.0, sigma_floor_m**2)
+    sigma2 = max(rmse**2 if np.isfinite(rmse) else 0.0, sigma_floor_m**2) * info_inflation
     info = h_scan / sigma2
     if lam is not None:
         info = info + lam
