@@ -186,6 +186,7 @@ class OccupancyGrid:
         l_hit: float = 0.9,
         l_pass: float = -0.4,
         max_dist_m: float = 2.0,
+        max_hit_range_m: float | None = None,
     ) -> OccupancyGrid:
         """Trace scans ``ranges_m`` ``(K, n_beams)`` taken at robot ``poses`` ``(K, 3)``.
 
@@ -193,7 +194,10 @@ class OccupancyGrid:
         it with ``l_pass`` (each cell counted once per beam); a ``+inf`` (no return) clears
         ``no_return_free_m`` of free space.
         Cells with positive total log-odds are occupied, negative free, unseen unknown.
+        Readings beyond ``max_hit_range_m`` (default: the sensor's range) only clear free
+        space up to that range: far readings are noisy (URG-04LX: 1 % of the range).
         """
+        hit_max = laser.range_max_m if max_hit_range_m is None else float(max_hit_range_m)
         poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
         rng_all = np.asarray(ranges_m, dtype=np.float64).reshape(len(poses), -1)
         angles = laser.angles()
@@ -202,7 +206,7 @@ class OccupancyGrid:
         ends = []
         for k in range(len(poses)):
             r = rng_all[k]
-            ok = np.isfinite(r) & (r >= laser.range_min_m) & (r < laser.range_max_m)
+            ok = np.isfinite(r) & (r >= laser.range_min_m) & (r < min(laser.range_max_m, hit_max))
             th = lp[k, 2] + angles[ok]
             ends.append(lp[k, :2] + r[ok, None] * np.stack([np.cos(th), np.sin(th)], axis=1))
         allpts = np.concatenate([lp[:, :2], *ends]) if ends else lp[:, :2]
@@ -219,8 +223,12 @@ class OccupancyGrid:
         step = 0.5 * resolution_m
         for k in range(len(poses)):
             r = rng_all[k].copy()
-            hit = np.isfinite(r) & (r >= laser.range_min_m) & (r < laser.range_max_m)
-            clear = np.where(hit, r - resolution_m, np.where(r == np.inf, reach, 0.0))
+            valid = np.isfinite(r) & (r >= laser.range_min_m) & (r < laser.range_max_m)
+            hit = valid & (r < hit_max)
+            far = valid & ~hit
+            clear = np.where(
+                hit, r - resolution_m, np.where(far, hit_max, np.where(r == np.inf, reach, 0.0))
+            )
             th = lp[k, 2] + angles
             c, s = np.cos(th), np.sin(th)
             n_max = int(np.ceil(max(clear.max(), 0.0) / step))

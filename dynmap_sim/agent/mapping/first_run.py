@@ -108,6 +108,7 @@ class FirstRunMapper:
         odom_prior: bool = True,
         max_neighbours: int = 8,
         info_inflation: float = 20.0,
+        map_max_hit_range_m: float = 4.0,
         graph_rounds: int = 2,
         map_max_range_m: float = 100.0,
         k_normal: int = 6,
@@ -138,6 +139,7 @@ class FirstRunMapper:
         self.odom_prior = bool(odom_prior)
         self.max_neighbours = int(max_neighbours)
         self.info_inflation = float(info_inflation)
+        self.map_max_hit_range_m = float(map_max_hit_range_m)
         self.graph_rounds = int(graph_rounds)
         self._kf_maps: dict[int, PointMap | None] | None = None
         self.map_max_range_m = float(map_max_range_m)
@@ -309,6 +311,7 @@ class FirstRunMapper:
             np.array([k.ranges_m for k in self.keyframes]),
             self.laser,
             resolution_m=self.resolution_m,
+            max_hit_range_m=self.map_max_hit_range_m,
         )
         return StaticMap(
             trajectory=traj,

@@ -86,3 +86,15 @@ def test_too_few_points_is_not_converged(segments):
     res = match_scan(np.array([[100.0, 100.0]]), target, np.zeros(3))
     assert not res.converged
     assert res.n_matched == 0
+
+
+def test_info_inflation_scales_scan_covariance(laser, cast):
+    corridor = np.array([[-50.0, -1.0, 50.0, -1.0], [-50.0, 1.0, 50.0, 1.0]])
+    target = PointMap(_dense_points(corridor, 0.05))
+    truth = np.array([0.0, 0.1, 0.0])
+    pts = se2.scan_to_points(cast(truth, laser.angles(), corridor, 5.6), laser.angles())
+    prior = np.diag([1 / 0.05**2, 1 / 0.05**2, 1 / 0.02**2])
+    a = match_scan(pts, target, truth, prior_mean=truth, prior_info=prior)
+    b = match_scan(pts, target, truth, prior_mean=truth, prior_info=prior, info_inflation=100.0)
+    # Across the corridor the scan rules: the sd grows by sqrt(100) = 10.
+    assert np.sqrt(b.cov[1, 1] / a.cov[1, 1]) == pytest.approx(10.0, rel=0.05)

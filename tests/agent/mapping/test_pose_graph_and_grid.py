@@ -1,0 +1,55 @@
+"""Pose graph (closed-form loop) and occupancy grid / likelihood field (closed-form distances)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dynmap_sim import se2
+from dynmap_sim.agent.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
+from dynmap_sim.agent.mapping.pose_graph import Edge, edge_errors, optimize_pose_graph
+
+
+def test_loop_closure_spreads_the_error_and_keeps_the_anchor():
+    truth = np.array([[0, 0, 0], [1, 0, np.pi / 2], [1, 1, np.pi], [0, 1, -np.pi / 2]], float)
+    info = np.diag([1e4, 1e4, 1e4])
+    # Odometry edges with a heading bias, and an exact loop-closure edge 3 -> 0.
+    edges = []
+    drifted = [truth[0]]
+    for k in range(3):
+        z = se2.between(truth[k], truth[k + 1]) + np.array([0.0, 0.0, 0.05])
+        edges.append(Edge(k, k + 1, z, info))
+        drifted.append(se2.compose(drifted[-1], z))
+    edges.append(Edge(3, 0, se2.between(truth[3], truth[0]), info))
+    drifted = np.array(drifted)
+    opt = optimize_pose_graph(drifted, edges, anchor=0)
+    assert np.allclose(opt[0], truth[0])
+    before = np.abs(edge_errors(drifted, edges)).sum()
+    after = np.abs(edge_errors(opt, edges)).sum()
+    assert after < 0.5 * before
+    err = np.hypot(*(opt[:, :2] - truth[:, :2]).T)
+    assert err.max() < np.hypot(*(drifted[:, :2] - truth[:, :2]).T).max()
+
+
+def test_pose_graph_rejects_bad_edges():
+    with pytest.raises(ValueError):
+        optimize_pose_graph(np.zeros((2, 3)), [Edge(0, 5, np.zeros(3), np.eye(3))])
+
+
+def test_grid_from_one_wall_distance_field_closed_form():
+    g = OccupancyGrid.from_segments(np.array([[0.0, 0.0, 4.0, 0.0]]), resolution_m=0.05)
+    assert g.distance_at(2.0, 0.0) == 0.0
+    assert g.distance_at(2.0, 0.8) == pytest.approx(0.8, abs=0.06)
+    assert g.distance_at(2.0, -0.5) == pytest.approx(0.5, abs=0.06)
+    assert g.distance_at(100.0, 100.0) == g.max_dist_m == 2.0
+    assert (g.occupancy == OCCUPIED).sum() == pytest.approx(80, abs=2)
+
+
+def test_grid_free_seed_marks_inside_free_and_outside_unknown():
+    sq = np.array([[0, 0, 2, 0], [2, 0, 2, 2], [2, 2, 0, 2], [0, 2, 0, 0]], float)
+    g = OccupancyGrid.from_segments(sq, free_seed_xy_m=(1.0, 1.0))
+    ix, iy = g.cell_of(np.array([[1.0, 1.0], [-0.5, -0.5]]))
+    assert g.occupancy[iy[0], ix[0]] == FREE
+    assert g.occupancy[iy[1], ix[1]] == UNKNOWN
+    free = g.free_points()
+    assert free[:, 0].min() > 0 and free[:, 0].max() < 2
