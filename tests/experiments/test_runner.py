@@ -186,3 +186,20 @@ def test_an_unpicklable_localizer_is_named(tmp_path):
     with pytest.raises(InputError, match="'bad one'.*cannot be pickled"):
         run(scn, tmp_path / "o")
     assert table(tmp_path / "o", "SELECT count(*) FROM runs") == [(0,)]
+
+
+def test_report_with_extras_and_point_classes(tmp_path):
+    import csv
+
+    from dynmap_sim.experiments.report import write_report
+
+    scn = scenario(tmp_path, days=[1, 2])
+    run(scn, tmp_path / "o")
+    names = {p.name for p in write_report(tmp_path / "o")}
+    assert {"likelihood_certainty.png", "timescale_usage.png", "summary.md"} <= names
+    with (tmp_path / "o" / "per_day.csv").open() as fh:
+        rows = [r for r in csv.DictReader(fh) if r["localizer"] == "rec"]
+    assert [float(r["mean_scan_loglik"]) for r in rows] == [-1.5, -1.5]
+    assert [float(r["mean_lambda_min"]) for r in rows] == [100.0, 100.0]
+    md = (tmp_path / "o" / "summary.md").read_text()
+    assert "## Point classes" in md and "| rec | static | 1.000 | 1.000 |" in md
