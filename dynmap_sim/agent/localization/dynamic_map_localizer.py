@@ -23,10 +23,7 @@ Per scan ``z_t`` (with odometry):
 The first run (``prior.first_run``, or no local maps yet) is mapped by the static SLAM of
 :class:`~dynmap_sim.agent.mapping.first_run.FirstRunMapper`; its keyframes, thinned to one per
 ``local_map_spacing_m``, become the initial local maps (§4), and the run's optimized
-trajectory feeds the first long-term update. With ``initial_map="walls"`` and a scenario that
-grants the wall segments, the first run instead scan-matches against the walls (same eq. 9
-scheme) and creates its local maps online — not in the paper, but it puts the dynamic map in
-the same frame as a static localizer given the walls.
+trajectory feeds the first long-term update.
 
 Per scan ``PoseEstimate.extras``: ``scan_loglik`` (mean per-reading log-likelihood of the
 scan under the selected models), ``scan_lik`` (mean per-reading likelihood, Fig. 10),
@@ -63,17 +60,6 @@ def lambda_min(cov: FloatArray) -> float:
     """Smallest eigenvalue of the inverse of a 3x3 covariance (B&D §5.3, Fig. 11)."""
     info = np.linalg.inv(0.5 * (cov + cov.T) + 1e-12 * np.eye(3))
     return float(np.linalg.eigvalsh(0.5 * (info + info.T))[0])
-
-
-def wall_points(walls: FloatArray, spacing_m: float) -> FloatArray:
-    """Points every ``spacing_m`` along wall segments ``(N, 4)`` (a granted prior map)."""
-    segs = np.asarray(walls, dtype=np.float64).reshape(-1, 4)
-    out = []
-    for x0, y0, x1, y1 in segs:
-        n = max(2, int(np.ceil(np.hypot(x1 - x0, y1 - y0) / spacing_m)) + 1)
-        t = np.linspace(0.0, 1.0, n)[:, None]
-        out.append(np.array([x0, y0]) + t * np.array([x1 - x0, y1 - y0]))
-    return np.concatenate(out) if out else np.zeros((0, 2))
 
 
 def odometry_covariance(
@@ -116,22 +102,16 @@ class DynamicMapLocalizer(Localizer):
         max_iterations: int = 20,
         min_matched: int = 20,
         map_voxel_m: float = 0.05,
-        initial_map: str = "slam",
         ltm_scans_per_run: int = 800,
         ltm_day_scans_per_run: int = 500,
-        wall_spacing_m: float = 0.03,
         **params: Any,
     ) -> None:
         super().__init__(laser, rng, **params)
         if mode not in _MODES:
             raise ValueError(f"mode must be one of {_MODES}, got {mode!r}")
-        if initial_map not in ("slam", "walls"):
-            raise ValueError(f"initial_map must be 'slam' or 'walls', got {initial_map!r}")
-        self.initial_map = initial_map
         self.ltm_scans_per_run = int(ltm_scans_per_run)
         self.ltm_day_scans_per_run = int(ltm_day_scans_per_run)
-        self.wall_spacing_m = float(wall_spacing_m)
-        self._walls_pts: FloatArray | None = None
+
         self.mode = mode
         self.freeze_after_day = int(freeze_after_day)
         self.update_radius_m = float(update_radius_m)
@@ -213,15 +193,8 @@ class DynamicMapLocalizer(Localizer):
         self._cmap = None
         self._run_poses, self._run_ranges = [], []
         self._mapper = None
-        self._walls_pts = None
         if (prior.first_run or len(self.dmap) == 0) and not self.frozen:
-            if self.initial_map == "walls" and prior.walls is not None and len(prior.walls):
-                # The map granted as prior: the first run localizes against the known walls and
-                # creates its local maps online (§4.4 rule: none within 2.5 m -> a new one).
-                self._walls_pts = wall_points(prior.walls, self.wall_spacing_m)
-                self._cmap_points = self._walls_pts
-            else:
-                self._mapper = FirstRunMapper(self.laser, self._pose)
+            self._mapper = FirstRunMapper(self.laser, self._pose)
 
     def _points_map(self, pose: FloatArray, ranges_m: np.ndarray) -> FloatArray:
         return se2.transform_points(pose, scan_points_base(self.laser, ranges_m))
@@ -256,8 +229,7 @@ class DynamicMapLocalizer(Localizer):
         cur = synthesize_current_map(
             self.dmap, self._pose, pts_map, self.selectable_levels, self.synthesis
         )
-        if self._walls_pts is None:
-            self._set_current_map(cur)
+        self._set_current_map(cur)
         if self.learns_stm:
             self.dmap.learn_online(
                 self._pose, pts_map, self.rng, levels=[0], allow_new=not self.frozen
