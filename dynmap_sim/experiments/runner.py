@@ -229,7 +229,7 @@ class ExperimentRunner:
             t = rng.uniform(0.2, 0.6) * expected_s if k.time_s == "random" else float(k.time_s)
             pose = None if k.pose == "random" else np.asarray(k.pose, dtype=np.float64)
             out.append(_Kidnap(max(1, int(round(t / dt_s))), pose))
-        return out
+        return sorted(out, key=lambda kp: kp.step)
 
     def _random_route_pose(self, rng: np.random.Generator) -> np.ndarray:
         route = np.asarray(self.state["driver"].route, float)
@@ -277,16 +277,16 @@ class ExperimentRunner:
         progress_frac = 0.0
         while True:
             truth = info["truth"]
-            pose = np.asarray(truth["pose"], dtype=np.float64)
-            t_s = float(truth["time"][2])
+            pose = np.array(truth["pose"], dtype=np.float64)  # copies: the history must not
+            t_s = float(truth["time"][2])  # change if a producer reuses its arrays
             odom = Odometry(pose=np.array(obs["odom"], dtype=np.float64), stamp_s=t_s)
             scan = Scan(ranges_m=obs["scan"], stamp_s=t_s)
             for k, loc in enumerate(locs):
                 t_up = time.perf_counter()
                 est = loc.update(odom, scan)
                 update_s[k] += time.perf_counter() - t_up
-                est_l[k].append(est.mean)
-                cov_l[k].append(est.cov)
+                est_l[k].append(np.array(est.mean, dtype=np.float64))
+                cov_l[k].append(np.array(est.cov, dtype=np.float64))
                 ex = est.extras
                 if ex:
                     ext_l[k].append(
@@ -311,7 +311,7 @@ class ExperimentRunner:
             if max_steps is not None and step >= max_steps:
                 events.append((step, t_s, "time_limit", f"stopped after {sc.driver.max_run_s} s"))
                 break
-            if kidnaps and kidnaps[0].step == step:
+            if kidnaps and kidnaps[0].step <= step:
                 kp = kidnaps.pop(0)
                 target = kp.pose if kp.pose is not None else self._random_route_pose(rng)
                 free = driver.free_place_near(target[:2], 1.0)
@@ -327,6 +327,9 @@ class ExperimentRunner:
             obs, _, terminated, truncated, info = self.env.step(action)
             collision = bool(info.get("collision", False))
             step += 1
+        events += [
+            (step, t_s, "kidnap_not_reached", f"planned at step {kp.step}") for kp in kidnaps
+        ]
         for loc in locs:
             loc.end_run()
         driver_events, skipped = list(driver.events), driver.skipped_waypoints
