@@ -85,6 +85,50 @@ class Crowd:
         return len(self.pos)
 
 
+@dataclass(frozen=True)
+class _StepConstants:
+    """Per-crowd constants of :meth:`SocialForce.step`; ``*_log_a`` fold a force's amplitude
+    and the bodies' radii into the exponent (``A exp((r - d) / B) = exp(log_a - d / B)``)."""
+
+    n: int
+    radius: FloatArray
+    v0: FloatArray
+    robot_radius_m: float
+    v0_tau: FloatArray
+    vmax: FloatArray
+    rsum_masked: FloatArray
+    """``r_i + r_j`` with ``-inf`` on the diagonal (a body never overlaps itself)."""
+    pair_log_a: FloatArray
+    """``ln A + (r_i + r_j) / B`` with ``-inf`` on the diagonal (no self-force)."""
+    wall_log_a: FloatArray
+    robot_log_a: FloatArray
+    evade_log_a: FloatArray
+    robot_need: FloatArray
+    robot_goal_reach: FloatArray
+
+    @classmethod
+    def build(cls, radius: FloatArray, v0: FloatArray, robot_radius_m: float) -> _StepConstants:
+        n = len(radius)
+        rsum = radius[:, None] + radius[None, :]
+        diag = np.eye(n, dtype=bool)
+        reach = radius + robot_radius_m + ROBOT_GAP_M
+        return cls(
+            n=n,
+            radius=radius,
+            v0=v0,
+            robot_radius_m=robot_radius_m,
+            v0_tau=v0 / TAU_S,
+            vmax=1.3 * v0,
+            rsum_masked=np.where(diag, -np.inf, rsum),
+            pair_log_a=np.where(diag, -np.inf, np.log(A_PEOPLE) + rsum / B_PEOPLE),
+            wall_log_a=np.log(A_WALL) + radius / B_WALL,
+            robot_log_a=np.log(A_ROBOT) + reach / B_ROBOT,
+            evade_log_a=np.log(A_EVADE) + reach / B_EVADE,
+            robot_need=reach,
+            robot_goal_reach=reach + 0.1,
+        )
+
+
 class SocialForce:
     """Social force stepping for the people of one run among fixed ``segments`` ``(N, 4)``."""
 
@@ -102,6 +146,7 @@ class SocialForce:
         self.broad_phase = broad_phase
         #: first segment of each closed outline in ``segments`` (for inside tests), or None
         self.outline_starts = outline_starts
+        self._consts: _StepConstants | None = None
         self._build_grid()
 
     def _build_grid(self) -> None:
@@ -115,10 +160,15 @@ class SocialForce:
         ext = np.concatenate([s, far])
         d = ext[:, 2:4] - ext[:, 0:2]
         inv = 1.0 / np.maximum(np.sum(d * d, axis=1), 1e-18)
-        # per segment: x0, y0, dx, dy, 1 / |d|^2 (gathered per person each step)
-        self._segdata = np.column_stack([ext[:, 0], ext[:, 1], d[:, 0], d[:, 1], inv])
+        # per segment, complex: p0, conj(d), 1 / |d|^2 (gathered per person each step)
+        self._segrows = np.column_stack(
+            [ext[:, 0] + 1j * ext[:, 1], d[:, 0] - 1j * d[:, 1], inv + 0j]
+        )
         if len(s) == 0:
             self._origin = np.zeros(2)
+            self._origin_c = 0j
+            self._cell_hi = np.zeros(2, dtype=np.int64)
+            self._cell_stride = np.array([1, 1], dtype=np.int64)
             self._shape = (1, 1)
             self._cells = np.zeros((1, 1), dtype=np.int64)
             return
@@ -126,6 +176,9 @@ class SocialForce:
         hi = np.maximum(s[:, :2], s[:, 2:]).max(axis=0) + REACH_M
         nx, ny = (np.ceil((hi - lo) / CELL_M).astype(int) + 1).tolist()
         self._origin, self._shape = lo, (nx, ny)
+        self._origin_c = complex(lo[0], lo[1])
+        self._cell_hi = np.array([nx - 1, ny - 1], dtype=np.int64)
+        self._cell_stride = np.array([ny, 1], dtype=np.int64)
         smin = np.minimum(s[:, :2], s[:, 2:]) - REACH_M - lo
         smax = np.maximum(s[:, :2], s[:, 2:]) + REACH_M - lo
         i0 = np.clip(np.floor(smin / CELL_M).astype(np.int64), 0, [nx - 1, ny - 1])
@@ -144,20 +197,6 @@ class SocialForce:
         cells = np.full((nx * ny, max(1, int(counts.max()))), len(s), dtype=np.int64)
         cells[cell_sorted, rank] = seg[order]
         self._cells = cells
-
-    def _candidates(self, pos: FloatArray) -> FloatArray:
-        """Candidate segments near each person as ``(P, K, 5)`` rows ``x0, y0, dx, dy,
-        1/|d|^2`` (padded with a far dummy).
-
-        Without ``broad_phase`` every segment is a candidate (the naive reference).
-        """
-        if not self.broad_phase:
-            return np.broadcast_to(self._segdata[:-1], (len(pos), *self._segdata[:-1].shape))
-        nx, ny = self._shape
-        ij = np.floor((pos - self._origin) / CELL_M).astype(np.int64)
-        ix = np.minimum(np.maximum(ij[:, 0], 0), nx - 1)  # (np.clip is slow on tiny arrays)
-        iy = np.minimum(np.maximum(ij[:, 1], 0), ny - 1)
-        return self._segdata[self._cells[ix * ny + iy]]
 
     # -- sampling -----------------------------------------------------------------------
     def _inside_any(self, points: FloatArray) -> NDArray[np.bool_]:
@@ -287,21 +326,34 @@ class SocialForce:
         )
 
     # -- dynamics -------------------------------------------------------------------------
-    @staticmethod
-    def _closest(points: FloatArray, segs: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Distances ``(P, K)`` and unit vectors (x, y components, each ``(P, K)``) from the
-        closest points of per-person segments ``(P, K, 5)`` to the points ``(P, 2)``."""
-        ax = points[:, 0:1] - segs[..., 0]
-        ay = points[:, 1:2] - segs[..., 1]
-        dx, dy = segs[..., 2], segs[..., 3]
-        t = (ax * dx + ay * dy) * segs[..., 4]
-        np.maximum(t, 0.0, out=t)
-        np.minimum(t, 1.0, out=t)
-        qx = ax - t * dx
-        qy = ay - t * dy
-        dist = np.sqrt(qx * qx + qy * qy)
-        inv = 1.0 / np.maximum(dist, 1e-9)
-        return dist, qx * inv, qy * inv
+    def _constants(self, crowd: Crowd, robot_radius_m: float) -> _StepConstants:
+        """Per-crowd constants of :meth:`step` (radii, speeds), rebuilt when they change."""
+        c = self._consts
+        if (
+            c is not None
+            and c.radius is crowd.radius
+            and c.v0 is crowd.v0
+            and c.robot_radius_m == robot_radius_m
+            and c.n == crowd.n
+        ):
+            return c
+        c = _StepConstants.build(crowd.radius, crowd.v0, robot_radius_m)
+        self._consts = c
+        return c
+
+    def _segment_rows(self, z: NDArray[np.complex128]) -> NDArray[np.complex128]:
+        """Candidate segments near each person as ``(P, K, 3)`` complex rows
+        ``p0, conj(d), 1/|d|^2`` (padded with a far dummy).
+
+        Without ``broad_phase`` every segment is a candidate (the naive reference).
+        """
+        if not self.broad_phase:
+            rows = self._segrows  # all segments and the far dummy (never empty)
+            return np.broadcast_to(rows, (len(z), *rows.shape))
+        ij = ((z - self._origin_c) * (1.0 / CELL_M)).view(np.float64).reshape(-1, 2)
+        ij = ij.astype(np.int64)  # truncation: negative cells clip to 0 as with floor
+        np.minimum(np.maximum(ij, 0, out=ij), self._cell_hi, out=ij)
+        return self._segrows[self._cells[ij @ self._cell_stride]]
 
     def step(
         self,
@@ -310,68 +362,84 @@ class SocialForce:
         robot_xy: FloatArray | None = None,
         robot_radius_m: float = 0.2,
     ) -> None:
-        """Advance ``crowd`` by ``dt_s`` seconds in place (explicit Euler + position correction)."""
+        """Advance ``crowd`` by ``dt_s`` seconds in place (explicit Euler + position correction).
+
+        Positions and velocities are handled as complex numbers ``x + iy`` (views of
+        ``crowd.pos`` / ``crowd.vel``), and the exponentials fold their prefactors in
+        (``A exp((r - d) / B) = exp(ln A + r / B - d / B)``), so one step is a few dozen
+        numpy calls whatever the crowd size (the cost of a step is call overhead for the
+        crowds of the shipped worlds).
+        """
         n = crowd.n
         if n == 0:
             return
-        pos, vel = crowd.pos, crowd.vel
-        to_goal = crowd.goal - pos
-        dist_goal = np.hypot(to_goal[:, 0], to_goal[:, 1])
-        e = to_goal / np.maximum(dist_goal, 1e-9)[:, None]
-        force = (crowd.v0[:, None] * e - vel) / TAU_S
+        for name in ("pos", "vel", "goal"):
+            a = getattr(crowd, name)
+            if not (a.flags.c_contiguous and a.dtype == np.float64):
+                setattr(crowd, name, np.ascontiguousarray(a, dtype=np.float64))
+        k = self._constants(crowd, robot_radius_m)
+        z = crowd.pos.view(np.complex128)[:, 0]  # views: in-place updates write through
+        v = crowd.vel.view(np.complex128)[:, 0]
+        goal = crowd.goal.view(np.complex128)[:, 0]
+        to_goal = goal - z
+        e = to_goal / np.maximum(np.abs(to_goal), 1e-9)
+        # driving term (H&M eq. 2)
+        force = k.v0_tau * e - v * (1.0 / TAU_S)
         pair_gap = np.inf  # smallest gap between two bodies before the move [m]
-        if n > 1:
-            diff = pos[:, None, :] - pos[None, :, :]
-            d = np.hypot(diff[..., 0], diff[..., 1])
-            np.fill_diagonal(d, np.inf)
-            rsum = crowd.radius[:, None] + crowd.radius[None, :]
-            pair_gap = float(np.min(d - rsum))
-            mag = A_PEOPLE * np.exp((rsum - d) / B_PEOPLE)
-            force += np.sum((mag / np.maximum(d, 1e-9))[..., None] * diff, axis=1)
-        segs = self._candidates(pos)
-        wall_gap = np.full(n, np.inf)  # per person, gap to the nearest segment before the move
-        if segs.shape[1]:
-            dist, nx, ny = self._closest(pos, segs)
-            wall_gap = dist.min(axis=1) - crowd.radius
-            mag = A_WALL * np.exp((crowd.radius[:, None] - np.minimum(dist, 50.0)) / B_WALL)
-            mag[dist > REACH_M] = 0.0
-            force[:, 0] += np.sum(mag * nx, axis=1)
-            force[:, 1] += np.sum(mag * ny, axis=1)
+        if n > 1:  # people (H&M eq. 3-4); the diagonal is masked by the constants
+            diff = z[:, None] - z[None, :]
+            d = np.abs(diff)
+            pair_gap = float((d - k.rsum_masked).min())
+            w = np.exp(k.pair_log_a - d * (1.0 / B_PEOPLE))
+            w /= np.maximum(d, 1e-9)
+            force += (w * diff).sum(axis=1)
+        # static geometry (H&M eq. 5): every segment within REACH_M
+        rows = self._segment_rows(z)
+        a = z[:, None] - rows[..., 0]
+        cd = rows[..., 1]  # conj(d)
+        t = (a * cd).real
+        t *= rows[..., 2].real
+        np.minimum(np.maximum(t, 0.0, out=t), 1.0, out=t)
+        q = a - t * cd.conjugate()  # from the closest point to the person
+        dist = np.abs(q)
+        wall_gap = dist.min(axis=1) - crowd.radius  # per person, before the move
+        w = np.exp(k.wall_log_a[:, None] - dist * (1.0 / B_WALL))
+        w /= np.maximum(dist, 1e-9)
+        w[dist > REACH_M] = 0.0
+        force += (w * q).sum(axis=1)
+        rz = None
         if robot_xy is not None:
-            rd = pos - robot_xy[None, :]
-            dr = np.maximum(np.hypot(rd[:, 0], rd[:, 1]), 1e-9)
-            reach = crowd.radius + robot_radius_m + ROBOT_GAP_M
-            force += (A_ROBOT * np.exp((reach - dr) / B_ROBOT) / dr)[:, None] * rd
+            rz = complex(float(robot_xy[0]), float(robot_xy[1]))
+            rd = z - rz
+            dr = np.maximum(np.abs(rd), 1e-9)
+            force += np.exp(k.robot_log_a - dr * (1.0 / B_ROBOT)) / dr * rd
             # evasion: a robot ahead makes people step aside early (to their right when it is
-            # dead ahead), so a head-on meeting in a corridor does not end in a stand-off
-            ahead = -(rd[:, 0] * e[:, 0] + rd[:, 1] * e[:, 1])
-            side = e[:, 0] * -rd[:, 1] - e[:, 1] * -rd[:, 0]  # > 0: robot on the left
-            # +1: step right (keep-right convention), unless the robot is clearly on the right
-            sign = np.where(side < -KEEP_RIGHT_M, -1.0, 1.0)
-            mag = np.where(ahead > 0, A_EVADE * np.exp((reach - dr) / B_EVADE), 0.0)
-            force[:, 0] += mag * sign * e[:, 1]
-            force[:, 1] -= mag * sign * e[:, 0]
-        vel += dt_s * force
-        speed = np.hypot(vel[:, 0], vel[:, 1])
-        vmax = 1.3 * crowd.v0
-        vel *= np.minimum(1.0, vmax / np.maximum(speed, 1e-9))[:, None]
-        old = pos.copy()
-        pos += dt_s * vel
-        self._correct(crowd, segs, robot_xy, robot_radius_m, old, pair_gap, wall_gap)
-        moved = np.hypot(*(pos - old).T)
-        crowd.phase += 2 * np.pi * moved / STRIDE_M
+            # dead ahead), so a head-on meeting in a corridor does not end in a stand-off.
+            # conj(e) rd: real part -(robot ahead), imaginary part > 0: robot on the right
+            er = e.conjugate() * rd
+            mag = np.exp(k.evade_log_a - dr * (1.0 / B_EVADE)) * (er.real < 0.0)
+            # step right (keep-right convention), unless the robot is clearly on the right
+            force += mag * np.where(er.imag > KEEP_RIGHT_M, 1j, -1j) * e
+        v += dt_s * force
+        v *= np.minimum(1.0, k.vmax / np.maximum(np.abs(v), 1e-9))  # H&M eq. 8
+        old = z.copy()
+        z += dt_s * v
+        self._correct(crowd, z, v, rows, rz, k, old, pair_gap, wall_gap)
+        crowd.phase += np.abs(z - old) * (2 * np.pi / STRIDE_M)
         # goals: arrival, no progress for STUCK_S, or the robot standing on the goal -> new goal
-        gd = np.hypot(crowd.goal[:, 0] - pos[:, 0], crowd.goal[:, 1] - pos[:, 1])
+        gd = np.abs(goal - z)
         progress = gd < crowd.best_goal_m - PROGRESS_M
         crowd.best_goal_m = np.where(progress, gd, crowd.best_goal_m)
         crowd.stuck_s = np.where(progress, 0.0, crowd.stuck_s + dt_s)
         redo = (gd < GOAL_TOL_M) | (crowd.stuck_s > STUCK_S)
         avoid = None
-        if robot_xy is not None:
-            reach_goal = crowd.radius + robot_radius_m + ROBOT_GAP_M + 0.1
-            redo |= np.hypot(*(crowd.goal - robot_xy[None, :]).T) < reach_goal
+        if rz is not None:
+            redo |= np.abs(goal - rz) < k.robot_goal_reach
             avoid = (robot_xy, robot_radius_m + ROBOT_GAP_M + 0.1)
         redo &= crowd.stuck_s >= 0.0  # negative: pausing after a failed goal search
+        if not redo.any():
+            return
+        pos = crowd.pos
         for i in np.flatnonzero(redo):
             pop = self.populations[int(crowd.population[i])]
             if pop.route:  # next waypoint of the (closed) route
@@ -387,50 +455,59 @@ class SocialForce:
     def _correct(
         self,
         crowd: Crowd,
-        segs: FloatArray,
-        robot_xy: FloatArray | None,
-        robot_r: float,
-        old: FloatArray,
+        z: NDArray[np.complex128],
+        v: NDArray[np.complex128],
+        rows: NDArray[np.complex128],
+        rz: complex | None,
+        k: _StepConstants,
+        old: NDArray[np.complex128],
         pair_gap: float,
         wall_gap: FloatArray,
     ) -> None:
         """Push bodies out of the robot's comfort disc, each other, then walls (walls win).
 
+        ``z``, ``v`` are complex views of positions and velocities (updated in place).
         Distances are 1-Lipschitz in position, so a body that moved less than its gap before
         the move (``pair_gap``, ``wall_gap`` [m]) cannot overlap: those checks are skipped.
         """
-        pos = crowd.pos
-        if robot_xy is not None:
-            rd = pos - robot_xy[None, :]
-            dr = np.maximum(np.hypot(rd[:, 0], rd[:, 1]), 1e-9)
-            need = crowd.radius + robot_r + ROBOT_GAP_M
-            push = np.maximum(need - dr, 0.0)
-            pos += (push / dr)[:, None] * rd
-        delta = pos - old
-        disp = np.sqrt(delta[:, 0] ** 2 + delta[:, 1] ** 2)
+        if rz is not None:
+            rd = z - rz
+            dr = np.maximum(np.abs(rd), 1e-9)
+            push = k.robot_need - dr
+            if push.max() > 0.0:
+                np.maximum(push, 0.0, out=push)
+                z += push / dr * rd
+        disp = np.abs(z - old)
         if crowd.n > 1 and 2.0 * disp.max() >= pair_gap:
-            diff = pos[:, None, :] - pos[None, :, :]
-            d = np.hypot(diff[..., 0], diff[..., 1])
-            np.fill_diagonal(d, np.inf)
-            over = np.maximum(crowd.radius[:, None] + crowd.radius[None, :] - d, 0.0)
-            pos += 0.5 * np.sum((over / np.maximum(d, 1e-9))[..., None] * diff, axis=1)
-            delta = pos - old
-            disp = np.sqrt(delta[:, 0] ** 2 + delta[:, 1] ** 2)
-        if segs.shape[1] and bool(np.any(disp >= wall_gap)):
-            rows = np.arange(crowd.n)
-            for _ in range(2):
-                dist, nx, ny = self._closest(pos, segs)
-                over = np.maximum(crowd.radius[:, None] - dist, 0.0)
-                if not over.any():
-                    break
-                j = np.argmax(over, axis=1)
-                depth = over[rows, j]
-                nv = np.column_stack([nx[rows, j], ny[rows, j]])
-                pos += depth[:, None] * nv
-                # remove the velocity component into the obstacle
-                vn = np.sum(crowd.vel * nv, axis=1)
-                hit = (depth > 0) & (vn < 0)
-                crowd.vel[hit] -= vn[hit, None] * nv[hit]
+            diff = z[:, None] - z[None, :]
+            d = np.abs(diff)
+            over = np.maximum(k.rsum_masked - d, 0.0)
+            z += 0.5 * ((over / np.maximum(d, 1e-9)) * diff).sum(axis=1)
+            disp = np.abs(z - old)
+        if not bool((disp >= wall_gap).any()):
+            return
+        p0 = rows[..., 0]
+        cd = rows[..., 1]
+        inv = rows[..., 2].real
+        idx = np.arange(crowd.n)
+        for _ in range(2):
+            a = z[:, None] - p0
+            t = (a * cd).real * inv
+            np.minimum(np.maximum(t, 0.0, out=t), 1.0, out=t)
+            q = a - t * cd.conjugate()
+            dist = np.abs(q)
+            over = crowd.radius[:, None] - dist
+            j = np.argmax(over, axis=1)
+            depth = over[idx, j]
+            if not (depth > 0.0).any():
+                break
+            np.maximum(depth, 0.0, out=depth)
+            nv = q[idx, j] / np.maximum(dist[idx, j], 1e-9)
+            z += depth * nv
+            # remove the velocity component into the obstacle
+            vn = (v * nv.conjugate()).real
+            hit = (depth > 0) & (vn < 0)
+            v -= np.where(hit, vn, 0.0) * nv
 
     @staticmethod
     def legs(crowd: Crowd) -> tuple[FloatArray, NDArray[np.int32]]:
