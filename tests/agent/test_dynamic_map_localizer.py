@@ -187,3 +187,18 @@ def test_dynamic_map_adapts_to_a_change_and_static_map_stays_frozen(learned):
 def test_bad_mode_is_rejected():
     with pytest.raises(ValueError, match="mode"):
         DynamicMapLocalizer(LASER, np.random.default_rng(0), mode="frozen")
+
+
+def test_min_update_motion_skips_scans_with_odometry_prediction(learned):
+    loc = pickle.loads(pickle.dumps(learned[0]["dynamic-map"]))
+    loc.min_update_dist_m, loc.min_update_angle_rad = 0.3, 0.3
+    truth = learned[2]
+    rng = np.random.default_rng(9)
+    loc.begin_run(Prior(initial_pose=truth[0].copy(), day=2, run=1))
+    ests = [loc.update(o, s) for o, s in _stream(truth, _world(False), rng)]
+    loc.end_run()
+    skipped = np.array([e.extras.get("skipped", False) for e in ests])
+    assert 0.3 < skipped.mean() < 0.95
+    err = np.hypot(*(np.array([e.mean[:2] for e in ests]) - truth[:, :2]).T)
+    assert err.mean() < 0.05
+    assert all("timescale" not in e.extras for e in np.array(ests)[skipped])

@@ -31,6 +31,10 @@ scan under the selected models), ``scan_lik`` (mean per-reading likelihood, Fig.
 of the best-fitting selection, 0 = λ1 … 4 = λ5, -1 none), ``timescales`` (levels of all
 selections, Figs. 12–13), ``safe_mode``, ``kappa`` (final κ of eq. 9), ``n_local_maps``.
 
+``min_update_dist_m`` / ``min_update_angle_rad`` (default 0: every scan, as in the paper)
+skip scans taken before the robot moved that far since the last processed scan: those get
+the odometry prediction and ``extras = {"skipped": True}`` (no likelihood, no timescale).
+
 Static variants (§5.3): the map is learned exactly like ``dynamic-map`` until the end of day
 ``freeze_after_day`` (1), then frozen — a snapshot of the dynamic map after the first day.
 ``static-map`` then localizes with λ2–λ5 of the snapshot only; ``static-map+stm`` also keeps
@@ -103,6 +107,8 @@ class DynamicMapLocalizer(Localizer):
         min_matched: int = 20,
         map_voxel_m: float = 0.05,
         ltm_scans_per_run: int = 800,
+        min_update_dist_m: float = 0.0,
+        min_update_angle_rad: float = 0.0,
         ltm_day_scans_per_run: int = 500,
         **params: Any,
     ) -> None:
@@ -110,6 +116,8 @@ class DynamicMapLocalizer(Localizer):
         if mode not in _MODES:
             raise ValueError(f"mode must be one of {_MODES}, got {mode!r}")
         self.ltm_scans_per_run = int(ltm_scans_per_run)
+        self.min_update_dist_m = float(min_update_dist_m)
+        self.min_update_angle_rad = float(min_update_angle_rad)
         self.ltm_day_scans_per_run = int(ltm_day_scans_per_run)
 
         self.mode = mode
@@ -214,12 +222,23 @@ class DynamicMapLocalizer(Localizer):
             )
             return est
         opose = np.asarray(odom.pose, dtype=np.float64)
-        pts_base = scan_points_base(self.laser, ranges)
         kappa = 0.0
+        if self._last_odom is not None:
+            delta = se2.between(self._last_odom, opose)
+            if (
+                np.hypot(delta[0], delta[1]) < self.min_update_dist_m
+                and abs(delta[2]) < self.min_update_angle_rad
+            ):  # not moved enough: odometry only, the scan is not used (like AMCL's update_min_*)
+                c_o = odometry_covariance(delta, *self.odom_params)
+                return PoseEstimate(
+                    mean=se2.compose(self._pose, delta),
+                    cov=self._propagated_cov(c_o),
+                    extras={"skipped": True},
+                )
+        pts_base = scan_points_base(self.laser, ranges)
         if self._last_odom is None:
             self._last_odom = opose.copy()
         else:
-            delta = se2.between(self._last_odom, opose)
             self._last_odom = opose.copy()
             pred = se2.compose(self._pose, delta)
             c_o = odometry_covariance(delta, *self.odom_params)
