@@ -107,7 +107,7 @@ class FirstRunMapper:
         voxel_mean: bool = True,
         odom_prior: bool = True,
         max_neighbours: int = 8,
-        info_inflation: float = 20.0,
+        info_inflation: float = 5.0,
         map_max_hit_range_m: float = 4.0,
         graph_rounds: int = 2,
         map_max_range_m: float = 100.0,
@@ -279,8 +279,14 @@ class FirstRunMapper:
                 if target is None:
                     continue
                 init = se2.between(poses[j], poses[i])
-                res = match_scan(src, target, init, max_correspondence_m=0.5, max_iterations=30)
-                res = match_scan(src, target, res.pose, max_correspondence_m=0.15)
+                if i - j > self.loop_min_gap:  # a loop closure: allow for more drift
+                    res = match_scan(src, target, init, max_correspondence_m=0.5, max_iterations=30)
+                    init_fine = res.pose
+                else:
+                    init_fine = init
+                res = match_scan(
+                    src, target, init_fine, max_correspondence_m=0.15, max_iterations=20
+                )
                 moved = float(np.hypot(*(res.pose[:2] - init[:2])))
                 if (
                     res.converged
