@@ -288,6 +288,7 @@ class DynMapEnv(gymnasium.Env):
         if p.shape != (3,) or not np.isfinite(p).all():
             raise ValueError(f"teleport pose must be 3 finite numbers (x, y, theta), got {pose!r}")
         self.robot.set_pose(p)
+        self.world.sync_space()  # people's bodies far from the old pose lag behind
 
     @property
     def day_run(self) -> tuple[int, int]:

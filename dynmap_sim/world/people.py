@@ -512,18 +512,33 @@ class SocialForce:
     @staticmethod
     def legs(crowd: Crowd) -> tuple[FloatArray, NDArray[np.int32]]:
         """Two leg circles per person ``(2P, 3)`` and the person index of each."""
-        n = crowd.n
-        sp = np.hypot(crowd.vel[:, 0], crowd.vel[:, 1])
-        h = np.where(
-            sp[:, None] > 1e-3, crowd.vel / np.maximum(sp, 1e-9)[:, None], np.array([1.0, 0.0])
-        )
-        lat = np.stack([-h[:, 1], h[:, 0]], axis=1)
-        swing = LEG_SWING_M * np.sin(crowd.phase) * np.minimum(sp / 0.5, 1.0)
-        out = np.empty((2 * n, 3))
-        out[0::2, :2] = crowd.pos + LEG_SPREAD_M * lat + swing[:, None] * h
-        out[1::2, :2] = crowd.pos - LEG_SPREAD_M * lat - swing[:, None] * h
+        out = np.empty((2 * crowd.n, 3))
+        SocialForce.legs_into(crowd, out)
+        return out, np.repeat(np.arange(crowd.n, dtype=np.int32), 2)
+
+    @staticmethod
+    def legs_into(crowd: Crowd, out: FloatArray) -> None:
+        """Write the two leg circles of each person into rows of ``out`` ``(2P, 3)``.
+
+        The legs stand ``LEG_SPREAD_M`` to either side of the heading of motion (``+x`` for
+        a person standing still), offset fore and aft by ``LEG_SWING_M sin(phase)`` (scaled
+        down below 0.5 m/s).
+        """
+        if crowd.n == 0:
+            return
+        vel = np.ascontiguousarray(crowd.vel, dtype=np.float64)
+        pos = np.ascontiguousarray(crowd.pos, dtype=np.float64)
+        v = vel.view(np.complex128)[:, 0]
+        z = pos.view(np.complex128)[:, 0]
+        sp = np.abs(v)
+        h = np.where(sp > 1e-3, v / np.maximum(sp, 1e-9), 1.0)
+        swing = np.sin(crowd.phase)
+        swing *= np.minimum(sp * (LEG_SWING_M / 0.5), LEG_SWING_M)
+        off = h * (swing + 1j * LEG_SPREAD_M)
+        legs = out[:, :2].view(np.complex128)[:, 0]
+        np.add(z, off, out=legs[0::2])
+        np.subtract(z, off, out=legs[1::2])
         out[:, 2] = LEG_RADIUS_M
-        return out, np.repeat(np.arange(n, dtype=np.int32), 2)
 
     @staticmethod
     def poses(crowd: Crowd) -> FloatArray:

@@ -9,6 +9,7 @@ the run started, so weeks of stepping do not drift.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -28,6 +29,9 @@ COLLISION_PERSON = 2
 CATEGORY_STATIC = 0b01
 CATEGORY_PERSON = 0b10
 _PEOPLE_TAG = 0x9E0913
+#: People's pymunk bodies farther than this from the robot (plus its radius) [m] are moved
+#: lazily: on the next access to ``World.space``, or when they come this near the robot.
+SYNC_MARGIN_M = 2.0
 
 
 class World:
@@ -38,7 +42,10 @@ class World:
     * ``reset(day, run)`` jumps to the start of a run; ``step(dt_s, robot_pose, robot_radius_m)``
       advances people and the clock; ``time_s`` (since midnight), ``elapsed_s`` (in the run);
     * ``geometry`` (:class:`GeometryView` for sensors), ``space`` (pymunk: walls and objects
-      as static shapes, people as kinematic circles; the space is never stepped here),
+      as static shapes, people as kinematic circles; the space is never stepped here;
+      people's bodies are brought up to date on every access to ``space``, and at every
+      step for those within ``SYNC_MARGIN_M`` of the robot, so a robot that holds the space
+      and queries around itself always sees people where they are),
       ``wall_segments()``, ``people_poses()``, ``people_radii()``, ``objects`` (current
       :class:`ObjectState` tuple), ``route_blocked()``;
     * ``snapshot(day, run)``: the state at the start of any run, a pure function of (file,
@@ -55,12 +62,12 @@ class World:
         self.seed = int(seed)
         self.calendar = Calendar(spec.calendar)
         self.schedule = Schedule(spec, self.calendar)
-        self.space = pymunk.Space()
-        self.space.gravity = (0.0, 0.0)
+        self._space = pymunk.Space()
+        self._space.gravity = (0.0, 0.0)
         self._static_filter = pymunk.ShapeFilter(categories=CATEGORY_STATIC)
         self._person_filter = pymunk.ShapeFilter(categories=CATEGORY_PERSON)
         for _, poly in self.schedule.walls:
-            self.space.add(self._static_shape(poly, None))
+            self._space.add(self._static_shape(poly, None))
         ws = [polygon_edges(poly) for _, poly in self.schedule.walls]
         self._wall_segments = np.concatenate(ws) if ws else np.zeros((0, 4))
         self._wall_segments.setflags(write=False)
@@ -72,7 +79,7 @@ class World:
 
     # -- pymunk helpers -------------------------------------------------------------------
     def _static_shape(self, poly: FloatArray, circle) -> pymunk.Shape:
-        body = self.space.static_body
+        body = self._space.static_body
         if circle is not None:
             shape: pymunk.Shape = pymunk.Circle(body, circle[2], offset=(circle[0], circle[1]))
         else:
@@ -90,17 +97,17 @@ class World:
             key, shape = self._object_shapes[oid]
             o = wanted.get(oid)
             if o is None or key != (o.pose, o.polygon.tobytes()):
-                self.space.remove(shape)
+                self._space.remove(shape)
                 del self._object_shapes[oid]
                 changed = True
         for oid, o in wanted.items():
             if oid not in self._object_shapes:
                 shape = self._static_shape(o.polygon, o.circle)
-                self.space.add(shape)
+                self._space.add(shape)
                 self._object_shapes[oid] = ((o.pose, o.polygon.tobytes()), shape)
                 changed = True
         if changed:
-            self.space.reindex_static()
+            self._space.reindex_static()
 
     # -- public API -----------------------------------------------------------------------
     def reset(self, day: int, run: int) -> None:
@@ -120,7 +127,7 @@ class World:
         # people
         self._forces, self._crowd = self._spawn(day, run, objects)
         for b in self._people_bodies:
-            self.space.remove(b, *b.shapes)
+            self._space.remove(b, *b.shapes)
         self._people_bodies = []
         for i in range(self._crowd.n):
             body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
@@ -128,8 +135,10 @@ class World:
             shape = pymunk.Circle(body, float(self._crowd.radius[i]))
             shape.collision_type = COLLISION_PERSON
             shape.filter = self._person_filter
-            self.space.add(body, shape)
+            self._space.add(body, shape)
             self._people_bodies.append(body)
+        self._synced = self._crowd.pos.copy().view(np.complex128)[:, 0]  # bodies' positions
+        self._stale = False  # some people's bodies lag behind the crowd
         n_obj = len(self._static.object_ids)
         self._people_ids = self._crowd.ids
         nl = 2 * self._crowd.n
@@ -158,10 +167,13 @@ class World:
         return forces, crowd
 
     def _refresh_people(self) -> None:
-        legs, _ = SocialForce.legs(self._crowd)
-        circles = (
-            np.concatenate([self._static.circles, legs]) if len(legs) else self._static.circles
-        )
+        if self._crowd.n:
+            ns = self._static.circles.shape[0]
+            circles = np.empty((ns + 2 * self._crowd.n, 3))
+            circles[:ns] = self._static.circles
+            SocialForce.legs_into(self._crowd, circles[ns:])
+        else:
+            circles = self._static.circles
         self._geometry = GeometryView(
             segments=self._static.segments,
             segment_object=self._static.segment_object,
@@ -180,21 +192,55 @@ class World:
         robot_radius_m: float = 0.2,
     ) -> None:
         """Advance the clock and people by ``dt_s`` seconds; people avoid the robot's disc."""
-        if not (np.isfinite(dt_s) and 0.0 <= dt_s <= 10.0):
+        if not (math.isfinite(dt_s) and 0.0 <= dt_s <= 10.0):
             raise ValueError(f"dt_s must be a finite time step in [0, 10] s, not {dt_s!r}")
         self._time_us += int(round(dt_s * 1e6))
         if self._crowd.n == 0:
             return
-        rxy = None if robot_pose is None else np.array(robot_pose[:2], dtype=np.float64)
-        self._forces.step(self._crowd, dt_s, rxy, robot_radius_m)
-        reindex = self.space.reindex_shapes_for_body
-        pos, vel = self._crowd.pos.tolist(), self._crowd.vel.tolist()
-        for body, p, v in zip(self._people_bodies, pos, vel, strict=True):
-            body.position = p
-            body.velocity = v
+        if robot_pose is None:
+            self._forces.step(self._crowd, dt_s, None, robot_radius_m)
+            self._sync_bodies(None)
+        else:
+            rxy = np.array((float(robot_pose[0]), float(robot_pose[1])))
+            self._forces.step(self._crowd, dt_s, rxy, robot_radius_m)
+            self._sync_bodies(complex(rxy[0], rxy[1]), robot_radius_m + SYNC_MARGIN_M)
+        self._refresh_people()
+
+    def _sync_bodies(self, robot_xy: complex | None, near_m: float = 0.0) -> None:
+        """Move people's pymunk bodies to the crowd's state: all of them, or (with a robot)
+        those whose new or last synced position lies within ``near_m`` of it."""
+        crowd = self._crowd
+        z = crowd.pos.view(np.complex128)[:, 0]
+        if robot_xy is None:
+            idx = range(crowd.n)
+            self._stale = False
+        else:
+            near = (np.abs(z - robot_xy) < near_m) | (np.abs(self._synced - robot_xy) < near_m)
+            idx = np.flatnonzero(near).tolist()
+            self._stale = True  # (cheaper than checking whether all were near)
+        reindex = self._space.reindex_shapes_for_body
+        bodies = self._people_bodies
+        pos, vel = crowd.pos, crowd.vel
+        synced = self._synced
+        for i in idx:
+            body = bodies[i]
+            body.position = (float(pos[i, 0]), float(pos[i, 1]))
+            body.velocity = (float(vel[i, 0]), float(vel[i, 1]))
+            synced[i] = z[i]
             # the space is never stepped: refresh the shapes' cached positions for queries
             reindex(body)
-        self._refresh_people()
+
+    @property
+    def space(self) -> pymunk.Space:
+        """The pymunk space (walls and objects static, people kinematic), up to date."""
+        return self.sync_space()
+
+    def sync_space(self) -> pymunk.Space:
+        """Bring every person's pymunk body up to date (after a teleport, say) and return
+        the space."""
+        if self._stale:
+            self._sync_bodies(None)
+        return self._space
 
     @property
     def time_s(self) -> float:
