@@ -9,23 +9,33 @@ closed-form intersection:
   ``t = (a - o) x d / (u x d)``, ``s = (a - o) x u / (u x d)`` (2-D cross products);
 * circle ``|p - c| = r``: ``t = b - sqrt(b^2 - (|c - o|^2 - r^2))`` with ``b = u . (c - o)``.
 
-Shapes farther than the maximum range are culled first. The nearest hit per beam is a
-``numpy.minimum.at`` scatter. The result agrees with pymunk's ``segment_query_first`` (radius-0
-segments and circles) to floating-point precision; see ``tests/sensors/test_raycast.py``.
+Segments out of range are culled first, with a candidate list memoized per 0.25 m cell of
+the sensor position (:meth:`SegmentCache.near`, a superset of the segments in range). The
+nearest hit per beam is a ``numpy.fmin.at`` scatter (misses are NaN and never win). Where two
+shapes are hit at the same range (collinear faces, shared corners) either may be reported.
+The result agrees with pymunk's ``segment_query_first`` (radius-0 segments and circles) to
+floating-point precision; see ``tests/sensors/test_raycast.py``.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
+ComplexArray = NDArray[np.complex128]
 
 _TWO_PI = 2.0 * np.pi
+
+
+#: Side [m] of the square cells for which :meth:`SegmentCache.near` keeps its candidates.
+NEAR_CELL_M = 0.25
+#: At most this many cells' candidate lists are kept per cache (then it starts over).
+NEAR_CELLS_MAX = 4096
 
 
 @dataclass(frozen=True)
@@ -35,6 +45,7 @@ class SegmentCache:
     Points are complex numbers ``x + iy``: ``p0`` the segments' first endpoints, ``d`` their
     direction vectors ``p1 - p0``; ``bbox`` rows are ``xmin, ymin, xmax, ymax`` of each
     segment (range cull). ``data`` rows ``x0, y0, dx, dy`` serve the numba backend.
+    ``near_cells`` memoizes :meth:`near` per sensor cell.
     """
 
     p0: NDArray[np.complex128]
@@ -42,6 +53,9 @@ class SegmentCache:
     data: FloatArray
     bbox: FloatArray
     n: int
+    near_cells: dict[tuple[int, int, float], tuple[IntArray, ComplexArray, ComplexArray]] = field(
+        default_factory=dict, compare=False, repr=False
+    )
 
     @classmethod
     def build(cls, segments: FloatArray) -> SegmentCache:
@@ -64,32 +78,26 @@ class SegmentCache:
             p0=seg[:, 0] + 1j * seg[:, 1], d=dx + 1j * dy, data=data, bbox=bbox, n=seg.shape[0]
         )
 
-
-def _beam_runs(
-    start_rad: FloatArray, span_rad: FloatArray, inc_rad: float, n_beams: int
-) -> tuple[IntArray, IntArray]:
-    """Beam index runs ``[lo, hi]`` covered by bearing intervals ``[start, start + span]``.
-
-    Bearings are relative to the first beam and ``start`` lies in ``[0, 2 pi)``. Each interval
-    yields two candidate runs (as is, and shifted by ``-2 pi`` for intervals that wrap), each
-    widened by one beam for safety: the narrow phase is exact, the broad phase only needs to
-    be conservative. Returns ``lo`` and ``count`` (``count = 0`` for an empty run), shape
-    ``(2 K,)``.
-    """
-    s = start_rad * (1.0 / inc_rad)
-    s = np.concatenate([s, s - _TWO_PI / inc_rad])
-    e = s + np.concatenate([span_rad, span_rad]) * (1.0 / inc_rad)
-    lo = np.maximum(np.ceil(s).astype(np.int64) - 1, 0)
-    hi = np.minimum(np.floor(e).astype(np.int64) + 1, n_beams - 1)
-    return lo, np.maximum(hi - lo + 1, 0)
-
-
-def _expand(lo: IntArray, count: IntArray) -> tuple[IntArray, IntArray]:
-    """``(run index, beam index)`` of every pair in the runs ``lo[k] .. lo[k] + count[k] - 1``."""
-    run = np.repeat(np.arange(count.shape[0]), count)
-    first = np.cumsum(count) - count
-    beam = np.arange(run.shape[0]) + (lo - first)[run]
-    return run, beam
+    def near(
+        self, x_m: float, y_m: float, r_max_m: float
+    ) -> tuple[IntArray, ComplexArray, ComplexArray]:
+        """Rows, ``p0`` and ``d`` of the segments whose bounding box comes within
+        ``r_max_m`` (per axis) of the ``NEAR_CELL_M`` cell holding ``(x_m, y_m)``: a superset
+        of those within range of any sensor in that cell (memoized per cell)."""
+        key = (math.floor(x_m / NEAR_CELL_M), math.floor(y_m / NEAR_CELL_M), r_max_m)
+        got = self.near_cells.get(key)
+        if got is None:
+            x0, y0 = key[0] * NEAR_CELL_M, key[1] * NEAR_CELL_M
+            bb = self.bbox
+            lo_x, hi_x = x0 - r_max_m - 1e-9, x0 + NEAR_CELL_M + r_max_m + 1e-9
+            lo_y, hi_y = y0 - r_max_m - 1e-9, y0 + NEAR_CELL_M + r_max_m + 1e-9
+            m = (bb[0] <= hi_x) & (bb[2] >= lo_x) & (bb[1] <= hi_y) & (bb[3] >= lo_y)
+            idx = np.flatnonzero(m)
+            got = (idx, self.p0[idx], self.d[idx])
+            if len(self.near_cells) >= NEAR_CELLS_MAX:
+                self.near_cells.clear()
+            self.near_cells[key] = got
+        return got
 
 
 def cast_scan(
@@ -101,7 +109,7 @@ def cast_scan(
     max_range_m: float,
     segments: SegmentCache,
     circles: FloatArray | None = None,
-    u_l: NDArray[np.complex128] | None = None,
+    u_l: ComplexArray | None = None,
 ) -> tuple[FloatArray, IntArray]:
     """Cast all beams of one scan; return the true range [m] and the hit shape of each beam.
 
@@ -113,6 +121,9 @@ def cast_scan(
     (real part) and the cross product (imaginary part) of ``p`` and ``q``. ``circles`` rows
     are ``x, y, r`` [m]. The hit index is a row of the segments (``0 .. N-1``), ``N + j`` for
     circle ``j``, or ``-1`` (no hit within ``max_range_m``, range ``+inf``).
+
+    The work is a fixed number of numpy calls on arrays of (beam, shape) pairs: for scans of
+    a few hundred beams the call overhead, not the arithmetic, sets the cost.
     """
     ox, oy, heading = float(pose[0]), float(pose[1]), float(pose[2])
     n_beams = cos_l.shape[0]
@@ -121,85 +132,98 @@ def cast_scan(
     inc = float(angle_increment_rad)
     r_max = float(max_range_m)
     rot = complex(math.cos(heading), -math.sin(heading))  # map -> sensor frame
+    o = complex(ox, oy)
 
-    # --- segments: range cull (bounding boxes), into the sensor frame, bearing interval ----
-    bb = segments.bbox
-    near = (bb[0] <= ox + r_max) & (bb[2] >= ox - r_max) & (bb[1] <= oy + r_max)
-    near &= bb[3] >= oy - r_max
-    sidx = np.flatnonzero(near)
-    a = (segments.p0[sidx] - complex(ox, oy)) * rot  # first endpoint
-    d = segments.d[sidx] * rot
+    # --- segments near the sensor's cell (memoized), into the sensor frame -----------------
+    sidx, p0, d0 = segments.near(ox, oy, r_max)
+    a = (p0 - o) * rot  # first endpoint
+    d = d0 * rot
     b = a + d  # second endpoint
-    ab = a.conjugate() * b  # imag: a x b (> 0: b is counter-clockwise of a)
-    span = np.abs(np.angle(ab))
-    start = np.angle(np.where(ab.imag >= 0.0, a, b))
+    ab = a.conjugate() * b  # imag: a x b = a x d (> 0: b is counter-clockwise of a)
+    a_x_d = ab.imag
+    span = np.abs(np.arctan2(a_x_d, ab.real))  # bearing interval of each segment [rad]
+    first = np.where(a_x_d >= 0.0, a, b)
+    start = np.arctan2(first.imag, first.real)
     n_s = sidx.shape[0]
 
-    # --- circles ------------------------------------------------------------------------
-    n_seg = segments.n
+    # --- circles within range ------------------------------------------------------------
+    n_c = 0
     if circles is not None and circles.shape[0] > 0:
-        wx = circles[:, 0] - ox
-        wy = circles[:, 1] - oy
+        cw = circles[:, 0] + 1j * circles[:, 1] - o
         cr = circles[:, 2]
-        cd2 = wx * wx + wy * wy
-        rr = r_max + cr
-        cnear = np.flatnonzero(cd2 <= rr * rr)
-        c = (wx[cnear] + 1j * wy[cnear]) * rot
-        cr = cr[cnear]
-        cd2 = cd2[cnear]
-        c0 = cd2 - cr * cr  # < 0: the sensor is inside the circle
-        with np.errstate(invalid="ignore", divide="ignore"):
-            half = np.where(c0 <= 0.0, np.pi, np.arcsin(np.minimum(cr / np.sqrt(cd2), 1.0)))
-        start = np.concatenate([start, np.angle(c) - half])
-        span = np.concatenate([span, 2.0 * half])
+        dist = np.abs(cw)
+        cnear = np.flatnonzero(dist <= r_max + cr)
         n_c = cnear.shape[0]
+    # runs in the order: segments, their wrap copies, circles, their wrap copies
+    if n_c:
+        c = cw[cnear] * rot
+        cr = cr[cnear]
+        dist = dist[cnear]
+        c0 = (dist - cr) * (dist + cr)  # |c|^2 - r^2 (<= 0: the sensor is inside the circle)
+        inside = c0 <= 0.0
+        with np.errstate(invalid="ignore", divide="ignore"):
+            half = np.arcsin(np.minimum(cr / dist, 1.0))
+        half[inside] = np.pi
+        half2 = 2.0 * half
+        sb = np.concatenate([start, start, np.arctan2(c.imag, c.real) - half])
+        sb = np.concatenate([sb, sb[2 * n_s :]])
+        sp = np.concatenate([span, span, half2, half2])
     else:
-        n_c = 0
+        sb = np.concatenate([start, start])
+        sp = np.concatenate([span, span])
 
-    lo, count = _beam_runs((start - angle_min_rad) % _TWO_PI, span, inc, n_beams)
-    run, beam = _expand(lo, count)
-    n_sc = n_s + n_c
-    shape_k = run - n_sc * (run >= n_sc)  # undo the wrap copy
-    u = u_l[beam]
+    # --- broad phase: the beam indices each bearing interval covers, widened by one beam ----
+    # (bearing from the first beam in [0, 2 pi), the copies shifted back by one turn for
+    # intervals that wrap; truncation toward zero only widens a run)
+    s_b = (sb - angle_min_rad) % _TWO_PI
+    s_b[n_s : 2 * n_s] -= _TWO_PI
+    s_b[2 * n_s + n_c :] -= _TWO_PI
+    s_b *= 1.0 / inc
+    lo = np.maximum(s_b.astype(np.int64) - 1, 0)
+    hi = np.minimum((s_b + sp * (1.0 / inc)).astype(np.int64) + 1, n_beams - 1)
+    count = np.maximum(hi - lo + 1, 0)
+    ends = np.cumsum(count)
+    # the shape of each (beam, shape) pair: segment k, or circle n_s + j
+    shape = np.arange(n_s + n_c)
+    if n_c:
+        shape = np.concatenate([shape[:n_s], shape[:n_s], shape[n_s:], shape[n_s:]])
+    else:
+        shape = np.concatenate([shape, shape])
+    key = np.repeat(shape, count)
+    beam = np.arange(key.shape[0]) - np.repeat(ends - count - lo, count)
+    uc = u_l.conjugate()[beam]  # conj(u) of each pair's beam
+    m = int(ends[2 * n_s - 1]) if n_s else 0  # pairs [0, m) are segment pairs
+
+    with np.errstate(invalid="ignore", divide="ignore"):
+        # segments: t = (a x d) / (u x d), s = (a x u) / (u x d); here s_neg = -s
+        ks = key[:m]
+        ucs = uc[:m]
+        inv = 1.0 / (ucs * d[ks]).imag
+        t = a_x_d[ks] * inv
+        s_neg = (a[ks] * ucs).imag * inv
+        ok = (t >= 0.0) & (t <= r_max) & (s_neg <= 0.0) & (s_neg >= -1.0)
+        t_all = np.where(ok, t, np.nan)
+        if n_c:
+            # circles: t = b - sqrt(b^2 - c0) with b = u . c (0 from inside the circle)
+            kc = key[m:] - n_s
+            bdot = (uc[m:] * c[kc]).real
+            tc = bdot - np.sqrt(bdot * bdot - c0[kc])
+            if inside.any():
+                tc[inside[kc]] = 0.0
+            okc = (tc >= 0.0) & (tc <= r_max)
+            t_all = np.concatenate([t_all, np.where(okc, tc, np.nan)])
 
     ranges = np.full(n_beams, np.inf)
-    hit = np.full(n_beams, -1, dtype=np.int64)
+    np.fmin.at(ranges, beam, t_all)  # NaN (no hit) never wins
+    win = t_all == ranges[beam]
+    hit_key = np.full(n_beams, -1, dtype=np.int64)
+    hit_key[beam[win]] = key[win]
+    # hit index of each shape (segment row or N + circle), and -1 (nothing) at the end
     if n_c:
-        is_seg = shape_k < n_s
-        ks = shape_k[is_seg]
-        bs = beam[is_seg]
-        us = u[is_seg]
+        shape_id = np.concatenate([sidx, segments.n + cnear, [-1]])
     else:
-        ks, bs, us = shape_k, beam, u
-    pac = a[ks].conjugate()
-    pd = d[ks]
-    with np.errstate(invalid="ignore", divide="ignore"):
-        inv = 1.0 / (us.conjugate() * pd).imag  # 1 / (u x d)
-        t = (pac * pd).imag * inv  # (a x d) / (u x d)
-        s = (pac * us).imag * inv  # (a x u) / (u x d)
-    ok = (t >= 0.0) & (t <= r_max) & (s >= 0.0) & (s <= 1.0)
-    t_hit = t[ok]
-    b_hit = bs[ok]
-    id_hit = sidx[ks[ok]]
-
-    if n_c:
-        notseg = ~is_seg
-        kc = shape_k[notseg] - n_s
-        bc = beam[notseg]
-        cc0 = c0[kc]
-        bdot = (u[notseg].conjugate() * c[kc]).real  # u . c
-        disc = bdot * bdot - cc0
-        okc = (disc >= 0.0) & ((bdot >= 0.0) | (cc0 <= 0.0))
-        tc = np.where(cc0[okc] <= 0.0, 0.0, bdot[okc] - np.sqrt(disc[okc]))
-        near_c = tc <= r_max
-        t_hit = np.concatenate([t_hit, tc[near_c]])
-        b_hit = np.concatenate([b_hit, bc[okc][near_c]])
-        id_hit = np.concatenate([id_hit, n_seg + cnear[kc[okc][near_c]]])
-
-    np.minimum.at(ranges, b_hit, t_hit)
-    win = t_hit == ranges[b_hit]
-    hit[b_hit[win]] = id_hit[win]
-    return ranges, hit
+        shape_id = np.concatenate([sidx, [-1]])
+    return ranges, shape_id[hit_key]
 
 
 def beam_directions(

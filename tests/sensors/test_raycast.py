@@ -163,3 +163,25 @@ def test_ranges_invariant_under_rigid_motion_of_world_and_sensor(tx, ty, rot, se
     fin = np.isfinite(r1) & np.isfinite(r2)
     assert np.mean(np.isfinite(r1) == np.isfinite(r2)) > 0.995  # grazing beams may flip
     assert np.max(np.abs(r1[fin] - r2[fin]), initial=0.0) < 1e-6
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    x=st.floats(-10.0, 10.0, allow_nan=False),
+    y=st.floats(-10.0, 10.0, allow_nan=False),
+    r_max=st.floats(0.5, 8.0),
+)
+def test_near_cells_hold_every_segment_in_range(x, y, r_max):
+    """The per-cell candidate list is a superset of the segments within r_max of the sensor."""
+    segs, _ = random_geometry(np.random.default_rng(11), 120, 0)
+    cache = SegmentCache.build(segs)
+    cache.near(x + 0.3, y - 0.2, r_max)  # fill another cell first: the memo is per cell
+    idx, p0, d = cache.near(x, y, r_max)
+    a, b = segs[:, :2], segs[:, 2:]
+    t = np.clip(
+        np.sum((np.array([x, y]) - a) * (b - a), axis=1) / np.sum((b - a) ** 2, axis=1), 0, 1
+    )
+    dist = np.hypot(*(a + t[:, None] * (b - a) - np.array([x, y])).T)
+    assert set(np.flatnonzero(dist <= r_max)) <= set(idx.tolist())
+    np.testing.assert_array_equal(p0, cache.p0[idx])
+    np.testing.assert_array_equal(d, cache.d[idx])
