@@ -188,6 +188,19 @@ def bench_localizer(rng: np.random.Generator) -> None:
         f"{err.mean() * 100:.1f} cm; timescale usage {ts.tolist()}; "
         f"safe mode {np.mean([e.extras['safe_mode'] for e in ests]) * 100:.1f} %"
     )
+    fast = pickle.loads(pickle.dumps(loc))
+    fast.end_run()
+    fast.min_update_dist_m, fast.min_update_angle_rad = 0.1, 0.1
+    fast.begin_run(Prior(initial_pose=truth[0].copy(), day=2, run=2))
+    c0 = time.process_time()
+    ests = [fast.update(o, s) for o, s in stream]
+    c_fast = time.process_time() - c0
+    err = np.hypot(*(np.array([e.mean[:2] for e in ests]) - truth[:, :2]).T)
+    print(
+        f"   same stream with min_update_dist_m = min_update_angle_rad = 0.1: "
+        f"{len(stream) / c_fast:.0f} scans/s of CPU time, mean error {err.mean() * 100:.1f} cm, "
+        f"{np.mean([e.extras.get('skipped', False) for e in ests]) * 100:.0f} % scans skipped"
+    )
     print(f"   pickled localizer: {len(pickle.dumps(loc)) / 1e6:.1f} MB for {len(loc.dmap)} maps")
 
 
