@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
-from dynmap_sim.world.polygons import FloatArray, point_segment_distance, segments_cross
+from dynmap_sim.world.polygons import FloatArray, point_segment_distance
 from dynmap_sim.world.spec import PeopleSpec
 
 TAU_S = 0.5
@@ -160,6 +160,9 @@ class SocialForce:
         ext = np.concatenate([s, far])
         d = ext[:, 2:4] - ext[:, 0:2]
         inv = 1.0 / np.maximum(np.sum(d * d, axis=1), 1e-18)
+        self._seg_p0 = s[:, 0] + 1j * s[:, 1]
+        self._seg_d = (s[:, 2] - s[:, 0]) + 1j * (s[:, 3] - s[:, 1])
+        self._seg_dc = self._seg_d.conjugate()
         # per segment, complex: p0, conj(d), 1 / |d|^2 (gathered per person each step)
         self._segrows = np.column_stack(
             [ext[:, 0] + 1j * ext[:, 1], d[:, 0] - 1j * d[:, 1], inv + 0j]
@@ -219,7 +222,17 @@ class SocialForce:
         by 5 cm and not inside any)."""
         if len(self.segments) == 0:
             return np.ones(len(points), dtype=bool)
-        clear = point_segment_distance(points, self.segments).min(axis=1) > r + 0.05
+        if self.broad_phase and r + 0.05 < REACH_M:  # the grid lists every segment that near
+            pts = np.ascontiguousarray(points, dtype=np.float64)
+            z = pts.view(np.complex128)[:, 0]
+            rows = self._segment_rows(z)
+            a = z[:, None] - rows[..., 0]
+            cd = rows[..., 1]
+            t = (a * cd).real * rows[..., 2].real
+            np.minimum(np.maximum(t, 0.0, out=t), 1.0, out=t)
+            clear = np.abs(a - t * cd.conjugate()).min(axis=1) > r + 0.05
+        else:
+            clear = point_segment_distance(points, self.segments).min(axis=1) > r + 0.05
         return clear & ~self._inside_any(points)
 
     def _free(self, xy: FloatArray, r: float) -> bool:
@@ -228,7 +241,15 @@ class SocialForce:
     def _visible(self, a: FloatArray, b: FloatArray) -> bool:
         if len(self.segments) == 0:
             return True
-        return not bool(segments_cross(np.concatenate([a, b]), self.segments).any())
+        # proper crossings of a-b with each segment p0 + s d: the endpoints of each lie on
+        # opposite sides of the other (signs of 2-D cross products, Im(conj(u) w) = u x w)
+        za, ab = complex(a[0], a[1]), complex(b[0] - a[0], b[1] - a[1])
+        w0 = self._seg_p0 - za  # p0 - a
+        o1 = (ab.conjugate() * w0).imag
+        o2 = (ab.conjugate() * (w0 + self._seg_d)).imag
+        o3 = (self._seg_dc * w0).imag  # = -(d x (a - p0))
+        o4 = (self._seg_dc * (w0 - ab)).imag  # = -(d x (b - p0))
+        return not bool(((o1 * o2 < 0.0) & (o3 * o4 < 0.0)).any())
 
     def _random_point(self, pop: PeopleSpec, r: float) -> FloatArray | None:
         """A uniformly drawn free point of the population's areas (up to 8 batches of 8)."""
