@@ -13,10 +13,12 @@ Targets (DESIGN.md §7, issue 3): env step >= 10x the naive scan rate (about >= 
 steps/s), lidar <= 1 us/ray with numpy and <= 0.3 us/ray with numba. Prints a table and
 writes JSON (package version, platform, figures).
 
-    python benchmarks/bench_sim.py [--steps 3000] [--repeats 5] [--json PATH]
+    python benchmarks/bench_sim.py [--steps 3000] [--repeats 3] [--json PATH]
 
-Each figure is the best of ``--repeats`` equal chunks of its measurement (robust to a busy
-machine); the JSON goes to ``benchmarks/results/bench_sim.json`` by default.
+Each figure is the best of ``--repeats`` passes over the same work (same poses, or the same
+run with the same seed and actions), robust to a busy machine: load only adds time. (Earlier
+versions took the best of *different* chunks, which favoured whichever chunk had the cheapest
+poses.) The JSON goes to ``benchmarks/results/bench_sim.json`` by default.
 """
 
 from __future__ import annotations
@@ -51,34 +53,46 @@ def actions(n: int) -> np.ndarray:
 
 def env_rate(
     people: bool, day: int, run: int, steps: int, repeats: int, backend: str = "numpy"
-) -> tuple[float, int]:
+) -> tuple[float, int, float]:
+    """Best steps/s over ``repeats`` passes of the same ``steps`` steps (same seed and run,
+    same actions: identical work each pass, so only machine load differs); also the number of
+    people and the best steps per second of process CPU time."""
     env = DynMapEnv(world="lab", people=people, sensor_options={"backend": backend})
-    env.reset(seed=0, options={"day": day, "run": run})
     acts = actions(steps)
+    env.reset(seed=0, options={"day": day, "run": run})
     for a in acts[:50]:  # warm-up (caches, allocator)
         env.step(a)
-    env.reset(seed=0, options={"day": day, "run": run})
-    n_people = env.world.people_poses().shape[0]
-    best = math.inf
-    for chunk in np.array_split(acts, repeats):  # best chunk: robust to a busy machine
-        t0 = time.perf_counter()
-        for a in chunk:
+    best = best_cpu = math.inf
+    n_people = 0
+    for _ in range(repeats):
+        env.reset(seed=0, options={"day": day, "run": run})
+        n_people = env.world.people_poses().shape[0]
+        t0, c0 = time.perf_counter(), time.process_time()
+        for a in acts:
             _, _, term, trunc, _ = env.step(a)
             if term or trunc:
                 env.reset()
-        best = min(best, (time.perf_counter() - t0) / len(chunk))
-    return 1.0 / best, n_people
+        best = min(best, (time.perf_counter() - t0) / len(acts))
+        best_cpu = min(best_cpu, (time.process_time() - c0) / len(acts))
+    return 1.0 / best, n_people, 1.0 / best_cpu
 
 
 def best_time_per_item(fn, items, repeats: int) -> float:
-    """Smallest mean time per item [s] of ``fn(item)`` over ``repeats`` chunks of ``items``."""
-    best = math.inf
-    for chunk in np.array_split(np.arange(len(items)), repeats):
-        t0 = time.perf_counter()
-        for i in chunk:
-            fn(items[i])
-        best = min(best, (time.perf_counter() - t0) / len(chunk))
-    return best
+    """Smallest mean time per item [s] of ``fn(item)`` over ``repeats`` passes over all
+    ``items`` (identical work each pass)."""
+    return best_times_per_item(fn, items, repeats)[0]
+
+
+def best_times_per_item(fn, items, repeats: int) -> tuple[float, float]:
+    """Like :func:`best_time_per_item`, as ``(wall clock, process CPU time)`` [s]."""
+    best = best_cpu = math.inf
+    for _ in range(repeats):
+        t0, c0 = time.perf_counter(), time.process_time()
+        for item in items:
+            fn(item)
+        best = min(best, (time.perf_counter() - t0) / len(items))
+        best_cpu = min(best_cpu, (time.process_time() - c0) / len(items))
+    return best, best_cpu
 
 
 def lunch_run(env: DynMapEnv) -> tuple[int, int]:
@@ -129,7 +143,7 @@ def main() -> None:
     ap.add_argument("--scans", type=int, default=300, help="lidar scans per measurement")
     ap.add_argument("--naive-scans", type=int, default=30, help="naive reference scans")
     ap.add_argument(
-        "--repeats", type=int, default=5, help="each figure is the best of this many chunks"
+        "--repeats", type=int, default=3, help="each figure is the best of this many passes"
     )
     ap.add_argument("--json", type=Path, default=Path("benchmarks/results/bench_sim.json"))
     args = ap.parse_args()
@@ -165,7 +179,7 @@ def main() -> None:
     angles = spec.angles()
     sel = np.linspace(0, args.scans - 1, args.naive_scans).astype(int)
     ref = [naive_scan(space, poses[i], angles, spec.range_max_m) for i in sel]
-    t_naive = best_time_per_item(
+    t_naive, t_naive_cpu = best_times_per_item(
         lambda p: naive_scan(space, p, angles, spec.range_max_m), poses[sel], args.repeats
     )
     naive_scans_per_s = 1.0 / t_naive
@@ -176,12 +190,12 @@ def main() -> None:
         assert np.array_equal(np.isfinite(r), np.isfinite(ours[i]))
         max_diff = max(max_diff, float(np.max(np.abs(r[both] - ours[i][both]), initial=0.0)))
 
-    rate_empty, _ = env_rate(False, day, run, args.steps, args.repeats)
-    rate_crowd, n_people = env_rate(True, day, run, args.steps, args.repeats)
+    rate_empty, _, cpu_empty = env_rate(False, day, run, args.steps, args.repeats)
+    rate_crowd, n_people, cpu_crowd = env_rate(True, day, run, args.steps, args.repeats)
     rate_empty_nb = rate_crowd_nb = None
     if us_ray_numba is not None:
-        rate_empty_nb, _ = env_rate(False, day, run, args.steps, args.repeats, "numba")
-        rate_crowd_nb, _ = env_rate(True, day, run, args.steps, args.repeats, "numba")
+        rate_empty_nb, _, _ = env_rate(False, day, run, args.steps, args.repeats, "numba")
+        rate_crowd_nb, _, _ = env_rate(True, day, run, args.steps, args.repeats, "numba")
 
     rows = [
         (
@@ -238,6 +252,13 @@ def main() -> None:
         f"env step / naive scan: {ratio_empty:.1f}x without people, {ratio_crowd:.1f}x with the "
         f"crowd (target >= {TARGET_ENV_RATIO:.0f}x)"
     )
+    cpu_ratio_empty = cpu_empty * t_naive_cpu
+    cpu_ratio_crowd = cpu_crowd * t_naive_cpu
+    print(
+        f"in process CPU time (robust to other load): {cpu_empty:.0f} / {cpu_crowd:.0f} env "
+        f"steps/s, naive {1.0 / t_naive_cpu:.1f} scans/s -> {cpu_ratio_empty:.1f}x / "
+        f"{cpu_ratio_crowd:.1f}x"
+    )
     print(f"lidar speed-up over naive: {us_ray_naive / us_ray_numpy:.1f}x (numpy)")
     n_hits = int(sum(np.isfinite(r).sum() for r in ref))
     print(f"max |ours - pymunk| over {n_hits} hits: {max_diff:.2e} m")
@@ -261,6 +282,14 @@ def main() -> None:
         "naive_scans_per_s": naive_scans_per_s,
         "env_over_naive_no_people": ratio_empty,
         "env_over_naive_crowd": ratio_crowd,
+        "cpu_env_steps_per_s_no_people": cpu_empty,
+        "cpu_env_steps_per_s_crowd": cpu_crowd,
+        "cpu_naive_scans_per_s": 1.0 / t_naive_cpu,
+        "cpu_env_over_naive_no_people": cpu_ratio_empty,
+        "cpu_env_over_naive_crowd": cpu_ratio_crowd,
+        "repeats": args.repeats,
+        "steps": args.steps,
+        "load_average": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
         "lidar_us_per_ray_numpy": us_ray_numpy,
         "lidar_us_per_ray_numba": us_ray_numba,
         "lidar_us_per_ray_naive": us_ray_naive,
