@@ -157,6 +157,8 @@ class DynMapEnv(gymnasium.Env):
             math.ceil(pop.count * max(1.0, *(f for _, f in pop.profile))) for pop in spec.people
         )
         self.metadata = {**self.metadata, "render_fps": max(1, round(1.0 / self.dt_s))}
+        self._no_people = np.zeros((self.max_people, 3))  # padding rows (inf, inf, 0)
+        self._no_people[:, :2] = np.inf
 
         p = self.robot_params
         n = self.laser_spec.n_beams
@@ -170,6 +172,7 @@ class DynMapEnv(gymnasium.Env):
         self.action_space = spaces.Box(-high, high, (2,), np.float32)
         self._act_lo = (-high).astype(np.float64)
         self._act_hi = high.astype(np.float64)
+        self._act_bounds = (tuple(self._act_lo.tolist()), tuple(self._act_hi.tolist()))
 
         self.world_seed = 0
         self.world = World(spec, seed=0)
@@ -231,10 +234,12 @@ class DynMapEnv(gymnasium.Env):
         a = np.asarray(action, dtype=np.float64)
         if a.shape != (2,):
             raise ValueError(f"action must have shape (2,) = (v_mps, omega_radps), got {a.shape}")
-        if not np.isfinite(a).all():
+        v, w = float(a[0]), float(a[1])
+        if not (math.isfinite(v) and math.isfinite(w)):
             raise ValueError(f"action must be finite (v_mps, omega_radps), got {a.tolist()}")
-        v = min(max(float(a[0]), self._act_lo[0]), self._act_hi[0])
-        w = min(max(float(a[1]), self._act_lo[1]), self._act_hi[1])
+        lo, hi = self._act_bounds
+        v = min(max(v, lo[0]), hi[0])
+        w = min(max(w, lo[1]), hi[1])
         res = self.robot.step(v, w, self.dt_s, self._rng_slip)
         self.odometry.update(res.dphi_left_rad, res.dphi_right_rad, self._rng_odom)
         pose = self.robot.pose
@@ -274,11 +279,13 @@ class DynMapEnv(gymnasium.Env):
 
     def _people(self) -> tuple[FloatArray, int]:
         """People poses padded to ``max_people`` rows ``(inf, inf, 0)``, and their number."""
-        poses = self.world.people_poses()
-        out = np.zeros((self.max_people, 3))
-        out[:, :2] = np.inf
-        n = min(poses.shape[0], self.max_people)
-        out[:n] = poses[:n]
+        out = self._no_people.copy()
+        crowd = self.world.crowd
+        n = min(crowd.n, self.max_people)
+        if n:
+            out[:n, :2] = crowd.pos[:n]
+            vel = crowd.vel[:n]
+            out[:n, 2] = np.arctan2(vel[:, 1], vel[:, 0])  # heading of motion, as people_poses
         return out, n
 
     # -- extras ---------------------------------------------------------------------------

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 import pymunk
@@ -80,9 +81,9 @@ class RobotParams:
             raise ValueError(f"RobotParams.slip_mean must be in (-0.5, 0.5), got {self.slip_mean}")
 
 
-@dataclass(frozen=True)
-class StepResult:
-    """Outcome of one control step: wheel rotations [rad] and the bumper state."""
+class StepResult(NamedTuple):
+    """Outcome of one control step: wheel rotations [rad] and the bumper state (a named
+    tuple: immutable and cheap to build every step)."""
 
     dphi_left_rad: float
     dphi_right_rad: float

@@ -316,7 +316,8 @@ class Lidar:
             if nz.sigma_rel
             else nz.sigma_m
         )
-        out = r + self._bias_m + sigma * rng.standard_normal(r.shape)  # inf stays inf
+        out = sigma * rng.standard_normal(r.shape)
+        out += r + self._bias_m if nz.systematic_m else r  # inf stays inf
         flat_out = out.reshape(-1)
         flat_r = r.reshape(-1)
         if nz.p_mixed > 0.0:
