@@ -246,3 +246,15 @@ def test_new_seed_new_world_no_stale_caches():
     ob, ib = DynMapEnv(world="lab").reset(seed=2, options={"day": 9, "run": 2})
     np.testing.assert_array_equal(oa["scan"], ob["scan"])
     np.testing.assert_array_equal(ia["truth"]["beam_object"], ib["truth"]["beam_object"])
+
+
+def test_info_people_are_the_worlds_people_padded():
+    env = DynMapEnv(world="lab")
+    env.reset(seed=0, options={"day": 1, "run": 2})
+    for _ in range(5):
+        _, _, _, _, info = env.step(np.array([0.3, 0.2], np.float32))
+    poses = env.unwrapped.world.people_poses()
+    n = info["truth"]["n_people"]
+    assert n == poses.shape[0] > 0
+    np.testing.assert_array_equal(info["truth"]["people"][:n], poses)
+    assert np.all(np.isposinf(info["truth"]["people"][n:, :2]))
