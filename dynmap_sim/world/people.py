@@ -52,6 +52,7 @@ LEG_RADIUS_M = 0.06
 LEG_SPREAD_M = 0.10
 STRIDE_M = 1.2
 LEG_SWING_M = 0.12
+_FAR = complex(1e9, 1e9)  # stands in for an absent robot (its force underflows to 0)
 
 
 def profile_fraction(profile: tuple[tuple[float, float], ...], time_s: float) -> float:
@@ -105,13 +106,29 @@ class _StepConstants:
     evade_log_a: FloatArray
     robot_need: FloatArray
     robot_goal_reach: FloatArray
+    k_cols: int
+    log_a: FloatArray
+    """``(P, P + 1 + K)``: the ``*_log_a`` of the people, the robot and ``K`` candidate
+    segments, laid out like the source points in :meth:`SocialForce.step`."""
+    inv_b: FloatArray
+    """``(P, P + 1 + K)``: ``1 / B`` of the same interactions [1/m]."""
 
     @classmethod
-    def build(cls, radius: FloatArray, v0: FloatArray, robot_radius_m: float) -> _StepConstants:
+    def build(
+        cls, radius: FloatArray, v0: FloatArray, robot_radius_m: float, k_cols: int
+    ) -> _StepConstants:
         n = len(radius)
         rsum = radius[:, None] + radius[None, :]
         diag = np.eye(n, dtype=bool)
         reach = radius + robot_radius_m + ROBOT_GAP_M
+        pair_log_a = np.where(diag, -np.inf, np.log(A_PEOPLE) + rsum / B_PEOPLE)
+        wall_log_a = np.log(A_WALL) + radius / B_WALL
+        robot_log_a = np.log(A_ROBOT) + reach / B_ROBOT
+        log_a = np.empty((n, n + 1 + k_cols))
+        inv_b = np.empty((n, n + 1 + k_cols))
+        log_a[:, :n], inv_b[:, :n] = pair_log_a, 1.0 / B_PEOPLE
+        log_a[:, n], inv_b[:, n] = robot_log_a, 1.0 / B_ROBOT
+        log_a[:, n + 1 :], inv_b[:, n + 1 :] = wall_log_a[:, None], 1.0 / B_WALL
         return cls(
             n=n,
             radius=radius,
@@ -120,12 +137,15 @@ class _StepConstants:
             v0_tau=v0 / TAU_S,
             vmax=1.3 * v0,
             rsum_masked=np.where(diag, -np.inf, rsum),
-            pair_log_a=np.where(diag, -np.inf, np.log(A_PEOPLE) + rsum / B_PEOPLE),
-            wall_log_a=np.log(A_WALL) + radius / B_WALL,
-            robot_log_a=np.log(A_ROBOT) + reach / B_ROBOT,
+            pair_log_a=pair_log_a,
+            wall_log_a=wall_log_a,
+            robot_log_a=robot_log_a,
             evade_log_a=np.log(A_EVADE) + reach / B_EVADE,
             robot_need=reach,
             robot_goal_reach=reach + 0.1,
+            k_cols=k_cols,
+            log_a=log_a,
+            inv_b=inv_b,
         )
 
 
@@ -347,7 +367,7 @@ class SocialForce:
         )
 
     # -- dynamics -------------------------------------------------------------------------
-    def _constants(self, crowd: Crowd, robot_radius_m: float) -> _StepConstants:
+    def _constants(self, crowd: Crowd, robot_radius_m: float, k_cols: int) -> _StepConstants:
         """Per-crowd constants of :meth:`step` (radii, speeds), rebuilt when they change."""
         c = self._consts
         if (
@@ -356,9 +376,10 @@ class SocialForce:
             and c.v0 is crowd.v0
             and c.robot_radius_m == robot_radius_m
             and c.n == crowd.n
+            and c.k_cols == k_cols
         ):
             return c
-        c = _StepConstants.build(crowd.radius, crowd.v0, robot_radius_m)
+        c = _StepConstants.build(crowd.radius, crowd.v0, robot_radius_m, k_cols)
         self._consts = c
         return c
 
@@ -398,42 +419,41 @@ class SocialForce:
             a = getattr(crowd, name)
             if not (a.flags.c_contiguous and a.dtype == np.float64):
                 setattr(crowd, name, np.ascontiguousarray(a, dtype=np.float64))
-        k = self._constants(crowd, robot_radius_m)
         z = crowd.pos.view(np.complex128)[:, 0]  # views: in-place updates write through
         v = crowd.vel.view(np.complex128)[:, 0]
         goal = crowd.goal.view(np.complex128)[:, 0]
+        rows = self._segment_rows(z)  # candidate segments (static geometry within REACH_M)
+        k = self._constants(crowd, robot_radius_m, rows.shape[1])
         to_goal = goal - z
         e = to_goal / np.maximum(np.abs(to_goal), 1e-9)
         # driving term (H&M eq. 2)
         force = k.v0_tau * e - v * (1.0 / TAU_S)
-        pair_gap = np.inf  # smallest gap between two bodies before the move [m]
-        if n > 1:  # people (H&M eq. 3-4); the diagonal is masked by the constants
-            diff = z[:, None] - z[None, :]
-            d = np.abs(diff)
-            pair_gap = float((d - k.rsum_masked).min())
-            w = np.exp(k.pair_log_a - d * (1.0 / B_PEOPLE))
-            w /= np.maximum(d, 1e-9)
-            force += (w * diff).sum(axis=1)
-        # static geometry (H&M eq. 5): every segment within REACH_M
-        rows = self._segment_rows(z)
+        # repulsion: one exponential per (person, source) from the vectors source -> person
+        # of all sources at once: the other people (H&M eq. 3-4; the diagonal is masked by
+        # the constants), the robot, and the closest point of each candidate segment (H&M
+        # eq. 5; only those within REACH_M count)
+        rz = None if robot_xy is None else complex(float(robot_xy[0]), float(robot_xy[1]))
+        diff = np.empty((n, n + 1 + rows.shape[1]), dtype=np.complex128)
+        np.subtract(z[:, None], z[None, :], out=diff[:, :n])
+        np.subtract(z, _FAR if rz is None else rz, out=diff[:, n])
         a = z[:, None] - rows[..., 0]
         cd = rows[..., 1]  # conj(d)
         t = (a * cd).real
         t *= rows[..., 2].real
         np.minimum(np.maximum(t, 0.0, out=t), 1.0, out=t)
-        q = a - t * cd.conjugate()  # from the closest point to the person
-        dist = np.abs(q)
-        wall_gap = dist.min(axis=1) - crowd.radius  # per person, before the move
-        w = np.exp(k.wall_log_a[:, None] - dist * (1.0 / B_WALL))
-        w /= np.maximum(dist, 1e-9)
-        w[dist > REACH_M] = 0.0
-        force += (w * q).sum(axis=1)
-        rz = None
-        if robot_xy is not None:
-            rz = complex(float(robot_xy[0]), float(robot_xy[1]))
-            rd = z - rz
-            dr = np.maximum(np.abs(rd), 1e-9)
-            force += np.exp(k.robot_log_a - dr * (1.0 / B_ROBOT)) / dr * rd
+        np.subtract(a, t * cd.conjugate(), out=diff[:, n + 1 :])  # closest point -> person
+        d = np.abs(diff)
+        # smallest gaps before the move [m]: between two bodies, and per person to a segment
+        pair_gap = float((d[:, :n] - k.rsum_masked).min())
+        wall_gap = d[:, n + 1 :].min(axis=1) - crowd.radius
+        w = np.exp(k.log_a - d * k.inv_b)
+        w /= np.maximum(d, 1e-9)
+        w_wall = w[:, n + 1 :]
+        w_wall[d[:, n + 1 :] > REACH_M] = 0.0
+        force += (w * diff).sum(axis=1)
+        if rz is not None:
+            rd = diff[:, n]
+            dr = np.maximum(d[:, n], 1e-9)
             # evasion: a robot ahead makes people step aside early (to their right when it is
             # dead ahead), so a head-on meeting in a corridor does not end in a stand-off.
             # conj(e) rd: real part -(robot ahead), imaginary part > 0: robot on the right
