@@ -23,6 +23,7 @@ People are seen by the laser as two legs whose fore-aft offset follows the gait 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -301,9 +302,10 @@ class SocialForce:
                 g = self._random_point(pop, r)
                 if g is None:
                     continue
-            if avoid is not None and np.hypot(*(g - avoid[0])) < avoid[1] + r:
+            gx, gy = float(g[0]), float(g[1])
+            if avoid is not None and math.hypot(gx - avoid[0][0], gy - avoid[0][1]) < avoid[1] + r:
                 continue
-            if np.hypot(*(g - frm)) > GOAL_TOL_M and self._visible(frm, g):
+            if math.hypot(gx - frm[0], gy - frm[1]) > GOAL_TOL_M and self._visible(frm, g):
                 return g
         return frm.copy()
 
@@ -392,10 +394,14 @@ class SocialForce:
         if not self.broad_phase:
             rows = self._segrows  # all segments and the far dummy (never empty)
             return np.broadcast_to(rows, (len(z), *rows.shape))
+        return self._segrows[self._cells[self._cell_index(z)]]
+
+    def _cell_index(self, z: NDArray[np.complex128]) -> NDArray[np.int64]:
+        """Index of the grid cell holding each point ``z`` (clipped to the grid)."""
         ij = ((z - self._origin_c) * (1.0 / CELL_M)).view(np.float64).reshape(-1, 2)
         ij = ij.astype(np.int64)  # truncation: negative cells clip to 0 as with floor
         np.minimum(np.maximum(ij, 0, out=ij), self._cell_hi, out=ij)
-        return self._segrows[self._cells[ij @ self._cell_stride]]
+        return ij @ self._cell_stride
 
     def step(
         self,
