@@ -236,6 +236,14 @@ class Lidar:
         self._labels_key: tuple[np.ndarray, ...] | None = None
         self._labels: tuple[NDArray[np.int32], NDArray[np.int8]] | None = None
 
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickle without the broad-phase cache (rebuilt on the next scan; its per-cell
+        candidate lists would only bloat checkpoints)."""
+        state = self.__dict__.copy()
+        state["_cache"] = None
+        state["_cache_key"] = None
+        return state
+
     def _segments(self, geom: GeometryLike) -> SegmentCache:
         """Broad-phase data of the segments, rebuilt when the geometry changes.
 

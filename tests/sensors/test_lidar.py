@@ -142,3 +142,27 @@ def test_same_seed_same_scan():
     a = lidar.scan(np.array([0.1, 0.2, 0.3]), g, np.random.default_rng(9)).ranges_m
     b = lidar.scan(np.array([0.1, 0.2, 0.3]), g, np.random.default_rng(9)).ranges_m
     np.testing.assert_array_equal(a, b)
+
+
+def test_pickled_lidar_drops_its_cache_and_scans_the_same():
+    import pickle
+
+    segs = np.array([[3.0, -5.0, 3.0, 5.0], [-2.0, -1.0, -2.0, 1.0]])
+
+    class G:
+        segments = segs
+        segment_object = np.array([0, 1], np.int32)
+        segment_class = np.array([1, 1], np.int8)
+        circles = np.array([[0.0, 2.0, 0.1]])
+        circle_object = np.array([2], np.int32)
+        circle_class = np.array([5], np.int8)
+        static_version = 0
+
+    lidar = make_lidar("urg-04lx", noise=NOISELESS)
+    pose = np.array([0.2, 0.1, 0.3])
+    before = lidar.cast(pose, G)
+    clone = pickle.loads(pickle.dumps(lidar))
+    assert clone._cache is None
+    after = clone.cast(pose, G)
+    np.testing.assert_array_equal(before[0], after[0])
+    np.testing.assert_array_equal(before[1], after[1])
