@@ -330,15 +330,15 @@ class Lidar:
         flat_r = r.reshape(-1)
         if nz.p_mixed > 0.0:
             # depth discontinuities between neighbours i, i+1 (NaN for no-hit beams: no edge)
+            # (NaN arithmetic and comparisons are quiet: no errstate needed)
             rn = np.where(hit, r, np.nan)
-            with np.errstate(invalid="ignore"):
-                edge = np.abs(rn[..., 1:] - rn[..., :-1]) > nz.mixed_jump_m
-            e = np.flatnonzero(edge)
+            e = np.flatnonzero(np.abs(rn[..., 1:] - rn[..., :-1]) > nz.mixed_jump_m)
             if e.size:
                 # flat index of the left beam of each edge (rows are n_beams long)
-                left = e + e // (spec.n_beams - 1)
-                beams = np.concatenate([left, left + 1])
-                others = np.concatenate([left + 1, left])
+                left = e + e // (spec.n_beams - 1) if r.ndim > 1 else e
+                right = left + 1
+                beams = np.concatenate([left, right])
+                others = np.concatenate([right, left])
                 pick = rng.random(beams.size) < nz.p_mixed
                 beams, others = beams[pick], others[pick]
                 w = rng.random(beams.size)
