@@ -149,7 +149,10 @@ def cast_scan(
     # --- circles within range ------------------------------------------------------------
     n_c = 0
     if circles is not None and circles.shape[0] > 0:
-        cw = circles[:, 0] + 1j * circles[:, 1] - o
+        if circles.flags.c_contiguous and circles.dtype == np.float64:
+            cw = circles[:, :2].view(np.complex128)[:, 0] - o  # centres, sensor at 0
+        else:
+            cw = circles[:, 0] + 1j * circles[:, 1] - o
         cr = circles[:, 2]
         dist = np.abs(cw)
         cnear = np.flatnonzero(dist <= r_max + cr)
@@ -161,8 +164,7 @@ def cast_scan(
         dist = dist[cnear]
         c0 = (dist - cr) * (dist + cr)  # |c|^2 - r^2 (<= 0: the sensor is inside the circle)
         inside = c0 <= 0.0
-        with np.errstate(invalid="ignore", divide="ignore"):
-            half = np.arcsin(np.minimum(cr / dist, 1.0))
+        half = np.arcsin(cr / np.maximum(dist, cr))  # half the angle the circle subtends
         half[inside] = np.pi
         half2 = 2.0 * half
         sb = np.concatenate([start, start, np.arctan2(c.imag, c.real) - half])
