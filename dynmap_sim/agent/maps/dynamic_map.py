@@ -60,11 +60,14 @@ class DynamicMap:
     def add_local_map(
         self, centre_xy: ArrayLike, points_map: ArrayLike, rng: np.random.Generator
     ) -> int:
-        """Create a local map at ``centre_xy`` and fill every sub-map with ``points_map``."""
+        """Create a local map at ``centre_xy`` and seed every sub-map with ``points_map``.
+
+        The seed does not count as a time step: each sub-map's first update fills it (§3.5).
+        """
         lm = LocalMap(centre_xy, self.timescales, self.max_range_m)
         polar = lm.polar(points_map)
         for level in range(len(self.timescales)):
-            lm.learn(level, points_map, rng, fill=True, polar=polar)
+            lm.learn(level, points_map, rng, fill=True, initialize=False, polar=polar)
         self.local_maps.append(lm)
         return len(self.local_maps) - 1
 

@@ -95,6 +95,7 @@ class LocalMap:
         rng: np.random.Generator,
         *,
         fill: bool = False,
+        initialize: bool = True,
         polar: tuple[FloatArray, FloatArray] | None = None,
     ) -> None:
         """One §3.1 update of sub-map ``level`` with the points (all of one time step).
@@ -104,7 +105,7 @@ class LocalMap:
         ang, dist = self.polar(points_map) if polar is None else polar
         ok = dist <= self.max_range_m
         ray = self.ray_index(ang[ok], self.timescales[level].n_rays)
-        self.sub[level].update(ray, to_mm(dist[ok]), rng, fill=fill)
+        self.sub[level].update(ray, to_mm(dist[ok]), rng, fill=fill, initialize=initialize)
 
     # ------------------------------------------------------------------ perceptual model
     def log_likelihood(

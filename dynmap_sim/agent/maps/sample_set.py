@@ -67,6 +67,9 @@ class SampleSets:
         self.update_ratio = float(update_ratio)
         self.samples_mm = np.zeros((self.n_rays, self.n_samples), dtype=np.uint16)
         self.count = np.zeros(self.n_rays, dtype=np.uint16)
+        #: Rays that had their first time step (§3.5: a set is initialized with the
+        #: measurements of its first time step; afterwards the §3.1 rule applies).
+        self.initialized = np.zeros(self.n_rays, dtype=bool)
         self._est: RayEstimates | None = None
         self._table: tuple[tuple[float, float, float], NDArray[np.float64]] | None = None
 
@@ -74,7 +77,7 @@ class SampleSets:
     @property
     def nbytes(self) -> int:
         """Bytes of the sample storage (2 per sample slot) plus the per-ray counts."""
-        return int(self.samples_mm.nbytes + self.count.nbytes)
+        return int(self.samples_mm.nbytes + self.count.nbytes + self.initialized.nbytes)
 
     @property
     def sample_bytes(self) -> int:
@@ -86,6 +89,7 @@ class SampleSets:
         out = SampleSets(self.n_rays, self.n_samples, self.update_ratio)
         out.samples_mm[:] = self.samples_mm
         out.count[:] = self.count
+        out.initialized[:] = self.initialized
         out._est = self._est
         return out
 
@@ -107,13 +111,18 @@ class SampleSets:
         rng: np.random.Generator,
         *,
         fill: bool = False,
+        initialize: bool = True,
     ) -> None:
         """Apply one time step of the §3.1 rule with the measurements ``(ray_idx, values_mm)``.
 
         The measurements are a flat list: measurement ``i`` belongs to ray ``ray_idx[i]``
-        (any order, any multiplicity). Rays without measurements are unchanged. With
-        ``fill=True`` the set is only filled (every free slot may take a measurement, nothing is
-        removed): used to initialize a new local map from one scan (§4.4).
+        (any order, any multiplicity). Rays without measurements are unchanged.
+
+        A ray's first time step *initializes* it (§3.5: "initialized using the measurements of
+        the first time-step"): it takes up to ``n`` measurements; from then on the §3.1 rule
+        (with its filling phase of ``u·n`` per step while not full) applies. ``fill=True``
+        fills free slots without removing anything; with ``initialize=False`` it does not
+        count as the first time step (used to seed a new local map with one scan, §4.4).
         """
         ray = np.asarray(ray_idx, dtype=np.int64).ravel()
         val = np.asarray(values_mm).ravel()
@@ -136,10 +145,15 @@ class SampleSets:
 
         cnt = self.count[uniq].astype(np.int64)
         free = self.n_samples - cnt
+        first = ~self.initialized[uniq]
         if fill:
             n_new = np.minimum(m_per, free)
         else:
-            n_new = np.minimum(self._n_new(uniq.size, rng), m_per)
+            n_new = np.where(
+                first, np.minimum(m_per, free), np.minimum(self._n_new(uniq.size, rng), m_per)
+            )
+        if initialize or not fill:
+            self.initialized[uniq] = True
         n_add = np.minimum(n_new, free)
         n_rep = n_new - n_add
 

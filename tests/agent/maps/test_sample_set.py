@@ -19,11 +19,13 @@ def test_storage_is_two_bytes_per_sample():
 def test_filling_phase_adds_u_n_then_replaces():
     rng = np.random.default_rng(0)
     s = SampleSets(3, 10, 0.3)
-    for step in range(1, 4):
+    s.update([0, 0, 1, 1], [1, 2, 3, 4], rng)  # first time step: initialized with all (§3.5)
+    assert list(s.count) == [2, 2, 0]
+    for step in range(1, 3):
         s.update(np.repeat([0, 1], 50), np.arange(100) + 1, rng)
-        assert list(s.count) == [min(3 * step, 10), min(3 * step, 10), 0]
+        assert list(s.count) == [2 + 3 * step, 2 + 3 * step, 0]
     s.update(np.repeat([0, 1], 50), np.arange(100) + 1, rng)
-    assert list(s.count) == [10, 10, 0]  # 9 + 1 added, 2 replaced
+    assert list(s.count) == [10, 10, 0]  # 8 + 2 added, 1 replaced
     for _ in range(5):
         s.update(np.repeat([0, 1], 50), np.arange(100) + 1, rng)
         assert list(s.count) == [10, 10, 0]
@@ -36,6 +38,16 @@ def test_update_replaces_exactly_u_n_samples():
     assert np.all(s.count == 20)
     s.update(np.repeat(np.arange(50), 20), np.full(1000, 2000), rng)
     assert np.all(np.sum(s.samples_mm == 2000, axis=1) == 5)
+
+
+def test_first_time_step_initializes_unless_only_seeded():
+    rng = np.random.default_rng(4)
+    s = SampleSets(2, 20, 0.05)
+    s.update([0, 1], [500, 500], rng, fill=True, initialize=False)  # a seed (new local map)
+    s.update(np.repeat([0, 1], 30), np.full(60, 900), rng)  # first time step: fill to 20
+    assert list(s.count) == [20, 20]
+    s.update(np.repeat([0, 1], 30), np.full(60, 700), rng)  # then the rule: u·n = 1
+    assert list(np.sum(s.samples_mm == 700, axis=1)) == [1, 1]
 
 
 def test_few_measurements_are_never_duplicated():
