@@ -106,10 +106,10 @@ class DynamicMapLocalizer(Localizer):
         max_iterations: int = 20,
         min_matched: int = 20,
         map_voxel_m: float = 0.05,
-        ltm_scans_per_run: int = 800,
+        ltm_scans_per_run: int = 1500,
         min_update_dist_m: float = 0.0,
         min_update_angle_rad: float = 0.0,
-        ltm_day_scans_per_run: int = 500,
+        ltm_day_scans_per_run: int = 1500,
         **params: Any,
     ) -> None:
         super().__init__(laser, rng, **params)
