@@ -19,6 +19,14 @@ A person who reaches a goal, gets no closer to it by ``PROGRESS_M`` for ``STUCK_
 the robot standing on it picks a new one in line of sight,
 or, for a population with a ``route``, heads for the route's next waypoint (closed loop).
 People are seen by the laser as two legs whose fore-aft offset follows the gait phase.
+
+Cost: for the crowds of the shipped worlds (<= ~30 people) a step is bound by the number of
+numpy calls, not by arithmetic, so :meth:`SocialForce.step` works on complex numbers
+(``x + iy`` views of the crowd arrays) and evaluates every repulsion — people, robot and the
+closest points of the candidate segments from a 0.5 m grid (broad phase) — as one
+exponential over a single ``(P, P + 1 + K)`` matrix of source-to-person vectors. The forces
+are those of the formulas above, evaluated exactly (no precomputed field), and the same seed
+gives the same trajectories.
 """
 
 from __future__ import annotations
