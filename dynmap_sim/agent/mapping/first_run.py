@@ -27,6 +27,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import OccupancyGrid
+from dynmap_sim.agent.mapping.correlative_matcher import LikelihoodTable, correlative_match
 from dynmap_sim.agent.mapping.pose_graph import Edge, optimize_pose_graph
 from dynmap_sim.agent.mapping.scan_matcher import PointMap, match_scan
 from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Scan
@@ -112,6 +113,13 @@ class FirstRunMapper:
         graph_rounds: int = 2,
         map_max_range_m: float = 100.0,
         k_normal: int = 6,
+        global_loops: bool = True,
+        loop_stride: int = 2,
+        loop_window_m: tuple[float, float, float] = (0.3, 0.025, 3.0),
+        loop_window_rad: tuple[float, float, float] = (0.05, 0.004, 0.5),
+        loop_submap_half: int = 4,
+        loop_min_score: float = 0.45,
+        loop_max_sigma_m: float = 0.03,
         odom_sigma: tuple[float, float, float, float, float, float] = (
             0.005,
             0.05,
@@ -144,6 +152,13 @@ class FirstRunMapper:
         self._kf_maps: dict[int, PointMap | None] | None = None
         self.map_max_range_m = float(map_max_range_m)
         self.k_normal = int(k_normal)
+        self.global_loops = bool(global_loops)
+        self.loop_stride = max(1, int(loop_stride))
+        self.loop_window_m = tuple(float(v) for v in loop_window_m)
+        self.loop_window_rad = tuple(float(v) for v in loop_window_rad)
+        self.loop_submap_half = int(loop_submap_half)
+        self.loop_min_score = float(loop_min_score)
+        self.loop_max_sigma_m = float(loop_max_sigma_m)
         self.odom_sigma = tuple(float(v) for v in odom_sigma)
         self.pose = self.initial_pose.copy()
         self.cov = np.diag([1e-6, 1e-6, 1e-6])
@@ -297,6 +312,114 @@ class FirstRunMapper:
                     edges.append(Edge(int(j), i, res.pose, info))
         return edges
 
+    def _submap_points(self, poses: FloatArray, j: int) -> FloatArray:
+        """Points of keyframes ``j +- loop_submap_half`` in keyframe ``j``'s frame."""
+        lo, hi = max(0, j - self.loop_submap_half), min(len(poses), j + self.loop_submap_half + 1)
+        pts = np.concatenate(
+            [
+                se2.transform_points(se2.between(poses[j], poses[k]), self._kf_points[k])
+                for k in range(lo, hi)
+            ]
+        )
+        return voxel_downsample(pts, 0.04, mean=True)
+
+    def _global_loop_edges(self, poses: FloatArray) -> list[Edge]:
+        """Loop closures robust to large drift: correlative search, then ICP verification.
+
+        For keyframe ``i`` (every ``loop_stride``-th) and earlier keyframes ``j`` more than
+        ``loop_min_gap`` keyframes back, the search window grows with the path length
+        ``s`` [m] between them, ``w = min(a + b s, cap)`` (``loop_window_m`` for x and y,
+        ``loop_window_rad`` for theta): the drift the front end may have gathered. The
+        nearest such candidate (in the current estimate) is matched by
+        :func:`.correlative_matcher.correlative_match` against the submap around ``j``; the
+        result is refined by ICP and kept if the correlative score, the ICP residual and
+        overlap are good and the ICP pose is well constrained in every direction (no
+        corridor-like ambiguity: largest position standard deviation <= ``loop_max_sigma_m``).
+        """
+        n = len(poses)
+        step = np.hypot(*np.diff(poses[:, :2], axis=0).T)
+        path = np.concatenate([[0.0], np.cumsum(step)])
+        a_m, b_m, cap_m = self.loop_window_m
+        a_r, b_r, cap_r = self.loop_window_rad
+        tables: dict[int, tuple[LikelihoodTable, PointMap]] = {}
+        info = np.diag([1 / 0.01**2, 1 / 0.01**2, 1 / 0.005**2])
+        edges: list[Edge] = []
+        for i in range(self.loop_min_gap + 1, n, self.loop_stride):
+            src = self._kf_points[i]
+            if len(src) < 30:
+                continue
+            cand = np.arange(0, i - self.loop_min_gap)
+            s = path[i] - path[cand]
+            w_xy = np.minimum(a_m + b_m * s, cap_m)
+            dist = np.hypot(*(poses[cand, :2] - poses[i, :2]).T)
+            near = dist < 0.5 * self.loop_radius_m + w_xy
+            if not np.any(near):
+                continue
+            cand, w_xy, s, dist = cand[near], w_xy[near], s[near], dist[near]
+            m = int(np.argmin(dist))
+            j = int(cand[m])
+            if j not in tables:
+                sub = self._submap_points(poses, j)
+                if len(sub) < 30:
+                    continue
+                tables[j] = (LikelihoodTable(sub, 0.05, 0.05, margin_m=0.5), PointMap(sub))
+            table, pmap = tables[j]
+            init = se2.between(poses[j], poses[i])
+            src_c = voxel_downsample(src, 0.1)
+            cres = correlative_match(
+                src_c,
+                table,
+                init,
+                window_xy_m=float(w_xy[m]),
+                window_theta_rad=float(min(a_r + b_r * s[m], cap_r)),
+            )
+            if cres.score < self.loop_min_score:
+                continue
+            res = match_scan(src, pmap, cres.pose, max_correspondence_m=0.15, max_iterations=30)
+            sig = float(np.sqrt(np.max(np.linalg.eigvalsh(res.cov[:2, :2]))))
+            if (
+                res.converged
+                and res.n_matched >= max(60, self.loop_min_overlap * len(src))
+                and res.rmse_m < 0.03
+                and sig <= self.loop_max_sigma_m
+            ):
+                edges.append(Edge(j, i, res.pose, info))
+        return self._consistent_loops(poses, edges)
+
+    def _consistent_loops(
+        self,
+        poses: FloatArray,
+        edges: list[Edge],
+        window: int = 40,
+        tol_m: float = 0.25,
+        tol_rad: float = 0.05,
+    ) -> list[Edge]:
+        """Keep loop edges whose implied drift correction is confirmed by another.
+
+        An edge ``(j, i, z)`` says keyframe ``i`` is at ``x_j ⊕ z``; its correction
+        ``x_j ⊕ z ⊖ x_i`` (map frame) is the drift gathered between ``j`` and ``i``. Drift
+        is smooth, so true closures from keyframes within ``window`` of each other agree
+        (within ``tol_m`` / ``tol_rad``), while a false match (perceptual aliasing) stands
+        alone: an edge is kept if at least one other edge and a majority of those nearby
+        agree with it (a simple form of Olson's single-cluster test).
+        """
+        if len(edges) < 2:
+            return []
+        jj = np.array([e.i for e in edges])
+        ii = np.array([e.j for e in edges])
+        implied = se2.compose(poses[jj], np.array([e.z for e in edges]))
+        corr = implied - poses[ii]
+        corr[:, 2] = se2.wrap_angle(corr[:, 2])
+        near = np.abs(ii[:, None] - ii[None, :]) <= window
+        agree = (
+            near
+            & (np.hypot(*(corr[:, None, :2] - corr[None, :, :2]).transpose(2, 0, 1)) < tol_m)
+            & (np.abs(se2.wrap_angle(corr[:, None, 2] - corr[None, :, 2])) < tol_rad)
+        )
+        n_agree = agree.sum(axis=1)
+        keep = (n_agree >= 2) & (2 * n_agree > near.sum(axis=1))
+        return [e for e, k in zip(edges, keep, strict=True) if k]
+
     def finish(self) -> StaticMap:
         """Close loops, optimize the pose graph, render the grid; return the static map."""
         if not self.keyframes:
@@ -304,6 +427,10 @@ class FirstRunMapper:
         poses = np.array([k.pose for k in self.keyframes])
         seq = self._sequential_edges(poses)
         n_loops = 0
+        if self.global_loops:
+            loops = self._global_loop_edges(poses)
+            if loops:  # verified and mutually consistent: least squares without robust loss
+                poses = optimize_pose_graph(poses, seq + loops, anchor=0, loss="linear")
         for _ in range(self.graph_rounds):
             matches = self._match_edges(poses)
             n_loops = sum(1 for e in matches if e.j - e.i > self.loop_min_gap)
