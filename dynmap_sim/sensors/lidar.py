@@ -332,7 +332,8 @@ class Lidar:
             # depth discontinuities between neighbours i, i+1 (NaN for no-hit beams: no edge)
             # (NaN arithmetic and comparisons are quiet: no errstate needed)
             rn = np.where(hit, r, np.nan)
-            e = np.flatnonzero(np.abs(rn[..., 1:] - rn[..., :-1]) > nz.mixed_jump_m)
+            edge = np.abs(rn[..., 1:] - rn[..., :-1]) > nz.mixed_jump_m
+            e = edge.ravel().nonzero()[0]
             if e.size:
                 # flat index of the left beam of each edge (rows are n_beams long)
                 left = e + e // (spec.n_beams - 1) if r.ndim > 1 else e
@@ -349,7 +350,7 @@ class Lidar:
         p3 = p2 + nz.p_invalid
         if p3 > 0.0:
             u = rng.random(r.shape)
-            rare = np.flatnonzero((u < p3) & hit)
+            rare = ((u < p3) & hit).ravel().nonzero()[0]
             if rare.size:
                 ur = u.reshape(-1)[rare]
                 rmin = spec.range_min_m

@@ -155,7 +155,7 @@ def cast_scan(
             cw = circles[:, 0] + 1j * circles[:, 1] - o
         cr = circles[:, 2]
         dist = np.abs(cw)
-        cnear = np.flatnonzero(dist <= r_max + cr)
+        cnear = (dist <= r_max + cr).nonzero()[0]
         n_c = cnear.shape[0]
     # runs in the order: segments, their wrap copies, circles, their wrap copies
     if n_c:
@@ -184,15 +184,15 @@ def cast_scan(
     lo = np.maximum(s_b.astype(np.int64) - 1, 0)
     hi = np.minimum((s_b + sp * (1.0 / inc)).astype(np.int64) + 1, n_beams - 1)
     count = np.maximum(hi - lo + 1, 0)
-    ends = np.cumsum(count)
+    ends = count.cumsum()
     # the shape of each (beam, shape) pair: segment k, or circle n_s + j
     shape = np.arange(n_s + n_c)
     if n_c:
         shape = np.concatenate([shape[:n_s], shape[:n_s], shape[n_s:], shape[n_s:]])
     else:
         shape = np.concatenate([shape, shape])
-    key = np.repeat(shape, count)
-    beam = np.arange(key.shape[0]) - np.repeat(ends - count - lo, count)
+    key = shape.repeat(count)
+    beam = np.arange(key.shape[0]) - (ends - count - lo).repeat(count)
     uc = u_l.conjugate()[beam]  # conj(u) of each pair's beam
     m = int(ends[2 * n_s - 1]) if n_s else 0  # pairs [0, m) are segment pairs
 

@@ -216,7 +216,7 @@ class World:
             self._stale = False
         else:
             near = (np.abs(z - robot_xy) < near_m) | (np.abs(self._synced - robot_xy) < near_m)
-            idx = np.flatnonzero(near).tolist()
+            idx = near.nonzero()[0].tolist()
             self._stale = True  # (cheaper than checking whether all were near)
         reindex = self._space.reindex_shapes_for_body
         bodies = self._people_bodies
