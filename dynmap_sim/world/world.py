@@ -29,9 +29,13 @@ COLLISION_PERSON = 2
 CATEGORY_STATIC = 0b01
 CATEGORY_PERSON = 0b10
 _PEOPLE_TAG = 0x9E0913
-#: People's pymunk bodies farther than this from the robot (plus its radius) [m] are moved
-#: lazily: on the next access to ``World.space``, or when they come this near the robot.
+#: People's pymunk bodies farther than this from the robot (plus its radius, plus
+#: ``SYNC_SPEED_MPS`` times the step) [m] are moved lazily: on the next access to
+#: ``World.space``, or when they come this near the robot. The margin covers the robot's own
+#: next move (its collision query reaches its radius plus one step's travel) for robots up to
+#: ``SYNC_SPEED_MPS``.
 SYNC_MARGIN_M = 2.0
+SYNC_SPEED_MPS = 4.0
 
 
 class World:
@@ -44,8 +48,9 @@ class World:
     * ``geometry`` (:class:`GeometryView` for sensors), ``space`` (pymunk: walls and objects
       as static shapes, people as kinematic circles; the space is never stepped here;
       people's bodies are brought up to date on every access to ``space``, and at every
-      step for those within ``SYNC_MARGIN_M`` of the robot, so a robot that holds the space
-      and queries around itself always sees people where they are),
+      step for those near the robot (``SYNC_MARGIN_M``), so a robot that holds the space and
+      queries around itself always sees people where they are; after moving the robot by
+      hand, call ``sync_space()``),
       ``wall_segments()``, ``people_poses()``, ``people_radii()``, ``objects`` (current
       :class:`ObjectState` tuple), ``route_blocked()``;
     * ``snapshot(day, run)``: the state at the start of any run, a pure function of (file,
@@ -203,7 +208,8 @@ class World:
         else:
             rxy = np.array((float(robot_pose[0]), float(robot_pose[1])))
             self._forces.step(self._crowd, dt_s, rxy, robot_radius_m)
-            self._sync_bodies(complex(rxy[0], rxy[1]), robot_radius_m + SYNC_MARGIN_M)
+            near_m = robot_radius_m + SYNC_MARGIN_M + SYNC_SPEED_MPS * dt_s
+            self._sync_bodies(complex(rxy[0], rxy[1]), near_m)
         self._refresh_people()
 
     def _sync_bodies(self, robot_xy: complex | None, near_m: float = 0.0) -> None:
