@@ -63,6 +63,52 @@ def scan_points_base(laser: LaserSpec, ranges_m: ArrayLike) -> FloatArray:
     return se2.transform_points(np.asarray(laser.mount_pose, dtype=np.float64), pts)
 
 
+def free_space_violations(
+    laser: LaserSpec,
+    ranges_m: NDArray[np.float32],
+    pose: FloatArray,
+    ref_ranges_m: NDArray[np.float32],
+    ref_pose: FloatArray,
+    gate_m: float = 0.15,
+    gate_rel: float = 0.05,
+) -> NDArray[np.bool_]:
+    """Readings of a scan that lie in space an earlier scan saw free: moving obstacles.
+
+    The end point of each valid reading (scan at robot ``pose``) is projected into the
+    earlier scan (at ``ref_pose``); if the earlier beams around that direction (the beam and
+    its two neighbours, to be safe at edges) all reached farther than the point by more than
+    ``gate_m + gate_rel * range``, or returned nothing, the point sits in space that was
+    free a moment ago -- a person's legs, not the static world (the free-space consistency
+    test behind dynamic-object filtering, e.g. Hähnel et al. 2003). Returns ``(n_beams,)``.
+    """
+    r = np.asarray(ranges_m, dtype=np.float64)
+    ok = np.isfinite(r) & (r >= laser.range_min_m) & (r < laser.range_max_m)
+    out = np.zeros(len(r), dtype=bool)
+    if not ok.any():
+        return out
+    mount = np.asarray(laser.mount_pose, dtype=np.float64)
+    lp = se2.compose(pose, mount)
+    ref_lp = se2.compose(ref_pose, mount)
+    ang = laser.angles()
+    th = lp[2] + ang[ok]
+    pts = lp[:2] + r[ok, None] * np.stack([np.cos(th), np.sin(th)], axis=1)
+    rel = se2.transform_points(se2.inverse(ref_lp), pts)
+    rho = np.hypot(rel[:, 0], rel[:, 1])
+    b = np.rint(
+        (np.arctan2(rel[:, 1], rel[:, 0]) - laser.angle_min_rad) / laser.angle_increment_rad
+    )
+    b = b.astype(np.intp)
+    inside = (b >= 1) & (b < laser.n_beams - 1)
+    ref = np.asarray(ref_ranges_m, dtype=np.float64)
+    ref = np.where(np.isnan(ref) | (ref < laser.range_min_m), 0.0, ref)  # unknown: not free
+    ref = np.where(ref >= laser.range_max_m, np.inf, ref)
+    bc = np.clip(b, 1, laser.n_beams - 2)
+    reach = np.minimum(np.minimum(ref[bc - 1], ref[bc]), ref[bc + 1])
+    free = inside & (reach > rho + gate_m + gate_rel * rho) & (rho < laser.range_max_m - 0.5)
+    out[np.nonzero(ok)[0][free]] = True
+    return out
+
+
 def range_weights(points_base: FloatArray, rel_noise: float = 0.01, min_sigma_m: float = 0.01):
     """Relative inverse variances ``(sigma_min / sigma(r))^2`` of points for ICP, with the
     range noise ``sigma(r) = max(min_sigma_m, rel_noise * r)`` (URG-04LX datasheet)."""
@@ -114,6 +160,7 @@ class FirstRunMapper:
         map_max_range_m: float = 100.0,
         k_normal: int = 6,
         global_loops: bool = True,
+        dynamic_filter_lags: tuple[int, ...] = (3, 8),
         loop_stride: int = 2,
         loop_window_m: tuple[float, float, float] = (0.3, 0.025, 3.0),
         loop_window_rad: tuple[float, float, float] = (0.05, 0.004, 0.5),
@@ -153,6 +200,9 @@ class FirstRunMapper:
         self.map_max_range_m = float(map_max_range_m)
         self.k_normal = int(k_normal)
         self.global_loops = bool(global_loops)
+        self.dynamic_filter_lags = tuple(int(v) for v in dynamic_filter_lags)
+        self._history: list[tuple[FloatArray, NDArray[np.float32]]] = []  # recent (pose, scan)
+        self.n_dynamic = 0
         self.loop_stride = max(1, int(loop_stride))
         self.loop_window_m = tuple(float(v) for v in loop_window_m)
         self.loop_window_rad = tuple(float(v) for v in loop_window_rad)
@@ -197,18 +247,29 @@ class FirstRunMapper:
         pts = voxel_downsample(pts, self.voxel_m, mean=self.voxel_mean)
         self._local = PointMap(pts, k_normal=self.k_normal) if len(pts) >= 3 else None
 
+    def _dynamic_mask(self, ranges: NDArray[np.float32], pose: FloatArray) -> NDArray[np.bool_]:
+        """Readings in space free in the scans ``dynamic_filter_lags`` steps ago."""
+        dyn = np.zeros(len(ranges), dtype=bool)
+        for lag in self.dynamic_filter_lags:
+            if len(self._history) >= lag:
+                ref_pose, ref_ranges = self._history[-lag]
+                dyn |= free_space_violations(self.laser, ranges, pose, ref_ranges, ref_pose)
+        return dyn
+
     def update(self, odom: Odometry, scan: Scan) -> PoseEstimate:
         """Fuse one odometry reading and scan; return the front end's pose estimate."""
         opose = np.asarray(odom.pose, dtype=np.float64)
         ranges = np.asarray(scan.ranges_m, dtype=np.float32)
-        pts = scan_points_base(self.laser, ranges)
         if self._last_odom is None:
             self._last_odom = opose.copy()
-            self._add_keyframe(ranges, pts)
+            self._add_keyframe(ranges, scan_points_base(self.laser, ranges))
         else:
             delta = se2.between(self._last_odom, opose)
             self._last_odom = opose.copy()
             pred = se2.compose(self.pose, delta)
+            dyn = self._dynamic_mask(ranges, pred)
+            self.n_dynamic += int(dyn.sum())
+            pts = scan_points_base(self.laser, np.where(dyn, np.nan, ranges))
             d = float(np.hypot(delta[0], delta[1]))
             a = abs(float(delta[2]))
             sig_xy = self.odom_sigma[0] + self.odom_sigma[1] * d + self.odom_sigma[2] * a
@@ -243,6 +304,9 @@ class FirstRunMapper:
                 self.keyframe_angle_rad
             ):
                 self._add_keyframe(ranges, pts)
+        if self.dynamic_filter_lags:
+            self._history.append((self.pose.copy(), ranges))
+            del self._history[: -max(self.dynamic_filter_lags)]
         kf_idx = len(self.keyframes) - 1
         self._ref.append((kf_idx, se2.between(self.keyframes[kf_idx].pose, self.pose)))
         self._stamps.append(float(scan.stamp_s))

@@ -6,7 +6,7 @@ import numpy as np
 
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import OCCUPIED
-from dynmap_sim.agent.mapping.first_run import FirstRunMapper
+from dynmap_sim.agent.mapping.first_run import FirstRunMapper, free_space_violations
 from dynmap_sim.types import Odometry, Scan
 
 
@@ -51,3 +51,26 @@ def test_first_run_map_and_trajectory(segments, laser, cast, path_fn, odo_fn):
     assert (smap.grid.occupancy == OCCUPIED).sum() == len(occ)
     assert len(smap.keyframes) > 20
     assert all(k.ranges_m.shape == (laser.n_beams,) for k in smap.keyframes)
+
+
+def test_free_space_violations_flag_a_moving_leg_only(segments, laser, cast):
+    """A leg that appears where the earlier scan saw the wall: flagged; walls are not."""
+    pose0 = np.array([3.0, 1.5, 0.2])
+    pose1 = np.array([3.1, 1.52, 0.22])  # the robot moved a little
+    r0 = cast(pose0, laser.angles(), segments, laser.range_max_m).astype(np.float32)
+    leg = np.array([4.2, 1.9, 0.06])  # a 6 cm "leg" in front of the robot in scan 1 only
+    r1 = cast(pose1, laser.angles(), segments, laser.range_max_m)
+    th = pose1[2] + laser.angles()
+    d = np.stack([np.cos(th), np.sin(th)], axis=1)
+    w = leg[:2] - pose1[:2]
+    b = d @ w
+    disc = b**2 - (w @ w - leg[2] ** 2)
+    t_leg = np.where(disc > 0, b - np.sqrt(np.maximum(disc, 0)), np.inf)
+    on_leg = (t_leg > 0) & (t_leg < r1)
+    r1 = np.where(on_leg, t_leg, r1).astype(np.float32)
+    assert on_leg.sum() >= 2
+    dyn = free_space_violations(laser, r1, pose1, r0, pose0)
+    assert np.all(dyn[on_leg])
+    assert not np.any(dyn[~on_leg])
+    # The same scan against itself: nothing is dynamic.
+    assert not free_space_violations(laser, r1, pose1, r1, pose1).any()
