@@ -29,7 +29,7 @@ from dynmap_sim import se2
 from dynmap_sim.agent.grid import OccupancyGrid
 from dynmap_sim.agent.mapping.correlative_matcher import LikelihoodTable, correlative_match
 from dynmap_sim.agent.mapping.pose_graph import Edge, optimize_pose_graph
-from dynmap_sim.agent.mapping.scan_matcher import PointMap, match_scan
+from dynmap_sim.agent.mapping.scan_matcher import MatchResult, PointMap, match_scan
 from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Scan
 
 FloatArray = NDArray[np.float64]
@@ -160,6 +160,8 @@ class FirstRunMapper:
         map_max_range_m: float = 100.0,
         k_normal: int = 6,
         global_loops: bool = True,
+        loop_candidates: int = 3,
+        edge_info_inflation: float = 0.0,
         dynamic_filter_lags: tuple[int, ...] = (3, 8),
         loop_stride: int = 2,
         loop_window_m: tuple[float, float, float] = (0.3, 0.025, 3.0),
@@ -200,6 +202,8 @@ class FirstRunMapper:
         self.map_max_range_m = float(map_max_range_m)
         self.k_normal = int(k_normal)
         self.global_loops = bool(global_loops)
+        self.loop_candidates = int(loop_candidates)
+        self.edge_info_inflation = float(edge_info_inflation)
         self.dynamic_filter_lags = tuple(int(v) for v in dynamic_filter_lags)
         self._history: list[tuple[FloatArray, NDArray[np.float32]]] = []  # recent (pose, scan)
         self.n_dynamic = 0
@@ -324,6 +328,17 @@ class FirstRunMapper:
             edges.append(Edge(k, k + 1, z, np.diag([1 / sxy**2, 1 / sxy**2, 1 / sth**2])))
         return edges
 
+    def _edge_info(self, res: MatchResult, fixed: FloatArray) -> FloatArray:
+        """Information of an ICP edge: the fixed one, or (``edge_info_inflation`` > 0) the
+        ICP's own (Gauss-Newton) information divided by that factor -- so weakly constrained
+        directions weigh little -- but never more than the fixed one in any direction."""
+        if self.edge_info_inflation <= 0:
+            return fixed
+        icp_cov = res.cov * self.edge_info_inflation
+        cov = icp_cov + np.linalg.inv(fixed)
+        info = np.linalg.inv(cov)
+        return 0.5 * (info + info.T)
+
     def _keyframe_map(self, k: int) -> PointMap | None:
         """Point map of keyframe ``k`` in its own frame (built once, cached)."""
         if self._kf_maps is None:
@@ -373,7 +388,7 @@ class FirstRunMapper:
                     and res.rmse_m < 0.03
                     and moved < 1.0
                 ):
-                    edges.append(Edge(int(j), i, res.pose, info))
+                    edges.append(Edge(int(j), i, res.pose, self._edge_info(res, info)))
         return edges
 
     def _submap_points(self, poses: FloatArray, j: int) -> FloatArray:
@@ -394,7 +409,8 @@ class FirstRunMapper:
         ``loop_min_gap`` keyframes back, the search window grows with the path length
         ``s`` [m] between them, ``w = min(a + b s, cap)`` (``loop_window_m`` for x and y,
         ``loop_window_rad`` for theta): the drift the front end may have gathered. The
-        nearest such candidate (in the current estimate) is matched by
+        ``loop_candidates`` nearest such candidates (in the current estimate, from distinct
+        stretches of the sequence) are matched by
         :func:`.correlative_matcher.correlative_match` against the submap around ``j``; the
         result is refined by ICP and kept if the correlative score, the ICP residual and
         overlap are good and the ICP pose is well constrained in every direction (no
@@ -404,9 +420,7 @@ class FirstRunMapper:
         step = np.hypot(*np.diff(poses[:, :2], axis=0).T)
         path = np.concatenate([[0.0], np.cumsum(step)])
         a_m, b_m, cap_m = self.loop_window_m
-        a_r, b_r, cap_r = self.loop_window_rad
-        tables: dict[int, tuple[LikelihoodTable, PointMap]] = {}
-        info = np.diag([1 / 0.01**2, 1 / 0.01**2, 1 / 0.005**2])
+        tables: dict[int, tuple[LikelihoodTable, PointMap] | None] = {}
         edges: list[Edge] = []
         for i in range(self.loop_min_gap + 1, n, self.loop_stride):
             src = self._kf_points[i]
@@ -420,35 +434,61 @@ class FirstRunMapper:
             if not np.any(near):
                 continue
             cand, w_xy, s, dist = cand[near], w_xy[near], s[near], dist[near]
-            m = int(np.argmin(dist))
-            j = int(cand[m])
-            if j not in tables:
-                sub = self._submap_points(poses, j)
-                if len(sub) < 30:
-                    continue
-                tables[j] = (LikelihoodTable(sub, 0.05, 0.05, margin_m=0.5), PointMap(sub))
-            table, pmap = tables[j]
-            init = se2.between(poses[j], poses[i])
-            src_c = voxel_downsample(src, 0.1)
-            cres = correlative_match(
-                src_c,
-                table,
-                init,
-                window_xy_m=float(w_xy[m]),
-                window_theta_rad=float(min(a_r + b_r * s[m], cap_r)),
-            )
-            if cres.score < self.loop_min_score:
-                continue
-            res = match_scan(src, pmap, cres.pose, max_correspondence_m=0.15, max_iterations=30)
-            sig = float(np.sqrt(np.max(np.linalg.eigvalsh(res.cov[:2, :2]))))
-            if (
-                res.converged
-                and res.n_matched >= max(60, self.loop_min_overlap * len(src))
-                and res.rmse_m < 0.03
-                and sig <= self.loop_max_sigma_m
-            ):
-                edges.append(Edge(j, i, res.pose, info))
+            chosen: list[int] = []
+            for m in np.argsort(dist):  # nearest first, one per stretch of the sequence
+                if len(chosen) >= self.loop_candidates:
+                    break
+                if all(abs(int(cand[m]) - int(cand[c])) > 2 * self.loop_min_gap for c in chosen):
+                    chosen.append(int(m))
+            for m in chosen:
+                edge = self._verified_loop(poses, tables, int(cand[m]), i, w_xy[m], s[m])
+                if edge is not None:
+                    edges.append(edge)
         return self._consistent_loops(poses, edges)
+
+    def _verified_loop(
+        self,
+        poses: FloatArray,
+        tables: dict[int, tuple[LikelihoodTable, PointMap] | None],
+        j: int,
+        i: int,
+        w_xy_m: float,
+        path_m: float,
+    ) -> Edge | None:
+        """Correlative search of keyframe ``i`` around ``j``'s submap, verified by ICP."""
+        if j not in tables:
+            sub = self._submap_points(poses, j)
+            tables[j] = (
+                (LikelihoodTable(sub, 0.05, 0.05, margin_m=0.5), PointMap(sub))
+                if len(sub) >= 30
+                else None
+            )
+        entry = tables[j]
+        if entry is None:
+            return None
+        table, pmap = entry
+        src = self._kf_points[i]
+        a_r, b_r, cap_r = self.loop_window_rad
+        cres = correlative_match(
+            voxel_downsample(src, 0.1),
+            table,
+            se2.between(poses[j], poses[i]),
+            window_xy_m=float(w_xy_m),
+            window_theta_rad=float(min(a_r + b_r * path_m, cap_r)),
+        )
+        if cres.score < self.loop_min_score:
+            return None
+        res = match_scan(src, pmap, cres.pose, max_correspondence_m=0.15, max_iterations=30)
+        sig = float(np.sqrt(np.max(np.linalg.eigvalsh(res.cov[:2, :2]))))
+        if (
+            res.converged
+            and res.n_matched >= max(60, self.loop_min_overlap * len(src))
+            and res.rmse_m < 0.03
+            and sig <= self.loop_max_sigma_m
+        ):
+            info = np.diag([1 / 0.01**2, 1 / 0.01**2, 1 / 0.005**2])
+            return Edge(j, i, res.pose, info)
+        return None
 
     def _consistent_loops(
         self,
@@ -462,10 +502,10 @@ class FirstRunMapper:
 
         An edge ``(j, i, z)`` says keyframe ``i`` is at ``x_j ⊕ z``; its correction
         ``x_j ⊕ z ⊖ x_i`` (map frame) is the drift gathered between ``j`` and ``i``. Drift
-        is smooth, so true closures from keyframes within ``window`` of each other agree
-        (within ``tol_m`` / ``tol_rad``), while a false match (perceptual aliasing) stands
-        alone: an edge is kept if at least one other edge and a majority of those nearby
-        agree with it (a simple form of Olson's single-cluster test).
+        is smooth, so true closures whose ``i`` and ``j`` both lie within ``window`` of each
+        other agree (within ``tol_m`` / ``tol_rad``), while a false match (perceptual
+        aliasing) stands alone: an edge is kept if at least one other edge and a majority
+        of those nearby agree with it (a simple form of Olson's single-cluster test).
         """
         if len(edges) < 2:
             return []
@@ -474,7 +514,9 @@ class FirstRunMapper:
         implied = se2.compose(poses[jj], np.array([e.z for e in edges]))
         corr = implied - poses[ii]
         corr[:, 2] = se2.wrap_angle(corr[:, 2])
-        near = np.abs(ii[:, None] - ii[None, :]) <= window
+        near = (np.abs(ii[:, None] - ii[None, :]) <= window) & (
+            np.abs(jj[:, None] - jj[None, :]) <= window
+        )
         agree = (
             near
             & (np.hypot(*(corr[:, None, :2] - corr[None, :, :2]).transpose(2, 0, 1)) < tol_m)
