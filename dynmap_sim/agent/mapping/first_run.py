@@ -162,6 +162,7 @@ class FirstRunMapper:
         global_loops: bool = True,
         loop_candidates: int = 3,
         edge_info_inflation: float = 0.0,
+        huber_m: float = 0.02,
         dynamic_filter_lags: tuple[int, ...] = (3, 8),
         loop_stride: int = 2,
         loop_window_m: tuple[float, float, float] = (0.3, 0.025, 3.0),
@@ -204,6 +205,7 @@ class FirstRunMapper:
         self.global_loops = bool(global_loops)
         self.loop_candidates = int(loop_candidates)
         self.edge_info_inflation = float(edge_info_inflation)
+        self.huber_m = float(huber_m)
         self.dynamic_filter_lags = tuple(int(v) for v in dynamic_filter_lags)
         self._history: list[tuple[FloatArray, NDArray[np.float32]]] = []  # recent (pose, scan)
         self.n_dynamic = 0
@@ -292,6 +294,7 @@ class FirstRunMapper:
                     max_iterations=20,
                     weights=range_weights(sub) if self.range_weighting else None,
                     info_inflation=self.info_inflation,
+                    huber_m=self.huber_m,
                 )
                 n_used = len(pts[:: max(1, len(pts) // 400)])
                 if res.n_matched >= max(15, 0.3 * n_used) and res.rmse_m < 0.08:
