@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from dynmap_sim.experiments.figures_dynamic import write_dynamic_figures
 from dynmap_sim.experiments.results import ResultsDB
 from dynmap_sim.metrics import ate, class_scores, lost_stats, rpe
 from dynmap_sim.types import BeamClass
@@ -395,6 +396,8 @@ def write_report(out_dir: str | Path) -> list[Path]:
         ts = _fig_timescales(db, out / "timescale_usage.png")
         if ts is not None:
             figs.append(ts)
+        # B&D Figs. 10-13 per day and overall, for localizers that report those values
+        figs += write_dynamic_figures(out)
         written.append(_summary_md(db, out / "summary.md", figs))
         written += figs
     return written
