@@ -63,6 +63,26 @@ def scan_points_base(laser: LaserSpec, ranges_m: ArrayLike) -> FloatArray:
     return se2.transform_points(np.asarray(laser.mount_pose, dtype=np.float64), pts)
 
 
+def range_discontinuities(
+    ranges_m: ArrayLike, jump_m: float = 0.1, jump_rel: float = 0.03, isolated_only: bool = False
+) -> NDArray[np.bool_]:
+    """Beams whose range jumps from a neighbour's by more than ``jump_m + jump_rel * r``.
+
+    At a depth edge the laser spot straddles two surfaces and may read a range in between
+    (a *mixed pixel*, cf. the lidar model's ``p_mixed``); such points lie on no surface and
+    pull ICP. Dropping every beam next to a jump removes them (and the edge beams proper,
+    a small loss); ``isolated_only`` drops only beams that jump from *both* neighbours
+    (isolated points: most mixed pixels and spurious short returns). Non-finite readings
+    count as jumps. Returns ``(n_beams,)``.
+    """
+    r = np.asarray(ranges_m, dtype=np.float64)
+    fin = np.where(np.isfinite(r), r, 1e9)
+    gap = np.abs(np.diff(fin)) > jump_m + jump_rel * np.minimum(fin[1:], fin[:-1])
+    left = np.concatenate([[False], gap])  # a jump to the previous beam
+    right = np.concatenate([gap, [False]])
+    return (left & right) if isolated_only else (left | right)
+
+
 def free_space_violations(
     laser: LaserSpec,
     ranges_m: NDArray[np.float32],
@@ -155,7 +175,7 @@ class FirstRunMapper:
         odom_prior: bool = True,
         max_neighbours: int = 8,
         info_inflation: float = 5.0,
-        map_max_hit_range_m: float = 4.0,
+        map_max_hit_range_m: float = 3.0,
         graph_rounds: int = 2,
         map_max_range_m: float = 100.0,
         k_normal: int = 6,
@@ -163,6 +183,9 @@ class FirstRunMapper:
         loop_candidates: int = 3,
         edge_info_inflation: float = 0.0,
         huber_m: float = 0.02,
+        edge_huber_m: float = 0.02,
+        drop_edges: str = "none",
+        seq_sigma: tuple[float, float, float, float, float] = (0.01, 0.03, 0.005, 0.02, 0.02),
         dynamic_filter_lags: tuple[int, ...] = (3, 8),
         loop_stride: int = 2,
         loop_window_m: tuple[float, float, float] = (0.3, 0.025, 3.0),
@@ -206,6 +229,11 @@ class FirstRunMapper:
         self.loop_candidates = int(loop_candidates)
         self.edge_info_inflation = float(edge_info_inflation)
         self.huber_m = float(huber_m)
+        self.edge_huber_m = float(edge_huber_m)
+        if drop_edges not in ("none", "isolated", "all"):
+            raise ValueError(f"drop_edges must be none, isolated or all, got {drop_edges!r}")
+        self.drop_edges = str(drop_edges)
+        self.seq_sigma = tuple(float(v) for v in seq_sigma)
         self.dynamic_filter_lags = tuple(int(v) for v in dynamic_filter_lags)
         self._history: list[tuple[FloatArray, NDArray[np.float32]]] = []  # recent (pose, scan)
         self.n_dynamic = 0
@@ -268,13 +296,22 @@ class FirstRunMapper:
         ranges = np.asarray(scan.ranges_m, dtype=np.float32)
         if self._last_odom is None:
             self._last_odom = opose.copy()
-            self._add_keyframe(ranges, scan_points_base(self.laser, ranges))
+            first = ranges
+            if self.drop_edges != "none":
+                first = np.where(
+                    range_discontinuities(ranges, isolated_only=self.drop_edges == "isolated"),
+                    np.nan,
+                    ranges,
+                )
+            self._add_keyframe(ranges, scan_points_base(self.laser, first))
         else:
             delta = se2.between(self._last_odom, opose)
             self._last_odom = opose.copy()
             pred = se2.compose(self.pose, delta)
             dyn = self._dynamic_mask(ranges, pred)
             self.n_dynamic += int(dyn.sum())
+            if self.drop_edges != "none":
+                dyn |= range_discontinuities(ranges, isolated_only=self.drop_edges == "isolated")
             pts = scan_points_base(self.laser, np.where(dyn, np.nan, ranges))
             d = float(np.hypot(delta[0], delta[1]))
             a = abs(float(delta[2]))
@@ -326,8 +363,9 @@ class FirstRunMapper:
         for k in range(len(poses) - 1):
             z = se2.between(poses[k], poses[k + 1])
             d = float(np.hypot(z[0], z[1]))
-            sxy = 0.01 + 0.03 * d
-            sth = 0.005 + 0.02 * d + 0.02 * abs(float(z[2]))
+            a_xy, b_xy, a_th, b_th, c_th = self.seq_sigma
+            sxy = a_xy + b_xy * d
+            sth = a_th + b_th * d + c_th * abs(float(z[2]))
             edges.append(Edge(k, k + 1, z, np.diag([1 / sxy**2, 1 / sxy**2, 1 / sth**2])))
         return edges
 
@@ -377,12 +415,24 @@ class FirstRunMapper:
                     continue
                 init = se2.between(poses[j], poses[i])
                 if i - j > self.loop_min_gap:  # a loop closure: allow for more drift
-                    res = match_scan(src, target, init, max_correspondence_m=0.5, max_iterations=30)
+                    res = match_scan(
+                        src,
+                        target,
+                        init,
+                        max_correspondence_m=0.5,
+                        max_iterations=30,
+                        huber_m=self.edge_huber_m,
+                    )
                     init_fine = res.pose
                 else:
                     init_fine = init
                 res = match_scan(
-                    src, target, init_fine, max_correspondence_m=0.15, max_iterations=20
+                    src,
+                    target,
+                    init_fine,
+                    max_correspondence_m=0.15,
+                    max_iterations=20,
+                    huber_m=self.edge_huber_m,
                 )
                 moved = float(np.hypot(*(res.pose[:2] - init[:2])))
                 if (
@@ -481,7 +531,14 @@ class FirstRunMapper:
         )
         if cres.score < self.loop_min_score:
             return None
-        res = match_scan(src, pmap, cres.pose, max_correspondence_m=0.15, max_iterations=30)
+        res = match_scan(
+            src,
+            pmap,
+            cres.pose,
+            max_correspondence_m=0.15,
+            max_iterations=30,
+            huber_m=self.edge_huber_m,
+        )
         sig = float(np.sqrt(np.max(np.linalg.eigvalsh(res.cov[:2, :2]))))
         if (
             res.converged

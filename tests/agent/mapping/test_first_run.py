@@ -6,7 +6,11 @@ import numpy as np
 
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import OCCUPIED
-from dynmap_sim.agent.mapping.first_run import FirstRunMapper, free_space_violations
+from dynmap_sim.agent.mapping.first_run import (
+    FirstRunMapper,
+    free_space_violations,
+    range_discontinuities,
+)
 from dynmap_sim.types import Odometry, Scan
 
 
@@ -74,3 +78,13 @@ def test_free_space_violations_flag_a_moving_leg_only(segments, laser, cast):
     assert not np.any(dyn[~on_leg])
     # The same scan against itself: nothing is dynamic.
     assert not free_space_violations(laser, r1, pose1, r1, pose1).any()
+
+
+def test_range_discontinuities_flag_both_sides_of_a_jump():
+    r = np.array([2.0, 2.01, 2.02, 1.2, 3.0, 3.01, np.inf, 3.0], dtype=np.float32)
+    flags = range_discontinuities(r, jump_m=0.1, jump_rel=0.0)
+    # 2.02 -> 1.2 -> 3.0: the mixed pixel (1.2) and its neighbours; inf counts as a jump.
+    assert flags.tolist() == [False, False, True, True, True, True, True, True]
+    isolated = range_discontinuities(r, jump_m=0.1, jump_rel=0.0, isolated_only=True)
+    assert isolated.tolist() == [False, False, False, True, False, False, True, False]
+    assert not range_discontinuities(np.linspace(1.0, 1.5, 50)).any()
