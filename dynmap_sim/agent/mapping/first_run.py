@@ -4,12 +4,17 @@ Biber & Duckett §4: "an initial map is built from the first run ... by a classi
 SLAM algorithm ... based on scan matching". This is that algorithm:
 
 * **front end** (online, :meth:`FirstRunMapper.update`): each scan is matched by
-  point-to-line ICP (:mod:`.scan_matcher`) against a local map made of the last keyframes,
-  seeded by odometry, with an odometry prior (B&D eq. 9) that grows with the motion; a new
-  keyframe is taken every ``keyframe_dist_m`` / ``keyframe_angle_rad``;
-* **loop closure** (:meth:`FirstRunMapper.finish`): keyframes near each other in the current
-  estimate but far apart in sequence are matched by ICP; a match is accepted only if it
-  converges with a small residual and a high inlier fraction;
+  point-to-line ICP (:mod:`.scan_matcher`, Huber 2 cm) against a local map made of the last
+  keyframes, seeded by odometry, with an odometry prior (B&D eq. 9) that grows with the
+  motion; readings in space that a scan 3 or 8 steps earlier saw free (walking people) are
+  left out (:func:`free_space_violations`); a new keyframe is taken every
+  ``keyframe_dist_m`` / ``keyframe_angle_rad``;
+* **loop closure** (:meth:`FirstRunMapper.finish`): first, drift-tolerant closures -- for
+  keyframes far apart in sequence, a correlative search (:mod:`.correlative_matcher`,
+  Olson 2009) whose window grows with the path length between them, verified by ICP, a
+  conditioning test and a consistency vote -- are optimized by plain least squares; then
+  keyframes near each other in that estimate are matched by ICP; a match is accepted only
+  if it converges with a small residual and a high inlier fraction;
 * **back end**: the keyframe pose graph (sequential + loop edges) is optimized by
   :func:`.pose_graph.optimize_pose_graph`, anchored at the first keyframe so that the map
   frame is the frame of the initial pose the prior grants;
@@ -176,7 +181,7 @@ class FirstRunMapper:
         max_neighbours: int = 8,
         info_inflation: float = 5.0,
         map_max_hit_range_m: float = 3.0,
-        graph_rounds: int = 2,
+        graph_rounds: int = 1,
         map_max_range_m: float = 100.0,
         k_normal: int = 6,
         global_loops: bool = True,
