@@ -6,6 +6,7 @@ import pickle
 
 import numpy as np
 import pytest
+from synthetic_scans import box, raycast
 
 from dynmap_sim import se2
 from dynmap_sim.agent.localization.dynamic_map_localizer import (
@@ -27,34 +28,13 @@ LASER = LaserSpec(
 )
 
 
-def _raycast(pose, angles, segs, max_range):
-    th = pose[2] + angles
-    d = np.stack([np.cos(th), np.sin(th)], axis=1)
-    p0 = segs[:, :2]
-    e = segs[:, 2:] - p0
-    w = p0 - pose[:2]
-    den = d[:, None, 0] * e[None, :, 1] - d[:, None, 1] * e[None, :, 0]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (w[None, :, 0] * e[None, :, 1] - w[None, :, 1] * e[None, :, 0]) / den
-        u = (w[None, :, 0] * d[:, None, 1] - w[None, :, 1] * d[:, None, 0]) / den
-    hit = (np.abs(den) > 1e-12) & (t > 0) & (u >= 0) & (u <= 1)
-    r = np.where(hit, t, np.inf).min(axis=1)
-    r[r > max_range] = np.inf
-    return r
-
-
-def _box(x0, y0, x1, y1):
-    c = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], float)
-    return np.concatenate([c, np.roll(c, -1, axis=0)], axis=1)
-
-
 def _world(cupboard: bool) -> np.ndarray:
     """An L-shaped 8 m x 6 m room with a pillar (and, on later days, a cupboard)."""
     pts = np.array([[0, 0], [8, 0], [8, 3], [5, 3], [5, 6], [0, 6]], float)
     walls = np.concatenate([pts, np.roll(pts, -1, axis=0)], axis=1)
-    segs = [walls, _box(2.0, 2.0, 2.4, 2.4), _box(6.5, 0.0, 7.3, 0.6)]
+    segs = [walls, box(2.0, 2.0, 2.4, 2.4), box(6.5, 0.0, 7.3, 0.6)]
     if cupboard:
-        segs.append(_box(1.5, 4.3, 3.5, 4.8))
+        segs.append(box(1.5, 4.3, 3.5, 4.8))
     return np.concatenate(segs)
 
 
@@ -88,8 +68,8 @@ def _stream(truth, segs, rng, person: bool = False):
         s = segs
         if person:
             px = 1.0 + 3.0 * (k / len(truth))
-            s = np.concatenate([segs, _box(px, 2.8, px + 0.3, 3.1)])
-        r = _raycast(pose, LASER.angles(), s, LASER.range_max_m)
+            s = np.concatenate([segs, box(px, 2.8, px + 0.3, 3.1)])
+        r = raycast(pose, LASER.angles(), s, LASER.range_max_m)
         r = (r + rng.normal(0, 0.01, r.shape)).astype(np.float32)
         out.append((Odometry(odo[k], 0.1 * k), Scan(r, 0.1 * k)))
     return out

@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from synthetic_scans import raycast
+from synthetic_scans import room_segments as room
 
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import OccupancyGrid
@@ -39,31 +41,6 @@ LASER = LaserSpec(
     scan_period_s=0.1,
     time_increment_s=0.0,
 )
-
-
-def raycast(pose, angles, segs, max_range):
-    th = pose[2] + angles
-    d = np.stack([np.cos(th), np.sin(th)], axis=1)
-    e = segs[:, 2:] - segs[:, :2]
-    w = segs[:, :2] - pose[:2]
-    den = d[:, None, 0] * e[None, :, 1] - d[:, None, 1] * e[None, :, 0]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (w[None, :, 0] * e[None, :, 1] - w[None, :, 1] * e[None, :, 0]) / den
-        u = (w[None, :, 0] * d[:, None, 1] - w[None, :, 1] * d[:, None, 0]) / den
-    t = np.where((np.abs(den) > 1e-12) & (t > 0) & (u >= 0) & (u <= 1), t, np.inf)
-    r = t.min(axis=1)
-    r[r > max_range] = np.inf
-    return r
-
-
-def room():
-    pts = np.array([[0, 0], [8, 0], [8, 3], [5, 3], [5, 6], [0, 6]], float)
-    walls = np.concatenate([pts, np.roll(pts, -1, axis=0)], axis=1)
-    pillar = np.array([[2, 2], [2.4, 2], [2.4, 2.4], [2, 2.4]], float)
-    pil = np.concatenate([pillar, np.roll(pillar, -1, axis=0)], axis=1)
-    cup = np.array([[6.5, 0.0, 6.5, 0.6], [6.5, 0.6, 7.3, 0.6], [7.3, 0.6, 7.3, 0.0]])
-    box = np.array([[1.0, 4.5, 1.8, 4.5], [1.8, 4.5, 1.8, 5.0], [1.8, 5.0, 1.0, 5.0]])
-    return np.concatenate([walls, pil, cup, box])
 
 
 def path(laps=1, step=0.05, start=0):

@@ -7,35 +7,12 @@ import sqlite3
 
 import numpy as np
 import pytest
+from synthetic_scans import raycast, room_segments
 
 from dynmap_sim import se2
 from dynmap_sim.cli import main
 from dynmap_sim.errors import InputError
 from dynmap_sim.io.carmen import CarmenLogError, interpolate_poses, read_carmen
-
-
-def raycast(pose, angles, segs, max_range):
-    th = pose[2] + angles
-    d = np.stack([np.cos(th), np.sin(th)], axis=1)
-    e = segs[:, 2:] - segs[:, :2]
-    w = segs[:, :2] - pose[:2]
-    den = d[:, None, 0] * e[None, :, 1] - d[:, None, 1] * e[None, :, 0]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (w[None, :, 0] * e[None, :, 1] - w[None, :, 1] * e[None, :, 0]) / den
-        u = (w[None, :, 0] * d[:, None, 1] - w[None, :, 1] * d[:, None, 0]) / den
-    t = np.where((np.abs(den) > 1e-12) & (t > 0) & (u >= 0) & (u <= 1), t, np.inf)
-    r = t.min(axis=1)
-    r[r > max_range] = np.inf
-    return r
-
-
-def room():
-    pts = np.array([[0, 0], [8, 0], [8, 3], [5, 3], [5, 6], [0, 6]], float)
-    walls = np.concatenate([pts, np.roll(pts, -1, axis=0)], axis=1)
-    pillar = np.array([[2, 2], [2.4, 2], [2.4, 2.4], [2, 2.4]], float)
-    pil = np.concatenate([pillar, np.roll(pillar, -1, axis=0)], axis=1)
-    box = np.array([[1.0, 4.5, 1.8, 4.5], [1.8, 4.5, 1.8, 5.0], [1.8, 5.0, 1.0, 5.0]])
-    return np.concatenate([walls, pil, box])
 
 
 def trajectory(n=240):
@@ -55,7 +32,7 @@ def assert_poses_close(a, b, atol):
 
 def write_log(path, kind="FLASER", n_beams=181, gz=False, odom_drift=True, seed=0):
     rng = np.random.default_rng(seed)
-    segs = room()
+    segs = room_segments(cupboard=False)
     truth = trajectory()
     stamps = 1_000_000.0 + 0.1 * np.arange(len(truth))
     odo = [np.array([0.5, -0.2, 0.1])]

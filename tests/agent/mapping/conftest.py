@@ -4,37 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from synthetic_scans import raycast, room_segments
 
 from dynmap_sim.types import LaserSpec
-
-
-def raycast(pose: np.ndarray, angles: np.ndarray, segs: np.ndarray, max_range: float) -> np.ndarray:
-    """Exact ranges from ``pose`` along ``angles`` (robot frame) to the segments (+inf: none)."""
-    th = pose[2] + angles
-    d = np.stack([np.cos(th), np.sin(th)], axis=1)  # (B, 2)
-    p0 = segs[:, :2]
-    e = segs[:, 2:] - p0  # (S, 2)
-    w = p0 - pose[:2]  # (S, 2)
-    den = d[:, None, 0] * e[None, :, 1] - d[:, None, 1] * e[None, :, 0]  # (B, S)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (w[None, :, 0] * e[None, :, 1] - w[None, :, 1] * e[None, :, 0]) / den
-        u = (w[None, :, 0] * d[:, None, 1] - w[None, :, 1] * d[:, None, 0]) / den
-    hit = (np.abs(den) > 1e-12) & (t > 0) & (u >= 0) & (u <= 1)
-    t = np.where(hit, t, np.inf)
-    r = t.min(axis=1)
-    r[r > max_range] = np.inf
-    return r
-
-
-def room_segments() -> np.ndarray:
-    """An L-shaped 8 m x 6 m room with a pillar and a cupboard (rich geometry)."""
-    pts = np.array([[0, 0], [8, 0], [8, 3], [5, 3], [5, 6], [0, 6]], float)
-    walls = np.concatenate([pts, np.roll(pts, -1, axis=0)], axis=1)
-    pillar = np.array([[2, 2], [2.4, 2], [2.4, 2.4], [2, 2.4]], float)
-    pil = np.concatenate([pillar, np.roll(pillar, -1, axis=0)], axis=1)
-    cup = np.array([[6.5, 0.0, 6.5, 0.6], [6.5, 0.6, 7.3, 0.6], [7.3, 0.6, 7.3, 0.0]])
-    box = np.array([[1.0, 4.5, 1.8, 4.5], [1.8, 4.5, 1.8, 5.0], [1.8, 5.0, 1.0, 5.0]])
-    return np.concatenate([walls, pil, cup, box])
 
 
 @pytest.fixture

@@ -4,29 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
-
-def raycast(pose: np.ndarray, angles: np.ndarray, segs: np.ndarray, max_range: float) -> np.ndarray:
-    """Exact ranges from ``pose`` along ``angles`` (robot frame) to the segments (+inf: none)."""
-    th = pose[2] + angles
-    d = np.stack([np.cos(th), np.sin(th)], axis=1)
-    p0 = segs[:, :2]
-    e = segs[:, 2:] - p0
-    w = p0 - pose[:2]
-    den = d[:, None, 0] * e[None, :, 1] - d[:, None, 1] * e[None, :, 0]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (w[None, :, 0] * e[None, :, 1] - w[None, :, 1] * e[None, :, 0]) / den
-        u = (w[None, :, 0] * d[:, None, 1] - w[None, :, 1] * d[:, None, 0]) / den
-    hit = (np.abs(den) > 1e-12) & (t > 0) & (u >= 0) & (u <= 1)
-    r = np.where(hit, t, np.inf).min(axis=1)
-    r[r > max_range] = np.inf
-    return r
-
-
-def box(x0: float, y0: float, x1: float, y1: float) -> np.ndarray:
-    """The four sides of an axis-aligned rectangle as segments ``(4, 4)``."""
-    c = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
-    return np.concatenate([c, np.roll(c, -1, axis=0)], axis=1)
+from synthetic_scans import box, raycast
 
 
 def scan_points(pose, segs, rng, n_beams=361, fov=2 * np.pi, sigma=0.01, max_range=8.0):
