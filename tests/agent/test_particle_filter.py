@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pickle
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -240,7 +241,94 @@ def test_nav2_default_values():
     assert (c.update_min_d, c.update_min_a) == (0.25, 0.2)
     assert (c.recovery_alpha_slow, c.recovery_alpha_fast, c.do_beamskip) == (0.0, 0.0, False)
     assert TUNED.do_beamskip and TUNED.recovery_alpha_fast == 0.1
+    # nav2's recovery rule unchanged: raw average, inject whenever w_fast < w_slow, no cap.
+    assert not c.recovery_w_avg_per_beam and c.recovery_ratio_threshold == 1.0
+    assert c.recovery_min_updates == 1 and c.recovery_max_fraction == 1.0
+    assert c.recovery_floor_loglik == float("-inf")
     with pytest.raises(ValueError, match="unknown config"):
         StaticMCL(LASER, np.random.default_rng(0), config="fast")
     with pytest.raises(ValueError, match="unknown overrides"):
         StaticMCL(LASER, np.random.default_rng(0), overrides={"alpha9": 1.0})
+
+
+def test_injection_needs_a_sustained_likelihood_drop():
+    """tuned: one scan that disagrees with the map (a moved obstacle) injects nothing; only
+    ``recovery_min_updates`` consecutive bad updates (a kidnapping) start injecting."""
+    segs = room()
+    grid = OccupancyGrid.from_segments(segs, free_seed_xy_m=(1, 1))
+    f = AMCLFilter(grid, LASER, TUNED)
+    rng = np.random.default_rng(3)
+    pose = np.array([2.0, 2.0, 0.3])
+    f.init_gaussian(pose, np.diag([0.02**2, 0.02**2, 0.01**2]), rng)
+    good = raycast(pose, LASER.angles(), segs, LASER.range_max_m)
+    for _ in range(20):
+        f.correct(good)
+        f.resample(rng)
+    assert f.injection_probability() == 0.0 and f.n_random_injected == 0
+    far = raycast(np.array([3.7, 3.5, 2.5]), LASER.angles(), segs, LASER.range_max_m)
+    f.correct(far)  # a single bad scan: w_fast falls below w_slow at once ...
+    assert f.w_fast < f.w_slow
+    assert f.injection_probability() == 0.0  # ... but injection waits for a sustained drop
+    f.resample(rng)
+    assert f.n_random_injected == 0
+    k = 1
+    while f.injection_probability() == 0.0 and k < 40:
+        f.correct(far)
+        f.resample(rng)
+        k += 1
+    assert TUNED.recovery_min_updates <= k < 40  # a kidnapping does start recovery
+    assert 0.0 < f.injection_probability() <= TUNED.recovery_max_fraction
+    f.resample(rng)
+    assert f.n_random_injected > 0
+    # nav2's rule (any w_fast < w_slow, at once) would have injected after the first bad scan.
+    g = AMCLFilter(
+        grid,
+        LASER,
+        replace(TUNED, recovery_ratio_threshold=1.0, recovery_min_updates=1),
+    )
+    g.init_gaussian(pose, np.diag([0.02**2, 0.02**2, 0.01**2]), rng)
+    for _ in range(20):
+        g.correct(good)
+        g.resample(rng)
+    g.correct(far)
+    assert g.injection_probability() > 0.0
+
+
+def test_per_beam_average_ignores_how_many_beams_are_used():
+    """w_avg per beam: the same scan with half its beams invalid leaves w_fast/w_slow ~ 1."""
+    segs = room()
+    grid = OccupancyGrid.from_segments(segs, free_seed_xy_m=(1, 1))
+    f = AMCLFilter(grid, LASER, TUNED)
+    rng = np.random.default_rng(4)
+    pose = np.array([2.0, 2.0, 0.3])
+    f.init_gaussian(pose, np.diag([0.02**2, 0.02**2, 0.01**2]), rng)
+    good = raycast(pose, LASER.angles(), segs, LASER.range_max_m)
+    for _ in range(10):
+        f.correct(good)
+        f.resample(rng)
+    half = good.copy()
+    half[::2] = np.inf  # no return: not used by the model
+    f.correct(half)
+    assert f.w_fast / f.w_slow == pytest.approx(1.0, abs=0.1)
+
+
+def test_floor_makes_a_filter_that_started_wrong_inject():
+    """Converged to the wrong place from the first update: w_slow is seeded at the wrong
+    place's level, so w_fast/w_slow ~ 1 forever; the per-beam floor still triggers."""
+    segs = room()
+    grid = OccupancyGrid.from_segments(segs, free_seed_xy_m=(1, 1))
+    rng = np.random.default_rng(6)
+    pose = np.array([2.0, 2.0, 0.3])
+    far = raycast(np.array([3.7, 3.5, 2.5]), LASER.angles(), segs, LASER.range_max_m)
+    probs = {}
+    for floor in (float("-inf"), TUNED.recovery_floor_loglik):
+        f = AMCLFilter(grid, LASER, replace(TUNED, recovery_floor_loglik=floor))
+        f.init_gaussian(pose, np.diag([0.02**2, 0.02**2, 0.01**2]), rng)
+        for _ in range(TUNED.recovery_min_updates + 1):
+            f.correct(far)
+            f.resample(rng)
+        f.correct(far)
+        assert np.log(f.w_fast) < TUNED.recovery_floor_loglik - 1.0  # clearly lost
+        probs[floor] = f.injection_probability()
+    assert probs[float("-inf")] == 0.0
+    assert probs[TUNED.recovery_floor_loglik] == pytest.approx(TUNED.recovery_max_fraction)

@@ -14,6 +14,16 @@ Table 8.4 "KLD_Sampling_MCL"; Fox 2003) exactly as nav2_amcl composes it:
   ``max(0, 1 - w_fast / w_slow)``, after which nav2's ``pf.c`` resets both averages
   (``recovery_reset``; the ``tuned`` config keeps them, as Table 8.3 does, so that a filter
   that converged to a wrong place after an injection keeps injecting);
+* ``tuned`` only: the recovery rule is made robust to a changing world. On the apartment's
+  week 2 (furniture moved daily) Table 8.3 as nav2 implements it fired on every drop of the
+  raw 60-beam likelihood product and the estimate jumped up to 5 m away for seconds. Now
+  (a) w_slow/w_fast average the per-beam (geometric-mean) likelihood over all valid beams,
+  (b) injection starts only when ``w_fast`` stays below ``recovery_ratio_threshold`` of
+  ``w_ref = max(w_slow, exp(recovery_floor_loglik))`` for ``recovery_min_updates``
+  consecutive updates (a moved chair lowers the likelihood a little, a kidnapping a lot;
+  the floor lets a filter that converged wrongly right after global initialization
+  recover), and (c) at most ``recovery_max_fraction`` of the draws are random poses, so a
+  large unmapped obstacle cannot wipe out the correct cluster. See :class:`MCLConfig`;
 * KLD-sampling picks the number of particles (0.5 m x 0.5 m x 10 degree bins,
   :mod:`.kld_sampling`), low-variance resampling draws them (:mod:`.resampling`);
 * the estimate is the mean of the heaviest cluster of particles (clusters are connected
@@ -94,6 +104,29 @@ class MCLConfig:
     #: again, so its ``w_avg`` scales with 1/N and jumps when KLD changes N; Table 8.3's
     #: average of the measurement likelihood does not (``False``).
     recovery_w_avg_per_sample: bool = True
+    #: Feed w_slow/w_fast the weighted mean likelihood **per beam** (geometric mean over all
+    #: valid beams, ``(sum_i w_i prod_k p_ik)**(1/n_beams)``, beam skipping not applied).
+    #: nav2 (``False``) averages the raw product of 60 beams, whose scale swings by orders of
+    #: magnitude from scan to scan and whenever beam skipping drops a few beams, so
+    #: ``w_fast/w_slow`` is often tiny while tracking well and a few moved pieces of furniture
+    #: trigger injection. Skipped beams still count here: skipping is meant to ignore unmapped
+    #: obstacles in the *weights*, but it also hides the disagreement of a lost filter.
+    recovery_w_avg_per_beam: bool = False
+    #: Inject only while ``w_fast / w_ref`` is below this ratio (nav2: 1.0, i.e. whenever it
+    #: is below 1); the probability stays ``1 - w_fast / w_ref`` (Table 8.3 line 13).
+    recovery_ratio_threshold: float = 1.0
+    #: ``w_ref = max(w_slow, exp(recovery_floor_loglik))`` (per-beam mode only): a filter that
+    #: converged to the wrong place right after global initialization seeds w_slow at the
+    #: wrong place's low level and would never inject; a correctly localized filter's
+    #: per-beam likelihood is at least this high (nav2: -inf, no floor).
+    recovery_floor_loglik: float = float("-inf")
+    #: ... and only after that many consecutive filter updates below it (nav2: 1).
+    recovery_min_updates: int = 1
+    #: Cap on the injection probability (nav2: 1.0). Table 8.3 replaces up to all particles
+    #: at once; when a large unmapped obstacle (the apartment's day-9 board) drags the
+    #: likelihood down, that wipes out the (correct) cluster. A cap keeps most of it while
+    #: a few thousand random poses per update still find a kidnapped robot.
+    recovery_max_fraction: float = 1.0
     resample_interval: int = 1
     update_min_d: float = 0.25
     update_min_a: float = 0.2
@@ -129,6 +162,11 @@ TUNED = MCLConfig(
     recovery_alpha_fast=0.1,
     recovery_reset=False,
     recovery_w_avg_per_sample=False,
+    recovery_w_avg_per_beam=True,
+    recovery_ratio_threshold=0.3,
+    recovery_floor_loglik=-0.5,
+    recovery_min_updates=5,
+    recovery_max_fraction=0.35,
     update_min_d=0.1,
     update_min_a=0.1,
     init_sigma_xy=0.2,
@@ -200,6 +238,7 @@ class AMCLFilter:
         self.weights = np.zeros(0)
         self.w_slow = 0.0
         self.w_fast = 0.0
+        self.n_low_updates = 0
         self.n_random_injected = 0
 
     # -- initialization ------------------------------------------------------------------
@@ -218,6 +257,7 @@ class AMCLFilter:
         self.particles = p
         self.weights = np.full(n, 1.0 / n)
         self.w_slow = self.w_fast = 0.0
+        self.n_low_updates = 0
 
     def init_uniform(self, rng: np.random.Generator) -> None:
         """Global localization: ``max_particles`` random poses in free space."""
@@ -225,6 +265,7 @@ class AMCLFilter:
         self.particles = self.random_poses(n, rng)
         self.weights = np.full(n, 1.0 / n)
         self.w_slow = self.w_fast = 0.0
+        self.n_low_updates = 0
 
     # -- filter steps --------------------------------------------------------------------
     def predict(self, odom_old: ArrayLike, odom_new: ArrayLike, rng: np.random.Generator) -> None:
@@ -248,12 +289,20 @@ class AMCLFilter:
             logp, _ = likelihood_field_prob_cells(cells, self.table, self.lf)
         else:
             logp = np.log(likelihood_field_weights_cells(cells, self.table))
-        logw = np.log(np.maximum(self.weights, 1e-300)) + logp
+        w_prev = self.weights
+        logw = np.log(np.maximum(w_prev, 1e-300)) + logp
         m = float(logw.max())
         total_scaled = float(np.sum(np.exp(logw - m)))
         total = np.exp(m) * total_scaled
         self.weights = np.exp(logw - m) / total_scaled
         c = self.config
+        if c.recovery_w_avg_per_beam:
+            # Per-beam geometric mean over all valid beams, in log domain (the raw product
+            # under/overflows): log sum_i w_i exp(sum_k log p_ik), divided by n_beams.
+            lp_all = np.take(self.table.logp, cells).sum(axis=1, dtype=np.float64)
+            lw_all = np.log(np.maximum(w_prev, 1e-300)) + lp_all
+            m_all = float(lw_all.max())
+            total = float(np.exp((m_all + np.log(np.sum(np.exp(lw_all - m_all)))) / len(r)))
         if total > 0 and np.isfinite(total):
             w_avg = total / len(self.particles) if c.recovery_w_avg_per_sample else total
             self.w_slow = (
@@ -266,13 +315,31 @@ class AMCLFilter:
                 if self.w_fast == 0
                 else self.w_fast + c.recovery_alpha_fast * (w_avg - self.w_fast)
             )
+            w_ref = self.reference_weight()
+            low = w_ref > 0 and self.w_fast < c.recovery_ratio_threshold * w_ref
+            self.n_low_updates = self.n_low_updates + 1 if low else 0
+
+    def reference_weight(self) -> float:
+        """``w_slow``, floored at ``exp(recovery_floor_loglik)`` in per-beam mode."""
+        c = self.config
+        if c.recovery_w_avg_per_beam and self.w_slow > 0:
+            return max(self.w_slow, float(np.exp(c.recovery_floor_loglik)))
+        return self.w_slow
+
+    def injection_probability(self) -> float:
+        """Probability that a resampling draw is a random pose (Table 8.3 line 13), gated:
+        0 unless ``w_fast / w_ref`` stayed below ``recovery_ratio_threshold`` for
+        ``recovery_min_updates`` consecutive updates."""
+        c = self.config
+        w_ref = self.reference_weight()
+        if w_ref <= 0 or self.n_low_updates < max(1, c.recovery_min_updates):
+            return 0.0
+        return min(max(0.0, 1.0 - self.w_fast / w_ref), c.recovery_max_fraction)
 
     def resample(self, rng: np.random.Generator) -> None:
         """``pf_update_resample``: KLD-sized, low-variance, with random-pose injection."""
         c = self.config
-        w_diff = 0.0
-        if self.w_slow > 0:
-            w_diff = max(0.0, 1.0 - self.w_fast / self.w_slow)
+        w_diff = self.injection_probability()
         n_max = c.max_particles
         # Candidate sequence in random draw order to size the set like AMCL's loop.
         cand_idx = low_variance_resample(self.weights, n_max, rng)
@@ -292,6 +359,7 @@ class AMCLFilter:
         self.n_random_injected += n_rand
         if w_diff > 0 and self.config.recovery_reset:
             self.w_slow = self.w_fast = 0.0
+            self.n_low_updates = 0
 
     def estimate(self) -> tuple[FloatArray, FloatArray]:
         """Mean and covariance of the heaviest cluster (``pf_cluster_stats``)."""
