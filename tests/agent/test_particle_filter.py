@@ -26,6 +26,8 @@ from dynmap_sim.agent.localization.particle_filter import (
     TUNED,
     AMCLFilter,
     StaticMCL,
+    information_lambda_min,
+    regularized_covariance,
     weighted_pose_stats,
 )
 from dynmap_sim.agent.localization.resampling import low_variance_resample
@@ -144,6 +146,35 @@ def test_weighted_stats_circular_mean():
     assert abs(se2.wrap_angle(mean[2] - np.pi)) < 1e-9
     assert cov[0, 0] == pytest.approx(1.0)
     assert cov[2, 2] == pytest.approx(-2 * np.log(np.cos(0.1)))
+
+
+def test_lambda_min_closed_form_and_never_negative():
+    # diag(0.04, 0.01, 0.0025) -> information diag(25, 100, 400): smallest 25
+    assert information_lambda_min(np.diag([0.04, 0.01, 0.0025])) == pytest.approx(25.0)
+    rot = np.array([[np.cos(0.3), -np.sin(0.3), 0], [np.sin(0.3), np.cos(0.3), 0], [0, 0, 1]])
+    cov = rot @ np.diag([0.04, 0.01, 0.0025]) @ rot.T
+    assert information_lambda_min(cov) == pytest.approx(25.0)
+    # a collapsed particle set: rank-deficient, slightly asymmetric, tiny negative round-off
+    bad = np.array(
+        [[1.84e-6, 3e-7, 1.5e-6], [3e-7 + 1e-12, 5.3e-8, 2.5e-7], [1.5e-6, 2.5e-7, 1.27e-6]]
+    )
+    lam = information_lambda_min(bad)
+    assert lam > 0 and np.isfinite(lam)
+    reg = regularized_covariance(bad)
+    assert np.allclose(reg, reg.T)
+    assert np.linalg.eigvalsh(reg)[0] > 0
+    assert information_lambda_min(reg) == pytest.approx(lam, rel=1e-6)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.floats(-1.0, 1.0), min_size=9, max_size=9), st.floats(1e-12, 1e-3))
+def test_lambda_min_positive_for_any_psd_covariance(entries, eps):
+    a = np.array(entries).reshape(3, 3)
+    cov = a @ a.T * eps  # PSD, possibly singular
+    lam = information_lambda_min(cov)
+    assert lam > 0 and np.isfinite(lam)
+    ev = np.linalg.eigvalsh(regularized_covariance(cov))
+    assert ev[0] > 0
 
 
 def test_estimate_picks_heaviest_cluster():

@@ -177,6 +177,32 @@ CONFIGS: dict[str, MCLConfig] = {"nav2-default": NAV2_DEFAULT, "tuned": TUNED}
 MAP_SOURCES = ("first-run", "prior-walls")
 
 
+#: Smallest variance [m^2 / rad^2] kept in a reported covariance: a particle set collapsed onto
+#: one pose has a (numerically) singular covariance whose inverse is meaningless.
+COV_FLOOR = 1e-9
+
+
+def regularized_covariance(cov: ArrayLike, floor: float = COV_FLOOR) -> FloatArray:
+    """``cov`` made symmetric positive definite: symmetrized, eigenvalues clipped to ``floor``."""
+    c = np.asarray(cov, dtype=np.float64)
+    c = 0.5 * (c + c.T)
+    ev, vec = np.linalg.eigh(c)
+    c = (vec * np.maximum(ev, floor)) @ vec.T
+    return 0.5 * (c + c.T)
+
+
+def information_lambda_min(cov: ArrayLike, floor: float = COV_FLOOR) -> float:
+    """Smallest eigenvalue of the information matrix ``cov^-1`` (B&D §5.3, Fig. 11).
+
+    Computed as ``1 / lambda_max(cov)`` with ``eigvalsh`` on the symmetrized covariance, which is
+    exact for a positive definite ``cov`` and, unlike ``eigvalsh(inv(cov))``, never negative
+    for an ill-conditioned one (whose inverse carries huge round-off).
+    """
+    c = np.asarray(cov, dtype=np.float64)
+    lam_max = float(np.linalg.eigvalsh(0.5 * (c + c.T))[-1])
+    return 1.0 / max(lam_max, floor)
+
+
 def weighted_pose_stats(
     particles: FloatArray, weights: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
@@ -494,7 +520,7 @@ class StaticMCL(Localizer):
         pose_odom = np.asarray(odom.pose, dtype=np.float64)
         if self._mapper is not None:
             est = self._mapper.update(odom, scan)
-            est.extras["lambda_min"] = float(np.linalg.eigvalsh(np.linalg.inv(est.cov))[0])
+            est.extras["lambda_min"] = information_lambda_min(est.cov)
             return est
         f = self.filter
         if f is None:
@@ -523,10 +549,10 @@ class StaticMCL(Localizer):
                 f.resample(self.rng)
             self._odom_at_update = pose_odom.copy()
         mean = se2.compose(self._est_at_update, se2.between(self._odom_at_update, pose_odom))
-        cov = self._cov + 1e-9 * np.eye(3)
+        cov = regularized_covariance(self._cov)
         extras = {
             "scan_loglik": f.mean_beam_loglik(mean, scan.ranges_m),
-            "lambda_min": float(np.linalg.eigvalsh(np.linalg.inv(cov))[0]),
+            "lambda_min": information_lambda_min(cov),
             "n_particles": len(f.particles),
         }
         return PoseEstimate(mean=mean, cov=cov, extras=extras)
