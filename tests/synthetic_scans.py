@@ -9,6 +9,20 @@ from __future__ import annotations
 
 import numpy as np
 
+from dynmap_sim.types import LaserSpec
+
+#: A URG-04LX-like laser with its field of view but every third beam (241 beams).
+LASER = LaserSpec(
+    name="test-urg",
+    n_beams=241,
+    angle_min_rad=-2.0862,
+    angle_increment_rad=(2.0923 + 2.0862) / 240,
+    range_min_m=0.02,
+    range_max_m=5.6,
+    scan_period_s=0.1,
+    time_increment_s=0.0,
+)
+
 
 def raycast(pose: np.ndarray, angles: np.ndarray, segs: np.ndarray, max_range: float) -> np.ndarray:
     """Exact ranges from ``pose`` along ``angles`` (robot frame) to the segments (+inf: none)."""

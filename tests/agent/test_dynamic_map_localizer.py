@@ -6,7 +6,7 @@ import pickle
 
 import numpy as np
 import pytest
-from synthetic_scans import box, raycast
+from synthetic_scans import LASER, box, raycast
 
 from dynmap_sim import se2
 from dynmap_sim.agent.localization.dynamic_map_localizer import (
@@ -14,18 +14,7 @@ from dynmap_sim.agent.localization.dynamic_map_localizer import (
     lambda_min,
 )
 from dynmap_sim.agent.localizer import LOCALIZERS, make_localizer
-from dynmap_sim.types import LaserSpec, Odometry, Prior, Scan
-
-LASER = LaserSpec(
-    name="test-urg",
-    n_beams=241,
-    angle_min_rad=-2.0862,
-    angle_increment_rad=(2.0923 + 2.0862) / 240,
-    range_min_m=0.02,
-    range_max_m=5.6,
-    scan_period_s=0.1,
-    time_increment_s=0.0,
-)
+from dynmap_sim.types import Odometry, Prior, Scan
 
 
 def _world(cupboard: bool) -> np.ndarray:

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from synthetic_scans import raycast
+from synthetic_scans import LASER, raycast
 from synthetic_scans import room_segments as room
 
 from dynmap_sim import se2
@@ -32,18 +32,7 @@ from dynmap_sim.agent.localization.particle_filter import (
 )
 from dynmap_sim.agent.localization.resampling import low_variance_resample
 from dynmap_sim.agent.localizer import make_localizer
-from dynmap_sim.types import LaserSpec, Odometry, Prior, Scan
-
-LASER = LaserSpec(
-    name="test-urg",
-    n_beams=241,
-    angle_min_rad=-2.0862,
-    angle_increment_rad=(2.0923 + 2.0862) / 240,
-    range_min_m=0.02,
-    range_max_m=5.6,
-    scan_period_s=0.1,
-    time_increment_s=0.0,
-)
+from dynmap_sim.types import Odometry, Prior, Scan
 
 
 def path(laps=1, step=0.05, start=0):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from synthetic_scans import raycast, room_segments
+from synthetic_scans import LASER, raycast, room_segments
 
 from dynmap_sim.types import LaserSpec
 
@@ -12,17 +12,7 @@ from dynmap_sim.types import LaserSpec
 @pytest.fixture
 def laser() -> LaserSpec:
     """A URG-04LX-like scanner with fewer beams (240 degrees, 5.6 m)."""
-    n = 241
-    return LaserSpec(
-        name="test-urg",
-        n_beams=n,
-        angle_min_rad=-2.0862,
-        angle_increment_rad=(2.0923 + 2.0862) / (n - 1),
-        range_min_m=0.02,
-        range_max_m=5.6,
-        scan_period_s=0.1,
-        time_increment_s=0.0,
-    )
+    return LASER
 
 
 @pytest.fixture
