@@ -13,15 +13,20 @@ from __future__ import annotations
 
 import argparse
 import pickle
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
-from dynmap_sim import se2
 from dynmap_sim.agent.localizer import make_localizer
 from dynmap_sim.agent.maps.local_map import LocalMap
 from dynmap_sim.agent.maps.sample_set import SampleSets
-from dynmap_sim.types import LaserSpec, Odometry, Prior, Scan
+from dynmap_sim.types import LaserSpec, Prior
+
+# the synthetic geometry the agent tests use (one exact ray caster, one drifting stream)
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from synthetic_scans import box, drifting_stream, polyline_path  # noqa: E402
 
 URG = LaserSpec(
     name="urg-04lx",
@@ -80,64 +85,21 @@ def bench_sample_sets(rng: np.random.Generator, repeats: int) -> None:
         )
 
 
-def _raycast(pose, angles, segs, max_range):
-    th = pose[2] + angles
-    d = np.stack([np.cos(th), np.sin(th)], axis=1)
-    p0, e = segs[:, :2], segs[:, 2:] - segs[:, :2]
-    w = p0 - pose[:2]
-    den = d[:, None, 0] * e[None, :, 1] - d[:, None, 1] * e[None, :, 0]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (w[None, :, 0] * e[None, :, 1] - w[None, :, 1] * e[None, :, 0]) / den
-        u = (w[None, :, 0] * d[:, None, 1] - w[None, :, 1] * d[:, None, 0]) / den
-    hit = (np.abs(den) > 1e-12) & (t > 0) & (u >= 0) & (u <= 1)
-    r = np.where(hit, t, np.inf).min(axis=1)
-    r[r > max_range] = np.inf
-    return r
-
-
-def _box(x0, y0, x1, y1):
-    c = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]], float)
-    return np.concatenate([c, np.roll(c, -1, axis=0)], axis=1)
-
-
 def _world() -> np.ndarray:
     pts = np.array([[0, 0], [12, 0], [12, 4], [7, 4], [7, 9], [0, 9]], float)
     walls = np.concatenate([pts, np.roll(pts, -1, axis=0)], axis=1)
     return np.concatenate(
-        [walls, _box(2, 2, 2.4, 2.4), _box(9, 0, 10, 0.6), _box(1, 6, 3, 6.5), _box(4, 7, 4.5, 8)]
+        [walls, box(2, 2, 2.4, 2.4), box(9, 0, 10, 0.6), box(1, 6, 3, 6.5), box(4, 7, 4.5, 8)]
     )
 
 
 def _route(step_m: float = 0.035) -> np.ndarray:
     corners = np.array([[1, 1], [10.5, 1.2], [11, 3], [5.5, 2.5], [5.5, 8], [1.2, 8], [1, 4]])
-    poses, th = [], 0.0
-    for c in range(len(corners)):
-        a, b = corners[c].astype(float), corners[(c + 1) % len(corners)].astype(float)
-        heading = np.arctan2(b[1] - a[1], b[0] - a[0])
-        dth = (heading - th + np.pi) % (2 * np.pi) - np.pi
-        for k in range(int(np.ceil(abs(dth) / 0.1))):
-            th += np.sign(dth) * min(0.1, abs(dth) - k * 0.1)
-            poses.append([a[0], a[1], th])
-        th = heading
-        n = int(np.hypot(*(b - a)) / step_m)
-        poses += [[*(a + (b - a) * (k + 1) / n), th] for k in range(n)]
-    return np.array(poses)
+    return polyline_path(corners, step_m=step_m, turn_step_rad=0.1)
 
 
 def _stream(truth, segs, rng):
-    odo = [np.zeros(3)]
-    for k in range(1, len(truth)):
-        d = se2.between(truth[k - 1], truth[k])
-        dn = d * np.array([1.02, 1.02, 1.03])
-        dn[2] += 0.03 * np.hypot(d[0], d[1]) + rng.normal(0, 0.002)
-        dn[:2] += rng.normal(0, 0.002, 2)
-        odo.append(se2.compose(odo[-1], dn))
-    out = []
-    for k, pose in enumerate(truth):
-        r = _raycast(pose, URG.angles(), segs, URG.range_max_m)
-        r = (r + rng.normal(0, 0.01, r.shape)).astype(np.float32)
-        out.append((Odometry(odo[k], 0.1 * k), Scan(r, 0.1 * k)))
-    return out
+    return drifting_stream(truth, segs, URG, rng)
 
 
 def bench_localizer(rng: np.random.Generator) -> None:

@@ -56,3 +56,43 @@ def room_segments(cupboard: bool = True) -> np.ndarray:
         parts.append(np.array([[6.5, 0.0, 6.5, 0.6], [6.5, 0.6, 7.3, 0.6], [7.3, 0.6, 7.3, 0.0]]))
     parts.append(np.array([[1.0, 4.5, 1.8, 4.5], [1.8, 4.5, 1.8, 5.0], [1.8, 5.0, 1.0, 5.0]]))
     return np.concatenate(parts)
+
+
+def polyline_path(corners: np.ndarray, step_m: float, turn_step_rad: float) -> np.ndarray:
+    """Poses ``(T, 3)`` driving a closed polyline: turn in place at each corner in steps of at
+    most ``turn_step_rad``, then straight to the next corner in steps of ``step_m``."""
+    poses, th = [], 0.0
+    for c in range(len(corners)):
+        a, b = corners[c].astype(float), corners[(c + 1) % len(corners)].astype(float)
+        heading = np.arctan2(b[1] - a[1], b[0] - a[0])
+        dth = (heading - th + np.pi) % (2 * np.pi) - np.pi
+        for k in range(int(np.ceil(abs(dth) / turn_step_rad))):
+            th += np.sign(dth) * min(turn_step_rad, abs(dth) - k * turn_step_rad)
+            poses.append([a[0], a[1], th])
+        th = heading
+        n = int(np.hypot(*(b - a)) / step_m)
+        poses += [[*(a + (b - a) * (k + 1) / n), th] for k in range(n)]
+    return np.array(poses)
+
+
+def drifting_stream(truth, segs, laser, rng, extra_segments=None):
+    """``(Odometry, Scan)`` pairs along ``truth``: odometry with a 2 % scale and 3 % heading
+    error plus noise (it drifts), scans with 1 cm noise; ``extra_segments(k)`` adds moving
+    geometry (e.g. a walking person) to scan ``k``."""
+    from dynmap_sim import se2
+    from dynmap_sim.types import Odometry, Scan
+
+    odo = [np.zeros(3)]
+    for k in range(1, len(truth)):
+        d = se2.between(truth[k - 1], truth[k])
+        dn = d * np.array([1.02, 1.02, 1.03])
+        dn[2] += 0.03 * np.hypot(d[0], d[1]) + rng.normal(0, 0.002)
+        dn[:2] += rng.normal(0, 0.002, 2)
+        odo.append(se2.compose(odo[-1], dn))
+    out = []
+    for k, pose in enumerate(truth):
+        s = segs if extra_segments is None else np.concatenate([segs, extra_segments(k)])
+        r = raycast(pose, laser.angles(), s, laser.range_max_m)
+        r = (r + rng.normal(0, 0.01, r.shape)).astype(np.float32)
+        out.append((Odometry(odo[k], 0.1 * k), Scan(r, 0.1 * k)))
+    return out

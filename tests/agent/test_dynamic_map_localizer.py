@@ -6,15 +6,14 @@ import pickle
 
 import numpy as np
 import pytest
-from synthetic_scans import LASER, box, raycast
+from synthetic_scans import LASER, box, drifting_stream, polyline_path
 
-from dynmap_sim import se2
 from dynmap_sim.agent.localization.dynamic_map_localizer import (
     DynamicMapLocalizer,
     lambda_min,
 )
 from dynmap_sim.agent.localizer import LOCALIZERS, make_localizer
-from dynmap_sim.types import Odometry, Prior, Scan
+from dynmap_sim.types import Prior
 
 
 def _world(cupboard: bool) -> np.ndarray:
@@ -27,41 +26,19 @@ def _world(cupboard: bool) -> np.ndarray:
     return np.concatenate(segs)
 
 
-def _path(step_m: float = 0.12) -> np.ndarray:
+def _path() -> np.ndarray:
     corners = np.array([[1.0, 1.0], [4.2, 1.0], [6.5, 1.5], [4.2, 1.2], [4.0, 3.8], [1.0, 3.6]])
-    poses, th = [], 0.0
-    for c in range(len(corners)):
-        a, b = corners[c], corners[(c + 1) % len(corners)]
-        heading = np.arctan2(b[1] - a[1], b[0] - a[0])
-        dth = (heading - th + np.pi) % (2 * np.pi) - np.pi
-        for k in range(int(np.ceil(abs(dth) / 0.15))):
-            th += np.sign(dth) * min(0.15, abs(dth) - k * 0.15)
-            poses.append([a[0], a[1], th])
-        th = heading
-        n = int(np.hypot(*(b - a)) / step_m)
-        poses += [[*(a + (b - a) * (k + 1) / n), th] for k in range(n)]
-    return np.array(poses)
+    return polyline_path(corners, step_m=0.12, turn_step_rad=0.15)
 
 
 def _stream(truth, segs, rng, person: bool = False):
     """(odometry, scan) pairs: drifting odometry and noisy scans (optionally a walking person)."""
-    odo = [np.zeros(3)]
-    for k in range(1, len(truth)):
-        d = se2.between(truth[k - 1], truth[k])
-        dn = d * np.array([1.02, 1.02, 1.03])
-        dn[2] += 0.03 * np.hypot(d[0], d[1]) + rng.normal(0, 0.002)
-        dn[:2] += rng.normal(0, 0.002, 2)
-        odo.append(se2.compose(odo[-1], dn))
-    out = []
-    for k, pose in enumerate(truth):
-        s = segs
-        if person:
-            px = 1.0 + 3.0 * (k / len(truth))
-            s = np.concatenate([segs, box(px, 2.8, px + 0.3, 3.1)])
-        r = raycast(pose, LASER.angles(), s, LASER.range_max_m)
-        r = (r + rng.normal(0, 0.01, r.shape)).astype(np.float32)
-        out.append((Odometry(odo[k], 0.1 * k), Scan(r, 0.1 * k)))
-    return out
+
+    def walker(k):
+        px = 1.0 + 3.0 * (k / len(truth))
+        return box(px, 2.8, px + 0.3, 3.1)
+
+    return drifting_stream(truth, segs, LASER, rng, walker if person else None)
 
 
 def _run(loc, truth, segs, rng, day, run, first=False, person=False):
