@@ -85,6 +85,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         seed=args.seed,
         resume=args.resume,
         progress=not args.quiet,
+        workers=args.workers,
     )
     if args.report:
         from dynmap_sim.experiments.report import write_report
@@ -173,6 +174,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--resume", action="store_true", help="continue from the last checkpoint")
     s.add_argument("--report", action="store_true", help="write the report when done")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    s.add_argument(
+        "--workers",
+        type=int,
+        help="localizer worker processes (1: sequential in-process; default: up to 2)",
+    )
     s.set_defaults(func=_cmd_run)
 
     s = sub.add_parser("report", help="figures, summary.md and per_day.csv of a results folder")

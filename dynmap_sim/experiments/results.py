@@ -11,17 +11,23 @@
 * ``events`` — driver and experiment events (skipped waypoints, detours, kidnappings);
 * ``point_classes`` — per run and localizer, the 4x4 point-class confusion matrix;
 * ``geometry`` — the static segments of each run's world (for report figures);
-* ``checkpoint`` — pickled localizers, driver and RNG states, the next run to do, the
-  scenario hash and a SHA-256 of the blob, so a corrupt or mismatched checkpoint is refused.
+* ``checkpoint`` — the pickled driver and RNG states, the next run to do, the scenario hash,
+  the names and SHA-256 digests of the localizer files, and a SHA-256 of the blob, so a
+  corrupt or mismatched checkpoint is refused.
 
-Because a run's rows and the checkpoint after it are committed in the same transaction, a
-process killed at any moment leaves either the whole run or none of it.
+The localizers of a checkpoint are pickled one file each, ``checkpoint/loc<k>-<next
+index>.pkl`` next to ``results.db`` (written to a temporary name, then renamed), not into the
+database: a large state (the dynamic maps are tens of MB) rewritten after every run would
+churn the database's pages. The files are written before the transaction that names them
+commits, and older ones are deleted after it, so a process killed at any moment leaves
+either the whole run with its checkpoint or none of it.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
+import os
 import pickle
 import sqlite3
 from dataclasses import dataclass
@@ -35,6 +41,8 @@ from dynmap_sim.errors import InputError
 from dynmap_sim.metrics import heading_errors, position_errors, summarize
 
 DB_NAME = "results.db"
+#: Folder (next to ``results.db``) of the checkpoint's localizer files.
+CHECKPOINT_DIR = "checkpoint"
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -108,12 +116,14 @@ class RunRecord:
 
 @dataclass(frozen=True)
 class Checkpoint:
-    """The state to resume from: the next slot index and the pickled state dict."""
+    """The state to resume from: the next slot index, the state dict (driver, RNG; pickled
+    into the database) and the pickled localizers (one file each)."""
 
     next_index: int
     next_day: int
     next_run: int
     state: dict[str, Any]
+    localizers: tuple[bytes, ...] = ()
 
 
 class ResultsDB:
@@ -138,6 +148,8 @@ class ResultsDB:
                 )
             for suffix in ("", "-wal", "-shm"):
                 Path(str(path) + suffix).unlink(missing_ok=True)
+            for f in (d / CHECKPOINT_DIR).glob("*.pkl*"):
+                f.unlink()
         con = sqlite3.connect(path)
         con.execute("PRAGMA journal_mode=WAL")
         con.execute("PRAGMA synchronous=NORMAL")
@@ -206,6 +218,7 @@ class ResultsDB:
         d, r = rec.day, rec.run
         n_loc, n = rec.estimates.shape[:2]
         steps = np.arange(n)
+        files = self._write_localizer_files(checkpoint) if checkpoint is not None else []
         with self.con:
             # a run that was written before a crash (cannot happen with one transaction, but
             # a resumed experiment may redo a run whose checkpoint was older) is replaced
@@ -291,7 +304,9 @@ class ResultsDB:
                     {k: _none_if_nan(v) for k, v in s.items()},
                 )
             if checkpoint is not None:
-                self._put_checkpoint(checkpoint, scenario_hash, seed)
+                self._put_checkpoint(checkpoint, files, scenario_hash, seed)
+        if checkpoint is not None:
+            self._remove_stale_localizer_files({name for name, _ in files})
 
     def _day_summaries(self, day: int, n_loc: int) -> list[dict[str, float]]:
         """Summaries of all scans of ``day`` per localizer (reads uncommitted rows too)."""
@@ -307,8 +322,35 @@ class ResultsDB:
             out.append({"loc": k, "day": day, **s.to_dict()})
         return out
 
-    def _put_checkpoint(self, cp: Checkpoint, scenario_hash: str, seed: int) -> None:
-        blob = pickle.dumps(cp.state, protocol=pickle.HIGHEST_PROTOCOL)
+    @property
+    def checkpoint_dir(self) -> Path:
+        return self.path.parent / CHECKPOINT_DIR
+
+    def _write_localizer_files(self, cp: Checkpoint) -> list[tuple[str, str]]:
+        """Write each pickled localizer atomically (temp file + rename); (name, sha256)s."""
+        out = []
+        if cp.localizers:
+            self.checkpoint_dir.mkdir(exist_ok=True)
+        for k, blob in enumerate(cp.localizers):
+            name = f"loc{k}-{cp.next_index}.pkl"
+            path = self.checkpoint_dir / name
+            tmp = path.with_name(name + ".tmp")
+            tmp.write_bytes(blob)
+            os.replace(tmp, path)
+            out.append((name, hashlib.sha256(blob).hexdigest()))
+        return out
+
+    def _remove_stale_localizer_files(self, keep: set[str]) -> None:
+        if self.checkpoint_dir.is_dir():
+            for f in self.checkpoint_dir.iterdir():
+                if f.name not in keep and f.name.endswith((".pkl", ".pkl.tmp")):
+                    f.unlink(missing_ok=True)
+
+    def _put_checkpoint(
+        self, cp: Checkpoint, files: list[tuple[str, str]], scenario_hash: str, seed: int
+    ) -> None:
+        content = {"format": 2, "state": cp.state, "localizer_files": files}
+        blob = pickle.dumps(content, protocol=pickle.HIGHEST_PROTOCOL)
         self.con.execute(
             "INSERT OR REPLACE INTO checkpoint VALUES (1, ?, ?, ?, ?, ?, ?, ?, datetime('now'))",
             (
@@ -348,10 +390,29 @@ class ResultsDB:
         if blob is None or hashlib.sha256(bytes(blob)).hexdigest() != digest:
             raise InputError(f"{self.path}: the checkpoint is corrupt (checksum mismatch)")
         try:
-            state = pickle.loads(bytes(blob))  # noqa: S301 - our own checksummed blob
+            content = pickle.loads(bytes(blob))  # noqa: S301 - our own checksummed blob
         except Exception as exc:  # noqa: BLE001 - any failure means unusable
             raise InputError(f"{self.path}: the checkpoint cannot be loaded ({exc})") from None
-        return Checkpoint(int(idx), int(nd), int(nr), state)
+        if not (isinstance(content, dict) and content.get("format") == 2):
+            # the first format: everything (localizers included, as objects) in the blob
+            state = dict(content)
+            locs = tuple(
+                pickle.dumps(x, pickle.HIGHEST_PROTOCOL) for x in state.pop("localizers", [])
+            )
+            return Checkpoint(int(idx), int(nd), int(nr), state, locs)
+        locs = []
+        for name, digest in content["localizer_files"]:
+            path = self.checkpoint_dir / name
+            try:
+                data = path.read_bytes()
+            except OSError as exc:
+                raise InputError(
+                    f"{path}: cannot read the checkpoint's localizer ({exc})"
+                ) from None
+            if hashlib.sha256(data).hexdigest() != digest:
+                raise InputError(f"{path}: the checkpoint is corrupt (checksum mismatch)")
+            locs.append(data)
+        return Checkpoint(int(idx), int(nd), int(nr), content["state"], tuple(locs))
 
     def query(self, sql: str, params: tuple[Any, ...] = ()) -> list[tuple[Any, ...]]:
         return self.con.execute(sql, params).fetchall()

@@ -1,13 +1,17 @@
 """The calendar loop: run a scenario's days and runs, localizers side by side (DESIGN.md §6).
 
-For every run of the chosen days: ``env.reset(seed, day, run)``, build the :class:`Prior`,
-``begin_run`` every localizer, let the driver drive while the *same* (odometry, scan) stream
-feeds all localizers, ``end_run``, and ``end_day`` after the day's last run. Each run's rows,
-summaries and a checkpoint (localizers, driver, RNG states, next run) are committed to the
-results database in one transaction, so an experiment killed at any moment resumes
-(``resume=True``) from its last finished run and ends with exactly the numbers of an unbroken
-one: each run's sensor noise derives from (seed, day, run) in the env, and everything else
-that carries over between runs is in the checkpoint.
+For every run of the chosen days: ``env.reset(seed, day, run)``, build the :class:`Prior`, let
+the driver drive (it follows the true pose) and record the run's (odometry, scan) stream; then
+the *same* stream feeds every localizer: ``begin_run``, ``update`` per scan, ``end_run``, and
+``end_day`` after the day's last run (:mod:`.workers`). With ``workers > 1`` the localizers
+work in worker processes on run ``i`` while this process simulates run ``i + 1``; the numbers
+are the same as with ``workers=1`` (all in this process).
+
+Each run's rows, summaries and a checkpoint (localizers, driver, RNG states, next run) are
+committed to the results store in one transaction, so an experiment killed at any moment
+resumes (``resume=True``) from its last finished run and ends with exactly the numbers of an
+unbroken one: each run's sensor noise derives from (seed, day, run) in the env, and everything
+else that carries over between runs is in the checkpoint.
 """
 
 from __future__ import annotations
@@ -15,6 +19,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import math
+import os
 import pickle
 import time
 from pathlib import Path
@@ -27,15 +32,21 @@ from dynmap_sim.errors import InputError
 from dynmap_sim.experiments.drivers import TourDriver, TourParams, clip_route
 from dynmap_sim.experiments.results import Checkpoint, ResultsDB, RunRecord
 from dynmap_sim.experiments.scenario import Scenario, env_kwargs
+from dynmap_sim.experiments.workers import (
+    InProcessLocalizers,
+    LocalizerOutput,
+    LocalizerPool,
+    RunStream,
+    pickle_localizer,
+)
 from dynmap_sim.metrics import (
-    confusion_matrix,
     heading_errors,
     lost_stats,
     position_errors,
     rpe,
     summarize,
 )
-from dynmap_sim.types import Odometry, Prior, Scan
+from dynmap_sim.types import Prior
 
 #: Steps between poses for the per-run RPE (1 s at the URG-04LX's 10 Hz).
 RPE_DELTA_STEPS = 10
@@ -70,10 +81,37 @@ def localizer_seeds(seed: int, n: int) -> list[np.random.Generator]:
     return [np.random.Generator(np.random.PCG64(c)) for c in children]
 
 
+def default_workers(n_localizers: int) -> int:
+    """The automatic worker count: one process per core, at most 2 (the simulation runs in
+    the main process besides) and at most one per localizer; in-process (1) for a single
+    localizer, where worker processes would mostly add their start-up time."""
+    if n_localizers < 2:
+        return 1
+    return max(1, min(2, os.cpu_count() or 1, n_localizers))
+
+
 @dataclasses.dataclass
 class _Kidnap:
     step: int
     pose: np.ndarray | None  # None: random (drawn at the kidnapping from the runner's RNG)
+
+
+@dataclasses.dataclass
+class _SimRun:
+    """A simulated run waiting for its localizers' outputs."""
+
+    index: int
+    stream: RunStream
+    truth: np.ndarray
+    collision: np.ndarray
+    events: list[tuple[int, float, str, str]]
+    terminated: bool
+    route_progress: float
+    skipped_waypoints: int
+    segments: np.ndarray
+    segment_class: np.ndarray
+    state_after: dict[str, Any]
+    start_wall_s: float
 
 
 class ExperimentRunner:
@@ -88,7 +126,11 @@ class ExperimentRunner:
         resume: bool,
         overwrite: bool = False,
         env: Any = None,
+        workers: int = 1,
     ) -> None:
+        if workers < 1:
+            raise InputError(f"workers must be at least 1, not {workers}")
+        self.workers = int(workers)
         self.scenario = scenario
         self.out_dir = out_dir
         self.seed = int(seed)
@@ -107,6 +149,10 @@ class ExperimentRunner:
         self.hash = experiment_hash(scenario, self.seed, days)
         self.start_index = 0
         state: dict[str, Any] | None = None
+        #: the localizers pickled after the last stored run (None: fresh, in _fresh_locs)
+        self._loc_states: list[bytes] | None = None
+        self._fresh_locs: list[Localizer] = []
+        self._live_locs: list[Localizer] | None = None  # the in-process engine's objects
         db_file = out_dir / "results.db"
         if resume and db_file.exists():
             self.db = ResultsDB.open(out_dir)
@@ -128,6 +174,9 @@ class ExperimentRunner:
             if cp is not None:
                 self.start_index = cp.next_index
                 state = cp.state
+                self._loc_states = list(cp.localizers)
+                if len(self._loc_states) != len(scenario.localizers):
+                    raise InputError(f"{db_file}: the checkpoint has no localizer states")
         else:
             self.db = ResultsDB.create(out_dir, overwrite=overwrite)
             self._write_meta()
@@ -157,7 +206,7 @@ class ExperimentRunner:
     def _fresh_state(self) -> dict[str, Any]:
         sc = self.scenario
         rngs = localizer_seeds(self.seed, len(sc.localizers))
-        locs = [
+        self._fresh_locs = [
             make_localizer(c.name, laser=self.laser, rng=rngs[k + 1], **c.params)
             for k, c in enumerate(sc.localizers)
         ]
@@ -172,13 +221,47 @@ class ExperimentRunner:
             dt_s=float(self.laser.scan_period_s),
         )
         route = clip_route(np.asarray(self.spec.robot.route, float), d.route_fraction)
-        return {"localizers": locs, "driver": TourDriver(route, params), "rng": rngs[0]}
+        return {"driver": TourDriver(route, params), "rng": rngs[0]}
 
     # ------------------------------------------------------------------ running
-    def run(self, progress: bool = True) -> Path:
+    def localizers(self) -> list[Localizer]:
+        """The localizers as of the last stored run (copies when they ran in workers)."""
+        if self._live_locs is not None:
+            return self._live_locs
+        if self._loc_states is None:
+            return self._fresh_locs
+        return [pickle.loads(b) for b in self._loc_states]  # noqa: S301 - our own state
+
+    def _start_localizers(self) -> InProcessLocalizers | LocalizerPool:
+        labels = self.scenario.labels
+        if self.workers == 1:
+            locs = (
+                self._fresh_locs
+                if self._loc_states is None
+                else [pickle.loads(b) for b in self._loc_states]  # noqa: S301
+            )
+            self._live_locs = locs
+            return InProcessLocalizers(labels, locs)
+        states = self._loc_states
+        if states is None:
+            states = [
+                pickle_localizer(lab, loc)
+                for lab, loc in zip(labels, self._fresh_locs, strict=True)
+            ]
+        self._live_locs = None
+        return LocalizerPool(labels, states, self.workers)
+
+    def run(self, progress: bool = True, stop_after: int | None = None) -> Path:
+        """Run the remaining slots; return the results folder.
+
+        With ``workers > 1`` the localizers of run ``i`` work in worker processes while this
+        process simulates run ``i + 1``. ``stop_after`` (for tests) stops after that many
+        slots as if the process were killed: the experiment is left incomplete.
+        """
         from tqdm.auto import tqdm
 
         n = len(self.slots)
+        last = n if stop_after is None else min(n, stop_after)
         bar = tqdm(
             total=n,
             initial=self.start_index,
@@ -186,15 +269,35 @@ class ExperimentRunner:
             desc=self.scenario.name,
             unit="run",
         )
+        engine = None
         try:
-            for i in range(self.start_index, n):
+            engine = self._start_localizers()
+            pending: _SimRun | None = None
+            done_at = time.perf_counter()  # when the previous run was stored
+            for i in range(self.start_index, last):
                 slot = self.slots[i]
                 bar.set_postfix_str(f"day {slot.day} run {slot.run}")
-                self._run_slot(i)
+                sim = self._simulate(i)
+                if pending is not None:  # pipelined: store the run the workers just did
+                    self._write(pending, engine.result(), time.perf_counter() - done_at)
+                    done_at = time.perf_counter()
+                    bar.update(1)
+                engine.submit(sim.stream)
+                pending = sim
+                if not engine.pipelined:
+                    self._write(pending, engine.result(), time.perf_counter() - done_at)
+                    done_at = time.perf_counter()
+                    bar.update(1)
+                    pending = None
+            if pending is not None:
+                self._write(pending, engine.result(), time.perf_counter() - done_at)
                 bar.update(1)
         finally:
+            if engine is not None:
+                engine.close()
             bar.close()
-        self.db.set_meta(complete=True)
+        if last == n:
+            self.db.set_meta(complete=True)
         self.db.close()
         self.env.close()
         return self.out_dir
@@ -240,19 +343,17 @@ class ExperimentRunner:
         xy = route[k] + u * (route[k + 1] - route[k])
         return np.array([xy[0], xy[1], rng.uniform(-math.pi, math.pi)])
 
-    def _run_slot(self, i: int) -> None:
+    def _simulate(self, i: int) -> _SimRun:
+        """Drive run ``i`` through the env and record its sensor stream (no localizers: the
+        driver follows the true pose and kidnappings use the runner's RNG)."""
+        t0 = time.perf_counter()
         slot = self.slots[i]
         sc = self.scenario
-        locs: list[Localizer] = self.state["localizers"]
         driver: TourDriver = self.state["driver"]
         rng: np.random.Generator = self.state["rng"]
-        n_loc = len(locs)
-        wall0 = time.perf_counter()
         obs, info = self.env.reset(seed=self.seed, options={"day": slot.day, "run": slot.run})
         geom = self.world.geometry
         prior = self._prior(i)
-        for loc in locs:
-            loc.begin_run(prior)
         start = np.asarray(info["truth"]["pose"], dtype=np.float64)
         driver.begin_run(geom, start)
         kidnaps = self._kidnaps(slot.day, slot.run, rng)
@@ -263,14 +364,11 @@ class ExperimentRunner:
             else None
         )
         t_l: list[float] = []
+        odom_l: list[np.ndarray] = []
+        scan_l: list[np.ndarray] = []
+        class_l: list[np.ndarray] = []
         truth_l: list[np.ndarray] = []
         coll_l: list[bool] = []
-        est_l: list[list[np.ndarray]] = [[] for _ in range(n_loc)]
-        cov_l: list[list[np.ndarray]] = [[] for _ in range(n_loc)]
-        ext_l: list[list[tuple[float, float, float, float]]] = [[] for _ in range(n_loc)]
-        confusion = np.zeros((n_loc, 4, 4), dtype=np.int64)
-        update_s = np.zeros(n_loc)
-        nan4 = (math.nan, math.nan, math.nan, math.nan)
         terminated = truncated = False
         collision = False
         step = 0
@@ -279,30 +377,10 @@ class ExperimentRunner:
             truth = info["truth"]
             pose = np.array(truth["pose"], dtype=np.float64)  # copies: the history must not
             t_s = float(truth["time"][2])  # change if a producer reuses its arrays
-            odom = Odometry(pose=np.array(obs["odom"], dtype=np.float64), stamp_s=t_s)
-            scan = Scan(ranges_m=obs["scan"], stamp_s=t_s)
-            for k, loc in enumerate(locs):
-                t_up = time.perf_counter()
-                est = loc.update(odom, scan)
-                update_s[k] += time.perf_counter() - t_up
-                est_l[k].append(np.array(est.mean, dtype=np.float64))
-                cov_l[k].append(np.array(est.cov, dtype=np.float64))
-                ex = est.extras
-                if ex:
-                    ext_l[k].append(
-                        (
-                            float(ex.get("scan_loglik", math.nan)),
-                            float(ex.get("lambda_min", math.nan)),
-                            float(ex.get("timescale", math.nan)),
-                            float(ex.get("safe_mode", math.nan)),
-                        )
-                    )
-                    pc = ex.get("point_classes")
-                    if pc is not None:
-                        confusion[k] += confusion_matrix(truth["beam_class"], pc)
-                else:
-                    ext_l[k].append(nan4)
             t_l.append(t_s)
+            odom_l.append(np.array(obs["odom"], dtype=np.float64))
+            scan_l.append(np.array(obs["scan"], dtype=np.float32))
+            class_l.append(np.array(truth["beam_class"], dtype=np.int8))
             truth_l.append(pose)
             coll_l.append(collision)
             progress_frac = float(info.get("route_progress", progress_frac))
@@ -330,68 +408,71 @@ class ExperimentRunner:
         events += [
             (step, t_s, "kidnap_not_reached", f"planned at step {kp.step}") for kp in kidnaps
         ]
-        for loc in locs:
-            loc.end_run()
         driver_events, skipped = list(driver.events), driver.skipped_waypoints
         finished = driver.done
         driver.end_run()
         last_of_day = i + 1 == len(self.slots) or self.slots[i + 1].day != slot.day
-        if last_of_day:
-            for loc in locs:
-                loc.end_day()
-        events = sorted(events + driver_events, key=lambda e: e[0])
-        t = np.asarray(t_l, dtype=np.float64)
-        truth_a = np.asarray(truth_l, dtype=np.float64).reshape(-1, 3)
-        est_a = np.asarray(est_l, dtype=np.float64).reshape(n_loc, -1, 3)
-        cov_a = np.asarray(cov_l, dtype=np.float64).reshape(n_loc, -1, 3, 3)
-        cov_diag = np.diagonal(cov_a, axis1=2, axis2=3)
-        ext_a = np.asarray(ext_l, dtype=np.float64).reshape(n_loc, -1, 4)
+        stream = RunStream(
+            index=i,
+            prior=prior,
+            stamps_s=np.asarray(t_l, dtype=np.float64),
+            odom=np.asarray(odom_l, dtype=np.float64).reshape(-1, 3),
+            scans=np.asarray(scan_l, dtype=np.float32).reshape(len(t_l), -1),
+            beam_class=np.asarray(class_l, dtype=np.int8).reshape(len(t_l), -1),
+            last_of_day=last_of_day,
+        )
+        return _SimRun(
+            index=i,
+            stream=stream,
+            truth=np.asarray(truth_l, dtype=np.float64).reshape(-1, 3),
+            collision=np.asarray(coll_l, dtype=bool),
+            events=sorted(events + driver_events, key=lambda e: e[0]),
+            terminated=bool(terminated or finished),
+            route_progress=progress_frac,
+            skipped_waypoints=skipped,
+            segments=np.asarray(geom.segments, dtype=np.float64).copy(),
+            segment_class=np.asarray(geom.segment_class, dtype=np.int8).copy(),
+            # what the checkpoint after this run holds besides the localizers (copied now:
+            # the next run is simulated before this one is written)
+            state_after=pickle.loads(pickle.dumps(self.state, pickle.HIGHEST_PROTOCOL)),
+            start_wall_s=t0,
+        )
+
+    def _write(self, sim: _SimRun, outs: list[LocalizerOutput], wall_s: float) -> None:
+        """Store a localized run with the checkpoint after it (one transaction)."""
+        i, slot, stream = sim.index, self.slots[sim.index], sim.stream
         rec = RunRecord(
             day=slot.day,
             run=slot.run,
             date=slot.date.isoformat(),
             start_s=float(slot.start_s),
-            t_s=t,
-            truth=truth_a,
-            collision=np.asarray(coll_l, dtype=bool),
-            estimates=est_a,
-            cov_diag=cov_diag,
-            extras=ext_a,
-            confusion=confusion,
-            terminated=bool(terminated or finished),
-            route_progress=progress_frac,
-            skipped_waypoints=skipped,
-            wall_s=time.perf_counter() - wall0,
-            events=events,
-            segments=np.asarray(geom.segments, dtype=np.float64),
-            segment_class=np.asarray(geom.segment_class, dtype=np.int8),
-            update_s=update_s,
+            t_s=stream.stamps_s,
+            truth=sim.truth,
+            collision=sim.collision,
+            estimates=np.stack([o.estimates for o in outs]).reshape(len(outs), -1, 3),
+            cov_diag=np.stack([o.cov_diag for o in outs]).reshape(len(outs), -1, 3),
+            extras=np.stack([o.extras for o in outs]).reshape(len(outs), -1, 4),
+            confusion=np.stack([o.confusion for o in outs]).reshape(len(outs), 4, 4),
+            terminated=sim.terminated,
+            route_progress=sim.route_progress,
+            skipped_waypoints=sim.skipped_waypoints,
+            wall_s=wall_s,
+            events=sim.events,
+            segments=sim.segments,
+            segment_class=sim.segment_class,
+            update_s=np.array([o.update_s for o in outs], dtype=np.float64),
         )
-        run_sum = [self._run_summary(k, rec) for k in range(n_loc)]
+        run_sum = [self._run_summary(k, rec) for k in range(len(outs))]
+        self._loc_states = [o.state for o in outs]
         nxt = self.slots[i + 1] if i + 1 < len(self.slots) else None
         cp = Checkpoint(
             next_index=i + 1,
             next_day=nxt.day if nxt else -1,
             next_run=nxt.run if nxt else -1,
-            state=self.state,
+            state=sim.state_after,
+            localizers=tuple(self._loc_states),
         )
-        try:
-            self.db.write_run(rec, run_sum, last_of_day, cp, self.hash, self.seed)
-        except (pickle.PicklingError, TypeError, AttributeError) as exc:
-            self._explain_unpicklable(exc)
-            raise
-
-    def _explain_unpicklable(self, exc: Exception) -> None:
-        """Turn a checkpoint pickling failure into a clear error naming the localizer."""
-        for label, loc in zip(self.scenario.labels, self.state["localizers"], strict=True):
-            try:
-                pickle.dumps(loc)
-            except Exception as err:  # noqa: BLE001 - any failure is the answer
-                raise InputError(
-                    f"localizer {label!r} ({type(loc).__module__}.{type(loc).__qualname__}) "
-                    f"cannot be pickled for the checkpoint after each run: {err}. Localizers "
-                    "must be picklable (no lambdas, open files or threads in their state)."
-                ) from exc
+        self.db.write_run(rec, run_sum, stream.last_of_day, cp, self.hash, self.seed)
 
     @staticmethod
     def _run_summary(k: int, rec: RunRecord) -> dict[str, float]:
@@ -421,16 +502,25 @@ def run_experiment(
     resume: bool = False,
     progress: bool = True,
     overwrite: bool = False,
+    workers: int | None = None,
 ) -> Path:
     """Run ``scenario`` (optionally only ``days``, with ``seed``) into ``out_dir``; return it.
 
     ``resume=True`` continues from the last checkpoint in ``out_dir`` (or starts when there is
-    none). ``overwrite=True`` replaces earlier results in ``out_dir``.
+    none). ``overwrite=True`` replaces earlier results in ``out_dir``. ``workers``: localizer
+    worker processes (1: all in this process, sequentially; None: :func:`default_workers`);
+    the results are the same whatever the number.
     """
     out = Path(out_dir) if out_dir is not None else default_out_dir(scenario)
     days = tuple(days) if days is not None else scenario.days  # type: ignore[assignment]
     if days[0] < 1 or days[1] < days[0]:
         raise InputError(f"bad day range {days}")
     seed = scenario.seeds[0] if seed is None else int(seed)
-    runner = ExperimentRunner(scenario, out, days, seed, resume=resume, overwrite=overwrite)
+    if workers is None:
+        workers = default_workers(len(scenario.localizers))
+    if workers < 1:
+        raise InputError(f"--workers must be at least 1, not {workers}")
+    runner = ExperimentRunner(
+        scenario, out, days, seed, resume=resume, overwrite=overwrite, workers=workers
+    )
     return runner.run(progress=progress)

@@ -34,15 +34,12 @@ def scenario(tmp_path, **extra):
     return parse_scenario(data, tmp_path / "s.toml")
 
 
-def run(scn, out, resume=False, env=None, stop_after=None):
+def run(scn, out, resume=False, env=None, stop_after=None, workers=1):
     env = env if env is not None else FakeEnv()
-    r = ExperimentRunner(scn, out, scn.days, 0, resume=resume, overwrite=not resume, env=env)
-    if stop_after is not None:  # simulate a crash after some runs
-        for i in range(r.start_index, stop_after):
-            r._run_slot(i)
-        r.db.close()
-        return r
-    r.run(progress=False)
+    r = ExperimentRunner(
+        scn, out, scn.days, 0, resume=resume, overwrite=not resume, env=env, workers=workers
+    )
+    r.run(progress=False, stop_after=stop_after)  # stop_after: as if killed after some runs
     return r
 
 
@@ -57,7 +54,7 @@ def table(out, sql):
 def test_call_order_and_same_stream(tmp_path):
     scn = scenario(tmp_path, days=[1, 2])
     r = run(scn, tmp_path / "o")
-    calls = r.state["localizers"][0].calls
+    calls = r.localizers()[0].calls
     assert calls == [
         ("begin_run", 1, 1, True),
         ("end_run",),
@@ -103,7 +100,7 @@ def test_resume_gives_the_numbers_of_an_unbroken_run(tmp_path):
     ):
         assert table(tmp_path / "full", sql) == table(tmp_path / "broken", sql)
     # the recording localizer's history spans the break: it was restored from the checkpoint
-    assert len(r.state["localizers"][0].calls) == 3 * 3
+    assert len(r.localizers()[0].calls) == 3 * 3
 
 
 def test_resume_refuses_other_seed_or_days(tmp_path):

@@ -1,0 +1,407 @@
+"""Localizers in worker processes, pipelined with the simulation (DESIGN.md §6).
+
+A run's sensor stream does not depend on the localizers: the tour driver follows the *true*
+pose and kidnappings come from the runner's RNG. So the runner records a run's whole stream
+(:class:`RunStream`: odometry, scans, time stamps and the true beam classes) and hands it to
+the localizers afterwards, either in-process (:class:`InProcessLocalizers`, ``workers=1``) or
+spread over persistent worker processes (:class:`LocalizerPool`) while the main process
+simulates the next run. Both run every localizer through :func:`localize_run`, which makes
+the calls the sequential runner always made (``begin_run(prior)``, ``update(odom, scan)`` per
+scan in order, ``end_run()``, ``end_day()`` after the day's last run) on copies of the same
+arrays, so the numbers are bit-identical whichever way they were computed.
+
+After each run every localizer is pickled (:attr:`LocalizerOutput.state`): that is the
+checkpoint's copy, and the pool moves a localizer to another worker by sending it that
+state (it balances the workers by the busy time each localizer took in the last run).
+Worker processes use the ``spawn`` start method, ignore SIGINT (the main process stops them),
+exit when the main process goes away, and report a failing localizer by its label; a dead
+worker is noticed through its process sentinel, so the main process never hangs on it.
+"""
+
+from __future__ import annotations
+
+import math
+import multiprocessing as mp
+import os
+import pickle
+import signal
+import threading
+import time
+import traceback
+from collections.abc import Sequence
+from dataclasses import dataclass
+from multiprocessing.connection import Connection, wait
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dynmap_sim.agent.localizer import Localizer
+from dynmap_sim.errors import InputError
+from dynmap_sim.metrics import confusion_matrix
+from dynmap_sim.types import Odometry, Prior, Scan
+
+#: A rebalanced assignment must shorten the slowest worker's busy time by this fraction.
+REBALANCE_GAIN = 0.15
+
+
+class LocalizerError(RuntimeError):
+    """A localizer raised (in-process or in a worker); the message names it and the run."""
+
+
+@dataclass
+class RunStream:
+    """One run's sensor stream as the localizers consume it (``T`` scans).
+
+    ``stamps_s`` ``(T,)`` seconds since midnight; ``odom`` ``(T, 3)`` odometry poses;
+    ``scans`` ``(T, n_beams)`` float32 ranges [m] (REP-117 encoded); ``beam_class``
+    ``(T, n_beams)`` int8 true beam classes (only for scoring ``point_classes``, never shown
+    to a localizer); ``last_of_day``: ``end_day()`` follows ``end_run()``.
+    """
+
+    index: int
+    prior: Prior
+    stamps_s: NDArray[np.float64]
+    odom: NDArray[np.float64]
+    scans: NDArray[np.float32]
+    beam_class: NDArray[np.int8]
+    last_of_day: bool
+
+
+@dataclass
+class LocalizerOutput:
+    """What one localizer produced for one run.
+
+    ``estimates`` ``(T, 3)``; ``cov_diag`` ``(T, 3)``; ``extras`` ``(T, 4)`` (scan_loglik,
+    lambda_min, timescale, safe_mode; NaN where not reported); ``confusion`` ``(4, 4)``
+    point-class counts; ``update_s`` wall time in ``update()`` [s]; ``busy_s`` wall time of
+    the whole run including the hooks and pickling [s]; ``state`` the pickled localizer after
+    ``end_run`` (and ``end_day``).
+    """
+
+    estimates: NDArray[np.float64]
+    cov_diag: NDArray[np.float64]
+    extras: NDArray[np.float64]
+    confusion: NDArray[np.int64]
+    update_s: float
+    busy_s: float
+    state: bytes
+
+
+def _day_run(stream: RunStream) -> str:
+    return f"day {stream.prior.day} run {stream.prior.run}"
+
+
+def unpicklable_error(label: str, loc: Localizer, err: Exception) -> InputError:
+    """The error for a localizer that cannot be pickled for the checkpoint."""
+    return InputError(
+        f"localizer {label!r} ({type(loc).__module__}.{type(loc).__qualname__}) "
+        f"cannot be pickled for the checkpoint after each run: {err}. Localizers "
+        "must be picklable (no lambdas, open files or threads in their state)."
+    )
+
+
+def pickle_localizer(label: str, loc: Localizer) -> bytes:
+    """``loc`` pickled (highest protocol); :class:`InputError` naming it when it cannot be."""
+    try:
+        return pickle.dumps(loc, protocol=pickle.HIGHEST_PROTOCOL)
+    except Exception as err:  # noqa: BLE001 - any failure is the answer
+        raise unpicklable_error(label, loc, err) from err
+
+
+def localize_run(label: str, loc: Localizer, stream: RunStream) -> LocalizerOutput:
+    """Feed one run's stream to one localizer (the hooks in order) and pickle it afterwards.
+
+    Each call gets fresh copies of the step's odometry pose and scan, as the simulation
+    produced them. A failing localizer raises :class:`LocalizerError` naming it.
+    """
+    busy0 = time.perf_counter()
+    n = len(stream.stamps_s)
+    est = np.empty((n, 3))
+    cov_diag = np.empty((n, 3))
+    extras = np.full((n, 4), math.nan)
+    confusion = np.zeros((4, 4), dtype=np.int64)
+    update_s = 0.0
+    step = -1
+    try:
+        loc.begin_run(stream.prior)
+        for step in range(n):
+            t_s = float(stream.stamps_s[step])
+            odom = Odometry(pose=stream.odom[step].copy(), stamp_s=t_s)
+            scan = Scan(ranges_m=stream.scans[step].copy(), stamp_s=t_s)
+            t_up = time.perf_counter()
+            e = loc.update(odom, scan)
+            update_s += time.perf_counter() - t_up
+            est[step] = np.asarray(e.mean, dtype=np.float64)
+            cov_diag[step] = np.diagonal(np.asarray(e.cov, dtype=np.float64))
+            ex = e.extras
+            if ex:
+                extras[step] = (
+                    float(ex.get("scan_loglik", math.nan)),
+                    float(ex.get("lambda_min", math.nan)),
+                    float(ex.get("timescale", math.nan)),
+                    float(ex.get("safe_mode", math.nan)),
+                )
+                pc = ex.get("point_classes")
+                if pc is not None:
+                    confusion += confusion_matrix(stream.beam_class[step], pc)
+        step = -1
+        loc.end_run()
+        if stream.last_of_day:
+            loc.end_day()
+    except Exception as exc:
+        where = f"at scan {step}" if step >= 0 else "in a run/day hook"
+        raise LocalizerError(
+            f"localizer {label!r} failed on {_day_run(stream)} {where}: {type(exc).__name__}: {exc}"
+        ) from exc
+    state = pickle_localizer(label, loc)
+    return LocalizerOutput(
+        est, cov_diag, extras, confusion, update_s, time.perf_counter() - busy0, state
+    )
+
+
+class InProcessLocalizers:
+    """All localizers in the calling process (``workers=1``): :meth:`submit` does the work."""
+
+    pipelined = False
+
+    def __init__(self, labels: Sequence[str], localizers: Sequence[Localizer]) -> None:
+        self.labels = list(labels)
+        self.locs = list(localizers)
+        self._out: list[LocalizerOutput] | None = None
+
+    def submit(self, stream: RunStream) -> None:
+        self._out = [
+            localize_run(lab, loc, stream) for lab, loc in zip(self.labels, self.locs, strict=True)
+        ]
+
+    def result(self) -> list[LocalizerOutput]:
+        out, self._out = self._out, None
+        if out is None:
+            raise RuntimeError("result() without a submitted run")
+        return out
+
+    def close(self) -> None:
+        pass
+
+
+# ---------------------------------------------------------------------- worker processes
+def _exit_with_parent(parent_pid: int) -> None:
+    """Watchdog thread of a worker: leave at once when the main process is gone."""
+    while True:
+        time.sleep(0.5)
+        if os.getppid() != parent_pid:
+            os._exit(1)
+
+
+def _worker_main(conn: Connection, parent_pid: int) -> None:
+    """A worker's loop: hold some localizers, run each submitted stream through them.
+
+    Messages: ``("adopt", {k: (label, pickled)})``, ``("drop", [k, ...])``,
+    ``("run", RunStream)``, ``("stop",)``. Each gets one reply: ``("ok", payload)`` or
+    ``("error", kind, message, traceback)``.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the main process's business
+    threading.Thread(target=_exit_with_parent, args=(parent_pid,), daemon=True).start()
+    locs: dict[int, tuple[str, Localizer]] = {}
+    while True:
+        try:
+            msg = conn.recv()
+        except (EOFError, OSError):
+            return
+        kind = msg[0]
+        if kind == "stop":
+            return
+        try:
+            if kind == "adopt":
+                for k, (label, blob) in msg[1].items():
+                    locs[k] = (label, pickle.loads(blob))  # noqa: S301 - our own state
+                reply: tuple[Any, ...] = ("ok", None)
+            elif kind == "drop":
+                for k in msg[1]:
+                    locs.pop(k, None)
+                reply = ("ok", None)
+            elif kind == "run":
+                reply = (
+                    "ok",
+                    {k: localize_run(lab, loc, msg[1]) for k, (lab, loc) in locs.items()},
+                )
+            else:
+                reply = ("error", "protocol", f"unknown message {kind!r}", "")
+        except InputError as exc:
+            reply = ("error", "input", str(exc), traceback.format_exc())
+        except Exception as exc:  # noqa: BLE001 - reported to the main process
+            reply = ("error", "localizer", str(exc), traceback.format_exc())
+        try:
+            conn.send(reply)
+        except (BrokenPipeError, OSError):
+            return
+
+
+@dataclass
+class _Worker:
+    proc: Any  # multiprocessing.Process of the spawn context
+    conn: Connection
+    locs: list[int]
+
+
+class LocalizerPool:
+    """Localizers spread over ``n_workers`` persistent worker processes (see module doc).
+
+    ``states`` are the pickled localizers (fresh or from a checkpoint), index-aligned with
+    ``labels``. Use as: ``submit(stream)`` then ``result()`` per run; ``close()`` at the end
+    (also on errors: it terminates the workers).
+    """
+
+    pipelined = True
+
+    def __init__(self, labels: Sequence[str], states: Sequence[bytes], n_workers: int) -> None:
+        if n_workers < 1:
+            raise ValueError("n_workers must be >= 1")
+        self.labels = list(labels)
+        self.states = list(states)
+        self.busy_s = [0.0] * len(self.labels)  # per localizer, last run
+        self._stream: RunStream | None = None
+        n_workers = min(n_workers, max(1, len(self.labels)))
+        ctx = mp.get_context("spawn")
+        self.workers: list[_Worker] = []
+        try:
+            for w in range(n_workers):
+                ours, theirs = ctx.Pipe(duplex=True)
+                proc = ctx.Process(
+                    target=_worker_main,
+                    args=(theirs, os.getpid()),
+                    name=f"dynmap-localizers-{w + 1}",
+                    daemon=True,
+                )
+                proc.start()
+                theirs.close()
+                self.workers.append(_Worker(proc, ours, []))
+            # first assignment: round robin (no costs measured yet)
+            for k in range(len(self.labels)):
+                self.workers[k % n_workers].locs.append(k)
+            for w in self.workers:
+                self._call(w, ("adopt", {k: (self.labels[k], self.states[k]) for k in w.locs}))
+        except BaseException:
+            self.close()
+            raise
+
+    # ------------------------------------------------------------------ messaging
+    def _who(self, w: _Worker) -> str:
+        names = ", ".join(repr(self.labels[k]) for k in w.locs) or "no localizers"
+        return f"worker process {w.proc.name} (pid {w.proc.pid}; {names})"
+
+    def _recv(self, w: _Worker) -> Any:
+        """The worker's reply; raises when it reports an error or dies (never hangs)."""
+        while True:
+            ready = wait([w.conn, w.proc.sentinel])
+            if w.conn in ready:
+                try:
+                    reply = w.conn.recv()
+                except (EOFError, OSError):
+                    reply = None
+                break
+            if w.proc.sentinel in ready and not w.conn.poll():
+                reply = None
+                break
+        if reply is None:
+            w.proc.join(timeout=1.0)
+            what = f" on {_day_run(self._stream)}" if self._stream is not None else ""
+            raise LocalizerError(
+                f"{self._who(w)} died{what} (exit code {w.proc.exitcode}); "
+                "out of memory or a crash in native code?"
+            )
+        if reply[0] == "ok":
+            return reply[1]
+        _, kind, message, tb = reply
+        if kind == "input":
+            raise InputError(message)
+        raise LocalizerError(f"{message}\n--- traceback in {self._who(w)} ---\n{tb}")
+
+    def _call(self, w: _Worker, msg: tuple[Any, ...]) -> Any:
+        try:
+            w.conn.send(msg)
+        except (BrokenPipeError, OSError):
+            pass  # it died: _recv says so
+        return self._recv(w)
+
+    # ------------------------------------------------------------------ balancing
+    def _rebalance(self) -> None:
+        """Move localizers between workers when the last run's busy times call for it
+        (longest first onto the least loaded worker; only for a gain of REBALANCE_GAIN)."""
+        if len(self.workers) < 2 or not any(self.busy_s):
+            return
+        load_now = [sum(self.busy_s[k] for k in w.locs) for w in self.workers]
+        new: list[list[int]] = [[] for _ in self.workers]
+        load = [0.0] * len(self.workers)
+        for k in sorted(range(len(self.labels)), key=lambda k: -self.busy_s[k]):
+            j = int(np.argmin(load))
+            new[j].append(k)
+            load[j] += self.busy_s[k]
+        if max(load) > (1.0 - REBALANCE_GAIN) * max(load_now):
+            return
+        # keep as many localizers in place as possible: match new groups to workers
+        order = sorted(
+            range(len(new)),
+            key=lambda j: -max(len(set(new[j]) & set(w.locs)) for w in self.workers),
+        )
+        free = list(range(len(self.workers)))
+        target: dict[int, list[int]] = {}
+        for j in order:
+            best = max(free, key=lambda i: len(set(new[j]) & set(self.workers[i].locs)))
+            free.remove(best)
+            target[best] = sorted(new[j])
+        for i, w in enumerate(self.workers):
+            gone = [k for k in w.locs if k not in target[i]]
+            if gone:
+                self._call(w, ("drop", gone))
+        for i, w in enumerate(self.workers):
+            came = [k for k in target[i] if k not in w.locs]
+            if came:
+                self._call(w, ("adopt", {k: (self.labels[k], self.states[k]) for k in came}))
+            w.locs = target[i]
+
+    # ------------------------------------------------------------------ runs
+    def submit(self, stream: RunStream) -> None:
+        """Start localizing ``stream`` in the workers (returns at once)."""
+        self._rebalance()
+        self._stream = stream
+        for w in self.workers:
+            if w.locs:
+                try:
+                    w.conn.send(("run", stream))
+                except (BrokenPipeError, OSError):
+                    pass  # it died: result() says so
+
+    def result(self) -> list[LocalizerOutput]:
+        """Wait for the submitted run's outputs (index-aligned with the labels)."""
+        if self._stream is None:
+            raise RuntimeError("result() without a submitted run")
+        out: dict[int, LocalizerOutput] = {}
+        for w in self.workers:
+            if w.locs:
+                out.update(self._recv(w))
+        self._stream = None
+        for k, o in out.items():
+            self.states[k] = o.state
+            self.busy_s[k] = o.busy_s
+        return [out[k] for k in range(len(self.labels))]
+
+    def close(self) -> None:
+        """Stop the workers (politely, then by force); safe to call more than once."""
+        for w in self.workers:
+            try:
+                w.conn.send(("stop",))
+            except (BrokenPipeError, OSError):
+                pass
+        deadline = time.monotonic() + 2.0
+        for w in self.workers:
+            w.proc.join(timeout=max(0.0, deadline - time.monotonic()))
+            if w.proc.is_alive():
+                w.proc.terminate()
+                w.proc.join(timeout=2.0)
+            if w.proc.is_alive():
+                w.proc.kill()
+                w.proc.join()
+            w.conn.close()
+        self.workers = []
