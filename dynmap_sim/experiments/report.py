@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from dynmap_sim.experiments.bd_findings import Finding, findings_from_db, write_findings
 from dynmap_sim.experiments.figures_dynamic import write_dynamic_figures
 from dynmap_sim.experiments.results import ResultsDB
 from dynmap_sim.metrics import ate, class_scores, lost_stats, rpe
@@ -129,7 +130,9 @@ def overall_stats(db: ResultsDB) -> list[dict[str, Any]]:
     return out
 
 
-def _summary_md(db: ResultsDB, path: Path, figures: list[Path]) -> Path:
+def _summary_md(
+    db: ResultsDB, path: Path, figures: list[Path], findings: list[Finding] | None = None
+) -> Path:
     meta = db.meta()
     labels = db.labels()
     runs = db.query(
@@ -196,6 +199,17 @@ def _summary_md(db: ResultsDB, path: Path, figures: list[Path]) -> Path:
                     f"| {label} | {name} | {_fmt(sc.precision[j])} | {_fmt(sc.recall[j])} "
                     f"| {sc.support[j]} |"
                 )
+    if findings:
+        lines += [
+            "",
+            "## Biber & Duckett §5 findings (also in findings.md / findings.json)",
+            "",
+            "| finding | measured here | holds |",
+            "|---|---|---|",
+        ]
+        for f in findings:
+            holds = "n/a" if f.holds is None else ("yes" if f.holds else "**no**")
+            lines.append(f"| `{f.key}` | {f.measured} | {holds} |")
     events = db.query("SELECT kind, count(*) FROM events GROUP BY kind ORDER BY kind")
     if events:
         lines += ["", "## Events", ""]
@@ -398,6 +412,9 @@ def write_report(out_dir: str | Path) -> list[Path]:
             figs.append(ts)
         # B&D Figs. 10-13 per day and overall, for localizers that report those values
         figs += write_dynamic_figures(out)
-        written.append(_summary_md(db, out / "summary.md", figs))
+        findings = findings_from_db(db)  # B&D §5 claims, when a dynamic-map ran
+        if findings is not None:
+            written += write_findings(findings, out)
+        written.append(_summary_md(db, out / "summary.md", figs, findings))
         written += figs
     return written
