@@ -17,6 +17,7 @@ scaled by the residual variance (``max(rmse^2, sigma_floor^2)``) plus the prior 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -26,6 +27,9 @@ from scipy.spatial import cKDTree
 from dynmap_sim.se2 import wrap_angle
 
 FloatArray = NDArray[np.float64]
+
+#: Condition estimate above which the closed-form 3x3 solve is used (see _newton_step).
+_WELL_CONDITIONED = 1e-6
 
 
 class PointMap:
@@ -44,11 +48,13 @@ class PointMap:
         self.tree = cKDTree(pts)
         k = int(min(k_normal, len(pts)))
         _, idx = self.tree.query(pts, k=k)
-        nb = pts[idx]  # (M, k, 2)
-        d = nb - nb.mean(axis=1, keepdims=True)
-        sxx = np.einsum("mk,mk->m", d[..., 0], d[..., 0])
-        syy = np.einsum("mk,mk->m", d[..., 1], d[..., 1])
-        sxy = np.einsum("mk,mk->m", d[..., 0], d[..., 1])
+        nx = pts[:, 0][idx]  # (M, k) neighbour coordinates
+        ny = pts[:, 1][idx]
+        dx = nx - nx.mean(axis=1, keepdims=True)
+        dy = ny - ny.mean(axis=1, keepdims=True)
+        sxx = np.einsum("mk,mk->m", dx, dx)
+        syy = np.einsum("mk,mk->m", dy, dy)
+        sxy = np.einsum("mk,mk->m", dx, dy)
         # Closed-form eigen-decomposition of the symmetric 2x2 [[sxx, sxy], [sxy, syy]].
         tr = sxx + syy
         disc = np.sqrt(np.maximum(((sxx - syy) * 0.5) ** 2 + sxy**2, 0.0))
@@ -58,6 +64,24 @@ class PointMap:
         phi = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)
         self.normals = np.stack([-np.sin(phi), np.cos(phi)], axis=1)
         self.planarity = np.where(lam_max > 1e-12, 1.0 - lam_min / np.maximum(lam_max, 1e-12), 0.0)
+        self._packed: dict[float, tuple[FloatArray, NDArray[np.bool_]]] = {}
+
+    def packed(self, min_planarity: float) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """Rows ``(M + 1, 4)`` ``[n_x, n_y, q_x, q_y]`` (normal, point) of the points at least
+        ``min_planarity`` planar, zeros for the others and for the extra last row (the index
+        :meth:`cKDTree.query` returns for "no neighbour"), and the ``(M + 1,)`` mask of the
+        usable rows. Cached per threshold."""
+        key = float(min_planarity)
+        cache = self.__dict__.setdefault("_packed", {})  # (absent in pickles of older versions)
+        if key not in cache:
+            usable = np.zeros(len(self.points) + 1, dtype=bool)
+            usable[:-1] = self.planarity >= key
+            rows = np.zeros((len(self.points) + 1, 4))
+            rows[:-1, :2] = self.normals
+            rows[:-1, 2:] = self.points
+            rows[~usable] = 0.0
+            cache[key] = (rows, usable)
+        return cache[key]
 
     def __len__(self) -> int:
         return len(self.points)
@@ -78,11 +102,65 @@ class MatchResult:
     converged: bool
 
 
-def _rotation_terms(theta: float, pts: FloatArray) -> tuple[FloatArray, FloatArray]:
-    c, s = np.cos(theta), np.sin(theta)
-    rp = np.stack([c * pts[:, 0] - s * pts[:, 1], s * pts[:, 0] + c * pts[:, 1]], axis=1)
-    drp = np.stack([-rp[:, 1], rp[:, 0]], axis=1)  # d(R p)/d theta
-    return rp, drp
+def _sym3_condition(h: FloatArray) -> float:
+    """``|lambda|_min / |lambda|_max`` of a symmetric 3x3 ``h`` (0 for ``h = 0``, NaN if not
+    finite), from the closed-form eigenvalues: the trigonometric solution of the
+    characteristic cubic (Smith 1961). Its absolute error is small against ``|lambda|_max``
+    except near a double root, where it is about ``sqrt(eps) |lambda|_max``."""
+    a00, a01, a02 = float(h[0, 0]), float(h[0, 1]), float(h[0, 2])
+    a11, a12, a22 = float(h[1, 1]), float(h[1, 2]), float(h[2, 2])
+    if not math.isfinite(a00 + a01 + a02 + a11 + a12 + a22):
+        return math.nan
+    p1 = a01 * a01 + a02 * a02 + a12 * a12
+    q = (a00 + a11 + a22) / 3.0
+    if p1 == 0.0:
+        eig = (a00, a11, a22)
+    else:
+        b00, b11, b22 = a00 - q, a11 - q, a22 - q
+        p = math.sqrt((b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * p1) / 6.0)
+        det_b = (
+            b00 * (b11 * b22 - a12 * a12)
+            - a01 * (a01 * b22 - a12 * a02)
+            + a02 * (a01 * a12 - b11 * a02)
+        )
+        half = min(max(det_b / (2.0 * p**3), -1.0), 1.0)
+        phi = math.acos(half) / 3.0
+        e1 = q + 2.0 * p * math.cos(phi)
+        e3 = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)
+        eig = (e1, 3.0 * q - e1 - e3, e3)
+    s = [abs(e) for e in eig]
+    return min(s) / max(s) if max(s) > 0.0 else 0.0
+
+
+def _newton_step(h: FloatArray, grad: FloatArray) -> FloatArray | None:
+    """``-h^-1 grad`` for the symmetric 3x3 Gauss-Newton matrix ``h``; ``None`` when ``h`` is
+    rank deficient by :func:`numpy.linalg.matrix_rank`'s criterion.
+
+    A clearly regular ``h`` (closed-form condition estimate above ``_WELL_CONDITIONED``) is
+    solved in closed form (adjugate / determinant), the rest -- rare: degenerate geometry
+    without a prior -- exactly as before by ``matrix_rank`` and LU (``numpy.linalg.solve``).
+    """
+    if _sym3_condition(h) > _WELL_CONDITIONED:
+        a00, a01, a02 = float(h[0, 0]), float(h[0, 1]), float(h[0, 2])
+        a11, a12, a22 = float(h[1, 1]), float(h[1, 2]), float(h[2, 2])
+        c00 = a11 * a22 - a12 * a12
+        c01 = a02 * a12 - a01 * a22
+        c02 = a01 * a12 - a02 * a11
+        c11 = a00 * a22 - a02 * a02
+        c12 = a01 * a02 - a00 * a12
+        c22 = a00 * a11 - a01 * a01
+        det = a00 * c00 + a01 * c01 + a02 * c02
+        b0, b1, b2 = float(grad[0]), float(grad[1]), float(grad[2])
+        return np.array(
+            [
+                -(c00 * b0 + c01 * b1 + c02 * b2) / det,
+                -(c01 * b0 + c11 * b1 + c12 * b2) / det,
+                -(c02 * b0 + c12 * b1 + c22 * b2) / det,
+            ]
+        )
+    if np.linalg.matrix_rank(h) < 3:
+        return None
+    return -np.linalg.solve(h, grad)
 
 
 def match_scan(
@@ -110,44 +188,57 @@ def match_scan(
     residuals that are not independent (Censi 2007: ICP's covariance is optimistic), so that
     the prior keeps its say in directions the scan constrains only weakly. Returns the pose
     of the robot frame in the map frame with its covariance (see the module docstring).
+
+    Every iteration works on all ``N`` points at once: a point without a usable correspondence
+    (none within ``max_correspondence_m``, or a target point less planar than
+    ``min_planarity``) meets the zero row of :meth:`PointMap.packed` and so adds exactly
+    nothing to the normal equations.
     """
     pts = np.asarray(points_base, dtype=np.float64).reshape(-1, 2)
+    px = np.ascontiguousarray(pts[:, 0])
+    py = np.ascontiguousarray(pts[:, 1])
     pw = None if weights is None else np.asarray(weights, dtype=np.float64).reshape(-1)
     pose = np.asarray(init_pose, dtype=np.float64).copy()
     lam = None if prior_info is None else np.asarray(prior_info, dtype=np.float64)
     mu = None
     if lam is not None:
         mu = pose.copy() if prior_mean is None else np.asarray(prior_mean, dtype=np.float64)
+    packed, usable = target.packed(min_planarity)
+    tree = target.tree
     converged = False
     n_matched = 0
     rmse = float("inf")
     h_scan = np.zeros((3, 3))
+    world = np.empty((len(pts), 2))
+    jac = np.empty((len(pts), 3))
+    floor2 = sigma_floor_m**2
     for _ in range(max(1, int(max_iterations))):
-        rp, drp = _rotation_terms(pose[2], pts)
-        world = rp + pose[:2]
-        dist, idx = target.tree.query(world, k=1, distance_upper_bound=max_correspondence_m)
-        ok = np.isfinite(dist)
-        if np.any(ok):
-            ok[ok] &= target.planarity[idx[ok]] >= min_planarity
-        n_matched = int(ok.sum())
-        h_scan = np.zeros((3, 3))
-        g = np.zeros(3)
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        rx = c * px - s * py
+        ry = s * px + c * py
+        np.add(rx, pose[0], out=world[:, 0])
+        np.add(ry, pose[1], out=world[:, 1])
+        _, idx = tree.query(world, k=1, distance_upper_bound=max_correspondence_m)
+        n_matched = int(np.count_nonzero(usable[idx]))
         if n_matched >= 3:
-            n = target.normals[idx[ok]]
-            q = target.points[idx[ok]]
-            r = np.einsum("ij,ij->i", n, world[ok] - q)
-            jac = np.column_stack([n[:, 0], n[:, 1], np.einsum("ij,ij->i", n, drp[ok])])
-            a = np.abs(r)
-            w = np.where(a <= huber_m, 1.0, huber_m / np.maximum(a, 1e-12))
+            t = packed[idx]  # (N, 4): normal, target point; zeros where unmatched
+            r = np.einsum("ij,ij->i", t[:, :2], world - t[:, 2:])
+            jac[:, :2] = t[:, :2]
+            np.multiply(t[:, 1], rx, out=jac[:, 2])
+            jac[:, 2] -= t[:, 0] * ry
+            w = np.minimum(huber_m / np.maximum(np.abs(r), 1e-12), 1.0)  # Huber weights
             if pw is not None:
-                w = w * pw[ok]
-            h_scan = jac.T @ (jac * w[:, None])
-            g = jac.T @ (w * r)
-            rmse = float(np.sqrt(np.mean(r * r)))
+                w *= pw
+            jw = jac * w[:, None]
+            h_scan = jac.T @ jw
+            g = jw.T @ r
+            rmse = math.sqrt(float(r @ r) / n_matched)
         else:
+            h_scan = np.zeros((3, 3))
+            g = np.zeros(3)
             rmse = float("inf")
         # Scale the scan term by the residual variance so scan and prior mix correctly.
-        sigma2 = max(rmse**2 if np.isfinite(rmse) else 0.0, sigma_floor_m**2) * info_inflation
+        sigma2 = max(rmse**2 if math.isfinite(rmse) else 0.0, floor2) * info_inflation
         h = h_scan / sigma2
         grad = g / sigma2
         if lam is not None:
@@ -155,15 +246,15 @@ def match_scan(
             e[2] = wrap_angle(e[2])
             h = h + lam
             grad = grad + lam @ e
-        if np.linalg.matrix_rank(h) < 3:
+        delta = _newton_step(h, grad)
+        if delta is None:
             break
-        delta = -np.linalg.solve(h, grad)
         pose = pose + delta
         pose[2] = float(wrap_angle(pose[2]))
-        if np.hypot(delta[0], delta[1]) < tol_m and abs(delta[2]) < tol_rad:
+        if math.hypot(delta[0], delta[1]) < tol_m and abs(delta[2]) < tol_rad:
             converged = True
             break
-    sigma2 = max(rmse**2 if np.isfinite(rmse) else 0.0, sigma_floor_m**2) * info_inflation
+    sigma2 = max(rmse**2 if math.isfinite(rmse) else 0.0, floor2) * info_inflation
     info = h_scan / sigma2
     if lam is not None:
         info = info + lam

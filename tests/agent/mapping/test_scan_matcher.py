@@ -6,9 +6,15 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from synthetic_scans import LASER, raycast, room_segments
 
 from dynmap_sim import se2
-from dynmap_sim.agent.mapping.scan_matcher import PointMap, match_scan
+from dynmap_sim.agent.mapping.scan_matcher import (
+    PointMap,
+    _newton_step,
+    _sym3_condition,
+    match_scan,
+)
 
 
 def _dense_points(segs: np.ndarray, step_m: float = 0.02) -> np.ndarray:
@@ -98,3 +104,97 @@ def test_info_inflation_scales_scan_covariance(laser, cast):
     b = match_scan(pts, target, truth, prior_mean=truth, prior_info=prior, info_inflation=100.0)
     # Across the corridor the scan rules: the sd grows by sqrt(100) = 10.
     assert np.sqrt(b.cov[1, 1] / a.cov[1, 1]) == pytest.approx(10.0, rel=0.05)
+
+
+def _reference_match(
+    pts,
+    target,
+    init,
+    prior_mean=None,
+    prior_info=None,
+    max_iterations=30,
+    max_correspondence_m=0.5,
+    huber_m=0.05,
+    min_planarity=0.6,
+):
+    """The Gauss-Newton loop of the module docstring written plainly: matched points only,
+    LU solves and ``matrix_rank`` -- the reference the vectorized matcher must reproduce."""
+    pose = np.asarray(init, dtype=np.float64).copy()
+    for _ in range(max_iterations):
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        rp = np.column_stack([c * pts[:, 0] - s * pts[:, 1], s * pts[:, 0] + c * pts[:, 1]])
+        world = rp + pose[:2]
+        dist, idx = target.tree.query(world, k=1, distance_upper_bound=max_correspondence_m)
+        ok = np.isfinite(dist)
+        ok[ok] &= target.planarity[idx[ok]] >= min_planarity
+        h, g, rmse = np.zeros((3, 3)), np.zeros(3), np.inf
+        if ok.sum() >= 3:
+            n, q = target.normals[idx[ok]], target.points[idx[ok]]
+            r = np.sum(n * (world[ok] - q), axis=1)
+            jac = np.column_stack([n, n[:, 0] * -rp[ok, 1] + n[:, 1] * rp[ok, 0]])
+            w = np.where(np.abs(r) <= huber_m, 1.0, huber_m / np.abs(r))
+            h, g, rmse = jac.T @ (jac * w[:, None]), jac.T @ (w * r), np.sqrt(np.mean(r * r))
+        sigma2 = max(rmse**2 if np.isfinite(rmse) else 0.0, 0.01**2)
+        h, g = h / sigma2, g / sigma2
+        if prior_info is not None:
+            e = pose - prior_mean
+            e[2] = se2.wrap_angle(e[2])
+            h, g = h + prior_info, g + prior_info @ e
+        if np.linalg.matrix_rank(h) < 3:
+            break
+        delta = -np.linalg.solve(h, g)
+        pose = pose + delta
+        pose[2] = se2.wrap_angle(pose[2])
+        if np.hypot(delta[0], delta[1]) < 1e-4 and abs(delta[2]) < 1e-5:
+            break
+    return pose
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), with_prior=st.booleans())
+def test_matcher_reproduces_the_plain_reference(seed, with_prior):
+    """Same algorithm as the plain loop (up to round-off): points without a usable
+    correspondence add nothing, the closed-form 3x3 solve equals LU."""
+    rng = np.random.default_rng(seed)
+    segs = room_segments()
+    target = PointMap(_dense_points(segs, 0.03) + rng.normal(0, 0.003, (1, 2)))
+    truth = np.array([rng.uniform(1.2, 3.8), rng.uniform(1.0, 1.6), rng.uniform(-np.pi, np.pi)])
+    r = raycast(truth, LASER.angles(), segs, LASER.range_max_m)
+    r = r + rng.normal(0.0, 0.01, r.shape)
+    pts = se2.scan_to_points(r, LASER.angles())
+    init = truth + rng.normal(0, [0.1, 0.1, 0.05])
+    kw = {}
+    if with_prior:
+        kw = {"prior_mean": init, "prior_info": np.diag([400.0, 400.0, 2500.0])}
+    res = match_scan(pts, target, init, **kw)
+    ref = _reference_match(pts, target, init, **kw)
+    assert np.allclose(res.pose, ref, atol=1e-9)
+
+
+def test_gauss_newton_step_closed_form_and_rank_test():
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        a = rng.normal(size=(3, 3)) * rng.uniform(0.01, 1e4, 3)
+        h = a @ a.T
+        g = rng.normal(size=3)
+        assert np.allclose(_newton_step(h, g), -np.linalg.solve(h, g), rtol=1e-7, atol=0)
+        ev = np.linalg.eigvalsh(h)
+        assert _sym3_condition(h) == pytest.approx(ev[0] / ev[-1], rel=1e-6, abs=1e-12)
+    # Rank deficient (all normals alike, no prior): no step, as matrix_rank says.
+    j = np.column_stack([np.full(9, 0.6), np.full(9, 0.8), rng.normal(size=9)])
+    assert np.linalg.matrix_rank(j.T @ j) < 3
+    assert _newton_step(j.T @ j, np.ones(3)) is None
+    assert _newton_step(np.zeros((3, 3)), np.ones(3)) is None
+    assert _sym3_condition(np.diag([4.0, 2.0, 1.0])) == 0.25
+
+
+def test_packed_rows_are_zero_for_unusable_points():
+    pts = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [3.0, 0.0], [0.0, 5.0], [0.5, 5.4]])
+    pm = PointMap(pts, k_normal=3)
+    rows, usable = pm.packed(0.6)
+    assert rows.shape == (7, 4) and usable.shape == (7,)
+    assert not usable[-1] and np.all(rows[-1] == 0.0)
+    assert np.array_equal(usable[:-1], pm.planarity >= 0.6)
+    assert np.all(rows[~usable] == 0.0)
+    assert np.array_equal(rows[:-1][usable[:-1], 2:], pts[usable[:-1]])
+    assert pm.packed(0.6)[0] is rows  # cached
