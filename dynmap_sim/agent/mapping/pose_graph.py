@@ -5,9 +5,9 @@ graph-based SLAM", eq. 25-30): nodes are keyframe poses, edges relative-pose mea
 ``z_ij`` with information ``Omega_ij``; the error of an edge is
 ``e_ij = (x_i^-1 ⊕ x_j) ⊖ z_ij`` (angle wrapped) and we minimise
 ``sum_ij e_ij^T Omega_ij e_ij`` with ``scipy.optimize.least_squares`` on whitened residuals
-``L_ij^T e_ij`` (``Omega_ij = L_ij L_ij^T``), a sparse Jacobian pattern (each edge touches
-six variables) and a robust loss against false loop closures. The first node is anchored,
-so the optimized map frame is the frame of the first pose.
+``L_ij^T e_ij`` (``Omega_ij = L_ij L_ij^T``), their sparse closed-form Jacobian (each edge
+touches six variables) and a robust loss against false loop closures. The first node is
+anchored, so the optimized map frame is the frame of the first pose.
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
-from scipy.sparse import lil_matrix
+from scipy.sparse import csr_matrix
 
 from dynmap_sim import se2
 
@@ -45,6 +45,29 @@ def edge_errors(poses: FloatArray, edges: list[Edge]) -> FloatArray:
     return err
 
 
+def edge_jacobians(poses: FloatArray, ii: NDArray[np.intp], jj: NDArray[np.intp]):
+    """Closed-form Jacobians of the edge errors ``e = (x_i^-1 ⊕ x_j) ⊖ z`` (Grisetti et al.
+    2010, eq. 29-30 in SE(2)): ``(A, B)``, each ``(E, 3, 3)``, ``A = de/dx_i``, ``B = de/dx_j``.
+
+    With ``R_i`` the rotation of ``x_i`` and ``d = t_j - t_i``: ``de_xy/dt_i = -R_i^T``,
+    ``de_xy/dtheta_i = dR_i^T/dtheta d``, ``de_xy/dt_j = R_i^T``, ``de_theta/dtheta_i = -1``,
+    ``de_theta/dtheta_j = 1`` (``z`` and the angle wrap do not matter).
+    """
+    c, s = np.cos(poses[ii, 2]), np.sin(poses[ii, 2])
+    dx = poses[jj, 0] - poses[ii, 0]
+    dy = poses[jj, 1] - poses[ii, 1]
+    n = len(ii)
+    a = np.zeros((n, 3, 3))
+    b = np.zeros((n, 3, 3))
+    a[:, 0, 0], a[:, 0, 1], a[:, 0, 2] = -c, -s, -s * dx + c * dy
+    a[:, 1, 0], a[:, 1, 1], a[:, 1, 2] = s, -c, -c * dx - s * dy
+    a[:, 2, 2] = -1.0
+    b[:, 0, 0], b[:, 0, 1] = c, s
+    b[:, 1, 0], b[:, 1, 1] = -s, c
+    b[:, 2, 2] = 1.0
+    return a, b
+
+
 def optimize_pose_graph(
     poses: ArrayLike,
     edges: list[Edge],
@@ -56,7 +79,9 @@ def optimize_pose_graph(
     """Optimize node ``poses`` ``(K, 3)`` under ``edges``; node ``anchor`` stays fixed.
 
     ``loss``/``f_scale`` are passed to ``scipy.optimize.least_squares`` (on residuals
-    whitened by each edge's information, so ``f_scale`` is in standard deviations).
+    whitened by each edge's information, so ``f_scale`` is in standard deviations). The
+    sparse Jacobian of the whitened residuals is given in closed form
+    (:func:`edge_jacobians`), not by finite differences.
     """
     x0 = np.asarray(poses, dtype=np.float64).reshape(-1, 3).copy()
     k = len(x0)
@@ -66,10 +91,28 @@ def optimize_pose_graph(
     jj = np.array([e.j for e in edges])
     if ii.min() < 0 or jj.min() < 0 or ii.max() >= k or jj.max() >= k:
         raise ValueError("edge refers to a node that does not exist")
+    z = np.array([e.z for e in edges], dtype=np.float64)
     chol = np.array([np.linalg.cholesky(np.asarray(e.info, dtype=np.float64)) for e in edges])
+    chol_t = np.ascontiguousarray(chol.transpose(0, 2, 1))  # L^T per edge
     free = np.array([n for n in range(k) if n != anchor])
     col_of = -np.ones(k, dtype=np.intp)
     col_of[free] = np.arange(len(free))
+    n_e = len(edges)
+    # Sparsity structure: residual rows 3m..3m+2 of edge m touch the columns of its free nodes.
+    rows = np.broadcast_to(
+        3 * np.arange(n_e)[:, None, None] + np.arange(3)[None, :, None], (n_e, 3, 3)
+    )
+    cols_i = np.broadcast_to(
+        3 * col_of[ii][:, None, None] + np.arange(3)[None, None, :], (n_e, 3, 3)
+    )
+    cols_j = np.broadcast_to(
+        3 * col_of[jj][:, None, None] + np.arange(3)[None, None, :], (n_e, 3, 3)
+    )
+    use_i = np.broadcast_to((col_of[ii] >= 0)[:, None, None], (n_e, 3, 3))
+    use_j = np.broadcast_to((col_of[jj] >= 0)[:, None, None], (n_e, 3, 3))
+    jac_rows = np.concatenate([rows[use_i], rows[use_j]])
+    jac_cols = np.concatenate([cols_i[use_i], cols_j[use_j]])
+    shape = (3 * n_e, 3 * len(free))
 
     def unpack(v: FloatArray) -> FloatArray:
         x = x0.copy()
@@ -77,19 +120,22 @@ def optimize_pose_graph(
         return x
 
     def residuals(v: FloatArray) -> FloatArray:
-        err = edge_errors(unpack(v), edges)
-        return np.einsum("eba,eb->ea", chol, err).ravel()  # L^T e
+        x = unpack(v)
+        err = se2.between(x[ii], x[jj]) - z
+        err[:, 2] = se2.wrap_angle(err[:, 2])
+        return np.einsum("eab,eb->ea", chol_t, err).ravel()  # L^T e
 
-    sparsity = lil_matrix((3 * len(edges), 3 * len(free)), dtype=np.int8)
-    for m, (a, b) in enumerate(zip(ii, jj, strict=True)):
-        for node in (a, b):
-            c = col_of[node]
-            if c >= 0:
-                sparsity[3 * m : 3 * m + 3, 3 * c : 3 * c + 3] = 1
+    def jacobian(v: FloatArray) -> csr_matrix:
+        a, b = edge_jacobians(unpack(v), ii, jj)
+        wa = chol_t @ a  # whitened: d(L^T e)/dx = L^T de/dx
+        wb = chol_t @ b
+        data = np.concatenate([wa[use_i], wb[use_j]])
+        return csr_matrix((data, (jac_rows, jac_cols)), shape=shape)
+
     sol = least_squares(
         residuals,
         x0[free].ravel(),
-        jac_sparsity=sparsity.tocsr(),
+        jac=jacobian,
         loss=loss,
         f_scale=f_scale,
         max_nfev=max_nfev,

@@ -4,10 +4,18 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.optimize import least_squares
 
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
-from dynmap_sim.agent.mapping.pose_graph import Edge, edge_errors, optimize_pose_graph
+from dynmap_sim.agent.mapping.pose_graph import (
+    Edge,
+    edge_errors,
+    edge_jacobians,
+    optimize_pose_graph,
+)
 
 
 def test_loop_closure_spreads_the_error_and_keeps_the_anchor():
@@ -29,6 +37,58 @@ def test_loop_closure_spreads_the_error_and_keeps_the_anchor():
     assert after < 0.5 * before
     err = np.hypot(*(opt[:, :2] - truth[:, :2]).T)
     assert err.max() < np.hypot(*(drifted[:, :2] - truth[:, :2]).T).max()
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1))
+def test_edge_jacobians_match_finite_differences(seed):
+    rng = np.random.default_rng(seed)
+    poses = np.column_stack([rng.uniform(-5, 5, (6, 2)), rng.uniform(-np.pi, np.pi, 6)])
+    ii, jj = np.array([0, 1, 2, 5, 3]), np.array([1, 2, 4, 0, 1])
+    edges = [Edge(i, j, rng.normal(0, 0.5, 3), np.eye(3)) for i, j in zip(ii, jj, strict=True)]
+    a, b = edge_jacobians(poses, ii, jj)
+    h = 1e-6
+    for node, jac, ends in ((ii, a, ii), (jj, b, jj)):
+        for c in range(3):
+            step = np.zeros_like(poses)
+            num = np.zeros((len(edges), 3))
+            for m in range(len(edges)):
+                step[:] = 0.0
+                step[ends[m], c] = h
+                up = edge_errors(poses + step, edges)[m]
+                down = edge_errors(poses - step, edges)[m]
+                d = up - down
+                d[2] = se2.wrap_angle(d[2])
+                num[m] = d / (2 * h)
+            assert np.allclose(jac[:, :, c], num, atol=1e-6), (node, c)
+
+
+def test_closed_form_jacobian_gives_the_finite_difference_optimum():
+    rng = np.random.default_rng(5)
+    truth = np.array([[np.cos(t) * 3, np.sin(t) * 3, t + np.pi / 2] for t in np.linspace(0, 5, 12)])
+    edges = []
+    for k in range(11):
+        z = se2.between(truth[k], truth[k + 1]) + rng.normal(0, [0.02, 0.02, 0.01])
+        edges.append(Edge(k, k + 1, z, np.diag([1e3, 1e3, 4e3])))
+    for i, j in ((0, 6), (3, 11), (2, 9)):
+        edges.append(Edge(i, j, se2.between(truth[i], truth[j]), np.diag([1e4, 1e4, 1e4])))
+    start = truth + rng.normal(0, [0.1, 0.1, 0.05], truth.shape)
+    start[0] = truth[0]
+    opt = optimize_pose_graph(start, edges, anchor=0, loss="linear")
+
+    def whitened(v):
+        x = start.copy()
+        x[1:] = v.reshape(-1, 3)
+        err = edge_errors(x, edges)
+        return np.concatenate(
+            [np.linalg.cholesky(e.info).T @ r for e, r in zip(edges, err, strict=True)]
+        )
+
+    ref = least_squares(whitened, start[1:].ravel(), method="trf", x_scale="jac").x
+    diff = opt[1:] - ref.reshape(-1, 3)
+    diff[:, 2] = se2.wrap_angle(diff[:, 2])
+    assert np.abs(diff).max() < 1e-6
+    assert np.array_equal(opt[0], start[0])
 
 
 def test_pose_graph_rejects_bad_edges():
