@@ -203,52 +203,61 @@ class OccupancyGrid:
         angles = laser.angles()
         mount = np.asarray(laser.mount_pose, dtype=np.float64)
         lp = se2.compose(poses, np.broadcast_to(mount, poses.shape))  # laser poses (K, 3)
-        ends = []
-        for k in range(len(poses)):
-            r = rng_all[k]
-            ok = np.isfinite(r) & (r >= laser.range_min_m) & (r < min(laser.range_max_m, hit_max))
-            th = lp[k, 2] + angles[ok]
-            ends.append(lp[k, :2] + r[ok, None] * np.stack([np.cos(th), np.sin(th)], axis=1))
-        allpts = np.concatenate([lp[:, :2], *ends]) if ends else lp[:, :2]
+        th = lp[:, 2:3] + angles[None, :]  # (K, n_beams) beam directions
+        cos_b, sin_b = np.cos(th), np.sin(th)
+        with np.errstate(invalid="ignore"):
+            valid = np.isfinite(rng_all) & (rng_all >= laser.range_min_m)
+            valid &= rng_all < laser.range_max_m
+            hit = valid & (rng_all < hit_max)
+        ex = (lp[:, 0:1] + cos_b * rng_all)[hit]  # end points of the hits
+        ey = (lp[:, 1:2] + sin_b * rng_all)[hit]
         reach = max(no_return_free_m, 0.0)
         bounds = (
-            allpts[:, 0].min() - reach,
-            allpts[:, 1].min() - reach,
-            allpts[:, 0].max() + reach,
-            allpts[:, 1].max() + reach,
+            min(lp[:, 0].min(), ex.min(initial=np.inf)) - reach,
+            min(lp[:, 1].min(), ey.min(initial=np.inf)) - reach,
+            max(lp[:, 0].max(), ex.max(initial=-np.inf)) + reach,
+            max(lp[:, 1].max(), ey.max(initial=-np.inf)) + reach,
         )
         origin, h, w = cls._empty(bounds, resolution_m, margin_m)
-        hits = np.zeros(h * w, dtype=np.float64)
-        passes = np.zeros(h * w, dtype=np.float64)
+        # Free space: samples every step along each beam up to its clear length; a cell a
+        # beam passes is counted once for that beam. Along a ray the cell indices change
+        # monotonically, so a beam's repeated cells are consecutive samples.
+        far = valid & ~hit
+        clear = np.where(
+            hit,
+            rng_all - resolution_m,
+            np.where(far, hit_max, np.where(rng_all == np.inf, reach, 0.0)),
+        ).ravel()
         step = 0.5 * resolution_m
-        for k in range(len(poses)):
-            r = rng_all[k].copy()
-            valid = np.isfinite(r) & (r >= laser.range_min_m) & (r < laser.range_max_m)
-            hit = valid & (r < hit_max)
-            far = valid & ~hit
-            clear = np.where(
-                hit, r - resolution_m, np.where(far, hit_max, np.where(r == np.inf, reach, 0.0))
-            )
-            th = lp[k, 2] + angles
-            c, s = np.cos(th), np.sin(th)
-            n_max = int(np.ceil(max(clear.max(), 0.0) / step))
-            if n_max > 0:
-                t = np.arange(n_max) * step
-                use = t[None, :] < clear[:, None]
-                xs = lp[k, 0] + c[:, None] * t[None, :]
-                ys = lp[k, 1] + s[:, None] * t[None, :]
-                ix = np.floor((xs[use] - origin[0]) / resolution_m).astype(np.intp)
-                iy = np.floor((ys[use] - origin[1]) / resolution_m).astype(np.intp)
-                # Count each cell at most once per beam.
-                beam = np.broadcast_to(np.arange(len(r))[:, None], use.shape)[use]
-                key = np.unique(beam.astype(np.int64) * (h * w) + iy * w + ix)
-                passes += np.bincount(key % (h * w), minlength=h * w)
-            if hit.any():
-                ex = lp[k, 0] + c[hit] * r[hit]
-                ey = lp[k, 1] + s[hit] * r[hit]
-                ix = np.floor((ex - origin[0]) / resolution_m).astype(np.intp)
-                iy = np.floor((ey - origin[1]) / resolution_m).astype(np.intp)
-                hits += np.bincount(iy * w + ix, minlength=h * w)
+        # n_b = #{i >= 0 : i * step < clear_b}, exactly (the float ceil may be off by one).
+        n_b = np.maximum(np.ceil(clear / step), 0.0).astype(np.int64)
+        n_b -= (n_b > 0) & ((n_b - 1) * step >= clear)
+        n_b += n_b * step < clear
+        n_beams = rng_all.shape[1]
+        lx = np.repeat(lp[:, 0], n_beams)
+        ly = np.repeat(lp[:, 1], n_beams)
+        cb, sb = cos_b.ravel(), sin_b.ravel()
+        passes = np.zeros(h * w, dtype=np.float64)
+        ends = np.cumsum(n_b)
+        chunk = 1 << 17  # samples per vectorized batch
+        lo = 0
+        while lo < len(n_b):
+            start = int(ends[lo - 1]) if lo else 0
+            hi = max(int(np.searchsorted(ends, start + chunk, side="right")), lo + 1)
+            cnt = n_b[lo:hi]
+            beam = np.repeat(np.arange(lo, hi), cnt)
+            first = np.cumsum(cnt) - cnt
+            t = (np.arange(len(beam)) - np.repeat(first, cnt)) * step
+            ix = np.floor((lx[beam] + cb[beam] * t - origin[0]) / resolution_m).astype(np.intp)
+            iy = np.floor((ly[beam] + sb[beam] * t - origin[1]) / resolution_m).astype(np.intp)
+            key = iy * w + ix
+            new = t == 0.0
+            new[1:] |= key[1:] != key[:-1]
+            passes += np.bincount(key[new], minlength=h * w)
+            lo = hi
+        ix = np.floor((ex - origin[0]) / resolution_m).astype(np.intp)
+        iy = np.floor((ey - origin[1]) / resolution_m).astype(np.intp)
+        hits = np.bincount(iy * w + ix, minlength=h * w).astype(np.float64)
         logodds = l_hit * hits + l_pass * passes
         grid = np.full(h * w, UNKNOWN, dtype=np.int8)
         seen = (hits + passes) > 0

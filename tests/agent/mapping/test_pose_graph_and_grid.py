@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import least_squares
+from synthetic_scans import LASER, raycast, room_segments
 
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
@@ -113,3 +114,65 @@ def test_grid_free_seed_marks_inside_free_and_outside_unknown():
     assert g.occupancy[iy[1], ix[1]] == UNKNOWN
     free = g.free_points()
     assert free[:, 0].min() > 0 and free[:, 0].max() < 2
+
+
+def _reference_from_scans(poses, ranges, laser, res=0.05, margin=1.0, reach=4.0, hit_max=None):
+    """Thrun et al. §9.2 beam tracing written plainly, one scan and one beam at a time: the
+    vectorized :meth:`OccupancyGrid.from_scans` must give exactly this grid."""
+    hit_max = laser.range_max_m if hit_max is None else hit_max
+    angles = laser.angles()
+    lp = se2.compose(poses, np.broadcast_to(np.asarray(laser.mount_pose, float), poses.shape))
+    pts = [lp[:, :2]]
+    for k in range(len(poses)):
+        r = ranges[k]
+        ok = np.isfinite(r) & (r >= laser.range_min_m) & (r < min(laser.range_max_m, hit_max))
+        th = lp[k, 2] + angles[ok]
+        pts.append(lp[k, :2] + r[ok, None] * np.column_stack([np.cos(th), np.sin(th)]))
+    allpts = np.concatenate(pts)
+    bounds = (*(allpts.min(axis=0) - reach), *(allpts.max(axis=0) + reach))
+    origin, h, w = OccupancyGrid._empty(bounds, res, margin)
+    hits, passes = np.zeros((h, w)), np.zeros((h, w))
+    for k in range(len(poses)):
+        for b, r in enumerate(ranges[k]):
+            th = lp[k, 2] + angles[b]
+            c, s = np.cos(th), np.sin(th)
+            valid = np.isfinite(r) and laser.range_min_m <= r < laser.range_max_m
+            if valid and r < hit_max:
+                clear = r - res
+                ix = int(np.floor((lp[k, 0] + c * r - origin[0]) / res))
+                iy = int(np.floor((lp[k, 1] + s * r - origin[1]) / res))
+                hits[iy, ix] += 1
+            else:
+                clear = hit_max if valid else (reach if r == np.inf else 0.0)
+            t = np.arange(int(np.ceil(max(clear, 0.0) / (0.5 * res)))) * (0.5 * res)
+            t = t[t < clear]
+            ix = np.floor((lp[k, 0] + c * t - origin[0]) / res).astype(int)
+            iy = np.floor((lp[k, 1] + s * t - origin[1]) / res).astype(int)
+            for cell in set(zip(iy.tolist(), ix.tolist(), strict=True)):
+                passes[cell] += 1
+    logodds = 0.9 * hits - 0.4 * passes
+    grid = np.full((h, w), UNKNOWN)
+    seen = hits + passes > 0
+    grid[seen & (logodds < 0)] = FREE
+    grid[seen & (logodds >= 0) & (hits > 0)] = OCCUPIED
+    grid[seen & (logodds >= 0) & (hits == 0)] = FREE
+    return grid, origin
+
+
+@pytest.mark.parametrize("hit_max", [None, 3.0])
+def test_from_scans_equals_the_plain_beam_tracer(hit_max):
+    rng = np.random.default_rng(4)
+    segs = room_segments()
+    poses = np.column_stack(
+        [rng.uniform(1.0, 4.0, 5), rng.uniform(0.8, 3.5, 5), rng.uniform(-np.pi, np.pi, 5)]
+    )
+    ranges = np.array([raycast(p, LASER.angles(), segs, LASER.range_max_m) for p in poses])
+    ranges += rng.normal(0, 0.01, ranges.shape)
+    ranges[0, :40] = np.inf  # no return: clears 4 m
+    ranges[1, 50:60] = np.nan
+    ranges[2, 70:75] = 0.01  # below the minimum range
+    g = OccupancyGrid.from_scans(poses, ranges, LASER, max_hit_range_m=hit_max)
+    ref, origin = _reference_from_scans(poses, ranges, LASER, hit_max=hit_max)
+    assert np.array_equal(g.origin_xy_m, origin)
+    assert np.array_equal(g.occupancy, ref)
+    assert (g.occupancy == OCCUPIED).sum() > 100
