@@ -24,6 +24,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
+from dynmap_sim.agent.mapping.scan_matcher_numba import BucketGrid, icp_terms, numba_available
 from dynmap_sim.se2 import wrap_angle
 
 FloatArray = NDArray[np.float64]
@@ -81,6 +82,17 @@ class PointMap:
             rows[:-1, 2:] = self.points
             rows[~usable] = 0.0
             cache[key] = (rows, usable)
+        return cache[key]
+
+    def bucket_grid(self, cell_m: float) -> BucketGrid | None:
+        """The points in a :class:`.scan_matcher_numba.BucketGrid` of ``cell_m`` cells (cached);
+        ``None`` when the points spread over too many cells for a compact grid."""
+        key = float(cell_m)
+        cache = self.__dict__.setdefault("_grids", {})
+        if key not in cache:
+            span = (self.points.max(axis=0) - self.points.min(axis=0)) / key + 2.0
+            small = float(span[0]) * float(span[1]) <= 4 * len(self.points) + 250_000
+            cache[key] = BucketGrid.build(self.points, key) if small and key > 0 else None
         return cache[key]
 
     def __len__(self) -> int:
@@ -178,6 +190,7 @@ def match_scan(
     tol_rad: float = 1e-5,
     weights: ArrayLike | None = None,
     info_inflation: float = 1.0,
+    backend: str = "auto",
 ) -> MatchResult:
     """Align ``points_base`` ``(N, 2)`` (robot frame) to ``target``, starting at ``init_pose``.
 
@@ -192,8 +205,14 @@ def match_scan(
     Every iteration works on all ``N`` points at once: a point without a usable correspondence
     (none within ``max_correspondence_m``, or a target point less planar than
     ``min_planarity``) meets the zero row of :meth:`PointMap.packed` and so adds exactly
-    nothing to the normal equations.
+    nothing to the normal equations. ``backend`` ``"numpy"`` finds correspondences with the
+    KD-tree; ``"numba"`` (extra ``fast``) runs each iteration as one compiled loop
+    (:mod:`.scan_matcher_numba`, same result to rounding); ``"auto"`` uses numba if installed.
     """
+    if backend not in ("auto", "numpy", "numba"):
+        raise ValueError(f'backend must be "auto", "numpy" or "numba", got {backend!r}')
+    if backend == "numba" and not numba_available():
+        raise RuntimeError('backend "numba" needs numba: pip install "dynmap-sim[fast]"')
     pts = np.asarray(points_base, dtype=np.float64).reshape(-1, 2)
     px = np.ascontiguousarray(pts[:, 0])
     py = np.ascontiguousarray(pts[:, 1])
@@ -205,6 +224,12 @@ def match_scan(
         mu = pose.copy() if prior_mean is None else np.asarray(prior_mean, dtype=np.float64)
     packed, usable = target.packed(min_planarity)
     tree = target.tree
+    grid = None
+    if backend != "numpy" and numba_available() and len(pts):
+        grid = target.bucket_grid(max_correspondence_m)
+    if grid is not None:
+        pw_all = np.ones(len(pts)) if pw is None else np.ascontiguousarray(pw)
+        sums = np.empty(10)
     converged = False
     n_matched = 0
     rmse = float("inf")
@@ -214,25 +239,42 @@ def match_scan(
     floor2 = sigma_floor_m**2
     for _ in range(max(1, int(max_iterations))):
         c, s = np.cos(pose[2]), np.sin(pose[2])
-        rx = c * px - s * py
-        ry = s * px + c * py
-        np.add(rx, pose[0], out=world[:, 0])
-        np.add(ry, pose[1], out=world[:, 1])
-        _, idx = tree.query(world, k=1, distance_upper_bound=max_correspondence_m)
-        n_matched = int(np.count_nonzero(usable[idx]))
+        if grid is not None:  # compiled: correspondences and sums in one loop
+            n_matched = icp_terms(
+                px, py, pw_all, float(c), float(s), float(pose[0]), float(pose[1]),
+                float(max_correspondence_m), grid, packed, usable, float(huber_m), sums,
+            )  # fmt: skip
+            h_scan = np.array(
+                [
+                    [sums[0], sums[1], sums[2]],
+                    [sums[1], sums[3], sums[4]],
+                    [sums[2], sums[4], sums[5]],
+                ]
+            )
+            g = sums[6:9].copy()
+            ss = float(sums[9])
+        else:
+            rx = c * px - s * py
+            ry = s * px + c * py
+            np.add(rx, pose[0], out=world[:, 0])
+            np.add(ry, pose[1], out=world[:, 1])
+            _, idx = tree.query(world, k=1, distance_upper_bound=max_correspondence_m)
+            n_matched = int(np.count_nonzero(usable[idx]))
+            if n_matched >= 3:
+                t = packed[idx]  # (N, 4): normal, target point; zeros where unmatched
+                r = np.einsum("ij,ij->i", t[:, :2], world - t[:, 2:])
+                jac[:, :2] = t[:, :2]
+                np.multiply(t[:, 1], rx, out=jac[:, 2])
+                jac[:, 2] -= t[:, 0] * ry
+                w = np.minimum(huber_m / np.maximum(np.abs(r), 1e-12), 1.0)  # Huber weights
+                if pw is not None:
+                    w *= pw
+                jw = jac * w[:, None]
+                h_scan = jac.T @ jw
+                g = jw.T @ r
+                ss = float(r @ r)
         if n_matched >= 3:
-            t = packed[idx]  # (N, 4): normal, target point; zeros where unmatched
-            r = np.einsum("ij,ij->i", t[:, :2], world - t[:, 2:])
-            jac[:, :2] = t[:, :2]
-            np.multiply(t[:, 1], rx, out=jac[:, 2])
-            jac[:, 2] -= t[:, 0] * ry
-            w = np.minimum(huber_m / np.maximum(np.abs(r), 1e-12), 1.0)  # Huber weights
-            if pw is not None:
-                w *= pw
-            jw = jac * w[:, None]
-            h_scan = jac.T @ jw
-            g = jw.T @ r
-            rmse = math.sqrt(float(r @ r) / n_matched)
+            rmse = math.sqrt(ss / n_matched)
         else:
             h_scan = np.zeros((3, 3))
             g = np.zeros(3)

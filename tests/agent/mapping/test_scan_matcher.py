@@ -15,6 +15,7 @@ from dynmap_sim.agent.mapping.scan_matcher import (
     _sym3_condition,
     match_scan,
 )
+from dynmap_sim.agent.mapping.scan_matcher_numba import BucketGrid, _icp_terms_py, numba_available
 
 
 def _dense_points(segs: np.ndarray, step_m: float = 0.02) -> np.ndarray:
@@ -150,9 +151,21 @@ def _reference_match(
     return pose
 
 
+BACKENDS = [
+    "numpy",
+    pytest.param(
+        "numba",
+        marks=pytest.mark.skipif(
+            not numba_available(), reason="numba (extra 'fast') not installed"
+        ),
+    ),
+]
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
 @settings(max_examples=20, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1), with_prior=st.booleans())
-def test_matcher_reproduces_the_plain_reference(seed, with_prior):
+def test_matcher_reproduces_the_plain_reference(backend, seed, with_prior):
     """Same algorithm as the plain loop (up to round-off): points without a usable
     correspondence add nothing, the closed-form 3x3 solve equals LU."""
     rng = np.random.default_rng(seed)
@@ -166,7 +179,7 @@ def test_matcher_reproduces_the_plain_reference(seed, with_prior):
     kw = {}
     if with_prior:
         kw = {"prior_mean": init, "prior_info": np.diag([400.0, 400.0, 2500.0])}
-    res = match_scan(pts, target, init, **kw)
+    res = match_scan(pts, target, init, backend=backend, **kw)
     ref = _reference_match(pts, target, init, **kw)
     assert np.allclose(res.pose, ref, atol=1e-9)
 
@@ -198,3 +211,51 @@ def test_packed_rows_are_zero_for_unusable_points():
     assert np.all(rows[~usable] == 0.0)
     assert np.array_equal(rows[:-1][usable[:-1], 2:], pts[usable[:-1]])
     assert pm.packed(0.6)[0] is rows  # cached
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), radius=st.sampled_from([0.05, 0.15, 0.3, 0.5]))
+def test_bucket_grid_kernel_finds_the_kd_tree_neighbour_and_sums(seed, radius):
+    """The compiled loop's correspondences (run here as plain Python) are the KD-tree's, and
+    its sums are the normal equations of the numpy path."""
+    rng = np.random.default_rng(seed)
+    target = PointMap(
+        np.concatenate([_dense_points(room_segments(), 0.03), rng.uniform(0, 5, (40, 2))])
+    )
+    pts = rng.uniform(-1.0, 6.0, (60, 2))
+    pw = rng.uniform(0.5, 1.0, 60)
+    packed, usable = target.packed(0.6)
+    grid = BucketGrid.build(target.points, radius)
+    out = np.empty(10)
+    c, s, tx, ty = np.cos(0.3), np.sin(0.3), 0.2, -0.1
+    n = _icp_terms_py(
+        pts[:, 0].copy(), pts[:, 1].copy(), pw, c, s, tx, ty, radius, grid.cell_m, grid.x0,
+        grid.y0, grid.nx, grid.ny, grid.start, grid.order, grid.xs, grid.ys, packed, usable,
+        0.02, out,
+    )  # fmt: skip
+    world = pts @ np.array([[c, s], [-s, c]]) + [tx, ty]
+    _, idx = target.tree.query(world, k=1, distance_upper_bound=radius)
+    ok = usable[idx]
+    assert n == ok.sum()
+    t = packed[idx[ok]]
+    r = np.sum(t[:, :2] * (world[ok] - t[:, 2:]), axis=1)
+    rp = world[ok] - [tx, ty]
+    jac = np.column_stack([t[:, :2], t[:, 1] * rp[:, 0] - t[:, 0] * rp[:, 1]])
+    w = np.minimum(0.02 / np.maximum(np.abs(r), 1e-12), 1.0) * pw[ok]
+    h = jac.T @ (jac * w[:, None])
+    assert np.allclose(out[[0, 1, 2, 3, 4, 5]], h[np.triu_indices(3)], rtol=1e-9, atol=1e-12)
+    assert np.allclose(out[6:9], jac.T @ (w * r), rtol=1e-9, atol=1e-12)
+    assert out[9] == pytest.approx(float(r @ r), rel=1e-9, abs=1e-15)
+
+
+def test_spread_out_target_falls_back_to_the_kd_tree():
+    pts = np.array([[0.0, 0.0], [0.01, 0.0], [0.02, 0.0], [1e5, 1e5], [1e5, 1e5 + 0.01]])
+    target = PointMap(pts, k_normal=2)
+    assert target.bucket_grid(0.3) is None
+    res = match_scan(pts[:3] + [0.001, 0.0], target, np.zeros(3), max_iterations=2)
+    assert res.n_matched == 3
+
+
+def test_unknown_backend_is_refused(segments):
+    with pytest.raises(ValueError, match="backend"):
+        match_scan(np.zeros((3, 2)), PointMap(_dense_points(segments)), np.zeros(3), backend="x")
