@@ -323,6 +323,8 @@ class DynamicMapLocalizer(Localizer):
             key = np.floor(pts / self.map_voxel_m).astype(np.int64)
             _, idx = np.unique(key[:, 0] * 1_000_003 + key[:, 1], return_index=True)
             pts = pts[np.sort(idx)]
+        if self._cmap is not None and np.array_equal(pts, self._cmap_points):
+            return  # the same points as the last scan's (long-term timescales): keep the KD-tree
         self._cmap_points = pts
         self._cmap = None
 

@@ -91,14 +91,12 @@ def synthesize_current_map(
     logp = np.empty((nearby.size, len(levels), n))
     for a, i in enumerate(nearby):
         lm = dmap.local_maps[int(i)]
-        polar = lm.polar(points_map)
-        for b, level in enumerate(levels):
-            logp[a, b] = lm.log_likelihood(
-                level,
-                polar,
-                sigma_min_m=prm.sigma_min_m,
-                min_outlier_ratio=prm.min_outlier_ratio,
-            )
+        logp[a] = lm.log_likelihoods(
+            levels,
+            lm.polar(points_map),
+            sigma_min_m=prm.sigma_min_m,
+            min_outlier_ratio=prm.min_outlier_ratio,
+        )
     logp = np.maximum(logp, log_floor)
     good = logp >= np.log(prm.explained_density)
     remaining = np.ones(n, dtype=bool)

@@ -13,6 +13,7 @@ samples per local map, 658,800 bytes at 2 bytes per sample.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -130,6 +131,62 @@ class LocalMap:
             sigma_min_m=sigma_min_m,
             min_outlier_ratio=min_outlier_ratio,
         )
+
+    def log_likelihoods(
+        self,
+        levels: Sequence[int],
+        polar: tuple[FloatArray, FloatArray],
+        *,
+        sigma_min_m: float = 0.0,
+        min_outlier_ratio: float = 0.0,
+    ) -> FloatArray:
+        """:meth:`log_likelihood` of several levels at once, ``(len(levels), N)``.
+
+        The same values, computed in one pass over the levels' stacked model tables (one
+        gather, one ``exp``/``log``) instead of one pass per level; the stack is cached until
+        one of its tables changes.
+        """
+        ang, dist = polar
+        n = len(dist)
+        levels = list(levels)
+        if sigma_min_m <= 0.0 or not levels:
+            out = np.empty((len(levels), n))
+            for b, level in enumerate(levels):
+                out[b] = self.log_likelihood(
+                    level,
+                    polar,
+                    sigma_min_m=sigma_min_m,
+                    min_outlier_ratio=min_outlier_ratio,
+                )
+            return out
+        tabs = [
+            self.sub[level].model_table(self.max_range_m, sigma_min_m, min_outlier_ratio)
+            for level in levels
+        ]
+        cached = self.__dict__.get("_stack")
+        if (
+            cached is None
+            or len(cached[0]) != len(tabs)
+            or any(a is not b for a, b in zip(cached[0], tabs, strict=True))
+        ):
+            cached = (tabs, np.concatenate(tabs))
+            self._stack = cached
+        rays = np.empty(len(levels) * n, dtype=np.int64)
+        by_n_rays: dict[int, NDArray[np.int64]] = {}
+        offset = 0
+        for b, (level, tab) in enumerate(zip(levels, tabs, strict=True)):
+            n_rays = self.timescales[level].n_rays
+            if n_rays not in by_n_rays:
+                by_n_rays[n_rays] = self.ray_index(ang, n_rays)
+            np.add(by_n_rays[n_rays], offset, out=rays[b * n : (b + 1) * n])
+            offset += len(tab)
+        ll = table_log_likelihood(cached[1], rays, np.tile(dist, len(levels)), self.max_range_m)
+        return ll.reshape(len(levels), n)
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state.pop("_stack", None)  # a cache (copies of the model tables)
+        return state
 
     def points(self, level: int, sigma_max_m: float = 0.05) -> FloatArray:
         """Map-frame points of the medians of sub-map ``level`` with ``σ ≤ sigma_max_m`` (§4.3)."""

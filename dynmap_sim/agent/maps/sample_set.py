@@ -139,7 +139,13 @@ class SampleSets:
         order = np.argsort(ray + rng.random(m))  # by ray, random within a ray
         r_s = ray[order]
         v_s = val[order]
-        uniq, first, m_per = np.unique(r_s, return_index=True, return_counts=True)
+        # Runs of equal rays in the sorted order (what np.unique would return, without a sort).
+        starts = np.empty(m, dtype=bool)
+        starts[0] = True
+        np.not_equal(r_s[1:], r_s[:-1], out=starts[1:])
+        first = np.flatnonzero(starts)
+        uniq = r_s[first]
+        m_per = np.diff(first, append=m)
         g = np.repeat(np.arange(uniq.size), m_per)
         rank = np.arange(m) - first[g]
 

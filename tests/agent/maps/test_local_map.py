@@ -108,3 +108,22 @@ def test_safe_mode_when_nothing_fits(room, scan_fn, box_fn):
     assert cur.safe_mode
     assert cur.selections == [(0, 4)]
     assert cur.n_explained < 0.5 * cur.n_readings
+
+
+@pytest.mark.parametrize("sigma_min_m", [0.0, 0.01])
+def test_all_levels_at_once_equal_one_level_at_a_time(room, scan_fn, sigma_min_m):
+    rng = np.random.default_rng(5)
+    dmap = DynamicMap(max_range_m=8.0)
+    pose = np.array([2.0, 2.0, 0.0])
+    i = dmap.add_local_map(pose[:2], scan_fn(pose, room, rng), rng)
+    lm = dmap.local_maps[i]
+    dmap.learn_offline([1, 2, 3, 4], pose[None], [scan_fn(pose, room, rng)], rng)
+    for step in range(3):  # the stacked tables must follow every update
+        scan = scan_fn(pose + [0.1 * step, 0.0, 0.0], room, rng)
+        polar = lm.polar(np.concatenate([scan, [[30.0, 30.0]]]))  # one reading out of range
+        levels = [0, 1, 2, 3, 4] if step != 1 else [1, 3, 4]
+        both = lm.log_likelihoods(levels, polar, sigma_min_m=sigma_min_m, min_outlier_ratio=0.01)
+        for b, level in enumerate(levels):
+            one = lm.log_likelihood(level, polar, sigma_min_m=sigma_min_m, min_outlier_ratio=0.01)
+            assert np.array_equal(both[b], one)
+        dmap.learn_online(pose, scan, rng, levels=[0])
