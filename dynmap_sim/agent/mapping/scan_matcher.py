@@ -24,13 +24,29 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
-from dynmap_sim.agent.mapping.scan_matcher_numba import BucketGrid, icp_terms, numba_available
+from dynmap_sim.agent.mapping.scan_matcher_numba import (
+    BucketGrid,
+    icp_terms,
+    knn_indices,
+    numba_available,
+)
 from dynmap_sim.se2 import wrap_angle
 
 FloatArray = NDArray[np.float64]
 
 #: Condition estimate above which the closed-form 3x3 solve is used (see _newton_step).
 _WELL_CONDITIONED = 1e-6
+#: Cell size [m] of the bucket grid for the normals' k nearest neighbours (numba backend).
+_KNN_CELL_M = 0.1
+
+
+def _compact_grid(points: FloatArray, cell_m: float) -> BucketGrid | None:
+    """A :class:`.scan_matcher_numba.BucketGrid` of the points, or ``None`` when they spread
+    over too many cells (more than ``4 M + 250,000``) for one."""
+    span = (points.max(axis=0) - points.min(axis=0)) / cell_m + 2.0
+    if cell_m <= 0 or float(span[0]) * float(span[1]) > 4 * len(points) + 250_000:
+        return None
+    return BucketGrid.build(points, cell_m)
 
 
 class PointMap:
@@ -38,17 +54,30 @@ class PointMap:
 
     ``points_map`` is ``(M, 2)`` in the map frame [m]. Normals come from the smallest
     eigenvector of the covariance of the ``k_normal`` nearest neighbours; ``planarity``
-    in ``[0, 1]`` is ``1 - lambda_min / lambda_max`` (1 = a clean line).
+    in ``[0, 1]`` is ``1 - lambda_min / lambda_max`` (1 = a clean line). With numba (extra
+    ``fast``) the neighbours come from a compiled search on a bucket grid
+    (:func:`.scan_matcher_numba.knn_indices`, the same neighbours as the KD-tree's, nearest
+    first) and the KD-tree is only built if the numpy matcher asks for it; ``backend``
+    (``"auto"``, ``"numpy"``, ``"numba"``) chooses as in :func:`match_scan`.
     """
 
-    def __init__(self, points_map: ArrayLike, k_normal: int = 6) -> None:
+    def __init__(self, points_map: ArrayLike, k_normal: int = 6, backend: str = "auto") -> None:
+        if backend not in ("auto", "numpy", "numba"):
+            raise ValueError(f'backend must be "auto", "numpy" or "numba", got {backend!r}')
+        if backend == "numba" and not numba_available():
+            raise RuntimeError('backend "numba" needs numba: pip install "dynmap-sim[fast]"')
         pts = np.asarray(points_map, dtype=np.float64).reshape(-1, 2)
         if len(pts) < 3:
             raise ValueError(f"PointMap needs at least 3 points, got {len(pts)}")
         self.points = pts
-        self.tree = cKDTree(pts)
+        self._tree: cKDTree | None = None
         k = int(min(k_normal, len(pts)))
-        _, idx = self.tree.query(pts, k=k)
+        use_numba = backend != "numpy" and numba_available()
+        grid = _compact_grid(pts, _KNN_CELL_M) if use_numba else None
+        if grid is not None:  # compiled exact k-NN on a bucket grid (same neighbours)
+            idx = knn_indices(grid, k)
+        else:
+            _, idx = self.tree.query(pts, k=k)
         nx = pts[:, 0][idx]  # (M, k) neighbour coordinates
         ny = pts[:, 1][idx]
         dx = nx - nx.mean(axis=1, keepdims=True)
@@ -84,15 +113,20 @@ class PointMap:
             cache[key] = (rows, usable)
         return cache[key]
 
+    @property
+    def tree(self) -> cKDTree:
+        """KD-tree of the points (built on first use)."""
+        if self.__dict__.get("_tree") is None:
+            self._tree = cKDTree(self.points)
+        return self._tree
+
     def bucket_grid(self, cell_m: float) -> BucketGrid | None:
         """The points in a :class:`.scan_matcher_numba.BucketGrid` of ``cell_m`` cells (cached);
         ``None`` when the points spread over too many cells for a compact grid."""
         key = float(cell_m)
         cache = self.__dict__.setdefault("_grids", {})
         if key not in cache:
-            span = (self.points.max(axis=0) - self.points.min(axis=0)) / key + 2.0
-            small = float(span[0]) * float(span[1]) <= 4 * len(self.points) + 250_000
-            cache[key] = BucketGrid.build(self.points, key) if small and key > 0 else None
+            cache[key] = _compact_grid(self.points, key)
         return cache[key]
 
     def __len__(self) -> int:

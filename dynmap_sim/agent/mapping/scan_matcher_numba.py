@@ -217,3 +217,97 @@ def icp_terms(
             out,
         )
     )
+
+
+def _knn_py(
+    k: int,
+    cell_m: float,
+    x0: int,
+    y0: int,
+    nx: int,
+    ny: int,
+    start: IntArray,
+    order: IntArray,
+    xs: FloatArray,
+    ys: FloatArray,
+    out: IntArray,
+) -> None:
+    """``out[i]`` = indices of the ``k`` points nearest to point ``i`` (itself included),
+    nearest first (equal distances: lower index first); rings of cells around the point's
+    cell are searched until the next ring cannot hold anything nearer than the k-th."""
+    n = xs.shape[0]
+    best_d = np.empty(k)
+    best_j = np.empty(k, dtype=np.int64)
+    for p in range(n):
+        qx = xs[p]
+        qy = ys[p]
+        cx = int(math.floor(qx / cell_m)) - x0
+        cy = int(math.floor(qy / cell_m)) - y0
+        n_found = 0
+        ring = 0
+        while True:
+            for gx in range(cx - ring, cx + ring + 1):
+                if gx < 0 or gx >= nx:
+                    continue
+                edge_x = gx == cx - ring or gx == cx + ring
+                for gy in range(cy - ring, cy + ring + 1):
+                    if gy < 0 or gy >= ny:
+                        continue
+                    if not edge_x and gy != cy - ring and gy != cy + ring:
+                        continue  # inside the ring: done before
+                    if n_found == k:  # skip a cell whose box (+1 nm) is farther than the k-th
+                        lo_x = (gx + x0) * cell_m
+                        lo_y = (gy + y0) * cell_m
+                        bx = max(max(lo_x - qx, qx - (lo_x + cell_m)) - 1e-9, 0.0)
+                        by = max(max(lo_y - qy, qy - (lo_y + cell_m)) - 1e-9, 0.0)
+                        if bx * bx + by * by > best_d[k - 1]:
+                            continue
+                    kk = gx * ny + gy
+                    for m in range(start[kk], start[kk + 1]):
+                        dx = xs[m] - qx
+                        dy = ys[m] - qy
+                        d2 = dx * dx + dy * dy
+                        j = order[m]
+                        if n_found == k and (
+                            d2 > best_d[k - 1] or (d2 == best_d[k - 1] and j > best_j[k - 1])
+                        ):
+                            continue
+                        # insert (d2, j) into the sorted list
+                        pos = n_found if n_found < k else k - 1
+                        while pos > 0 and (
+                            best_d[pos - 1] > d2 or (best_d[pos - 1] == d2 and best_j[pos - 1] > j)
+                        ):
+                            if pos < k:
+                                best_d[pos] = best_d[pos - 1]
+                                best_j[pos] = best_j[pos - 1]
+                            pos -= 1
+                        best_d[pos] = d2
+                        best_j[pos] = j
+                        if n_found < k:
+                            n_found += 1
+            # Anything in ring + 1 or beyond is at least ring * cell_m away (less 1 nm).
+            reach = ring * cell_m - 1e-9
+            if n_found == k and reach > 0.0 and best_d[k - 1] < reach * reach:
+                break
+            if cx - ring <= 0 and cy - ring <= 0 and cx + ring >= nx - 1 and cy + ring >= ny - 1:
+                break  # the whole grid is searched
+            ring += 1
+        src = order[p]
+        for t in range(k):
+            out[src, t] = best_j[t]
+
+
+_knn = numba.njit(cache=True, nogil=True)(_knn_py) if numba is not None else None
+
+
+def knn_indices(grid: BucketGrid, k: int) -> IntArray:
+    """``(M, k)`` indices of each point's ``k`` nearest points of the grid (itself first).
+
+    Needs numba. ``k`` must not exceed the number of points.
+    """
+    if _knn is None:
+        raise RuntimeError('the numba kNN backend needs numba: pip install "dynmap-sim[fast]"')
+    out = np.empty((len(grid.xs), k), dtype=np.int64)
+    _knn(k, grid.cell_m, grid.x0, grid.y0, grid.nx, grid.ny, grid.start, grid.order, grid.xs,
+         grid.ys, out)  # fmt: skip
+    return out

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from scipy.spatial import cKDTree
 from synthetic_scans import LASER, raycast, room_segments
 
 from dynmap_sim import se2
@@ -15,7 +16,12 @@ from dynmap_sim.agent.mapping.scan_matcher import (
     _sym3_condition,
     match_scan,
 )
-from dynmap_sim.agent.mapping.scan_matcher_numba import BucketGrid, _icp_terms_py, numba_available
+from dynmap_sim.agent.mapping.scan_matcher_numba import (
+    BucketGrid,
+    _icp_terms_py,
+    knn_indices,
+    numba_available,
+)
 
 
 def _dense_points(segs: np.ndarray, step_m: float = 0.02) -> np.ndarray:
@@ -259,3 +265,21 @@ def test_spread_out_target_falls_back_to_the_kd_tree():
 def test_unknown_backend_is_refused(segments):
     with pytest.raises(ValueError, match="backend"):
         match_scan(np.zeros((3, 2)), PointMap(_dense_points(segments)), np.zeros(3), backend="x")
+
+
+@pytest.mark.skipif(not numba_available(), reason="numba (extra 'fast') not installed")
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1), cell=st.sampled_from([0.02, 0.1, 0.5]))
+def test_grid_knn_finds_the_kd_tree_neighbours(seed, cell):
+    rng = np.random.default_rng(seed)
+    pts = np.concatenate([_dense_points(room_segments(), 0.037), rng.uniform(-3, 8, (30, 2))])
+    pts += rng.normal(0, 1e-4, pts.shape)  # no exactly equal distances
+    idx = knn_indices(BucketGrid.build(pts, cell), 6)
+    d_ref, ref = cKDTree(pts).query(pts, k=6)
+    assert np.array_equal(idx, ref)
+    assert np.all(np.diff(np.hypot(*(pts[idx] - pts[:, None, :]).transpose(2, 0, 1)), axis=1) >= 0)
+    # The normals do not depend on the backend; the KD-tree is built on demand.
+    a, b = PointMap(pts, backend="numba"), PointMap(pts, backend="numpy")
+    assert np.allclose(a.normals, b.normals, atol=1e-12)
+    assert np.allclose(a.planarity, b.planarity, atol=1e-12)
+    assert a.__dict__["_tree"] is None and a.tree.n == len(pts)
