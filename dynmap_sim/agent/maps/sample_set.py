@@ -26,6 +26,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from dynmap_sim.agent.maps.sample_set_numba import numba_available, robust_rows
+
 #: Largest storable range [mm] (uint16); also the sort key of empty slots.
 MAX_RANGE_MM = 65535
 
@@ -251,10 +253,22 @@ class SampleSets:
         )
 
 
-def robust_estimates(samples_mm: NDArray[np.uint16], count: NDArray[np.integer]) -> RayEstimates:
-    """Eq. 4–5 and the 3σ outlier ratio for every row of ``samples_mm`` (first ``count`` valid)."""
+def robust_estimates(
+    samples_mm: NDArray[np.uint16], count: NDArray[np.integer], backend: str = "auto"
+) -> RayEstimates:
+    """Eq. 4–5 and the 3σ outlier ratio for every row of ``samples_mm`` (first ``count`` valid).
+
+    ``backend`` ``"numba"`` (extra ``fast``; ``"auto"``: when installed and the rows are
+    short) computes the identical values in a compiled loop (:mod:`.sample_set_numba`),
+    ``"numpy"`` vectorized.
+    """
     n_rays, n = samples_mm.shape
     cnt = count.astype(np.int64)
+    if backend not in ("auto", "numpy", "numba"):
+        raise ValueError(f'backend must be "auto", "numpy" or "numba", got {backend!r}')
+    if backend == "numba" or (backend == "auto" and n <= 16 and numba_available()):
+        rho_m, sigma_m, outlier = robust_rows(samples_mm, cnt)
+        return RayEstimates(rho_m=rho_m, sigma_m=sigma_m, outlier_ratio=outlier, count=cnt)
     valid = np.arange(n)[None, :] < cnt[:, None]
     s = np.where(valid, samples_mm.astype(np.int32), MAX_RANGE_MM + 1)
     s.sort(axis=1)

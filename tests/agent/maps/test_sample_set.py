@@ -7,6 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from dynmap_sim.agent.maps import sample_set_numba
 from dynmap_sim.agent.maps.sample_set import SampleSets, robust_estimates, to_mm
 
 
@@ -168,3 +169,18 @@ def test_table_likelihood_equals_direct_formula(seed, sigma_min):
     fin = np.isfinite(direct)
     assert np.array_equal(fin, np.isfinite(fast))
     assert np.allclose(direct[fin], fast[fin], rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.skipif(not sample_set_numba.numba_available(), reason="numba not installed")
+@pytest.mark.parametrize("n_samples", [1, 2, 5, 10, 50])
+def test_compiled_robust_estimates_are_identical(n_samples):
+    rng = np.random.default_rng(n_samples)
+    for trial in range(10):
+        s = rng.integers(0, 65535 if trial % 2 else 3000, (200, n_samples)).astype(np.uint16)
+        if trial % 3 == 0:
+            s[:] = rng.integers(1000, 1004, s.shape)  # many equal samples and deviations
+        c = rng.integers(0, n_samples + 1, 200).astype(np.uint16)
+        a = robust_estimates(s, c, backend="numpy")
+        b = robust_estimates(s, c, backend="numba")
+        for f in ("rho_m", "sigma_m", "outlier_ratio", "count"):
+            assert np.array_equal(getattr(a, f), getattr(b, f), equal_nan=True), f
