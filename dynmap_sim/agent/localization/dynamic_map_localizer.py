@@ -49,7 +49,7 @@ import numpy as np
 
 from dynmap_sim import se2
 from dynmap_sim.agent.localizer import Localizer, register_localizer
-from dynmap_sim.agent.mapping.first_run import FirstRunMapper, scan_points_base
+from dynmap_sim.agent.mapping.first_run import BeamDirections, FirstRunMapper, scan_points_base
 from dynmap_sim.agent.mapping.scan_matcher import MatchResult, PointMap, match_scan
 from dynmap_sim.agent.maps.current_map import CurrentMap, SynthesisParams, synthesize_current_map
 from dynmap_sim.agent.maps.dynamic_map import DynamicMap
@@ -121,6 +121,7 @@ class DynamicMapLocalizer(Localizer):
         self.ltm_day_scans_per_run = int(ltm_day_scans_per_run)
 
         self.mode = mode
+        self._beams = BeamDirections(laser)
         self.freeze_after_day = int(freeze_after_day)
         self.update_radius_m = float(update_radius_m)
         self.local_map_spacing_m = float(local_map_spacing_m)
@@ -204,8 +205,17 @@ class DynamicMapLocalizer(Localizer):
         if (prior.first_run or len(self.dmap) == 0) and not self.frozen:
             self._mapper = FirstRunMapper(self.laser, self._pose)
 
+    def _beam_directions(self) -> BeamDirections:
+        """The laser's beam directions (cached; rebuilt for pickles made before the cache)."""
+        beams = self.__dict__.get("_beams")
+        if beams is None:
+            beams = self._beams = BeamDirections(self.laser)
+        return beams
+
     def _points_map(self, pose: FloatArray, ranges_m: np.ndarray) -> FloatArray:
-        return se2.transform_points(pose, scan_points_base(self.laser, ranges_m))
+        return se2.transform_points(
+            pose, scan_points_base(self.laser, ranges_m, self._beam_directions())
+        )
 
     def update(self, odom: Odometry, scan: Scan) -> PoseEstimate:
         self.n_scans += 1
@@ -235,7 +245,7 @@ class DynamicMapLocalizer(Localizer):
                     cov=self._propagated_cov(c_o),
                     extras={"skipped": True},
                 )
-        pts_base = scan_points_base(self.laser, ranges)
+        pts_base = scan_points_base(self.laser, ranges, self._beam_directions())
         if self._last_odom is None:
             self._last_odom = opose.copy()
         else:

@@ -60,11 +60,33 @@ class StaticMap:
     n_loop_closures: int = 0
 
 
-def scan_points_base(laser: LaserSpec, ranges_m: ArrayLike) -> FloatArray:
-    """Valid readings of a scan as points ``(N, 2)`` in the robot (``base_link``) frame."""
+class BeamDirections:
+    """Cosines and sines of a laser's beam angles, computed once for many scans."""
+
+    def __init__(self, laser: LaserSpec) -> None:
+        angles = laser.angles()
+        self.laser = laser
+        self.cos = np.cos(angles)
+        self.sin = np.sin(angles)
+
+
+def scan_points_base(
+    laser: LaserSpec, ranges_m: ArrayLike, beams: BeamDirections | None = None
+) -> FloatArray:
+    """Valid readings of a scan as points ``(N, 2)`` in the robot (``base_link``) frame.
+
+    ``beams`` (the laser's :class:`BeamDirections`, optional) saves recomputing the beam
+    directions for every scan; the points are the same.
+    """
     r = np.asarray(ranges_m, dtype=np.float64)
     ok = np.isfinite(r) & (r >= laser.range_min_m) & (r < laser.range_max_m)
-    pts = se2.scan_to_points(np.where(ok, r, np.nan), laser.angles())
+    if beams is None:
+        pts = se2.scan_to_points(np.where(ok, r, np.nan), laser.angles())
+    else:
+        rr = r[ok]
+        pts = np.empty((len(rr), 2))
+        np.multiply(rr, beams.cos[ok], out=pts[:, 0])
+        np.multiply(rr, beams.sin[ok], out=pts[:, 1])
     return se2.transform_points(np.asarray(laser.mount_pose, dtype=np.float64), pts)
 
 
@@ -208,6 +230,7 @@ class FirstRunMapper:
         ),
     ) -> None:
         self.laser = laser
+        self._beams = BeamDirections(laser)
         self.initial_pose = np.asarray(initial_pose, dtype=np.float64).reshape(3).copy()
         self.keyframe_dist_m = float(keyframe_dist_m)
         self.keyframe_angle_rad = float(keyframe_angle_rad)
@@ -308,7 +331,7 @@ class FirstRunMapper:
                     np.nan,
                     ranges,
                 )
-            self._add_keyframe(ranges, scan_points_base(self.laser, first))
+            self._add_keyframe(ranges, scan_points_base(self.laser, first, self._beams))
         else:
             delta = se2.between(self._last_odom, opose)
             self._last_odom = opose.copy()
@@ -317,7 +340,7 @@ class FirstRunMapper:
             self.n_dynamic += int(dyn.sum())
             if self.drop_edges != "none":
                 dyn |= range_discontinuities(ranges, isolated_only=self.drop_edges == "isolated")
-            pts = scan_points_base(self.laser, np.where(dyn, np.nan, ranges))
+            pts = scan_points_base(self.laser, np.where(dyn, np.nan, ranges), self._beams)
             d = float(np.hypot(delta[0], delta[1]))
             a = abs(float(delta[2]))
             sig_xy = self.odom_sigma[0] + self.odom_sigma[1] * d + self.odom_sigma[2] * a

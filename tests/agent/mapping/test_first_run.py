@@ -7,9 +7,11 @@ import numpy as np
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import OCCUPIED
 from dynmap_sim.agent.mapping.first_run import (
+    BeamDirections,
     FirstRunMapper,
     free_space_violations,
     range_discontinuities,
+    scan_points_base,
 )
 from dynmap_sim.types import Odometry, Scan
 
@@ -88,3 +90,12 @@ def test_range_discontinuities_flag_both_sides_of_a_jump():
     isolated = range_discontinuities(r, jump_m=0.1, jump_rel=0.0, isolated_only=True)
     assert isolated.tolist() == [False, False, False, True, False, False, True, False]
     assert not range_discontinuities(np.linspace(1.0, 1.5, 50)).any()
+
+
+def test_scan_points_with_cached_beam_directions_are_the_same(laser):
+    rng = np.random.default_rng(2)
+    r = rng.uniform(0.0, 7.0, laser.n_beams)
+    r[::7] = np.inf
+    r[::11] = np.nan
+    beams = BeamDirections(laser)
+    assert np.array_equal(scan_points_base(laser, r, beams), scan_points_base(laser, r))
