@@ -91,9 +91,9 @@ def synthesize_current_map(
     logp = np.empty((nearby.size, len(levels), n))
     for a, i in enumerate(nearby):
         lm = dmap.local_maps[int(i)]
-        logp[a] = lm.log_likelihoods(
+        logp[a] = lm.scan_log_likelihoods(
             levels,
-            lm.polar(points_map),
+            points_map,
             sigma_min_m=prm.sigma_min_m,
             min_outlier_ratio=prm.min_outlier_ratio,
         )

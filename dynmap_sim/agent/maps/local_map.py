@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from dynmap_sim.agent.maps.local_map_numba import numba_available, scan_log_likelihoods
 from dynmap_sim.agent.maps.sample_set import (
     SampleSets,
     mixture_log_likelihood,
@@ -159,6 +160,22 @@ class LocalMap:
                     min_outlier_ratio=min_outlier_ratio,
                 )
             return out
+        table, offsets = self._model_stack(levels, sigma_min_m, min_outlier_ratio)
+        rays = np.empty(len(levels) * n, dtype=np.int64)
+        by_n_rays: dict[int, NDArray[np.int64]] = {}
+        for b, level in enumerate(levels):
+            n_rays = self.timescales[level].n_rays
+            if n_rays not in by_n_rays:
+                by_n_rays[n_rays] = self.ray_index(ang, n_rays)
+            np.add(by_n_rays[n_rays], offsets[b], out=rays[b * n : (b + 1) * n])
+        ll = table_log_likelihood(table, rays, np.tile(dist, len(levels)), self.max_range_m)
+        return ll.reshape(len(levels), n)
+
+    def _model_stack(
+        self, levels: list[int], sigma_min_m: float, min_outlier_ratio: float
+    ) -> tuple[FloatArray, NDArray[np.int64]]:
+        """The levels' model tables stacked ``(sum of rays, 4)`` and each level's first row;
+        cached until one of the tables changes."""
         tabs = [
             self.sub[level].model_table(self.max_range_m, sigma_min_m, min_outlier_ratio)
             for level in levels
@@ -169,19 +186,42 @@ class LocalMap:
             or len(cached[0]) != len(tabs)
             or any(a is not b for a, b in zip(cached[0], tabs, strict=True))
         ):
-            cached = (tabs, np.concatenate(tabs))
+            offsets = np.concatenate([[0], np.cumsum([len(t) for t in tabs])[:-1]])
+            cached = (tabs, np.concatenate(tabs), offsets.astype(np.int64))
             self._stack = cached
-        rays = np.empty(len(levels) * n, dtype=np.int64)
-        by_n_rays: dict[int, NDArray[np.int64]] = {}
-        offset = 0
-        for b, (level, tab) in enumerate(zip(levels, tabs, strict=True)):
-            n_rays = self.timescales[level].n_rays
-            if n_rays not in by_n_rays:
-                by_n_rays[n_rays] = self.ray_index(ang, n_rays)
-            np.add(by_n_rays[n_rays], offset, out=rays[b * n : (b + 1) * n])
-            offset += len(tab)
-        ll = table_log_likelihood(cached[1], rays, np.tile(dist, len(levels)), self.max_range_m)
-        return ll.reshape(len(levels), n)
+        return cached[1], cached[2]
+
+    def scan_log_likelihoods(
+        self,
+        levels: Sequence[int],
+        points_map: FloatArray,
+        *,
+        sigma_min_m: float = 0.0,
+        min_outlier_ratio: float = 0.0,
+        backend: str = "auto",
+    ) -> FloatArray:
+        """:meth:`log_likelihoods` of map-frame points ``(N, 2)``, ``(len(levels), N)``.
+
+        ``backend`` ``"numba"`` (extra ``fast``; ``"auto"``: when installed, for the floored
+        model ``sigma_min_m > 0``) projects and scores in one compiled loop
+        (:mod:`.local_map_numba`, the same values to rounding); ``"numpy"``:
+        :meth:`polar` and :meth:`log_likelihoods`.
+        """
+        if backend not in ("auto", "numpy", "numba"):
+            raise ValueError(f'backend must be "auto", "numpy" or "numba", got {backend!r}')
+        levels = list(levels)
+        pts = np.asarray(points_map, dtype=np.float64).reshape(-1, 2)
+        compiled = backend == "numba" or (backend == "auto" and numba_available())
+        if compiled and sigma_min_m > 0.0 and levels:
+            table, offsets = self._model_stack(levels, sigma_min_m, min_outlier_ratio)
+            n_rays = np.array([self.timescales[level].n_rays for level in levels], np.int64)
+            return scan_log_likelihoods(pts, self.centre, table, offsets, n_rays, self.max_range_m)
+        return self.log_likelihoods(
+            levels,
+            self.polar(pts),
+            sigma_min_m=sigma_min_m,
+            min_outlier_ratio=min_outlier_ratio,
+        )
 
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()

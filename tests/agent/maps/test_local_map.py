@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from dynmap_sim.agent.maps import local_map_numba
 from dynmap_sim.agent.maps.current_map import synthesize_current_map
 from dynmap_sim.agent.maps.dynamic_map import DynamicMap
 from dynmap_sim.agent.maps.local_map import TABLE1, LocalMap
@@ -127,3 +128,20 @@ def test_all_levels_at_once_equal_one_level_at_a_time(room, scan_fn, sigma_min_m
             one = lm.log_likelihood(level, polar, sigma_min_m=sigma_min_m, min_outlier_ratio=0.01)
             assert np.array_equal(both[b], one)
         dmap.learn_online(pose, scan, rng, levels=[0])
+
+
+@pytest.mark.skipif(not local_map_numba.numba_available(), reason="numba not installed")
+def test_compiled_scan_log_likelihoods_agree_with_numpy(room, scan_fn):
+    rng = np.random.default_rng(8)
+    dmap = DynamicMap(max_range_m=8.0)
+    pose = np.array([2.0, 2.0, 0.0])
+    i = dmap.add_local_map(pose[:2], scan_fn(pose, room, rng), rng)
+    lm = dmap.local_maps[i]
+    dmap.learn_offline([1, 2, 3, 4], pose[None], [scan_fn(pose, room, rng)], rng)
+    for step in range(3):
+        pts = np.concatenate([scan_fn(pose + [0.2 * step, 0.1, 0.0], room, rng), [[30.0, 2.0]]])
+        kw = {"sigma_min_m": 0.01, "min_outlier_ratio": 0.01}
+        a = lm.scan_log_likelihoods([0, 1, 2, 3, 4], pts, backend="numba", **kw)
+        b = lm.scan_log_likelihoods([0, 1, 2, 3, 4], pts, backend="numpy", **kw)
+        assert np.allclose(a, b, rtol=1e-12, atol=1e-12)
+        dmap.learn_online(pose, pts, rng, levels=[0])

@@ -1,0 +1,89 @@
+"""Optional numba backend of :meth:`.local_map.LocalMap.log_likelihoods` (extra ``fast``).
+
+The perceptual model of Biber & Duckett eq. 6–8 for the readings of one scan under several
+timescales of one local map: each reading is projected to the map's centre (bearing, distance,
+§4.1), goes to the closest ray of each sub-map and gets ``log p(d)`` from that ray's row of
+the model table (:meth:`.sample_set.SampleSets.model_table`) -- the numpy code's operations
+in one compiled loop (``libm``'s ``atan2``/``exp``/``log`` instead of numpy's, so values agree
+to rounding). :func:`numba_available` says whether it can be used.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+try:  # pragma: no cover - depends on the optional extra
+    import numba
+except ImportError:  # pragma: no cover
+    numba = None
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
+
+
+def numba_available() -> bool:
+    """True when numba is installed (the ``fast`` extra)."""
+    return numba is not None
+
+
+def _scan_loglik_py(
+    px: FloatArray,
+    py: FloatArray,
+    cx: float,
+    cy: float,
+    table: FloatArray,
+    offsets: IntArray,
+    n_rays: IntArray,
+    max_range_m: float,
+    out: FloatArray,
+) -> None:
+    """``out[b, i] = log p`` of reading ``i`` under the level whose table rows start at
+    ``offsets[b]`` (``n_rays[b]`` rays)."""
+    two_pi = 2.0 * math.pi
+    for i in range(px.shape[0]):
+        dx = px[i] - cx
+        dy = py[i] - cy
+        ang = math.atan2(dy, dx) % two_pi
+        dist = math.hypot(dx, dy)
+        inside = dist >= 0.0 and dist <= max_range_m
+        for b in range(offsets.shape[0]):
+            nr = n_rays[b]
+            ray = np.int64(np.rint(ang * (nr / two_pi))) % nr
+            row = offsets[b] + ray
+            z = dist - table[row, 0]
+            p = math.exp(table[row, 2] - z * z * table[row, 1])
+            if inside:
+                p += table[row, 3]
+            out[b, i] = math.log(p) if p > 0.0 else -math.inf
+
+
+_scan_loglik = numba.njit(cache=True, nogil=True)(_scan_loglik_py) if numba is not None else None
+
+
+def scan_log_likelihoods(
+    points_map: FloatArray,
+    centre: FloatArray,
+    table: FloatArray,
+    offsets: IntArray,
+    n_rays: IntArray,
+    max_range_m: float,
+) -> FloatArray:
+    """``(len(offsets), N)`` log-likelihoods of map-frame points (compiled; needs numba)."""
+    if _scan_loglik is None:
+        raise RuntimeError('the numba backend needs numba: pip install "dynmap-sim[fast]"')
+    out = np.empty((len(offsets), len(points_map)))
+    _scan_loglik(
+        np.ascontiguousarray(points_map[:, 0]),
+        np.ascontiguousarray(points_map[:, 1]),
+        float(centre[0]),
+        float(centre[1]),
+        table,
+        offsets,
+        n_rays,
+        float(max_range_m),
+        out,
+    )
+    return out
