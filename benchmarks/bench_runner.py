@@ -1,4 +1,5 @@
-"""The runner's overhead over the bare env + driver + localizer loop (target: ratio <= 1.10).
+"""The runner's overhead over the bare env + driver + localizer loop (target: ratio <= 1.10),
+and the parallel runner (localizers in ``--workers`` processes) against the sequential one.
 
 Both loops run the same scenario (same seed, days, driver and localizers). The reference is
 the minimum a caller needs: ``env.reset``, the driver's action, ``env.step``, every
@@ -9,12 +10,16 @@ metrics, the SQLite writes, the checkpoint after every run and the progress bar.
     python benchmarks/bench_runner.py --scenario worlds/scenarios/ci-apartment-mcl.toml
 
 Prints absolute times and the ratios (wall clock and process CPU time; CPU time is the
-steadier one on a shared machine); the best of ``--repeat`` runs of each loop counts.
+steadier one on a shared machine); the best of ``--repeat`` runs of each loop counts. The
+parallel runner's estimates are compared with the sequential one's (they must be identical).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
+import resource
+import sqlite3
 import tempfile
 import time
 from pathlib import Path
@@ -94,17 +99,26 @@ def bare_loop(scenario, days, seed):
     return wall, cpu, n
 
 
-def runner_loop(scenario, days, seed):
-    with tempfile.TemporaryDirectory() as tmp:
-        t0, c0 = time.perf_counter(), time.process_time()
-        out = run_experiment(scenario, out_dir=Path(tmp) / "r", days=days, seed=seed, progress=True)
-        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-        import sqlite3
+def _children_cpu_s():
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
 
+
+def runner_loop(scenario, days, seed, workers=1):
+    """The runner. Returns (wall s, CPU s of this process and its finished workers, scans,
+    estimates table)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        t0, c0, k0 = time.perf_counter(), time.process_time(), _children_cpu_s()
+        out = run_experiment(
+            scenario, out_dir=Path(tmp) / "r", days=days, seed=seed, progress=True, workers=workers
+        )
+        wall = time.perf_counter() - t0
+        cpu = time.process_time() - c0 + _children_cpu_s() - k0
         con = sqlite3.connect(out / "results.db")
         n = con.execute("SELECT count(*) FROM scans").fetchone()[0]
+        est = con.execute("SELECT * FROM estimates ORDER BY loc, day, run, step").fetchall()
         con.close()
-    return wall, cpu, n
+    return wall, cpu, n, est
 
 
 def main() -> None:
@@ -113,6 +127,9 @@ def main() -> None:
     ap.add_argument("--days", default="1-7")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument(
+        "--workers", type=int, default=2, help="worker processes of the parallel runner (0: skip)"
+    )
     ap.add_argument(
         "--keep-time-limit",
         action="store_true",
@@ -125,10 +142,12 @@ def main() -> None:
         scn._source = load_scenario(args.scenario).source_path
     a, _, b = args.days.partition("-")
     days = (int(a), int(b or a))
-    bare, run = [], []
+    bare, run, par = [], [], []
     for _ in range(args.repeat):
         bare.append(bare_loop(scn, days, args.seed))
-        run.append(runner_loop(scn, days, args.seed))
+        run.append(runner_loop(scn, days, args.seed, workers=1))
+        if args.workers > 0:
+            par.append(runner_loop(scn, days, args.seed, workers=args.workers))
     tb, nb = min(b[0] for b in bare), bare[0][2]
     tr, nr = min(r[0] for r in run), run[0][2]
     cb, cr = min(b[1] for b in bare), min(r[1] for r in run)
@@ -146,6 +165,17 @@ def main() -> None:
     print(
         f"overhead ratio runner / bare:   {tr / tb:8.3f} wall {cr / cb:8.3f} CPU  (target <= 1.10)"
     )
+    if par:
+        tp, cp = min(p[0] for p in par), min(p[1] for p in par)
+        same = all(p[3] == run[0][3] for p in par)
+        print(
+            f"runner, {args.workers} worker processes: {tp:8.3f} s wall {cp:8.3f} s CPU "
+            f"(main + workers; estimates {'identical' if same else 'DIFFERENT'})"
+        )
+        print(
+            f"parallel / sequential runner:   {tp / tr:8.3f} wall {cp / cr:8.3f} CPU  "
+            f"(speed-up {tr / tp:.2f}x on {os.cpu_count()} cores)"
+        )
 
 
 if __name__ == "__main__":

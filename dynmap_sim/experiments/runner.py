@@ -111,7 +111,6 @@ class _SimRun:
     segments: np.ndarray
     segment_class: np.ndarray
     state_after: dict[str, Any]
-    start_wall_s: float
 
 
 class ExperimentRunner:
@@ -278,11 +277,13 @@ class ExperimentRunner:
                 slot = self.slots[i]
                 bar.set_postfix_str(f"day {slot.day} run {slot.run}")
                 sim = self._simulate(i)
-                if pending is not None:  # pipelined: store the run the workers just did
-                    self._write(pending, engine.result(), time.perf_counter() - done_at)
+                # pipelined: collect the previous run, start this one, then store the previous
+                outs = engine.result() if pending is not None else None
+                engine.submit(sim.stream)
+                if pending is not None and outs is not None:
+                    self._write(pending, outs, time.perf_counter() - done_at)
                     done_at = time.perf_counter()
                     bar.update(1)
-                engine.submit(sim.stream)
                 pending = sim
                 if not engine.pipelined:
                     self._write(pending, engine.result(), time.perf_counter() - done_at)
@@ -346,7 +347,6 @@ class ExperimentRunner:
     def _simulate(self, i: int) -> _SimRun:
         """Drive run ``i`` through the env and record its sensor stream (no localizers: the
         driver follows the true pose and kidnappings use the runner's RNG)."""
-        t0 = time.perf_counter()
         slot = self.slots[i]
         sc = self.scenario
         driver: TourDriver = self.state["driver"]
@@ -435,7 +435,6 @@ class ExperimentRunner:
             # what the checkpoint after this run holds besides the localizers (copied now:
             # the next run is simulated before this one is written)
             state_after=pickle.loads(pickle.dumps(self.state, pickle.HIGHEST_PROTOCOL)),
-            start_wall_s=t0,
         )
 
     def _write(self, sim: _SimRun, outs: list[LocalizerOutput], wall_s: float) -> None:

@@ -74,6 +74,9 @@ def test_workers_give_the_numbers_of_the_sequential_runner(tmp_path):
     # the localizers really ran elsewhere, and got the same calls
     pids = par.localizers()[2].pids
     assert len(pids) == 3 and os.getpid() not in pids
+    # one BLAS thread per worker (the workers are the parallelism); ours is untouched
+    assert par.localizers()[2].blas_threads == os.environ.get("OPENBLAS_NUM_THREADS", "1")
+    assert seq.localizers()[2].blas_threads == os.environ.get("OPENBLAS_NUM_THREADS")
     assert seq.localizers()[0].calls == par.localizers()[0].calls
     assert not mp.active_children()
 
@@ -179,9 +182,9 @@ def test_real_env_static_mcl_bit_identical_with_workers(tmp_path):
     from dynmap_sim.experiments.scenario import load_scenario
 
     scn = load_scenario(ROOT / "worlds" / "scenarios" / "ci-apartment-mcl.toml")
-    scn = scn.model_copy(update={"driver": scn.driver.model_copy(update={"max_run_s": 6.0})})
+    scn = scn.model_copy(update={"driver": scn.driver.model_copy(update={"max_run_s": 4.0})})
     scn._source = load_scenario(ROOT / "worlds" / "scenarios" / "ci-apartment-mcl.toml").source_path
     for w in (1, 2):
         run_experiment(scn, out_dir=tmp_path / f"w{w}", progress=False, workers=w)
     assert tables(tmp_path / "w1") == tables(tmp_path / "w2")
-    assert len(tables(tmp_path / "w1")[0]) == 3 * 2 * 61
+    assert len(tables(tmp_path / "w1")[0]) == 3 * 2 * 41

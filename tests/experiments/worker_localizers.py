@@ -32,3 +32,4 @@ class PidLocalizer(RecordingLocalizer):
     def begin_run(self, prior):
         super().begin_run(prior)
         self.pids = [*getattr(self, "pids", []), os.getpid()]
+        self.blas_threads = os.environ.get("OPENBLAS_NUM_THREADS")
