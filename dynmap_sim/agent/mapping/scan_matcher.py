@@ -36,8 +36,8 @@ FloatArray = NDArray[np.float64]
 
 #: Condition estimate above which the closed-form 3x3 solve is used (see _newton_step).
 _WELL_CONDITIONED = 1e-6
-#: Cell size [m] of the bucket grid for the normals' k nearest neighbours (numba backend).
-_KNN_CELL_M = 0.1
+#: Bounds [m] of the cell size of the bucket grid for the normals' k nearest neighbours.
+_KNN_CELL_M = (0.02, 2.0)
 
 
 def _compact_grid(points: FloatArray, cell_m: float) -> BucketGrid | None:
@@ -73,7 +73,11 @@ class PointMap:
         self._tree: cKDTree | None = None
         k = int(min(k_normal, len(pts)))
         use_numba = backend != "numpy" and numba_available()
-        grid = _compact_grid(pts, _KNN_CELL_M) if use_numba else None
+        grid = None
+        if use_numba:  # about one point per cell on average (spacing of the bounding box)
+            ext = pts.max(axis=0) - pts.min(axis=0)
+            cell = math.sqrt(max(float(ext[0] * ext[1]), 1e-6) / len(pts))
+            grid = _compact_grid(pts, min(max(cell, _KNN_CELL_M[0]), _KNN_CELL_M[1]))
         if grid is not None:  # compiled exact k-NN on a bucket grid (same neighbours)
             idx = knn_indices(grid, k)
         else:
@@ -257,7 +261,6 @@ def match_scan(
     if lam is not None:
         mu = pose.copy() if prior_mean is None else np.asarray(prior_mean, dtype=np.float64)
     packed, usable = target.packed(min_planarity)
-    tree = target.tree
     grid = None
     if backend != "numpy" and numba_available() and len(pts):
         grid = target.bucket_grid(max_correspondence_m)
@@ -292,7 +295,7 @@ def match_scan(
             ry = s * px + c * py
             np.add(rx, pose[0], out=world[:, 0])
             np.add(ry, pose[1], out=world[:, 1])
-            _, idx = tree.query(world, k=1, distance_upper_bound=max_correspondence_m)
+            _, idx = target.tree.query(world, k=1, distance_upper_bound=max_correspondence_m)
             n_matched = int(np.count_nonzero(usable[idx]))
             if n_matched >= 3:
                 t = packed[idx]  # (N, 4): normal, target point; zeros where unmatched
