@@ -26,6 +26,7 @@ from scipy.spatial import cKDTree
 
 from dynmap_sim.agent.mapping.scan_matcher_numba import (
     BucketGrid,
+    icp_loop,
     icp_terms,
     knn_indices,
     numba_available,
@@ -274,7 +275,14 @@ def match_scan(
     world = np.empty((len(pts), 2))
     jac = np.empty((len(pts), 3))
     floor2 = sigma_floor_m**2
-    for _ in range(max(1, int(max_iterations))):
+    n_iter = max(1, int(max_iterations))
+    if grid is not None:  # compiled iterations; hands over to the loop below if ill-conditioned
+        status, done, n_matched, rmse, converged, h_scan = icp_loop(
+            px, py, pw_all, pose, mu, lam, n_iter, max_correspondence_m, grid, packed, usable,
+            huber_m, floor2, info_inflation, tol_m, tol_rad, _WELL_CONDITIONED,
+        )  # fmt: skip
+        n_iter = n_iter - done if status else 0
+    for _ in range(n_iter):
         c, s = np.cos(pose[2]), np.sin(pose[2])
         if grid is not None:  # compiled: correspondences and sums in one loop
             n_matched = icp_terms(

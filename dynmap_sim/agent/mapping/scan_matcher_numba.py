@@ -311,3 +311,184 @@ def knn_indices(grid: BucketGrid, k: int) -> IntArray:
     _knn(k, grid.cell_m, grid.x0, grid.y0, grid.nx, grid.ny, grid.start, grid.order, grid.xs,
          grid.ys, out)  # fmt: skip
     return out
+
+
+def _condition3_py(h: FloatArray) -> float:
+    """``|lambda|_min / |lambda|_max`` of a symmetric 3x3 (as ``scan_matcher._sym3_condition``)."""
+    a00, a01, a02 = h[0, 0], h[0, 1], h[0, 2]
+    a11, a12, a22 = h[1, 1], h[1, 2], h[2, 2]
+    if not math.isfinite(a00 + a01 + a02 + a11 + a12 + a22):
+        return math.nan
+    p1 = a01 * a01 + a02 * a02 + a12 * a12
+    q = (a00 + a11 + a22) / 3.0
+    if p1 == 0.0:
+        e1, e2, e3 = a00, a11, a22
+    else:
+        b00, b11, b22 = a00 - q, a11 - q, a22 - q
+        p = math.sqrt((b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * p1) / 6.0)
+        det_b = (
+            b00 * (b11 * b22 - a12 * a12)
+            - a01 * (a01 * b22 - a12 * a02)
+            + a02 * (a01 * a12 - b11 * a02)
+        )
+        half = min(max(det_b / (2.0 * p**3), -1.0), 1.0)
+        phi = math.acos(half) / 3.0
+        e1 = q + 2.0 * p * math.cos(phi)
+        e3 = q + 2.0 * p * math.cos(phi + 2.0 * math.pi / 3.0)
+        e2 = 3.0 * q - e1 - e3
+    lo = min(abs(e1), abs(e2), abs(e3))
+    hi = max(abs(e1), abs(e2), abs(e3))
+    return lo / hi if hi > 0.0 else 0.0
+
+
+_condition3 = numba.njit(cache=True, nogil=True)(_condition3_py) if numba is not None else None
+
+
+def _icp_loop_py(
+    px: FloatArray,
+    py: FloatArray,
+    pw: FloatArray,
+    pose: FloatArray,
+    has_prior: bool,
+    mu: FloatArray,
+    lam: FloatArray,
+    max_iterations: int,
+    radius_m: float,
+    cell_m: float,
+    x0: int,
+    y0: int,
+    nx: int,
+    ny: int,
+    start: IntArray,
+    order: IntArray,
+    xs: FloatArray,
+    ys: FloatArray,
+    packed: FloatArray,
+    usable: NDArray[np.bool_],
+    huber_m: float,
+    floor2: float,
+    inflation: float,
+    tol_m: float,
+    tol_rad: float,
+    well_conditioned: float,
+    h_scan: FloatArray,
+    state: FloatArray,
+) -> int:
+    """The Gauss-Newton iterations of ``match_scan`` (compiled; ``pose`` updated in place).
+
+    Stops when converged, after ``max_iterations``, or -- returning 1 -- before the step of an
+    iteration whose matrix is not clearly regular (condition estimate ``<=
+    well_conditioned``): the caller redoes that iteration with ``matrix_rank`` and LU.
+    ``state`` gets ``[iterations done, n_matched, rmse, converged]``; ``h_scan`` the last
+    scan information (unscaled). Returns 0 otherwise.
+    """
+    sums = np.empty(10)
+    h = np.empty((3, 3))
+    two_pi = 2.0 * math.pi
+    n_matched = 0
+    rmse = math.inf
+    converged = 0.0
+    status = 0
+    it = 0
+    while it < max_iterations:
+        c = math.cos(pose[2])
+        s = math.sin(pose[2])
+        n_matched = _icp_terms(
+            px, py, pw, c, s, pose[0], pose[1], radius_m, cell_m, x0, y0, nx, ny, start,
+            order, xs, ys, packed, usable, huber_m, sums,
+        )  # fmt: skip
+        if n_matched >= 3:
+            rmse = math.sqrt(sums[9] / n_matched)
+            h_scan[0, 0], h_scan[0, 1], h_scan[0, 2] = sums[0], sums[1], sums[2]
+            h_scan[1, 0], h_scan[1, 1], h_scan[1, 2] = sums[1], sums[3], sums[4]
+            h_scan[2, 0], h_scan[2, 1], h_scan[2, 2] = sums[2], sums[4], sums[5]
+            g0, g1, g2 = sums[6], sums[7], sums[8]
+        else:
+            rmse = math.inf
+            h_scan[:, :] = 0.0
+            g0 = g1 = g2 = 0.0
+        sigma2 = max(rmse * rmse if math.isfinite(rmse) else 0.0, floor2) * inflation
+        for a in range(3):
+            for b in range(3):
+                h[a, b] = h_scan[a, b] / sigma2
+        g0 /= sigma2
+        g1 /= sigma2
+        g2 /= sigma2
+        if has_prior:
+            e0 = pose[0] - mu[0]
+            e1 = pose[1] - mu[1]
+            e2 = (pose[2] - mu[2] + math.pi) % two_pi - math.pi
+            for a in range(3):
+                for b in range(3):
+                    h[a, b] += lam[a, b]
+            g0 += lam[0, 0] * e0 + lam[0, 1] * e1 + lam[0, 2] * e2
+            g1 += lam[1, 0] * e0 + lam[1, 1] * e1 + lam[1, 2] * e2
+            g2 += lam[2, 0] * e0 + lam[2, 1] * e1 + lam[2, 2] * e2
+        if not _condition3(h) > well_conditioned:
+            status = 1
+            break
+        a00, a01, a02 = h[0, 0], h[0, 1], h[0, 2]
+        a11, a12, a22 = h[1, 1], h[1, 2], h[2, 2]
+        c00 = a11 * a22 - a12 * a12
+        c01 = a02 * a12 - a01 * a22
+        c02 = a01 * a12 - a02 * a11
+        c11 = a00 * a22 - a02 * a02
+        c12 = a01 * a02 - a00 * a12
+        c22 = a00 * a11 - a01 * a01
+        det = a00 * c00 + a01 * c01 + a02 * c02
+        d0 = -(c00 * g0 + c01 * g1 + c02 * g2) / det
+        d1 = -(c01 * g0 + c11 * g1 + c12 * g2) / det
+        d2 = -(c02 * g0 + c12 * g1 + c22 * g2) / det
+        pose[0] += d0
+        pose[1] += d1
+        pose[2] = (pose[2] + d2 + math.pi) % two_pi - math.pi
+        it += 1
+        if math.hypot(d0, d1) < tol_m and abs(d2) < tol_rad:
+            converged = 1.0
+            break
+    state[0] = it
+    state[1] = n_matched
+    state[2] = rmse
+    state[3] = converged
+    return status
+
+
+_icp_loop = numba.njit(cache=True, nogil=True)(_icp_loop_py) if numba is not None else None
+
+
+def icp_loop(
+    px: FloatArray,
+    py: FloatArray,
+    pw: FloatArray,
+    pose: FloatArray,
+    mu: FloatArray | None,
+    lam: FloatArray | None,
+    max_iterations: int,
+    radius_m: float,
+    grid: BucketGrid,
+    packed: FloatArray,
+    usable: NDArray[np.bool_],
+    huber_m: float,
+    floor2: float,
+    inflation: float,
+    tol_m: float,
+    tol_rad: float,
+    well_conditioned: float,
+) -> tuple[int, int, int, float, bool, FloatArray]:
+    """Compiled :func:`_icp_loop_py`; ``pose`` is updated in place. Returns ``(status,
+    iterations done, n_matched, rmse, converged, h_scan)``."""
+    if _icp_loop is None:
+        raise RuntimeError('the numba ICP backend needs numba: pip install "dynmap-sim[fast]"')
+    has_prior = lam is not None
+    state = np.empty(4)
+    h_scan = np.zeros((3, 3))
+    status = _icp_loop(
+        px, py, pw, pose, has_prior,
+        np.ascontiguousarray(mu, dtype=np.float64) if has_prior else np.zeros(3),
+        np.ascontiguousarray(lam, dtype=np.float64) if has_prior else np.zeros((3, 3)),
+        int(max_iterations), float(radius_m), grid.cell_m, grid.x0, grid.y0, grid.nx, grid.ny,
+        grid.start, grid.order, grid.xs, grid.ys, packed, usable, float(huber_m),
+        float(floor2), float(inflation), float(tol_m), float(tol_rad), float(well_conditioned),
+        h_scan, state,
+    )  # fmt: skip
+    return int(status), int(state[0]), int(state[1]), float(state[2]), bool(state[3]), h_scan

@@ -283,3 +283,16 @@ def test_grid_knn_finds_the_kd_tree_neighbours(seed, cell):
     assert np.allclose(a.normals, b.normals, atol=1e-12)
     assert np.allclose(a.planarity, b.planarity, atol=1e-12)
     assert a.__dict__["_tree"] is None and a.tree.n == len(pts)
+
+
+@pytest.mark.parametrize("backend", BACKENDS)
+def test_rank_deficient_problem_stops_like_the_reference(backend):
+    """One straight wall, no prior: x is unconstrained, ``matrix_rank`` < 3 at once; the
+    compiled loop hands that iteration back to the rank test and stops the same way."""
+    wall = np.column_stack([np.linspace(-3, 3, 301), np.full(301, 1.0)])
+    target = PointMap(wall)
+    pts = np.column_stack([np.linspace(-1, 1, 41), np.full(41, 0.97)])
+    res = match_scan(pts, target, np.zeros(3), backend=backend)
+    ref = _reference_match(pts, target, np.zeros(3))
+    assert np.allclose(res.pose, ref, atol=1e-12)
+    assert not res.converged and res.n_matched == 41
