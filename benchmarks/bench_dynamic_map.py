@@ -6,7 +6,11 @@ Prints
 2. scans/s of the ``dynamic-map`` localizer on synthetic URG-04LX scans (683 beams) of an
    L-shaped room after one learned day (first-run SLAM + two runs), and the time of the
    offline (end-of-run / end-of-day) updates;
-3. memory per local map (Table 1: 329,400 samples, 658,800 bytes).
+3. memory per local map (Table 1: 329,400 samples, 658,800 bytes);
+4. the hot-path kernels with their two backends on the same inputs in the same run: ICP
+   (``match_scan``), ``PointMap`` construction (normals), the per-scan log-likelihoods of a
+   local map and the robust estimates of a lambda1 sub-map -- numba (extra ``fast``) against
+   numpy, with the ratio.
 """
 
 from __future__ import annotations
@@ -19,14 +23,19 @@ from pathlib import Path
 
 import numpy as np
 
+from dynmap_sim import se2
 from dynmap_sim.agent.localizer import make_localizer
+from dynmap_sim.agent.mapping.first_run import scan_points_base, voxel_downsample
+from dynmap_sim.agent.mapping.scan_matcher import PointMap, match_scan
+from dynmap_sim.agent.mapping.scan_matcher_numba import numba_available
+from dynmap_sim.agent.maps.dynamic_map import DynamicMap
 from dynmap_sim.agent.maps.local_map import LocalMap
-from dynmap_sim.agent.maps.sample_set import SampleSets
+from dynmap_sim.agent.maps.sample_set import SampleSets, robust_estimates
 from dynmap_sim.types import LaserSpec, Prior
 
 # the synthetic geometry the agent tests use (one exact ray caster, one drifting stream)
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from synthetic_scans import box, drifting_stream, polyline_path  # noqa: E402
+from synthetic_scans import box, drifting_stream, polyline_path, raycast  # noqa: E402
 
 URG = LaserSpec(
     name="urg-04lx",
@@ -176,6 +185,81 @@ def bench_memory() -> None:
     )
 
 
+def _per_call_s(fn, repeats: int) -> float:
+    fn()  # warm-up (numba: load or compile)
+    t0 = time.perf_counter()
+    for _ in range(repeats):
+        fn()
+    return (time.perf_counter() - t0) / repeats
+
+
+def bench_backends(rng: np.random.Generator, repeats: int) -> None:
+    print("4. hot-path kernels, numba backend vs numpy backend (same inputs, same run)")
+    if not numba_available():
+        print('   numba not installed (pip install "dynmap-sim[fast]"): numpy only')
+        return
+    segs = _world()
+    truth = _route()[::40]
+    scans = [raycast(p, URG.angles(), segs, URG.range_max_m) for p in truth]
+    scans = [r + rng.normal(0.0, 0.01, r.shape) for r in scans]
+    base = [scan_points_base(URG, r) for r in scans]
+    local = voxel_downsample(
+        np.concatenate([se2.transform_points(truth[k], base[k]) for k in range(6, 18)]), 0.03
+    )
+    pts = base[12][:: max(1, len(base[12]) // 400)]
+    init = truth[12] + [0.05, -0.03, 0.02]
+    prior = np.diag([400.0, 400.0, 2500.0])
+    rows = []
+    for backend in ("numpy", "numba"):
+        target = PointMap(local, backend=backend)
+        t_icp = _per_call_s(
+            lambda b=backend, t=target: match_scan(
+                pts, t, init, prior_mean=init, prior_info=prior, max_correspondence_m=0.3,
+                backend=b, huber_m=0.02,
+            ),
+            repeats,
+        )  # fmt: skip
+        t_map = _per_call_s(lambda b=backend: PointMap(local, backend=b), max(1, repeats // 4))
+        rows.append((t_icp, t_map))
+    print(
+        f"   match_scan ({len(pts)} points, {len(local)}-point local map, with prior): "
+        f"numpy {rows[0][0] * 1e3:.3f} ms, numba {rows[1][0] * 1e3:.3f} ms "
+        f"-> x{rows[0][0] / rows[1][0]:.1f}"
+    )
+    print(
+        f"   PointMap({len(local)} points): numpy {rows[0][1] * 1e3:.3f} ms, "
+        f"numba {rows[1][1] * 1e3:.3f} ms -> x{rows[0][1] / rows[1][1]:.1f}"
+    )
+    dmap = DynamicMap(max_range_m=URG.range_max_m)
+    centre = truth[12]
+    i = dmap.add_local_map(centre[:2], se2.transform_points(centre, base[12]), rng)
+    near = [truth[k] for k in range(9, 16)]
+    dmap.learn_offline(
+        [1, 2, 3, 4], np.array(near), [se2.transform_points(p, scan_points_base(URG, r))
+                                       for p, r in zip(near, scans[9:16], strict=True)], rng,
+    )  # fmt: skip
+    lm = dmap.local_maps[i]
+    scan = se2.transform_points(truth[13], base[13])[::3]
+    kw = {"sigma_min_m": 0.01, "min_outlier_ratio": 0.0}
+    t_np = _per_call_s(
+        lambda: lm.scan_log_likelihoods(range(5), scan, backend="numpy", **kw), repeats
+    )
+    t_nb = _per_call_s(
+        lambda: lm.scan_log_likelihoods(range(5), scan, backend="numba", **kw), repeats
+    )
+    print(
+        f"   LocalMap.scan_log_likelihoods ({len(scan)} readings x 5 timescales): "
+        f"numpy {t_np * 1e6:.0f} us, numba {t_nb * 1e6:.0f} us -> x{t_np / t_nb:.1f}"
+    )
+    sub = lm.sub[0]
+    t_np = _per_call_s(lambda: robust_estimates(sub.samples_mm, sub.count, "numpy"), repeats)
+    t_nb = _per_call_s(lambda: robust_estimates(sub.samples_mm, sub.count, "numba"), repeats)
+    print(
+        f"   robust_estimates of a 360 x 5 sub-map: numpy {t_np * 1e6:.0f} us, "
+        f"numba {t_nb * 1e6:.0f} us -> x{t_np / t_nb:.1f}"
+    )
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--repeats", type=int, default=200)
@@ -185,6 +269,7 @@ def main() -> None:
     bench_sample_sets(rng, args.repeats)
     bench_localizer(rng)
     bench_memory()
+    bench_backends(rng, max(10, args.repeats // 2))
 
 
 if __name__ == "__main__":
