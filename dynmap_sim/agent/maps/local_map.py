@@ -84,10 +84,15 @@ class LocalMap:
         return (np.rint(b * (n_rays / (2.0 * np.pi))).astype(np.int64)) % n_rays
 
     def ray_directions(self, level: int) -> FloatArray:
-        """Unit vectors ``(n_rays, 2)`` of the rays of sub-map ``level``."""
+        """Unit vectors ``(n_rays, 2)`` of the rays of sub-map ``level`` (cached, read-only)."""
         n = self.timescales[level].n_rays
-        a = np.arange(n) * (2.0 * np.pi / n)
-        return np.stack([np.cos(a), np.sin(a)], axis=1)
+        cache = self.__dict__.setdefault("_dirs", {})
+        if n not in cache:
+            a = np.arange(n) * (2.0 * np.pi / n)
+            dirs = np.stack([np.cos(a), np.sin(a)], axis=1)
+            dirs.flags.writeable = False
+            cache[n] = dirs
+        return cache[n]
 
     # ------------------------------------------------------------------ learning
     def learn(
@@ -225,7 +230,8 @@ class LocalMap:
 
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
-        state.pop("_stack", None)  # a cache (copies of the model tables)
+        state.pop("_stack", None)  # caches: copies of the model tables, ray directions
+        state.pop("_dirs", None)
         return state
 
     def points(self, level: int, sigma_max_m: float = 0.05) -> FloatArray:
