@@ -1,0 +1,87 @@
+"""Distance filter (Fox et al. 1999): expected ranges in a grid, short readings, and its use in
+static-mcl's recovery signal."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+from synthetic_scans import LASER, raycast
+from synthetic_scans import room_segments as room
+
+from dynmap_sim.agent.grid import OccupancyGrid
+from dynmap_sim.agent.localization.distance_filter import expected_ranges, short_readings
+from dynmap_sim.agent.localization.particle_filter import TUNED, AMCLFilter
+
+
+def test_expected_ranges_match_the_true_walls_within_a_cell():
+    segs = room()
+    grid = OccupancyGrid.from_segments(segs, free_seed_xy_m=(1, 1))
+    pose = np.array([1.2, 1.1, 0.4])
+    angles = LASER.angles()
+    truth = raycast(pose, angles, segs, LASER.range_max_m)
+    exp = expected_ranges(grid, pose, angles, LASER.range_max_m)
+    both = np.isfinite(truth) & np.isfinite(exp)
+    assert both.mean() > 0.8
+    # rasterized walls and half-cell steps: within two cells of the segment, except beams
+    # that graze a wall and enter its rasterized cells early (never later than the wall)
+    err = exp[both] - truth[both]
+    assert np.mean(np.abs(err) <= 2 * grid.resolution_m) > 0.8
+    assert np.median(np.abs(err)) <= grid.resolution_m
+    assert err.max() <= 2 * grid.resolution_m
+    # nothing to hit within the range: inf
+    far = expected_ranges(grid, pose, angles, 0.05)
+    assert np.all(np.isinf(far))
+
+
+def test_short_readings():
+    mask = short_readings([1.0, 2.0, np.inf, 0.5], [2.0, 2.1, 3.0, np.inf], margin_m=0.3)
+    assert mask.tolist() == [True, False, False, True]
+
+
+def test_a_crowd_in_front_does_not_look_like_a_kidnapping():
+    """Two beams in five cut short (people in front): with the distance filter the per-beam
+    recovery average stays where it was; without it, it falls below the ratio at which
+    ``tuned`` starts injecting random poses."""
+    segs = room()
+    grid = OccupancyGrid.from_segments(segs, free_seed_xy_m=(1, 1))
+    pose = np.array([1.2, 1.1, 0.4])
+    good = raycast(pose, LASER.angles(), segs, LASER.range_max_m)
+    crowd = good.copy()
+    used = AMCLFilter(grid, LASER, TUNED).beams  # the beams the filter looks at
+    cut = used[np.arange(len(used)) % 5 < 2]
+    crowd[cut] = np.minimum(crowd[cut], 0.6)
+    ratios = {}
+    for margin in (0.0, TUNED.recovery_distance_filter_m):
+        f = AMCLFilter(grid, LASER, replace(TUNED, recovery_distance_filter_m=margin))
+        rng = np.random.default_rng(7)
+        f.init_gaussian(pose, np.diag([0.02**2, 0.02**2, 0.01**2]), rng)
+        for _ in range(20):
+            f.correct(good)
+            f.resample(rng)
+        before = f.w_fast
+        for _ in range(20):
+            f.correct(crowd)
+            f.resample(rng)
+        ratios[margin] = f.w_fast / before
+    assert ratios[TUNED.recovery_distance_filter_m] > 0.8
+    assert ratios[0.0] < TUNED.recovery_ratio_threshold
+
+
+def test_a_scan_mostly_shorter_than_the_map_is_not_filtered():
+    """More than half of the readings short (a kidnapping into a smaller room looks like
+    that): the recovery average uses every reading."""
+    segs = room()
+    grid = OccupancyGrid.from_segments(segs, free_seed_xy_m=(1, 1))
+    pose = np.array([1.2, 1.1, 0.4])
+    f = AMCLFilter(grid, LASER, TUNED)
+    f.init_gaussian(pose, np.diag([0.02**2, 0.02**2, 0.01**2]), np.random.default_rng(0))
+    good = raycast(pose, LASER.angles(), segs, LASER.range_max_m)
+    r, a = f._beams_of(good)
+    assert len(f._recovery_beams(f.weights, r, a)) == len(r)  # nothing short
+    few = r.copy()
+    few[: len(r) // 3] = 0.3
+    assert len(f._recovery_beams(f.weights, few, a)) == len(r) - len(r) // 3
+    most = r.copy()
+    most[: 2 * len(r) // 3] = 0.3
+    assert len(f._recovery_beams(f.weights, most, a)) == len(r)
