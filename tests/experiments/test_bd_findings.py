@@ -42,7 +42,8 @@ def paper_like():
     static = series(lambda d: 1.9 - 0.05 * d, lambda d: 800 - 10 * d, lambda d: 0.2)
     stm = series(lambda d: 1.85 - 0.02 * d, lambda d: 850 - 5 * d, lambda d: 0.15)
     mcl = series(lambda d: -0.4, lambda d: 10.0, lambda d: 0.1 if d <= 5 else 0.3)
-    return dyn, {"static-map": static, "static-map+stm": stm}, ("static-mcl tuned", mcl)
+    nav2 = series(lambda d: -0.7, lambda d: 10.0, lambda d: 0.2)
+    return dyn, {"static-map": static, "static-map+stm": stm}, {"tuned": mcl, "nav2": nav2}
 
 
 WEEKS = {d: (d - 1) // 5 + 1 for d in range(1, N_DAYS + 1)}
@@ -63,7 +64,9 @@ def test_every_finding_holds_on_paper_like_series():
     }
     assert all(f.holds for f in found.values()), [f for f in found.values() if not f.holds]
     assert "above static-map on 13/13 days" in found["likelihood_above_static"].measured
-    assert "week 3: 0.100 vs 0.300 m" in found["error_below_static_mcl"].measured
+    assert "tuned: week 1: 0.100 vs 0.100 m, week 2: 0.100 vs 0.300 m" in (
+        found["error_below_static_mcl"].measured
+    )
 
 
 def test_findings_fail_when_the_data_disagree():
@@ -75,7 +78,7 @@ def test_findings_fail_when_the_data_disagree():
     late = dyn["day"] > 10
     dyn["timescale"][late & (dyn["timescale"] == 4)] = 0
     dyn["safe_mode"][:] = 0.0
-    base[1]["err_m"][:] = 0.05  # static MCL better than the dynamic map
+    base["nav2"]["err_m"][:] = 0.05  # one static MCL better than the dynamic map
     found = {f.key: f for f in evaluate_findings(dyn, statics, base, WEEKS)}
     assert not found["likelihood_above_static"].holds
     assert "above static-map+stm on 0/13 days" in found["likelihood_above_static"].measured
@@ -89,7 +92,7 @@ def test_findings_fail_when_the_data_disagree():
 def test_safe_mode_share_and_missing_baseline():
     dyn, statics, _ = paper_like()
     dyn["safe_mode"][:] = (np.arange(dyn["day"].size) % 10 == 0).astype(float)
-    found = {f.key: f for f in evaluate_findings(dyn, statics, None, WEEKS)}
+    found = {f.key: f for f in evaluate_findings(dyn, statics, {}, WEEKS)}
     assert not found["safe_mode_rare"].holds
     assert found["safe_mode_rare"].measured.startswith("10.000 %")
     assert found["error_below_static_mcl"].holds is None
