@@ -272,7 +272,7 @@ class ExperimentRunner:
         try:
             engine = self._start_localizers()
             pending: _SimRun | None = None
-            done_at = time.perf_counter()  # when the previous run was stored
+            done_at = time.perf_counter()  # when storing the previous run began
             for i in range(self.start_index, last):
                 slot = self.slots[i]
                 bar.set_postfix_str(f"day {slot.day} run {slot.run}")
@@ -281,17 +281,15 @@ class ExperimentRunner:
                 outs = engine.result() if pending is not None else None
                 engine.submit(sim.stream)
                 if pending is not None and outs is not None:
-                    self._write(pending, outs, time.perf_counter() - done_at)
-                    done_at = time.perf_counter()
+                    done_at = self._write(pending, outs, done_at)
                     bar.update(1)
                 pending = sim
                 if not engine.pipelined:
-                    self._write(pending, engine.result(), time.perf_counter() - done_at)
-                    done_at = time.perf_counter()
+                    done_at = self._write(pending, engine.result(), done_at)
                     bar.update(1)
                     pending = None
             if pending is not None:
-                self._write(pending, engine.result(), time.perf_counter() - done_at)
+                self._write(pending, engine.result(), done_at)
                 bar.update(1)
         finally:
             if engine is not None:
@@ -437,8 +435,12 @@ class ExperimentRunner:
             state_after=pickle.loads(pickle.dumps(self.state, pickle.HIGHEST_PROTOCOL)),
         )
 
-    def _write(self, sim: _SimRun, outs: list[LocalizerOutput], wall_s: float) -> None:
-        """Store a localized run with the checkpoint after it (one transaction)."""
+    def _write(self, sim: _SimRun, outs: list[LocalizerOutput], since: float) -> float:
+        """Store a localized run with the checkpoint after it (one transaction); return when
+        that began. The run's ``wall_s`` is the time since the previous run's store began
+        (so the runs' wall times add up to the experiment's, also when pipelined)."""
+        now = time.perf_counter()
+        wall_s = now - since
         i, slot, stream = sim.index, self.slots[sim.index], sim.stream
         rec = RunRecord(
             day=slot.day,
@@ -472,6 +474,7 @@ class ExperimentRunner:
             localizers=tuple(self._loc_states),
         )
         self.db.write_run(rec, run_sum, stream.last_of_day, cp, self.hash, self.seed)
+        return now
 
     @staticmethod
     def _run_summary(k: int, rec: RunRecord) -> dict[str, float]:
