@@ -214,10 +214,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``dynmap-sim``; returns the exit status."""
     args = build_parser().parse_args(argv)
     from dynmap_sim.errors import InputError
+    from dynmap_sim.experiments.workers import LocalizerError
 
     try:
         return int(args.func(args))
     except InputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    except LocalizerError as exc:  # a localizer's own bug: name it, show its traceback
+        import traceback
+
+        if exc.__cause__ is not None:  # in-process; a worker's traceback is in the message
+            traceback.print_exception(exc.__cause__, file=sys.stderr)
         print(f"error: {exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:

@@ -148,3 +148,23 @@ def test_check_runs_every_seed(capsys, tmp_path):
     assert (tmp_path / "o" / "seed-1" / "results.db").is_file()
     seeds = {line.split()[0] for line in out.splitlines()[3:] if line.strip()}
     assert seeds == {"0", "1"}
+
+
+def test_a_failing_localizer_is_named_with_its_traceback_and_exit_1(capsys, tmp_path, monkeypatch):
+    (tmp_path / "boom_loc.py").write_text(
+        "from dynmap_sim.agent.dead_reckoning import DeadReckoning\n"
+        "class Boom(DeadReckoning):\n"
+        "    def update(self, odom, scan):\n"
+        "        raise ZeroDivisionError('my localizer divides by zero')\n"
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    scn = tmp_path / "boom.toml"
+    scn.write_text(
+        f'name = "boom"\nworld = "{ROOT / "worlds" / "apartment.toml"}"\ndays = [1, 1]\n'
+        '[driver]\nmax_run_s = 2.0\n[[localizers]]\nname = "boom_loc:Boom"\nlabel = "mine"\n'
+    )
+    code, _, err = run_cli(capsys, "run", scn, "--out", tmp_path / "o", "-q", "--workers", "1")
+    assert code == 1
+    assert "error: localizer 'mine' failed on day 1 run 1 at scan 0" in err
+    assert "ZeroDivisionError: my localizer divides by zero" in err
+    assert 'boom_loc.py", line 4, in update' in err  # the plugin author sees where
