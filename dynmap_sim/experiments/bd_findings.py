@@ -214,6 +214,40 @@ def evaluate_findings(
     return out
 
 
+def exhibition_finding(mem: Any, exhibition_days: list[int]) -> Finding:
+    """Fig. 9: the exhibition in λ2/λ3 on its last day (>= 50 % of the exhibit rays), gone
+    from them three days after its removal (<= 20 %), never in λ5 (<= 30 %); ``mem`` is an
+    :class:`~dynmap_sim.experiments.exhibition.ExhibitMemory`."""
+    paper = (
+        "the exhibition enters the short timescales and fades after its removal while λ5 "
+        "stays stable (Fig. 9); here the share of the exhibit rays of the local map that sees "
+        "it best whose median is on the exhibit: λ2 or λ3 >= 50 % on its last day, both "
+        "<= 20 % three days after, λ5 <= 30 % on every day"
+    )
+    last = max(exhibition_days)
+    days = list(mem.days)
+    during = [d for d in days if min(exhibition_days) <= d <= last]
+    after = [d for d in days if d >= last + 3]
+    lv = list(mem.levels)
+    if not during or not after or not {1, 2, 4} <= set(lv):
+        return Finding("exhibition_fades", paper, "no snapshots around the exhibition", None)
+    sh = mem.share
+    d_on, d_off = days.index(during[-1]), days.index(after[0])
+    on = np.nanmax(sh[d_on, [lv.index(1), lv.index(2)]])
+    off = np.nanmax(sh[d_off, [lv.index(1), lv.index(2)]])
+    l5 = np.nanmax(sh[:, lv.index(4)])
+    measured = (
+        f"day {during[-1]}: λ2 {100 * sh[d_on, lv.index(1)]:.0f} %, "
+        f"λ3 {100 * sh[d_on, lv.index(2)]:.0f} %; day {after[0]}: "
+        f"λ2 {100 * sh[d_off, lv.index(1)]:.0f} %, λ3 {100 * sh[d_off, lv.index(2)]:.0f} %; "
+        f"λ5 at most {100 * l5:.0f} % (local map at {np.round(mem.centre, 1).tolist()}, "
+        f"{mem.n_exhibit_rays[4]} exhibit rays of 1440)"
+    )
+    return Finding(
+        "exhibition_fades", paper, measured, bool(on >= 0.5 and off <= 0.2 and l5 <= 0.3)
+    )
+
+
 def weeks_of_days(dates: dict[int, dt.date]) -> dict[int, int]:
     """1-based calendar week (Monday to Sunday) of each day, counted from the first day's."""
     first = min(dates.values())
@@ -221,8 +255,11 @@ def weeks_of_days(dates: dict[int, dt.date]) -> dict[int, int]:
     return {d: (date - monday).days // 7 + 1 for d, date in dates.items()}
 
 
-def findings_from_db(db: Any) -> list[Finding] | None:
-    """:func:`evaluate_findings` on a :class:`ResultsDB`; None without a ``dynamic-map``."""
+def findings_from_db(db: Any, exhibition: Any = None) -> list[Finding] | None:
+    """:func:`evaluate_findings` on a :class:`ResultsDB`, plus :func:`exhibition_finding`
+    when ``exhibition`` (the result of
+    :func:`~dynmap_sim.experiments.exhibition.exhibition_from_db`) is given; None without a
+    ``dynamic-map``."""
     rows = db.query("SELECT idx, label, name, params FROM localizers ORDER BY idx")
     by_name: dict[str, list[tuple[int, str, dict[str, Any]]]] = {}
     for idx, label, name, params in rows:
@@ -237,7 +274,10 @@ def findings_from_db(db: Any) -> list[Finding] | None:
     }
     baselines = {label: db.per_scan(idx) for idx, label, _ in by_name.get("static-mcl", [])}
     dates = {int(s[0]): dt.date.fromisoformat(s[2]) for s in db.meta().get("slots", [])}
-    return evaluate_findings(dyn, statics, baselines, weeks_of_days(dates))
+    out = evaluate_findings(dyn, statics, baselines, weeks_of_days(dates))
+    if exhibition is not None:
+        out.append(exhibition_finding(exhibition[0], exhibition[3]))
+    return out
 
 
 def write_findings(findings: list[Finding], out_dir: Path) -> list[Path]:

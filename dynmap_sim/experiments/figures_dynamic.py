@@ -7,8 +7,9 @@
 * Fig. 13 — daily usage frequency of λ1 (short-term) and λ5 (most long-term).
 
 ``write_dynamic_figures(out_dir)`` reads ``results.db`` of an experiment folder and writes
-``dyn_likelihood_per_day.png``, ``dyn_lambda_min_per_day.png``, ``dyn_timescale_usage.png``
-and ``dyn_timescale_trend.png`` (only for localizers that report these extras). The
+``dyn_likelihood_per_day.png``, ``dyn_lambda_min_per_day.png``, and per localizer
+``dyn_timescale_usage_<label>.png`` and ``dyn_timescale_trend_<label>.png`` (only for
+localizers that report these extras). The
 aggregations are pure functions over arrays, tested on their own.
 """
 

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from dynmap_sim.experiments.bd_findings import Finding, findings_from_db, write_findings
+from dynmap_sim.experiments.exhibition import exhibition_from_db, plot_exhibition
 from dynmap_sim.experiments.figures_dynamic import write_dynamic_figures
 from dynmap_sim.experiments.results import ResultsDB
 from dynmap_sim.metrics import ate, class_scores, lost_stats, rpe
@@ -351,42 +352,6 @@ def _fig_likelihood(db: ResultsDB, path: Path) -> Path | None:
     return path
 
 
-def _fig_timescales(db: ResultsDB, path: Path) -> Path | None:
-    """Share of scans per chosen timescale and day (cf. B&D Figs. 12-13)."""
-    import matplotlib.pyplot as plt
-
-    rows = db.query(
-        "SELECT loc, day, timescale, count(*) FROM estimates WHERE timescale IS NOT NULL "
-        "GROUP BY loc, day, timescale ORDER BY loc, day, timescale"
-    )
-    if not rows:
-        return None
-    labels = db.labels()
-    locs = sorted({int(r[0]) for r in rows})
-    fig, axes = plt.subplots(len(locs), 1, figsize=(8, 2.8 * len(locs)), squeeze=False)
-    for ax, k in zip(axes[:, 0], locs, strict=True):
-        mine = [r for r in rows if int(r[0]) == k]
-        days = sorted({int(r[1]) for r in mine})
-        levels = sorted({int(r[2]) for r in mine})
-        share = np.zeros((len(levels), len(days)))
-        for _, day, lev, n in mine:
-            share[levels.index(int(lev)), days.index(int(day))] = n
-        share /= np.maximum(share.sum(axis=0, keepdims=True), 1)
-        bottom = np.zeros(len(days))
-        for j, lev in enumerate(levels):
-            name = "none" if lev < 0 else f"λ{lev + 1}"
-            ax.bar(days, share[j], bottom=bottom, label=name)
-            bottom += share[j]
-        ax.set_title(f"{labels[k]}: chosen timescale per day", fontsize="small")
-        ax.set_ylabel("share of scans")
-        ax.legend(fontsize="x-small", ncol=6)
-    axes[-1, 0].set_xlabel("day")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
-
-
 def write_report(out_dir: str | Path) -> list[Path]:
     """Write figures, ``summary.md`` and ``per_day.csv`` into a results folder."""
     import matplotlib
@@ -407,12 +372,13 @@ def write_report(out_dir: str | Path) -> list[Path]:
         lik = _fig_likelihood(db, out / "likelihood_certainty.png")
         if lik is not None:
             figs.append(lik)
-        ts = _fig_timescales(db, out / "timescale_usage.png")
-        if ts is not None:
-            figs.append(ts)
         # B&D Figs. 10-13 per day and overall, for localizers that report those values
         figs += write_dynamic_figures(out)
-        findings = findings_from_db(db)  # B&D §5 claims, when a dynamic-map ran
+        exhibition = exhibition_from_db(db)  # B&D Fig. 9, when a dynamic-map saw one
+        if exhibition is not None:
+            mem, snaps, geom, ex_days = exhibition
+            figs.append(plot_exhibition(mem, snaps, geom, ex_days, out / "exhibition.png"))
+        findings = findings_from_db(db, exhibition)  # B&D §5 claims, when a dynamic-map ran
         if findings is not None:
             written += write_findings(findings, out)
         written.append(_summary_md(db, out / "summary.md", figs, findings))

@@ -128,6 +128,17 @@ def test_dynamic_map_adapts_to_a_change_and_static_map_stays_frozen(learned):
     assert np.array_equal(lm["static-map"][0].samples_mm, snap["static-map"][0])
     # B&D Fig. 10: after the change the dynamic map explains the scans better than the snapshot
     assert res["dynamic-map"][-1] > res["static-map"][-1]
+    # the map's own history: a λ2-λ5 snapshot after each learning day (day 1 and day 2);
+    # the frozen variants only have the one of the day they froze on
+    days = [d for d, _ in locs["dynamic-map"].day_snapshots]
+    assert days == [1, 2]
+    assert [d for d, _ in locs["static-map"].day_snapshots] == [1]
+    first, second = (s for _, s in locs["dynamic-map"].day_snapshots)
+    assert len(second.centres) >= len(first.centres)
+    assert any(
+        not np.array_equal(a[: len(b)], b)
+        for a, b in zip(second.medians_mm, first.medians_mm, strict=True)
+    )  # the changed world entered the long-term memory
 
 
 def test_bad_mode_is_rejected():

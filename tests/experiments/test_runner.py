@@ -193,10 +193,11 @@ def test_report_with_extras_and_point_classes(tmp_path):
     scn = scenario(tmp_path, days=[1, 2])
     run(scn, tmp_path / "o")
     names = {p.name for p in write_report(tmp_path / "o")}
-    assert {"likelihood_certainty.png", "timescale_usage.png", "summary.md"} <= names
+    assert {"likelihood_certainty.png", "summary.md"} <= names
     # B&D Figs. 10-13 per day, for the localizer that reports likelihood and timescales
     assert {"dyn_likelihood_per_day.png", "dyn_lambda_min_per_day.png"} <= names
     assert any(n.startswith("dyn_timescale_trend_") for n in names)
+    assert any(n.startswith("dyn_timescale_usage_") for n in names)
     with (tmp_path / "o" / "per_day.csv").open() as fh:
         rows = [r for r in csv.DictReader(fh) if r["localizer"] == "rec"]
     assert [float(r["mean_scan_loglik"]) for r in rows] == [-1.5, -1.5]

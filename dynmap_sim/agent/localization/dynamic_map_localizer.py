@@ -52,7 +52,7 @@ from dynmap_sim.agent.localizer import Localizer, register_localizer
 from dynmap_sim.agent.mapping.first_run import BeamDirections, FirstRunMapper, scan_points_base
 from dynmap_sim.agent.mapping.scan_matcher import MatchResult, PointMap, match_scan
 from dynmap_sim.agent.maps.current_map import CurrentMap, SynthesisParams, synthesize_current_map
-from dynmap_sim.agent.maps.dynamic_map import DynamicMap
+from dynmap_sim.agent.maps.dynamic_map import DynamicMap, MapSnapshot
 from dynmap_sim.agent.maps.local_map import TABLE1
 from dynmap_sim.agent.maps.sample_set import to_mm
 from dynmap_sim.types import FloatArray, LaserSpec, Odometry, PoseEstimate, Prior, Scan
@@ -110,6 +110,7 @@ class DynamicMapLocalizer(Localizer):
         min_update_dist_m: float = 0.0,
         min_update_angle_rad: float = 0.0,
         ltm_day_scans_per_run: int = 1500,
+        day_snapshots: bool = True,
         **params: Any,
     ) -> None:
         super().__init__(laser, rng, **params)
@@ -162,6 +163,11 @@ class DynamicMapLocalizer(Localizer):
         self._day_ranges: list[np.ndarray] = []
         self.n_scans = 0
         self.n_safe_mode = 0
+        #: (day, MapSnapshot of λ2–λ5) after each day's offline learning, while learning:
+        #: the map's own history, for figures like B&D Fig. 9 (~0.5 MB a day in the lab)
+        self.keep_day_snapshots = bool(day_snapshots)
+        self.day_snapshots: list[tuple[int, MapSnapshot]] = []
+        self._day = 0
 
     # ------------------------------------------------------------------ pickling
     def __getstate__(self) -> dict[str, Any]:
@@ -198,6 +204,7 @@ class DynamicMapLocalizer(Localizer):
             else np.asarray(prior.initial_pose_cov, dtype=np.float64).copy()
         )
         self._last_odom = None
+        self._day = int(prior.day)
         self._cmap_points = np.zeros((0, 2))
         self._cmap = None
         self._run_poses, self._run_ranges = [], []
@@ -388,6 +395,8 @@ class DynamicMapLocalizer(Localizer):
             self.dmap.learn_offline(
                 self.dmap.levels("day"), np.array(self._day_poses), pts, self.rng
             )
+            if self.__dict__.get("keep_day_snapshots", False):
+                self.day_snapshots.append((self._day, self.dmap.snapshot()))
         self._day_poses, self._day_ranges = [], []
         self.days_done += 1
         if self.mode != "dynamic" and self.days_done >= self.freeze_after_day:

@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -19,6 +20,27 @@ from numpy.typing import ArrayLike, NDArray
 from dynmap_sim.agent.maps.local_map import TABLE1, LocalMap, Timescale
 
 FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class MapSnapshot:
+    """The long-term sub-maps of every local map at one moment, compact (B&D Figs. 7, 9):
+    ``medians_mm[k]`` is ``(L, n_rays of levels[k])`` uint16, the median range of each ray
+    of each local map (0: no estimate or ``σ > sigma_max_m``); ``centres`` ``(L, 2)`` [m]."""
+
+    centres: FloatArray
+    levels: tuple[int, ...]
+    medians_mm: tuple[NDArray[np.uint16], ...]
+    sigma_max_m: float
+
+    def points(self, local_map: int, level: int) -> FloatArray:
+        """Map-frame points ``(N, 2)`` of one local map's sub-map ``level``."""
+        mm = self.medians_mm[self.levels.index(level)][local_map]
+        n = len(mm)
+        th = np.arange(n) * (2.0 * np.pi / n)  # ray j at j 2π/n (LocalMap.ray_index)
+        ok = mm > 0
+        r = mm[ok].astype(np.float64) / 1000.0
+        return self.centres[local_map] + r[:, None] * np.column_stack([np.cos(th), np.sin(th)])[ok]
 
 
 class DynamicMap:
@@ -48,6 +70,19 @@ class DynamicMap:
     def levels(self, interval: str) -> list[int]:
         """Indices of the timescales updated at ``interval`` ("always", "run", "day")."""
         return [i for i, ts in enumerate(self.timescales) if ts.interval == interval]
+
+    def snapshot(
+        self, levels: Sequence[int] = (1, 2, 3, 4), sigma_max_m: float = 0.10
+    ) -> MapSnapshot:
+        """The sub-maps ``levels`` (default λ2–λ5) of every local map as ray medians."""
+        lv = tuple(int(v) for v in levels)
+        meds = tuple(
+            np.array([lm.median_ranges_mm(v, sigma_max_m) for lm in self.local_maps]).reshape(
+                len(self.local_maps), self.timescales[v].n_rays
+            )
+            for v in lv
+        )
+        return MapSnapshot(self.centres.copy(), lv, meds, float(sigma_max_m))
 
     def near(self, xy: ArrayLike, radius_m: float) -> NDArray[np.int64]:
         """Indices of local maps with centres within ``radius_m`` of ``xy``, nearest first."""

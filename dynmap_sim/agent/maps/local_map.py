@@ -240,6 +240,14 @@ class LocalMap:
         ok = (est.count > 0) & (est.sigma_m <= sigma_max_m)
         return self.centre + est.rho_m[ok, None] * self.ray_directions(level)[ok]
 
+    def median_ranges_mm(self, level: int, sigma_max_m: float = 0.10) -> NDArray[np.uint16]:
+        """Median range [mm] of every ray of sub-map ``level``, 0 where the ray has no
+        samples or ``σ > sigma_max_m`` (a compact form of :meth:`points`, for snapshots)."""
+        est = self.sub[level].estimates()
+        ok = (est.count > 0) & (est.sigma_m <= sigma_max_m)
+        mm = np.clip(np.rint(est.rho_m * 1000.0), 1, 65535)
+        return np.where(ok, mm, 0).astype(np.uint16)
+
     # ------------------------------------------------------------------ memory
     @property
     def n_samples_capacity(self) -> int:

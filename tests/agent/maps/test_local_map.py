@@ -145,3 +145,19 @@ def test_compiled_scan_log_likelihoods_agree_with_numpy(room, scan_fn):
         b = lm.scan_log_likelihoods([0, 1, 2, 3, 4], pts, backend="numpy", **kw)
         assert np.allclose(a, b, rtol=1e-12, atol=1e-12)
         dmap.learn_online(pose, pts, rng, levels=[0])
+
+
+def test_snapshot_points_are_the_sub_map_medians(room, scan_fn):
+    """A day snapshot (uint16 mm medians of λ2–λ5) reproduces LocalMap.points within 1 mm."""
+    rng = np.random.default_rng(3)
+    dmap, _ = _trained_map(room, scan_fn, rng, n=3)
+    dmap.add_local_map(np.array([4.5, 1.5]), scan_fn(np.array([4.5, 1.5, 0.0]), room, rng), rng)
+    snap = dmap.snapshot(sigma_max_m=0.10)
+    assert snap.levels == (1, 2, 3, 4) and snap.centres.shape == (2, 2)
+    for level in snap.levels:
+        assert snap.medians_mm[snap.levels.index(level)].shape == (2, TABLE1[level].n_rays)
+        for i, lm in enumerate(dmap.local_maps):
+            want = lm.points(level, 0.10)
+            got = snap.points(i, level)
+            assert got.shape == want.shape and len(got) > 0
+            assert np.abs(got - want).max() < 1e-3
