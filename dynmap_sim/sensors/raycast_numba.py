@@ -13,20 +13,12 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
+from dynmap_sim.jit import compiled, require_numba
+from dynmap_sim.jit import numba_available as numba_available  # re-exported
 from dynmap_sim.sensors.raycast import SegmentCache
-
-try:  # pragma: no cover - depends on the optional extra
-    import numba
-except ImportError:  # pragma: no cover
-    numba = None
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-
-
-def numba_available() -> bool:
-    """True when numba is installed (the ``fast`` extra)."""
-    return numba is not None
 
 
 def _kernel_py(
@@ -125,7 +117,7 @@ def _kernel_py(
             hit[b] = -1
 
 
-_kernel = numba.njit(cache=True, nogil=True)(_kernel_py) if numba is not None else None
+_kernel = compiled(_kernel_py)
 
 
 def cast_scan_numba(
@@ -143,8 +135,7 @@ def cast_scan_numba(
 
     ``u_l`` (the numpy caster's complex beam directions) is accepted and ignored.
     """
-    if _kernel is None:
-        raise RuntimeError('the numba backend needs numba: pip install "dynmap-sim[fast]"')
+    require_numba("backend")
     n = cos_l.shape[0]
     ranges = np.empty(n)
     hit = np.empty(n, dtype=np.int64)

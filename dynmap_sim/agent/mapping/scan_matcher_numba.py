@@ -20,18 +20,11 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-try:  # pragma: no cover - depends on the optional extra
-    import numba
-except ImportError:  # pragma: no cover
-    numba = None
+from dynmap_sim.jit import compiled, require_numba
+from dynmap_sim.jit import numba_available as numba_available  # re-exported
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-
-
-def numba_available() -> bool:
-    """True when numba is installed (the ``fast`` extra)."""
-    return numba is not None
 
 
 @dataclass(frozen=True)
@@ -171,7 +164,7 @@ def _icp_terms_py(
     return n_matched
 
 
-_icp_terms = numba.njit(cache=True, nogil=True)(_icp_terms_py) if numba is not None else None
+_icp_terms = compiled(_icp_terms_py)
 
 
 def icp_terms(
@@ -190,8 +183,7 @@ def icp_terms(
     out: FloatArray,
 ) -> int:
     """Compiled :func:`_icp_terms_py` on a :class:`BucketGrid` (``grid.cell_m >= radius_m``)."""
-    if _icp_terms is None:
-        raise RuntimeError('the numba ICP backend needs numba: pip install "dynmap-sim[fast]"')
+    require_numba("ICP backend")
     return int(
         _icp_terms(
             px,
@@ -297,7 +289,7 @@ def _knn_py(
             out[src, t] = best_j[t]
 
 
-_knn = numba.njit(cache=True, nogil=True)(_knn_py) if numba is not None else None
+_knn = compiled(_knn_py)
 
 
 def knn_indices(grid: BucketGrid, k: int) -> IntArray:
@@ -305,8 +297,7 @@ def knn_indices(grid: BucketGrid, k: int) -> IntArray:
 
     Needs numba. ``k`` must not exceed the number of points.
     """
-    if _knn is None:
-        raise RuntimeError('the numba kNN backend needs numba: pip install "dynmap-sim[fast]"')
+    require_numba("kNN backend")
     out = np.empty((len(grid.xs), k), dtype=np.int64)
     _knn(k, grid.cell_m, grid.x0, grid.y0, grid.nx, grid.ny, grid.start, grid.order, grid.xs,
          grid.ys, out)  # fmt: skip
@@ -341,7 +332,7 @@ def _condition3_py(h: FloatArray) -> float:
     return lo / hi if hi > 0.0 else 0.0
 
 
-_condition3 = numba.njit(cache=True, nogil=True)(_condition3_py) if numba is not None else None
+_condition3 = compiled(_condition3_py)
 
 
 def _icp_loop_py(
@@ -453,7 +444,7 @@ def _icp_loop_py(
     return status
 
 
-_icp_loop = numba.njit(cache=True, nogil=True)(_icp_loop_py) if numba is not None else None
+_icp_loop = compiled(_icp_loop_py)
 
 
 def icp_loop(
@@ -477,8 +468,7 @@ def icp_loop(
 ) -> tuple[int, int, int, float, bool, FloatArray]:
     """Compiled :func:`_icp_loop_py`; ``pose`` is updated in place. Returns ``(status,
     iterations done, n_matched, rmse, converged, h_scan)``."""
-    if _icp_loop is None:
-        raise RuntimeError('the numba ICP backend needs numba: pip install "dynmap-sim[fast]"')
+    require_numba("ICP backend")
     has_prior = lam is not None
     state = np.empty(4)
     h_scan = np.zeros((3, 3))

@@ -15,18 +15,11 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-try:  # pragma: no cover - depends on the optional extra
-    import numba
-except ImportError:  # pragma: no cover
-    numba = None
+from dynmap_sim.jit import compiled, require_numba
+from dynmap_sim.jit import numba_available as numba_available  # re-exported
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-
-
-def numba_available() -> bool:
-    """True when numba is installed (the ``fast`` extra)."""
-    return numba is not None
 
 
 def _scan_loglik_py(
@@ -60,7 +53,7 @@ def _scan_loglik_py(
             out[b, i] = math.log(p) if p > 0.0 else -math.inf
 
 
-_scan_loglik = numba.njit(cache=True, nogil=True)(_scan_loglik_py) if numba is not None else None
+_scan_loglik = compiled(_scan_loglik_py)
 
 
 def scan_log_likelihoods(
@@ -72,8 +65,7 @@ def scan_log_likelihoods(
     max_range_m: float,
 ) -> FloatArray:
     """``(len(offsets), N)`` log-likelihoods of map-frame points (compiled; needs numba)."""
-    if _scan_loglik is None:
-        raise RuntimeError('the numba backend needs numba: pip install "dynmap-sim[fast]"')
+    require_numba("backend")
     out = np.empty((len(offsets), len(points_map)))
     _scan_loglik(
         np.ascontiguousarray(points_map[:, 0]),

@@ -12,15 +12,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-try:  # pragma: no cover - depends on the optional extra
-    import numba
-except ImportError:  # pragma: no cover
-    numba = None
-
-
-def numba_available() -> bool:
-    """True when numba is installed (the ``fast`` extra)."""
-    return numba is not None
+from dynmap_sim.jit import compiled, require_numba
+from dynmap_sim.jit import numba_available as numba_available  # re-exported
 
 
 def _robust_rows_py(
@@ -72,15 +65,14 @@ def _robust_rows_py(
         outlier[r] = n_out / c
 
 
-_robust_rows = numba.njit(cache=True, nogil=True)(_robust_rows_py) if numba is not None else None
+_robust_rows = compiled(_robust_rows_py)
 
 
 def robust_rows(
     samples_mm: NDArray[np.uint16], count: NDArray[np.int64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """``(rho_m, sigma_m, outlier_ratio)`` of every row, compiled (needs numba)."""
-    if _robust_rows is None:
-        raise RuntimeError('the numba backend needs numba: pip install "dynmap-sim[fast]"')
+    require_numba("backend")
     n_rays = samples_mm.shape[0]
     rho, sig, out = np.empty(n_rays), np.empty(n_rays), np.empty(n_rays)
     _robust_rows(np.ascontiguousarray(samples_mm), count, rho, sig, out)
