@@ -87,7 +87,7 @@ def _compare_daily(
         name,
         f"the dynamic map's daily {what} above the static variants' (Figs. 10-11), "
         f"here on >= {DAY_SHARE:.0%} of the days from day {first_day}",
-        "; ".join(parts),
+        "; ".join(parts) or "no static variant ran",
         ok if n_compared else None,
     )
 
@@ -280,18 +280,21 @@ def findings_from_db(db: Any, exhibition: Any = None) -> list[Finding] | None:
     return out
 
 
+def findings_table(findings: list[Finding], paper: bool = True) -> list[str]:
+    """Markdown table lines: finding, (what the paper says,) measured, holds."""
+    head = ["finding", *(["the paper"] if paper else []), "measured here", "holds"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for f in findings:
+        holds = "n/a" if f.holds is None else ("yes" if f.holds else "**no**")
+        cells = [f"`{f.key}`", *([f.paper] if paper else []), f.measured, holds]
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines
+
+
 def write_findings(findings: list[Finding], out_dir: Path) -> list[Path]:
     """``findings.md`` (a table) and ``findings.json`` in ``out_dir``."""
     md = out_dir / "findings.md"
-    lines = [
-        "# Biber & Duckett §5 findings on this experiment",
-        "",
-        "| finding | the paper | measured here | holds |",
-        "|---|---|---|---|",
-    ]
-    for f in findings:
-        holds = "n/a" if f.holds is None else ("yes" if f.holds else "**no**")
-        lines.append(f"| `{f.key}` | {f.paper} | {f.measured} | {holds} |")
+    lines = ["# Biber & Duckett §5 findings on this experiment", "", *findings_table(findings)]
     md.write_text("\n".join(lines) + "\n")
     js = out_dir / "findings.json"
     js.write_text(json.dumps([asdict(f) for f in findings], indent=1, ensure_ascii=False) + "\n")

@@ -14,7 +14,12 @@ from typing import Any
 
 import numpy as np
 
-from dynmap_sim.experiments.bd_findings import Finding, findings_from_db, write_findings
+from dynmap_sim.experiments.bd_findings import (
+    Finding,
+    findings_from_db,
+    findings_table,
+    write_findings,
+)
 from dynmap_sim.experiments.exhibition import exhibition_from_db, plot_exhibition
 from dynmap_sim.experiments.figures_dynamic import write_dynamic_figures
 from dynmap_sim.experiments.results import ResultsDB
@@ -205,12 +210,8 @@ def _summary_md(
             "",
             "## Biber & Duckett §5 findings (also in findings.md / findings.json)",
             "",
-            "| finding | measured here | holds |",
-            "|---|---|---|",
+            *findings_table(findings, paper=False),
         ]
-        for f in findings:
-            holds = "n/a" if f.holds is None else ("yes" if f.holds else "**no**")
-            lines.append(f"| `{f.key}` | {f.measured} | {holds} |")
     events = db.query("SELECT kind, count(*) FROM events GROUP BY kind ORDER BY kind")
     if events:
         lines += ["", "## Events", ""]
