@@ -115,6 +115,11 @@ def write_dynamic_figures(out_dir: str | Path) -> list[Path]:
     with ResultsDB.open(out) as db:
         labels = db.labels()
         data = [(label, db.per_scan(k)) for k, label in enumerate(labels)]
+    # Figs. 10-11 compare sample-based maps under their own perceptual model (eq. 6-8):
+    # only localizers that select timescales; static MCL's likelihood field is another scale.
+    data = [
+        (lb, d) for lb, d in data if np.any(np.isfinite(d["timescale"]) & (d["timescale"] >= 0))
+    ]
     lik = [(lb, *daily_means(d["day"], d["scan_loglik"])) for lb, d in data]
     lik = [s for s in lik if len(s[1])]
     if lik:
