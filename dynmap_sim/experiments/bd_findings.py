@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dynmap_sim.experiments.figures_dynamic import daily_means, timescale_usage_per_day
+from dynmap_sim.experiments.figures_dynamic import daily_means
 
 #: Share of days (after the first ones) on which the dynamic map must beat a static variant.
 DAY_SHARE = 0.8
@@ -98,6 +98,7 @@ def evaluate_findings(
     baselines: dict[str, dict[str, NDArray[Any]]],
     week_of_day: dict[int, int],
     first_day: int = 3,
+    selections: tuple[NDArray[np.integer], NDArray[np.integer]] | None = None,
 ) -> list[Finding]:
     """Check the §5 findings on per-scan arrays.
 
@@ -107,6 +108,8 @@ def evaluate_findings(
     static variants to their series, ``baselines`` labels of static MCL runs to theirs,
     ``week_of_day`` the 1-based week of every day. ``first_day``: the comparisons of
     Figs. 10–11 start there (the maps of day 1 are the static maps themselves).
+    ``selections``: days and ``(n_days, 5)`` counts of every timescale selection (what
+    Figs. 12–13 count); without them the first selection of each scan stands in.
     """
     out = [
         _compare_daily("likelihood_above_static", "scan_loglik", dynamic, statics, first_day),
@@ -133,20 +136,32 @@ def evaluate_findings(
             ok_trend,
         )
     )
-    ts = dynamic["timescale"]
-    valid = np.isfinite(ts) & (ts >= 0)
-    counts = np.bincount(ts[valid].astype(int), minlength=5)[:5].astype(float)
+    if selections is not None and len(selections[0]):
+        days, day_counts = selections  # every selection of every scan (Fig. 12's count)
+        what = "every selection"
+    else:  # results without selection counts: the first (best) selection of each scan
+        ts = dynamic["timescale"]
+        valid = np.isfinite(ts) & (ts >= 0)
+        days = np.unique(dynamic["day"][valid])
+        day_counts = np.array(
+            [
+                np.bincount(ts[valid & (dynamic["day"] == d)].astype(int), minlength=5)[:5]
+                for d in days
+            ]
+        ).reshape(len(days), 5)
+        what = "first selection of each scan"
+    counts = day_counts.sum(axis=0).astype(float)
     share = counts / max(counts.sum(), 1.0)
     out.append(
         Finding(
             "all_timescales_used",
             f"each timescale was actually used (Fig. 12), here >= {MIN_TIMESCALE_SHARE:.0%} each",
-            ", ".join(f"λ{i + 1} {100 * v:.1f} %" for i, v in enumerate(share)),
-            bool(valid.any() and np.all(share >= MIN_TIMESCALE_SHARE)),
+            ", ".join(f"λ{i + 1} {100 * v:.1f} %" for i, v in enumerate(share)) + f" ({what})",
+            bool(counts.sum() > 0 and np.all(share >= MIN_TIMESCALE_SHARE)),
         )
     )
     # Fig. 13's trends from day 2: day 1 maps the building, so its choices are special.
-    days, usage = timescale_usage_per_day(dynamic["day"], ts)
+    usage = day_counts / np.maximum(day_counts.sum(axis=1, keepdims=True), 1)
     usage, days = usage[days >= 2], days[days >= 2]
     s1 = _slope_per_day(days, usage[:, 0]) if len(days) else float("nan")
     s5 = _slope_per_day(days, usage[:, 4]) if len(days) else float("nan")
@@ -274,7 +289,8 @@ def findings_from_db(db: Any, exhibition: Any = None) -> list[Finding] | None:
     }
     baselines = {label: db.per_scan(idx) for idx, label, _ in by_name.get("static-mcl", [])}
     dates = {int(s[0]): dt.date.fromisoformat(s[2]) for s in db.meta().get("slots", [])}
-    out = evaluate_findings(dyn, statics, baselines, weeks_of_days(dates))
+    sel = db.timescale_counts_per_day(by_name["dynamic-map"][0][0])
+    out = evaluate_findings(dyn, statics, baselines, weeks_of_days(dates), selections=sel)
     if exhibition is not None:
         out.append(exhibition_finding(exhibition[0], exhibition[3]))
     return out

@@ -3,7 +3,8 @@
 * Fig. 10 — average likelihood of a range reading per day (we store the mean per-reading
   log-likelihood ``scan_loglik``; the figure shows its daily mean), per localizer;
 * Fig. 11 — certainty: daily mean of ``λ_min`` of the inverse covariance, per localizer;
-* Fig. 12 — relative frequency with which each timescale was selected, overall;
+* Fig. 12 — relative frequency with which each timescale was selected, overall (every
+  selection of every scan, from the ``timescale_counts`` table);
 * Fig. 13 — daily usage frequency of λ1 (short-term) and λ5 (most long-term).
 
 ``write_dynamic_figures(out_dir)`` reads ``results.db`` of an experiment folder and writes
@@ -115,6 +116,10 @@ def write_dynamic_figures(out_dir: str | Path) -> list[Path]:
     with ResultsDB.open(out) as db:
         labels = db.labels()
         data = [(label, db.per_scan(k)) for k, label in enumerate(labels)]
+        selections = [db.timescale_counts_per_day(k) for k in range(len(labels))]
+    # Figs. 12-13 count every selection; results without those counts fall back to the
+    # first selection of each scan.
+    sel_of = dict(zip(labels, selections, strict=True))
     # Figs. 10-11 compare sample-based maps under their own perceptual model (eq. 6-8):
     # only localizers that select timescales; static MCL's likelihood field is another scale.
     data = [
@@ -147,12 +152,16 @@ def write_dynamic_figures(out_dir: str | Path) -> list[Path]:
         if not np.any(np.isfinite(d["timescale"]) & (d["timescale"] >= 0)):
             continue
         safe = label.replace("/", "_").replace(" ", "_")
+        days, counts = sel_of[label]
+        if len(days):
+            overall = counts.sum(axis=0) / max(int(counts.sum()), 1)
+            usage = counts / np.maximum(counts.sum(axis=1, keepdims=True), 1)
+        else:
+            overall = timescale_usage(d["timescale"])
+            days, usage = timescale_usage_per_day(d["day"], d["timescale"])
         written.append(
-            plot_timescale_usage(
-                label, timescale_usage(d["timescale"]), out / f"dyn_timescale_usage_{safe}.png"
-            )
+            plot_timescale_usage(label, overall, out / f"dyn_timescale_usage_{safe}.png")
         )
-        days, usage = timescale_usage_per_day(d["day"], d["timescale"])
         written.append(
             plot_timescale_trend(label, days, usage, out / f"dyn_timescale_trend_{safe}.png")
         )

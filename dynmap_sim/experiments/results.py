@@ -10,6 +10,8 @@
 * ``runs``, ``run_summaries``, ``day_summaries`` — per-run and per-day summaries;
 * ``events`` — driver and experiment events (skipped waypoints, detours, kidnappings);
 * ``point_classes`` — per run and localizer, the 4x4 point-class confusion matrix;
+* ``timescale_counts`` — per run and localizer, how often each timescale λ1–λ5 was selected
+  (every selection of every scan, B&D Fig. 12);
 * ``geometry`` — the static segments of each run's world (for report figures);
 * ``checkpoint`` — the pickled driver and RNG states, the next run to do, the scenario hash,
   the names and SHA-256 digests of the localizer files, and a SHA-256 of the blob, so a
@@ -74,12 +76,17 @@ CREATE TABLE IF NOT EXISTS events (
     day INTEGER, run INTEGER, step INTEGER, t_s REAL, kind TEXT, detail TEXT);
 CREATE TABLE IF NOT EXISTS point_classes (
     loc INTEGER, day INTEGER, run INTEGER, confusion BLOB, PRIMARY KEY (loc, day, run));
+CREATE TABLE IF NOT EXISTS timescale_counts (
+    loc INTEGER, day INTEGER, run INTEGER, counts BLOB, PRIMARY KEY (loc, day, run));
 CREATE TABLE IF NOT EXISTS geometry (
     day INTEGER, run INTEGER, segments BLOB, segment_class BLOB, PRIMARY KEY (day, run));
 CREATE TABLE IF NOT EXISTS checkpoint (
     id INTEGER PRIMARY KEY CHECK (id = 1), next_index INTEGER, next_day INTEGER,
     next_run INTEGER, scenario_hash TEXT, seed INTEGER, sha256 TEXT, blob BLOB, created TEXT);
 """
+
+#: Timescales of Biber & Duckett's Table 1 (λ1-λ5), the length of ``timescale_counts`` rows.
+N_TIMESCALES = 5
 
 #: Per-scan extras a localizer may report, stored as columns of ``estimates``.
 EXTRA_COLUMNS = ("scan_loglik", "lambda_min", "timescale", "safe_mode")
@@ -112,6 +119,7 @@ class RunRecord:
     segments: NDArray[np.float64] | None = None
     segment_class: NDArray[np.int8] | None = None
     update_s: NDArray[np.float64] | None = None  # (L,) wall time spent in each update()
+    timescale_counts: NDArray[np.int64] | None = None  # (L, 5) selections of each timescale
 
 
 @dataclass(frozen=True)
@@ -222,7 +230,14 @@ class ResultsDB:
         with self.con:
             # a run that was written before a crash (cannot happen with one transaction, but
             # a resumed experiment may redo a run whose checkpoint was older) is replaced
-            for table in ("scans", "estimates", "run_summaries", "point_classes", "geometry"):
+            for table in (
+                "scans",
+                "estimates",
+                "run_summaries",
+                "point_classes",
+                "timescale_counts",
+                "geometry",
+            ):
                 self.con.execute(f"DELETE FROM {table} WHERE day=? AND run=?", (d, r))
             self.con.execute("DELETE FROM runs WHERE day=? AND run=?", (d, r))
             self.con.execute("DELETE FROM events WHERE day=? AND run=?", (d, r))
@@ -257,6 +272,12 @@ class ResultsDB:
                     "INSERT INTO point_classes VALUES (?,?,?,?)",
                     (k, d, r, np.ascontiguousarray(rec.confusion[k], dtype="<i8").tobytes()),
                 )
+                if rec.timescale_counts is not None and rec.timescale_counts[k].any():
+                    counts = np.ascontiguousarray(rec.timescale_counts[k], dtype="<i8")
+                    self.con.execute(
+                        "INSERT INTO timescale_counts VALUES (?,?,?,?)",
+                        (k, d, r, counts.tobytes()),
+                    )
             self.con.execute(
                 "INSERT INTO runs VALUES (?,?,?,?,?,?,?,?,?,?,?)",
                 (
@@ -448,6 +469,19 @@ class ResultsDB:
             "timescale": a[:, 14],
             "safe_mode": a[:, 15],
         }
+
+    def timescale_counts_per_day(self, loc: int) -> tuple[np.ndarray, np.ndarray]:
+        """Days and ``(n_days, 5)`` counts of every timescale selection of localizer ``loc``
+        (empty when it selected none, or the results predate these counts)."""
+        per_day: dict[int, np.ndarray] = {}
+        for day, blob in self.con.execute(
+            "SELECT day, counts FROM timescale_counts WHERE loc=? ORDER BY day, run", (loc,)
+        ):
+            c = np.frombuffer(blob, dtype="<i8")
+            per_day[int(day)] = per_day.get(int(day), np.zeros_like(c)) + c
+        days = np.array(sorted(per_day), dtype=int)
+        counts = np.array([per_day[d] for d in days], dtype=np.int64)
+        return days, counts.reshape(len(days), N_TIMESCALES)
 
     def geometry(self, day: int, run: int) -> tuple[np.ndarray, np.ndarray] | None:
         row = self.con.execute(

@@ -462,6 +462,7 @@ class ExperimentRunner:
             segments=sim.segments,
             segment_class=sim.segment_class,
             update_s=np.array([o.update_s for o in outs], dtype=np.float64),
+            timescale_counts=np.stack([o.timescale_counts for o in outs]),
         )
         run_sum = [self._run_summary(k, rec) for k in range(len(outs))]
         self._loc_states = [o.state for o in outs]

@@ -29,7 +29,7 @@ import threading
 import time
 import traceback
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
@@ -38,6 +38,7 @@ from numpy.typing import NDArray
 
 from dynmap_sim.agent.localizer import Localizer
 from dynmap_sim.errors import InputError
+from dynmap_sim.experiments.results import N_TIMESCALES
 from dynmap_sim.metrics import confusion_matrix
 from dynmap_sim.types import Odometry, Prior, Scan
 
@@ -86,7 +87,9 @@ class LocalizerOutput:
     lambda_min, timescale, safe_mode; NaN where not reported); ``confusion`` ``(4, 4)``
     point-class counts; ``update_s`` wall time in ``update()`` [s]; ``busy_s`` wall time of
     the whole run including the hooks and pickling [s]; ``state`` the pickled localizer after
-    ``end_run`` (and ``end_day``).
+    ``end_run`` (and ``end_day``); ``timescale_counts`` ``(5,)`` how often each timescale
+    was selected over the run (every selection of every scan, the ``timescales`` extra; B&D
+    Fig. 12 counts these).
     """
 
     estimates: NDArray[np.float64]
@@ -96,6 +99,9 @@ class LocalizerOutput:
     update_s: float
     busy_s: float
     state: bytes
+    timescale_counts: NDArray[np.int64] = field(
+        default_factory=lambda: np.zeros(N_TIMESCALES, dtype=np.int64)
+    )
 
 
 def _day_run(stream: RunStream) -> str:
@@ -131,6 +137,7 @@ def localize_run(label: str, loc: Localizer, stream: RunStream) -> LocalizerOutp
     cov_diag = np.empty((n, 3))
     extras = np.full((n, 4), math.nan)
     confusion = np.zeros((4, 4), dtype=np.int64)
+    ts_counts = np.zeros(N_TIMESCALES, dtype=np.int64)
     update_s = 0.0
     step = -1
     try:
@@ -155,6 +162,9 @@ def localize_run(label: str, loc: Localizer, stream: RunStream) -> LocalizerOutp
                 pc = ex.get("point_classes")
                 if pc is not None:
                     confusion += confusion_matrix(stream.beam_class[step], pc)
+                sel = [int(v) for v in ex.get("timescales", ()) if 0 <= int(v) < N_TIMESCALES]
+                if sel:
+                    ts_counts += np.bincount(sel, minlength=N_TIMESCALES)
         step = -1
         loc.end_run()
         if stream.last_of_day:
@@ -166,7 +176,14 @@ def localize_run(label: str, loc: Localizer, stream: RunStream) -> LocalizerOutp
         ) from exc
     state = pickle_localizer(label, loc)
     return LocalizerOutput(
-        est, cov_diag, extras, confusion, update_s, time.perf_counter() - busy0, state
+        est,
+        cov_diag,
+        extras,
+        confusion,
+        update_s,
+        time.perf_counter() - busy0,
+        state,
+        timescale_counts=ts_counts,
     )
 
 

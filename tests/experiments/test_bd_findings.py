@@ -107,3 +107,25 @@ def test_weeks_start_on_monday_and_findings_are_written(tmp_path):
     rows = json.loads(paths[1].read_text())
     assert len(rows) == 8 and all(r["holds"] for r in rows)
     assert paths[0].read_text().count("| yes |") == 8
+
+
+def test_counts_of_every_selection_take_precedence_over_the_first_choice():
+    """Figs. 12-13 count every selection; the per-scan first choice only stands in."""
+    dyn, statics, base = paper_like()
+    days = np.arange(1, N_DAYS + 1)
+    # every selection: λ5 rising from 10 to 38 of 100, λ1 falling, the rest constant
+    counts = np.array([[40 - 2 * d, 25, 15, 10, 10 + 2 * d] for d in days])
+    found = {
+        f.key: f for f in evaluate_findings(dyn, statics, base, WEEKS, selections=(days, counts))
+    }
+    assert found["ltm_usage_rises"].holds and found["stm_usage_falls"].holds
+    assert found["all_timescales_used"].measured.endswith("(every selection)")
+    # the same counts with λ5 falling fail, whatever the first choices say
+    flipped = counts[:, ::-1]
+    found = {
+        f.key: f for f in evaluate_findings(dyn, statics, base, WEEKS, selections=(days, flipped))
+    }
+    assert not found["ltm_usage_rises"].holds and not found["stm_usage_falls"].holds
+    # no counts (older results): the first selection of each scan
+    found = {f.key: f for f in evaluate_findings(dyn, statics, base, WEEKS)}
+    assert found["all_timescales_used"].measured.endswith("(first selection of each scan)")

@@ -105,3 +105,18 @@ def test_a_run_is_all_or_nothing(tmp_path):
     assert db.query("SELECT count(*) FROM scans")[0][0] == 0
     assert db.query("SELECT count(*) FROM checkpoint")[0][0] == 0
     db.close()
+
+
+def test_timescale_selection_counts_add_up_per_day(tmp_path):
+    db = make_db(tmp_path)
+    for run, counts in ((1, [5, 0, 1, 2, 3]), (2, [1, 1, 1, 1, 1])):
+        rec = record(1, run)
+        rec.timescale_counts = np.array([[0] * 5, counts], np.int64)  # only the second selects
+        db.write_run(rec, [], run == 2, None, "h", 7)
+    days, counts = db.timescale_counts_per_day(1)
+    assert days.tolist() == [1] and counts.tolist() == [[6, 1, 2, 3, 4]]
+    days, counts = db.timescale_counts_per_day(0)
+    assert len(days) == 0 and counts.shape == (0, 5)
+    db.write_run(record(1, 2), [], True, None, "h", 7)  # a redone run replaces its counts
+    assert db.timescale_counts_per_day(1)[1].tolist() == [[5, 0, 1, 2, 3]]
+    db.close()
