@@ -40,6 +40,9 @@ DAY_SHARE = 0.8
 SAFE_MODE_MAX = 0.02
 #: A timescale chosen for less than this share of scans counts as unused (Fig. 12).
 MIN_TIMESCALE_SHARE = 0.01
+#: A usage trend (Fig. 13) counts when its fitted line changes the share by at least this
+#: much over the days compared (one percentage point), not for any sign of the slope.
+MIN_TREND = 0.01
 
 
 @dataclass(frozen=True)
@@ -163,30 +166,31 @@ def evaluate_findings(
     # Fig. 13's trends from day 2: day 1 maps the building, so its choices are special.
     usage = day_counts / np.maximum(day_counts.sum(axis=1, keepdims=True), 1)
     usage, days = usage[days >= 2], days[days >= 2]
+    span = float(days[-1] - days[0]) if len(days) else 0.0
     s1 = _slope_per_day(days, usage[:, 0]) if len(days) else float("nan")
     s5 = _slope_per_day(days, usage[:, 4]) if len(days) else float("nan")
     out.append(
         Finding(
             "stm_usage_falls",
             "the usage of the short-term memory map (λ1) decreased with time (Fig. 13; "
-            "slope of the daily share from day 2)",
+            "fitted daily share from day 2 falls by >= 1 percentage point)",
             f"λ1 share {100 * usage[0, 0]:.1f} % on day {days[0]}, "
             f"{100 * usage[-1, 0]:.1f} % on day {days[-1]}; slope {100 * s1:+.3f} %/day"
             if len(days)
             else "no timescale choices",
-            bool(s1 < 0) if np.isfinite(s1) else None,
+            bool(s1 * span <= -MIN_TREND) if np.isfinite(s1) else None,
         )
     )
     out.append(
         Finding(
             "ltm_usage_rises",
             "the usage of the most long-term map (λ5) increased with time (Fig. 13; "
-            "slope of the daily share from day 2)",
+            "fitted daily share from day 2 rises by >= 1 percentage point)",
             f"λ5 share {100 * usage[0, 4]:.1f} % on day {days[0]}, "
             f"{100 * usage[-1, 4]:.1f} % on day {days[-1]}; slope {100 * s5:+.3f} %/day"
             if len(days)
             else "no timescale choices",
-            bool(s5 > 0) if np.isfinite(s5) else None,
+            bool(s5 * span >= MIN_TREND) if np.isfinite(s5) else None,
         )
     )
     sm = dynamic["safe_mode"]

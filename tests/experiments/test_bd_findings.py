@@ -129,3 +129,14 @@ def test_counts_of_every_selection_take_precedence_over_the_first_choice():
     # no counts (older results): the first selection of each scan
     found = {f.key: f for f in evaluate_findings(dyn, statics, base, WEEKS)}
     assert found["all_timescales_used"].measured.endswith("(first selection of each scan)")
+
+
+def test_a_flat_usage_is_no_trend():
+    """A slope of a few thousandths of a percentage point a day is no rise (Fig. 13)."""
+    dyn, statics, base = paper_like()
+    days = np.arange(1, N_DAYS + 1)
+    flat = np.array([[30, 20, 20, 20, 10 + (d % 2)] for d in days])  # λ5 wobbles, no trend
+    found = {
+        f.key: f for f in evaluate_findings(dyn, statics, base, WEEKS, selections=(days, flat))
+    }
+    assert not found["ltm_usage_rises"].holds and not found["stm_usage_falls"].holds
