@@ -115,8 +115,9 @@ class PoseEstimate:
     ``extras`` carries optional per-scan values a localizer may report, with these keys
     (all optional): ``scan_loglik`` (average per-reading log-likelihood), ``lambda_min``
     (smallest eigenvalue of the inverse covariance, B&D §5.2), ``timescale`` (index of the
-    chosen timescale, 0..4, or -1), ``safe_mode`` (bool), ``point_classes`` (int array per
-    beam: 0 unknown, 1 dynamic, 2 semi-static, 3 static, H&W §4.4).
+    chosen timescale, 0..4, or -1), ``timescales`` (every timescale selected for this scan,
+    B&D §4.3; counted per run for Fig. 12), ``safe_mode`` (bool), ``point_classes`` (int
+    array per beam: 0 unknown, 1 dynamic, 2 semi-static, 3 static, H&W §4.4).
     """
 
     mean: FloatArray
