@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dynmap_sim.experiments.figures_dynamic import daily_means
+from dynmap_sim.experiments.figures_dynamic import daily_means, selection_counts_per_day
 
 #: Share of days (after the first ones) on which the dynamic map must beat a static variant.
 DAY_SHARE = 0.8
@@ -139,20 +139,10 @@ def evaluate_findings(
             ok_trend,
         )
     )
-    if selections is not None and len(selections[0]):
-        days, day_counts = selections  # every selection of every scan (Fig. 12's count)
-        what = "every selection"
-    else:  # results without selection counts: the first (best) selection of each scan
-        ts = dynamic["timescale"]
-        valid = np.isfinite(ts) & (ts >= 0)
-        days = np.unique(dynamic["day"][valid])
-        day_counts = np.array(
-            [
-                np.bincount(ts[valid & (dynamic["day"] == d)].astype(int), minlength=5)[:5]
-                for d in days
-            ]
-        ).reshape(len(days), 5)
-        what = "first selection of each scan"
+    days, day_counts, every = selection_counts_per_day(
+        dynamic["day"], dynamic["timescale"], selections
+    )
+    what = "every selection" if every else "first selection of each scan"
     counts = day_counts.sum(axis=0).astype(float)
     share = counts / max(counts.sum(), 1.0)
     out.append(

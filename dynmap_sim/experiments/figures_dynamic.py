@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-N_TIMESCALES = 5
+from dynmap_sim.experiments.results import N_TIMESCALES
 
 
 def daily_means(day: NDArray[np.integer], values: NDArray[np.floating]) -> tuple[np.ndarray, ...]:
@@ -32,24 +32,22 @@ def daily_means(day: NDArray[np.integer], values: NDArray[np.floating]) -> tuple
     return days, means
 
 
-def timescale_usage(
-    timescale: NDArray[np.floating], n_timescales: int = N_TIMESCALES
-) -> NDArray[np.float64]:
-    """Relative frequency of each timescale index ``0..n-1`` among scans that chose one."""
-    t = timescale[np.isfinite(timescale)].astype(int)
-    t = t[(t >= 0) & (t < n_timescales)]
-    counts = np.bincount(t, minlength=n_timescales).astype(float)
-    return counts / max(counts.sum(), 1.0)
-
-
-def timescale_usage_per_day(
-    day: NDArray[np.integer], timescale: NDArray[np.floating], n_timescales: int = N_TIMESCALES
-) -> tuple[np.ndarray, np.ndarray]:
-    """Days and ``(n_days, n_timescales)`` relative usage per day (Fig. 13)."""
-    ok = np.isfinite(timescale) & (timescale >= 0)
+def selection_counts_per_day(
+    day: NDArray[np.integer],
+    timescale: NDArray[np.floating],
+    selections: tuple[np.ndarray, np.ndarray] | None = None,
+) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Days, ``(n_days, 5)`` counts of timescale selections, and whether they count every
+    selection: the per-run counts ``selections`` (days, counts) when there are any (what
+    Figs. 12-13 count), else the first selection of each scan from per-scan ``timescale``."""
+    if selections is not None and len(selections[0]):
+        return selections[0], selections[1], True
+    ok = np.isfinite(timescale) & (timescale >= 0) & (timescale < N_TIMESCALES)
     days = np.unique(day[ok])
-    usage = np.array([timescale_usage(timescale[ok & (day == d)], n_timescales) for d in days])
-    return days, usage.reshape(len(days), n_timescales)
+    counts = np.array(
+        [np.bincount(timescale[ok & (day == d)].astype(int), minlength=N_TIMESCALES) for d in days]
+    )
+    return days, counts.reshape(len(days), N_TIMESCALES), False
 
 
 def _plot_per_day(series, ylabel: str, title: str, path: Path, log: bool = False) -> Path:
@@ -152,13 +150,9 @@ def write_dynamic_figures(out_dir: str | Path) -> list[Path]:
         if not np.any(np.isfinite(d["timescale"]) & (d["timescale"] >= 0)):
             continue
         safe = label.replace("/", "_").replace(" ", "_")
-        days, counts = sel_of[label]
-        if len(days):
-            overall = counts.sum(axis=0) / max(int(counts.sum()), 1)
-            usage = counts / np.maximum(counts.sum(axis=1, keepdims=True), 1)
-        else:
-            overall = timescale_usage(d["timescale"])
-            days, usage = timescale_usage_per_day(d["day"], d["timescale"])
+        days, counts, _ = selection_counts_per_day(d["day"], d["timescale"], sel_of[label])
+        overall = counts.sum(axis=0) / max(int(counts.sum()), 1)
+        usage = counts / np.maximum(counts.sum(axis=1, keepdims=True), 1)
         written.append(
             plot_timescale_usage(label, overall, out / f"dyn_timescale_usage_{safe}.png")
         )

@@ -8,8 +8,7 @@ from dynmap_sim.experiments.figures_dynamic import (
     daily_means,
     plot_timescale_trend,
     plot_timescale_usage,
-    timescale_usage,
-    timescale_usage_per_day,
+    selection_counts_per_day,
 )
 
 
@@ -22,12 +21,19 @@ def test_daily_means_skip_nan():
 
 def test_timescale_usage_counts_only_valid_choices():
     ts = np.array([0, 0, 4, -1, np.nan, 2, 4, 4])
-    u = timescale_usage(ts)
+    day = np.array([1, 1, 1, 1, 2, 2, 2, 2])
+    days, counts, every = selection_counts_per_day(day, ts)
+    assert not every and days.tolist() == [1, 2]
+    u = counts.sum(axis=0) / counts.sum()
     assert u.tolist() == [2 / 6, 0, 1 / 6, 0, 3 / 6]
-    days, per_day = timescale_usage_per_day(np.array([1, 1, 1, 1, 2, 2, 2, 2]), ts)
-    assert days.tolist() == [1, 2]
+    per_day = counts / counts.sum(axis=1, keepdims=True)
     assert np.allclose(per_day.sum(axis=1), 1.0)
     assert per_day[1].tolist() == [0, 0, 1 / 3, 0, 2 / 3]
+    # counts of every selection, when the results have them, take precedence
+    sel = (np.array([1, 2]), np.array([[3, 1, 1, 1, 1], [0, 2, 2, 2, 2]]))
+    days, counts, every = selection_counts_per_day(day, ts, sel)
+    assert every and counts.tolist() == sel[1].tolist()
+    assert selection_counts_per_day(day, ts, (np.zeros(0), np.zeros((0, 5))))[2] is False
 
 
 def test_plots_write_files(tmp_path):
