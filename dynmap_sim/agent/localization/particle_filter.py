@@ -355,16 +355,16 @@ class AMCLFilter:
         else:
             logp = np.log(likelihood_field_weights_cells(cells, self.table))
         w_prev = self.weights
-        logw = np.log(np.maximum(w_prev, 1e-300)) + logp
+        lw_prev = np.log(np.maximum(w_prev, 1e-300))
+        logw = lw_prev + logp
         m = float(logw.max())
         total_scaled = float(np.sum(np.exp(logw - m)))
         total = np.exp(m) * total_scaled
         self.weights = np.exp(logw - m) / total_scaled
         c = self.config
         if c.recovery_w_avg_per_beam:
-            # Per-beam geometric mean over all valid beams, in log domain (the raw product
-            # under/overflows): log sum_i w_i exp(sum_k log p_ik), divided by n_beams.
-            lw_prev = np.log(np.maximum(w_prev, 1e-300))
+            # Per-beam geometric mean over the beams the distance filter keeps (all valid
+            # beams without it), beam skipping not applied.
             use = self._recovery_beams(w_prev, r, a)
             total = per_beam_average(lw_prev, np.take(self.table.logp, cells[:, use]))
         if total > 0 and np.isfinite(total):
@@ -385,10 +385,7 @@ class AMCLFilter:
         margin = self.config.recovery_distance_filter_m
         if margin <= 0:
             return all_beams
-        w = weights / weights.sum()
-        p = self.particles
-        th = np.arctan2(np.sum(w * np.sin(p[:, 2])), np.sum(w * np.cos(p[:, 2])))
-        mean = np.array([np.sum(w * p[:, 0]), np.sum(w * p[:, 1]), th])
+        mean, _ = weighted_pose_stats(self.particles, weights)
         laser_pose = se2.compose(mean, self.mount)
         expected = expected_ranges(self.grid, laser_pose, angles_rad, self.range_max)
         keep = np.nonzero(~short_readings(ranges_m, expected, margin))[0]
