@@ -159,3 +159,15 @@ def test_min_update_motion_skips_scans_with_odometry_prediction(learned):
     err = np.hypot(*(np.array([e.mean[:2] for e in ests]) - truth[:, :2]).T)
     assert err.mean() < 0.05
     assert all("timescale" not in e.extras for e in np.array(ests)[skipped])
+
+
+def test_long_term_maps_fill_by_u_n_per_step(learned):
+    """§3.1 filling, §5.4: after one day (one step of λ3–λ5) a λ5 ray holds its seed (the
+    keyframe scan that made the local map, §4.4: a few samples) plus u·n = 5, λ4 seed + 20;
+    λ2 after 3 runs of u·n = 8 is full (10)."""
+    dmap = learned[0]["dynamic-map"].dmap
+    l5 = max(int(lm.sub[4].count.max()) for lm in dmap.local_maps)
+    l4 = max(int(lm.sub[3].count.max()) for lm in dmap.local_maps)
+    assert 5 < l5 <= 5 + 3
+    assert 20 < l4 <= 20 + 3
+    assert max(int(np.sum(lm.sub[1].count == 10)) for lm in dmap.local_maps) > 50

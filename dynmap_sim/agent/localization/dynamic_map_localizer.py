@@ -31,6 +31,15 @@ scan under the selected models), ``scan_lik`` (mean per-reading likelihood, Fig.
 of the best-fitting selection, 0 = λ1 … 4 = λ5, -1 none), ``timescales`` (levels of all
 selections, Figs. 12–13), ``safe_mode``, ``kappa`` (final κ of eq. 9), ``n_local_maps``.
 
+Filling (``first_step_fills``, default False): a sample set grows by ``u·n`` samples per
+time step until it is full, as §3.1 states ("until it is full an update just consists of
+adding u·n randomly chosen samples"), so λ5 (u = 0.05, 100 samples, one step a day) takes
+about 20 days to fill. That growth is one of §5.4's reasons why λ5 is used more and more
+("the median filter becomes more precise as the number of samples in the long-term memory
+map increases"). ``True`` lets a ray's first time step take up to ``n`` measurements, the way
+the toy example of §3.5 is initialized; on the lab replica λ5 is then full after day 1 and
+its usage does not rise.
+
 ``min_update_dist_m`` / ``min_update_angle_rad`` (default 0: every scan, as in the paper)
 skip scans taken before the robot moved that far since the last processed scan: those get
 the odometry prediction and ``extras = {"skipped": True}`` (no likelihood, no timescale).
@@ -111,6 +120,7 @@ class DynamicMapLocalizer(Localizer):
         min_update_angle_rad: float = 0.0,
         ltm_day_scans_per_run: int = 1500,
         day_snapshots: bool = True,
+        first_step_fills: bool = False,
         **params: Any,
     ) -> None:
         super().__init__(laser, rng, **params)
@@ -147,7 +157,9 @@ class DynamicMapLocalizer(Localizer):
         self.max_iterations = int(max_iterations)
         self.min_matched = int(min_matched)
         self.map_voxel_m = float(map_voxel_m)
-        self.dmap = DynamicMap(TABLE1, float(laser.range_max_m), self.update_radius_m)
+        self.dmap = DynamicMap(
+            TABLE1, float(laser.range_max_m), self.update_radius_m, bool(first_step_fills)
+        )
         self.frozen = False
         self.days_done = 0
         self._pose = np.zeros(3)

@@ -51,10 +51,13 @@ class DynamicMap:
         timescales: tuple[Timescale, ...] = TABLE1,
         max_range_m: float = 8.0,
         update_radius_m: float = 2.5,
+        first_step_fills: bool = False,
     ) -> None:
         self.timescales = timescales
         self.max_range_m = float(max_range_m)
         self.update_radius_m = float(update_radius_m)
+        #: See :class:`~dynmap_sim.agent.maps.sample_set.SampleSets`.
+        self.first_step_fills = bool(first_step_fills)
         self.local_maps: list[LocalMap] = []
 
     def __len__(self) -> int:
@@ -99,7 +102,12 @@ class DynamicMap:
 
         The seed does not count as a time step: each sub-map's first update fills it (§3.5).
         """
-        lm = LocalMap(centre_xy, self.timescales, self.max_range_m)
+        lm = LocalMap(
+            centre_xy,
+            self.timescales,
+            self.max_range_m,
+            self.__dict__.get("first_step_fills", True),
+        )
         polar = lm.polar(points_map)
         for level in range(len(self.timescales)):
             lm.learn(level, points_map, rng, fill=True, initialize=False, polar=polar)
@@ -176,6 +184,11 @@ class DynamicMap:
 
     def copy(self) -> DynamicMap:
         """A deep copy (a frozen snapshot, §5.3)."""
-        out = DynamicMap(self.timescales, self.max_range_m, self.update_radius_m)
+        out = DynamicMap(
+            self.timescales,
+            self.max_range_m,
+            self.update_radius_m,
+            self.__dict__.get("first_step_fills", True),
+        )
         out.local_maps = [lm.copy() for lm in self.local_maps]
         return out

@@ -9,6 +9,9 @@ from the centre as its range (§4.1).
 :data:`TABLE1` holds the timescales of Table 1: rays 360/360/720/1440/1440, samples
 5/10/50/100/100, update ratios 0.2 (always) / 0.8 (per run) / 0.8, 0.2, 0.05 (daily) — 329,400
 samples per local map, 658,800 bytes at 2 bytes per sample.
+
+Sub-maps grow by ``u·n`` samples per time step until full (§3.1); ``first_step_fills=True``
+lets each ray's first time step fill it instead (the initialization of the toy, §3.5).
 """
 
 from __future__ import annotations
@@ -64,11 +67,15 @@ class LocalMap:
         centre_xy: ArrayLike,
         timescales: tuple[Timescale, ...] = TABLE1,
         max_range_m: float = 8.0,
+        first_step_fills: bool = False,
     ) -> None:
         self.centre = np.asarray(centre_xy, dtype=np.float64).reshape(2).copy()
         self.timescales = timescales
         self.max_range_m = float(max_range_m)
-        self.sub = [SampleSets(ts.n_rays, ts.n_samples, ts.update_ratio) for ts in timescales]
+        self.sub = [
+            SampleSets(ts.n_rays, ts.n_samples, ts.update_ratio, first_step_fills)
+            for ts in timescales
+        ]
 
     # ------------------------------------------------------------------ geometry
     def polar(self, points_map: ArrayLike) -> tuple[FloatArray, FloatArray]:
@@ -248,6 +255,11 @@ class LocalMap:
         mm = np.clip(np.rint(est.rho_m * 1000.0), 1, 65535)
         return np.where(ok, mm, 0).astype(np.uint16)
 
+    @property
+    def first_step_fills(self) -> bool:
+        """Whether a ray's first time step fills its sample sets (see :class:`SampleSets`)."""
+        return self.sub[0].fills_first_step if self.sub else True
+
     # ------------------------------------------------------------------ memory
     @property
     def n_samples_capacity(self) -> int:
@@ -266,6 +278,6 @@ class LocalMap:
 
     def copy(self) -> LocalMap:
         """A deep copy."""
-        out = LocalMap(self.centre, self.timescales, self.max_range_m)
+        out = LocalMap(self.centre, self.timescales, self.max_range_m, self.first_step_fills)
         out.sub = [s.copy() for s in self.sub]
         return out

@@ -59,7 +59,9 @@ def to_mm(range_m: ArrayLike) -> NDArray[np.uint16]:
 class SampleSets:
     """``n_rays`` dynamic sample sets of ``n_samples`` each, update ratio ``update_ratio``."""
 
-    def __init__(self, n_rays: int, n_samples: int, update_ratio: float) -> None:
+    def __init__(
+        self, n_rays: int, n_samples: int, update_ratio: float, first_step_fills: bool = True
+    ) -> None:
         if n_rays < 1 or n_samples < 1:
             raise ValueError("n_rays and n_samples must be >= 1")
         if not 0.0 <= update_ratio <= 1.0:
@@ -67,6 +69,11 @@ class SampleSets:
         self.n_rays = int(n_rays)
         self.n_samples = int(n_samples)
         self.update_ratio = float(update_ratio)
+        #: True: a ray's first time step takes up to ``n`` measurements (the toy of §3.5,
+        #: "initialized using the measurements of the first time-step"); False: the plain
+        #: §3.1 rule from the start ("until it is full an update just consists of adding
+        #: u·n randomly chosen samples").
+        self.first_step_fills = bool(first_step_fills)
         self.samples_mm = np.zeros((self.n_rays, self.n_samples), dtype=np.uint16)
         self.count = np.zeros(self.n_rays, dtype=np.uint16)
         #: Rays that had their first time step (§3.5: a set is initialized with the
@@ -74,6 +81,11 @@ class SampleSets:
         self.initialized = np.zeros(self.n_rays, dtype=bool)
         self._est: RayEstimates | None = None
         self._table: tuple[tuple[float, float, float], NDArray[np.float64]] | None = None
+
+    @property
+    def fills_first_step(self) -> bool:
+        """:attr:`first_step_fills` (True for sets pickled before the option existed)."""
+        return bool(self.__dict__.get("first_step_fills", True))
 
     # ------------------------------------------------------------------ memory
     @property
@@ -88,7 +100,7 @@ class SampleSets:
 
     def copy(self) -> SampleSets:
         """A deep copy (used for the frozen snapshot of the static-map variants, §5.3)."""
-        out = SampleSets(self.n_rays, self.n_samples, self.update_ratio)
+        out = SampleSets(self.n_rays, self.n_samples, self.update_ratio, self.fills_first_step)
         out.samples_mm[:] = self.samples_mm
         out.count[:] = self.count
         out.initialized[:] = self.initialized
@@ -120,9 +132,10 @@ class SampleSets:
         The measurements are a flat list: measurement ``i`` belongs to ray ``ray_idx[i]``
         (any order, any multiplicity). Rays without measurements are unchanged.
 
-        A ray's first time step *initializes* it (§3.5: "initialized using the measurements of
-        the first time-step"): it takes up to ``n`` measurements; from then on the §3.1 rule
-        (with its filling phase of ``u·n`` per step while not full) applies. ``fill=True``
+        With :attr:`first_step_fills`, a ray's first time step *initializes* it (§3.5:
+        "initialized using the measurements of the first time-step"): it takes up to ``n``
+        measurements; from then on (and always without it) the §3.1 rule, with its filling
+        phase of ``u·n`` per step while not full, applies. ``fill=True``
         fills free slots without removing anything; with ``initialize=False`` it does not
         count as the first time step (used to seed a new local map with one scan, §4.4).
         """
@@ -153,7 +166,7 @@ class SampleSets:
 
         cnt = self.count[uniq].astype(np.int64)
         free = self.n_samples - cnt
-        first = ~self.initialized[uniq]
+        first = ~self.initialized[uniq] & self.fills_first_step
         if fill:
             n_new = np.minimum(m_per, free)
         else:

@@ -51,6 +51,21 @@ def test_first_time_step_initializes_unless_only_seeded():
     assert list(np.sum(s.samples_mm == 700, axis=1)) == [1, 1]
 
 
+def test_without_first_step_fill_the_set_grows_by_u_n_per_step():
+    """§3.1: "until it is full an update just consists of adding u·n randomly chosen samples"
+    (λ5 of Table 1: 5 per day, full after 20 days)."""
+    rng = np.random.default_rng(5)
+    s = SampleSets(2, 100, 0.05, first_step_fills=False)
+    s.update([0, 1], [500, 500], rng, fill=True, initialize=False)  # a seed still goes in
+    for day in range(1, 20):
+        s.update(np.repeat([0, 1], 300), np.full(600, 900), rng)
+        assert list(s.count) == [1 + 5 * day] * 2
+    s.update(np.repeat([0, 1], 300), np.full(600, 700), rng)
+    assert list(s.count) == [100, 100]  # 96 + 4 added, 1 replaced
+    assert list(np.sum(s.samples_mm == 700, axis=1)) == [5, 5]
+    assert s.copy().fills_first_step is False
+
+
 def test_few_measurements_are_never_duplicated():
     rng = np.random.default_rng(2)
     s = SampleSets(1, 50, 0.8)
