@@ -11,8 +11,10 @@ day used as a static map, with and without short-term memory (§5.3), and report
   long-term memory map increased";
 * §4.3: safe mode "was activated in approximately 0.5 percent of all cases".
 
-With ground truth we add one the paper could not measure: the dynamic map's position error
-below static MCL's (each configuration that ran) in the weeks after the first.
+With ground truth we add what the paper could not measure: the dynamic map's position error
+below static MCL's (each configuration that ran) in the weeks after the first; the
+exhibition's share in each timescale (Fig. 9, :mod:`.exhibition`); and the share of λ5's
+points on walls over the days (§5.2, :mod:`.map_structure`).
 
 :func:`evaluate_findings` is a pure function of per-scan arrays; :func:`findings_from_db`
 picks the localizers of a results database by their registry names (``dynamic-map``,
@@ -257,6 +259,33 @@ def exhibition_finding(mem: Any, exhibition_days: list[int]) -> Finding:
     )
 
 
+def structure_finding(ms: Any) -> Finding:
+    """§5.2 (ground truth): the share of λ5's points on walls rises by at least
+    :data:`MIN_TREND` over the days (fitted line); ``ms`` is a
+    :class:`~dynmap_sim.experiments.map_structure.MapStructure`."""
+    paper = (
+        "the accuracy of the local maps increased over time: static parts like walls emerge "
+        "while moving objects like chairs disappear (§5.2, seen in the maps; measured here "
+        f"from ground truth: the share of λ5's points within {100 * ms.tol_m:.0f} cm of a "
+        "wall, fitted over the days, rises by >= 1 percentage point)"
+    )
+    days = np.asarray(ms.days)
+    if 4 not in ms.levels or len(days) < 2:
+        return Finding("static_structure_emerges", paper, "fewer than two daily maps", None)
+    b5 = list(ms.levels).index(4)
+    rise = _slope_per_day(days, ms.on_walls[:, b5]) * float(days[-1] - days[0])
+    parts = [
+        f"λ{level + 1} {100 * ms.on_walls[0, b]:.1f} % → {100 * ms.on_walls[-1, b]:.1f} %"
+        for b, level in enumerate(ms.levels)
+    ]
+    measured = (
+        f"points on walls, day {days[0]} → day {days[-1]}: " + ", ".join(parts)
+        + f"; λ5 fitted {100 * rise:+.1f} points; median distance of λ5's points to the true "
+        f"world {1000 * ms.median_dist_m[0, b5]:.0f} → {1000 * ms.median_dist_m[-1, b5]:.0f} mm"
+    )  # fmt: skip
+    return Finding("static_structure_emerges", paper, measured, bool(rise >= MIN_TREND))
+
+
 def weeks_of_days(dates: dict[int, dt.date]) -> dict[int, int]:
     """1-based calendar week (Monday to Sunday) of each day, counted from the first day's."""
     first = min(dates.values())
@@ -264,10 +293,14 @@ def weeks_of_days(dates: dict[int, dt.date]) -> dict[int, int]:
     return {d: (date - monday).days // 7 + 1 for d, date in dates.items()}
 
 
-def findings_from_db(db: Any, exhibition: Any = None) -> list[Finding] | None:
+def findings_from_db(
+    db: Any, exhibition: Any = None, structure: Any = None
+) -> list[Finding] | None:
     """:func:`evaluate_findings` on a :class:`ResultsDB`, plus :func:`exhibition_finding`
     when ``exhibition`` (the result of
-    :func:`~dynmap_sim.experiments.exhibition.exhibition_from_db`) is given; None without a
+    :func:`~dynmap_sim.experiments.exhibition.exhibition_from_db`) is given and
+    :func:`structure_finding` when ``structure`` (a
+    :class:`~dynmap_sim.experiments.map_structure.MapStructure`) is; None without a
     ``dynamic-map``."""
     rows = db.query("SELECT idx, label, name, params FROM localizers ORDER BY idx")
     by_name: dict[str, list[tuple[int, str, dict[str, Any]]]] = {}
@@ -287,6 +320,8 @@ def findings_from_db(db: Any, exhibition: Any = None) -> list[Finding] | None:
     out = evaluate_findings(dyn, statics, baselines, weeks_of_days(dates), selections=sel)
     if exhibition is not None:
         out.append(exhibition_finding(exhibition[0], exhibition[3]))
+    if structure is not None:
+        out.append(structure_finding(structure))
     return out
 
 

@@ -16,7 +16,6 @@ exhibition and the snapshots in a results folder (the snapshots come from the ch
 
 from __future__ import annotations
 
-import pickle
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -24,6 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from dynmap_sim.experiments.map_structure import dynamic_map_snapshots
 from dynmap_sim.types import BeamClass
 
 FloatArray = NDArray[np.float64]
@@ -115,8 +115,6 @@ def exhibition_from_db(db: Any) -> tuple[ExhibitMemory, list, tuple, list[int]] 
     """(memory, snapshots, (segments, classes) of an exhibition day, exhibition days) of the
     first ``dynamic-map`` in a results database, or None (no such localizer, no exhibition,
     no snapshots in the checkpoint)."""
-    rows = db.query("SELECT idx, name FROM localizers ORDER BY idx")
-    dyn = [int(i) for i, name in rows if name == "dynamic-map"]
     geo_rows = db.query("SELECT day, run FROM geometry ORDER BY day, run")
     ex_days, ex_geom = [], None
     for day, run in geo_rows:
@@ -125,15 +123,11 @@ def exhibition_from_db(db: Any) -> tuple[ExhibitMemory, list, tuple, list[int]] 
             if int(day) not in ex_days:
                 ex_days.append(int(day))
             ex_geom = ex_geom or g
-    if not dyn or ex_geom is None:
+    snaps = dynamic_map_snapshots(db) if ex_geom is not None else []
+    if not snaps:
         return None
-    meta = db.meta()
-    cp = db.load_checkpoint(meta["experiment_hash"], meta["seed"])
-    if cp is None or len(cp.localizers) <= dyn[0]:
-        return None
-    loc = pickle.loads(cp.localizers[dyn[0]])  # noqa: S301 - our own checksummed file
-    snaps = list(getattr(loc, "day_snapshots", []))
-    mem = exhibit_memory(snaps, ex_geom[0], ex_geom[1], float(meta["laser"]["range_max_m"]))
+    range_max_m = float(db.meta()["laser"]["range_max_m"])
+    mem = exhibit_memory(snaps, ex_geom[0], ex_geom[1], range_max_m)
     if mem is None:
         return None
     return mem, snaps, ex_geom, ex_days

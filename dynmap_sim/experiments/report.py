@@ -22,6 +22,11 @@ from dynmap_sim.experiments.bd_findings import (
 )
 from dynmap_sim.experiments.exhibition import exhibition_from_db, plot_exhibition
 from dynmap_sim.experiments.figures_dynamic import write_dynamic_figures
+from dynmap_sim.experiments.map_structure import (
+    map_structure_from_db,
+    plot_map_structure,
+    write_map_structure_csv,
+)
 from dynmap_sim.experiments.results import ResultsDB
 from dynmap_sim.metrics import ate, class_scores, lost_stats, rpe
 from dynmap_sim.types import BeamClass
@@ -379,7 +384,12 @@ def write_report(out_dir: str | Path) -> list[Path]:
         if exhibition is not None:
             mem, snaps, geom, ex_days = exhibition
             figs.append(plot_exhibition(mem, snaps, geom, ex_days, out / "exhibition.png"))
-        findings = findings_from_db(db, exhibition)  # B&D §5 claims, when a dynamic-map ran
+        structure = map_structure_from_db(db)  # §5.2 against the truth, per day
+        if structure is not None:
+            figs.append(plot_map_structure(structure, out / "map_structure.png"))
+            written.append(write_map_structure_csv(structure, out / "map_structure.csv"))
+        # B&D §5 claims, when a dynamic-map ran
+        findings = findings_from_db(db, exhibition, structure)
         if findings is not None:
             written += write_findings(findings, out)
         written.append(_summary_md(db, out / "summary.md", figs, findings))

@@ -1,0 +1,125 @@
+"""The long-term memories against the true world (B&D §5.2), and a dynamic-map report end to
+end: figures, map_structure.csv and findings from a real run."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from dynmap_sim.agent.maps.dynamic_map import MapSnapshot
+from dynmap_sim.experiments.bd_findings import structure_finding
+from dynmap_sim.experiments.map_structure import (
+    map_structure,
+    plot_map_structure,
+    surface_samples,
+    write_map_structure_csv,
+)
+from dynmap_sim.experiments.report import write_report
+from dynmap_sim.experiments.runner import run_experiment
+from dynmap_sim.experiments.scenario import parse_scenario
+from dynmap_sim.types import BeamClass
+
+LEVELS = (1, 2, 3, 4)
+RAYS = {1: 360, 2: 720, 3: 1440, 4: 1440}
+#: A 4 m x 4 m room around the origin, and a chair at x = 1 m.
+ROOM = np.array([[2, -2, 2, 2], [2, 2, -2, 2], [-2, 2, -2, -2], [-2, -2, 2, -2]], float)
+CHAIR = np.array([[1.0, -0.3, 1.0, 0.3]])
+
+
+def _geometry(chair: bool):
+    seg = np.vstack([ROOM, CHAIR]) if chair else ROOM
+    cls = [BeamClass.WALL] * 4 + ([BeamClass.FURNITURE] if chair else [])
+    return seg, np.array(cls, dtype=np.int8)
+
+
+def _snapshot(n_wall: int, n_chair: int) -> MapSnapshot:
+    """One local map at the origin: in every sub-map, the first ``n_wall`` rays (from angle 0)
+    end on the wall x = 2 m, the next ``n_chair`` at 1 m (the chair's place)."""
+    meds = []
+    for level in LEVELS:
+        n = RAYS[level]
+        th = np.arange(n) * 2 * np.pi / n
+        mm = np.zeros(n, dtype=np.uint16)
+        mm[:n_wall] = np.rint(2000 / np.cos(th[:n_wall]))
+        mm[n_wall : n_wall + n_chair] = 1000
+        meds.append(mm[None, :])
+    return MapSnapshot(np.zeros((1, 2)), LEVELS, tuple(meds), 0.10)
+
+
+def test_surface_samples_are_spaced_along_each_segment():
+    pts, cls = surface_samples(*_geometry(chair=True), step_m=0.01)
+    assert len(pts) == 4 * 401 + 61
+    assert np.all(cls[-61:] == BeamClass.FURNITURE) and np.all(cls[:-61] == BeamClass.WALL)
+    assert np.allclose(pts[-61:, 0], 1.0) and np.isclose(np.diff(pts[-61:, 1]).max(), 0.01)
+
+
+def test_shares_on_walls_and_on_the_world_per_day_and_level():
+    snaps = [(1, _snapshot(5, 5)), (2, _snapshot(8, 2)), (3, _snapshot(10, 0))]
+    worlds = {1: _geometry(True), 2: _geometry(True), 3: _geometry(False)}
+    ms = map_structure(snaps, worlds.get, tol_m=0.05)
+    assert ms.days == (1, 2, 3) and ms.levels == LEVELS
+    assert np.all(ms.n_points == [[10], [10], [10]])
+    assert np.allclose(ms.on_walls, [[0.5], [0.8], [1.0]])
+    assert np.allclose(ms.on_world, 1.0)  # the chair stood there on days 1 and 2
+    assert np.all(ms.median_dist_m < 0.006)
+    f = structure_finding(ms)
+    assert f.holds is True and "λ5 50.0 % → 100.0 %" in f.measured
+    gone = map_structure(snaps, {1: _geometry(True), 2: _geometry(True)}.get)
+    assert gone.days == (1, 2)  # a day without geometry is skipped
+
+
+def test_structure_finding_needs_a_rise_of_one_point():
+    snaps = [(1, _snapshot(10, 0)), (2, _snapshot(5, 5))]
+    ms = map_structure(snaps, lambda day: _geometry(True))
+    f = structure_finding(ms)
+    assert f.holds is False and "λ5 100.0 % → 50.0 %" in f.measured
+    assert structure_finding(map_structure(snaps[:1], lambda day: _geometry(True))).holds is None
+
+
+def test_csv_and_figure(tmp_path):
+    ms = map_structure([(1, _snapshot(5, 5)), (2, _snapshot(10, 0))], lambda d: _geometry(True))
+    rows = list(csv.reader(write_map_structure_csv(ms, tmp_path / "m.csv").open()))
+    assert rows[0] == ["day", "timescale", "n_points", "on_walls", "on_world", "median_dist_m"]
+    assert len(rows) == 1 + 2 * 4 and rows[4][:4] == ["1", "lambda5", "10", "0.5000"]
+    assert plot_map_structure(ms, tmp_path / "m.png").stat().st_size > 10_000
+
+
+@pytest.fixture(scope="module")
+def dynamic_report(tmp_path_factory):
+    """Three apartment days, the three sample-based localizers, and the report."""
+    out = tmp_path_factory.mktemp("dyn") / "res"
+    fast = {"min_update_dist_m": 0.1, "min_update_angle_rad": 0.1}
+    data = {
+        "name": "ci-dynamic",
+        "world": "apartment",
+        "days": [1, 3],
+        "driver": {"max_run_s": 40.0},
+        "localizers": [
+            {"name": n, "params": fast} for n in ("dynamic-map", "static-map", "static-map+stm")
+        ],
+    }
+    scn = parse_scenario(data, out.parent / "ci-dynamic.toml")
+    run_experiment(scn, out_dir=out, progress=False, workers=1)
+    return out, {p.name for p in write_report(out)}
+
+
+def test_a_dynamic_map_report_measures_its_maps_against_the_truth(dynamic_report):
+    out, names = dynamic_report
+    assert {"map_structure.png", "map_structure.csv", "findings.json"} <= names
+    rows = list(csv.DictReader((out / "map_structure.csv").open()))
+    assert [(r["day"], r["timescale"]) for r in rows[:4]] == [
+        ("1", f"lambda{k}") for k in (2, 3, 4, 5)
+    ]
+    assert len(rows) == 3 * 4
+    for r in rows:
+        assert int(r["n_points"]) > 100
+        assert 0.0 < float(r["on_walls"]) <= float(r["on_world"]) <= 1.0
+        assert float(r["on_world"]) > 0.6  # the map is mostly where the world is
+        assert float(r["median_dist_m"]) < 0.05
+    found = {f["key"]: f for f in json.loads((out / "findings.json").read_text())}
+    assert "static_structure_emerges" in found
+    assert found["static_structure_emerges"]["holds"] in (True, False)
+    assert "likelihood_above_static" in found and "safe_mode_rare" in found
