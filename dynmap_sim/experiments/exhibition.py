@@ -111,10 +111,13 @@ def exhibit_memory(
     )
 
 
-def exhibition_from_db(db: Any) -> tuple[ExhibitMemory, list, tuple, list[int]] | None:
+def exhibition_from_db(
+    db: Any, snapshots: list[tuple[int, Any]] | None = None
+) -> tuple[ExhibitMemory, list, tuple, list[int]] | None:
     """(memory, snapshots, (segments, classes) of an exhibition day, exhibition days) of the
     first ``dynamic-map`` in a results database, or None (no such localizer, no exhibition,
-    no snapshots in the checkpoint)."""
+    no snapshots in the checkpoint). ``snapshots``: that localizer's daily snapshots when
+    already loaded (:func:`~.map_structure.dynamic_map_snapshots`)."""
     geo_rows = db.query("SELECT day, run FROM geometry ORDER BY day, run")
     ex_days, ex_geom = [], None
     for day, run in geo_rows:
@@ -123,7 +126,9 @@ def exhibition_from_db(db: Any) -> tuple[ExhibitMemory, list, tuple, list[int]] 
             if int(day) not in ex_days:
                 ex_days.append(int(day))
             ex_geom = ex_geom or g
-    snaps = dynamic_map_snapshots(db) if ex_geom is not None else []
+    if ex_geom is None:
+        return None
+    snaps = dynamic_map_snapshots(db) if snapshots is None else snapshots
     if not snaps:
         return None
     range_max_m = float(db.meta()["laser"]["range_max_m"])

@@ -121,10 +121,13 @@ def dynamic_map_snapshots(db: Any) -> list[tuple[int, Any]]:
     return list(getattr(loc, "day_snapshots", []))
 
 
-def map_structure_from_db(db: Any, tol_m: float = 0.05) -> MapStructure | None:
+def map_structure_from_db(
+    db: Any, snapshots: list[tuple[int, Any]] | None = None, tol_m: float = 0.05
+) -> MapStructure | None:
     """:func:`map_structure` of the first ``dynamic-map`` of a results database against each
-    day's last run; None without snapshots."""
-    snaps = dynamic_map_snapshots(db)
+    day's last run; None without snapshots. ``snapshots``: its daily snapshots when already
+    loaded (:func:`dynamic_map_snapshots`)."""
+    snaps = dynamic_map_snapshots(db) if snapshots is None else snapshots
     if not snaps:
         return None
     last_run = dict(db.query("SELECT day, MAX(run) FROM geometry GROUP BY day"))
