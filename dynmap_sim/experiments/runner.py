@@ -136,7 +136,6 @@ class ExperimentRunner:
         self.days = days
         self.env = env if env is not None else make_env(scenario)
         self.u = self.env.unwrapped
-        self.world = self.u.world
         self.laser = self.u.laser_spec
         self.spec = self.world.spec
         self.slots = [s for s in self.world.calendar.slots if days[0] <= s.day <= days[1]]
@@ -180,6 +179,12 @@ class ExperimentRunner:
             self.db = ResultsDB.create(out_dir, overwrite=overwrite)
             self._write_meta()
         self.state = state if state is not None else self._fresh_state()
+
+    @property
+    def world(self) -> Any:
+        """The env's current world: the env builds a new one when ``reset`` gets another
+        seed, so a reference kept from before would show another seed's objects."""
+        return self.u.world
 
     # ------------------------------------------------------------------ setup
     def _write_meta(self) -> None:

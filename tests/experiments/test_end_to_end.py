@@ -55,6 +55,30 @@ def test_a_failing_expectation_raises_with_the_table(tmp_path):
     assert "FAIL" in res.table() and "max error [m]" in res.table()
 
 
+def test_geometry_is_the_seeds_world(tmp_path):
+    """The stored truth geometry (and the driver's) is that of the env's current world, also
+    for a seed other than 0, where the env builds a new world on reset."""
+    from dynmap_sim.experiments.results import ResultsDB
+    from dynmap_sim.types import BeamClass
+    from dynmap_sim.world import World, load_world
+
+    data = {
+        "name": "lab-seed",
+        "world": "lab",
+        "days": [5, 5],
+        "driver": {"max_run_s": 2.0},
+        "localizers": [{"name": "odometry"}],
+    }
+    scn = parse_scenario(data, tmp_path / "s.toml")
+    out = run_experiment(scn, tmp_path / "o", seed=1, progress=False, workers=1)
+    world = World(load_world(scn.world_path), seed=1)
+    world.reset(5, 1)
+    with ResultsDB.open(out) as db:
+        seg, cls = db.geometry(5, 1)
+    assert np.any(cls == int(BeamClass.EXHIBIT))  # the toaster exhibition (days 4-9)
+    assert np.array_equal(seg, world.geometry.segments)
+
+
 def test_per_day_csv_and_report(ci_results):
     paths = write_report(ci_results)
     names = {p.name for p in paths}
