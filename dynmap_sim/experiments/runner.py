@@ -81,11 +81,18 @@ def localizer_seeds(seed: int, n: int) -> list[np.random.Generator]:
     return [np.random.Generator(np.random.PCG64(c)) for c in children]
 
 
-def default_workers(n_localizers: int) -> int:
+#: Experiments with at most this much robot time [s] (known from ``driver.max_run_s``) run
+#: their localizers in-process: starting worker processes (about 0.7 s) costs more than it
+#: saves (ci-apartment-mcl, 2 runs of 20 s: 1.8 s in-process, 2.5 s with 2 workers).
+SMALL_EXPERIMENT_S = 120.0
+
+
+def default_workers(n_localizers: int, robot_time_s: float | None = None) -> int:
     """The automatic worker count: one process per core, at most 2 (the simulation runs in
     the main process besides) and at most one per localizer; in-process (1) for a single
-    localizer, where worker processes would mostly add their start-up time."""
-    if n_localizers < 2:
+    localizer or at most :data:`SMALL_EXPERIMENT_S` of robot time (``robot_time_s``, None:
+    unknown), where worker processes would mostly add their start-up time."""
+    if n_localizers < 2 or (robot_time_s is not None and robot_time_s <= SMALL_EXPERIMENT_S):
         return 1
     return max(1, min(2, os.cpu_count() or 1, n_localizers))
 
@@ -125,11 +132,10 @@ class ExperimentRunner:
         resume: bool,
         overwrite: bool = False,
         env: Any = None,
-        workers: int = 1,
+        workers: int | None = 1,
     ) -> None:
-        if workers < 1:
+        if workers is not None and workers < 1:
             raise InputError(f"workers must be at least 1, not {workers}")
-        self.workers = int(workers)
         self.scenario = scenario
         self.out_dir = out_dir
         self.seed = int(seed)
@@ -144,6 +150,11 @@ class ExperimentRunner:
                 f"days {days[0]}-{days[1]}: the world's calendar has days "
                 f"1-{self.world.calendar.n_days}"
             )
+        if workers is None:
+            run_s = scenario.driver.max_run_s
+            robot_s = None if run_s is None else len(self.slots) * float(run_s)
+            workers = default_workers(len(scenario.localizers), robot_s)
+        self.workers = int(workers)
         self.hash = experiment_hash(scenario, self.seed, days)
         self.start_index = 0
         state: dict[str, Any] | None = None
@@ -516,7 +527,8 @@ def run_experiment(
 
     ``resume=True`` continues from the last checkpoint in ``out_dir`` (or starts when there is
     none). ``overwrite=True`` replaces earlier results in ``out_dir``. ``workers``: localizer
-    worker processes (1: all in this process, sequentially; None: :func:`default_workers`);
+    worker processes (1: all in this process, sequentially; None: :func:`default_workers`
+    for the experiment's localizers and robot time);
     the results are the same whatever the number.
     """
     out = Path(out_dir) if out_dir is not None else default_out_dir(scenario)
@@ -524,9 +536,7 @@ def run_experiment(
     if days[0] < 1 or days[1] < days[0]:
         raise InputError(f"bad day range {days}")
     seed = scenario.seeds[0] if seed is None else int(seed)
-    if workers is None:
-        workers = default_workers(len(scenario.localizers))
-    if workers < 1:
+    if workers is not None and workers < 1:
         raise InputError(f"--workers must be at least 1, not {workers}")
     runner = ExperimentRunner(
         scenario, out, days, seed, resume=resume, overwrite=overwrite, workers=workers

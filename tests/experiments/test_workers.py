@@ -171,9 +171,17 @@ def test_rebalancing_moves_localizers_and_keeps_the_numbers(tmp_path):
     assert not mp.active_children()
 
 
-def test_default_workers():
+def test_default_workers(tmp_path, monkeypatch):
+    monkeypatch.setattr("os.cpu_count", lambda: 4)
     assert default_workers(1) == 1
-    assert 1 <= default_workers(5) <= 2
+    assert default_workers(5) == 2  # robot time unknown (no max_run_s): worth the start-up
+    assert default_workers(5, robot_time_s=120.0) == 1  # a CI-sized experiment: in-process
+    assert default_workers(5, robot_time_s=121.0) == 2
+    assert default_workers(2, robot_time_s=1e4) == 2
+    # the runner's automatic choice: 3 runs of at most 5 s each
+    scn = scenario(tmp_path)
+    runner = ExperimentRunner(scn, tmp_path / "o", scn.days, 0, False, env=FakeEnv(), workers=None)
+    assert runner.workers == 1
 
 
 def test_real_env_static_mcl_bit_identical_with_workers(tmp_path):
