@@ -34,7 +34,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from dynmap_sim.experiments.exhibition import exhibition_from_db
 from dynmap_sim.experiments.figures_dynamic import daily_means, selection_counts_per_day
+from dynmap_sim.experiments.map_structure import dynamic_map_snapshots, map_structure_from_db
 
 #: Share of days (after the first ones) on which the dynamic map must beat a static variant.
 DAY_SHARE = 0.8
@@ -45,6 +47,22 @@ MIN_TIMESCALE_SHARE = 0.01
 #: A usage trend (Fig. 13) counts when its fitted line changes the share by at least this
 #: much over the days compared (one percentage point), not for any sign of the slope.
 MIN_TREND = 0.01
+
+
+#: Keys of every finding, in the order a report lists them (scenario files name them in
+#: ``[expectations] findings``).
+FINDING_KEYS = (
+    "likelihood_above_static",
+    "certainty_above_static",
+    "static_degrades_dynamic_does_not",
+    "all_timescales_used",
+    "stm_usage_falls",
+    "ltm_usage_rises",
+    "safe_mode_rare",
+    "error_below_static_mcl",
+    "exhibition_fades",
+    "static_structure_emerges",
+)
 
 
 @dataclass(frozen=True)
@@ -323,6 +341,17 @@ def findings_from_db(
     if structure is not None:
         out.append(structure_finding(structure))
     return out
+
+
+def measure_findings(db: Any) -> tuple[list[Finding] | None, Any, Any]:
+    """(findings, exhibition, map structure) of a :class:`ResultsDB`: the ``dynamic-map``'s
+    daily snapshots are read once for :func:`~.exhibition.exhibition_from_db` (Fig. 9) and
+    :func:`~.map_structure.map_structure_from_db` (§5.2), then :func:`findings_from_db`.
+    Each is None when it cannot be measured (no ``dynamic-map``, no exhibition, ...)."""
+    snaps = dynamic_map_snapshots(db)
+    exhibition = exhibition_from_db(db, snaps)
+    structure = map_structure_from_db(db, snaps)
+    return findings_from_db(db, exhibition, structure), exhibition, structure
 
 
 def findings_table(findings: list[Finding], paper: bool = True) -> list[str]:

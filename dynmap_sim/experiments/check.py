@@ -11,6 +11,7 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from dynmap_sim.experiments.bd_findings import measure_findings
 from dynmap_sim.experiments.results import ResultsDB
 from dynmap_sim.experiments.runner import run_experiment
 from dynmap_sim.experiments.scenario import Scenario, load_scenario
@@ -85,6 +86,8 @@ def evaluate(scenario: Scenario, out_dir: Path, seed: int) -> list[CheckRow]:
             n = db.query("SELECT coalesce(sum(skipped_waypoints), 0) FROM runs")[0][0]
             lim = exp.max_skipped_waypoints
             rows.append(CheckRow(seed, "robot", "skipped waypoints", lim, float(n), n <= lim))
+        if exp.findings:
+            rows += _finding_rows(db, exp.findings, seed)
         for label, e in exp.localizers.items():
             k = labels.index(label)
             days = db.query(
@@ -150,6 +153,23 @@ def evaluate(scenario: Scenario, out_dir: Path, seed: int) -> list[CheckRow]:
                         seed, label, "lost fraction", e.lost_fraction, v, _le(v, e.lost_fraction)
                     )
                 )
+    return rows
+
+
+def _finding_rows(db: ResultsDB, keys: list[str], seed: int) -> list[CheckRow]:
+    """One row per required B&D finding: measured 0 when it holds, 1 when it does not or
+    cannot be measured (limit 0)."""
+    findings, _, _ = measure_findings(db)
+    by_key = {f.key: f for f in findings or []}
+    rows = []
+    for key in keys:
+        f = by_key.get(key)
+        holds = f is not None and f.holds is True
+        where = "" if f is not None and f.holds is not None else "not measurable"
+        criterion = f"finding {key} fails"
+        rows.append(
+            CheckRow(seed, "dynamic-map", criterion, 0, 0.0 if holds else 1.0, holds, where)
+        )
     return rows
 
 

@@ -16,15 +16,13 @@ import numpy as np
 
 from dynmap_sim.experiments.bd_findings import (
     Finding,
-    findings_from_db,
     findings_table,
+    measure_findings,
     write_findings,
 )
-from dynmap_sim.experiments.exhibition import exhibition_from_db, plot_exhibition
+from dynmap_sim.experiments.exhibition import plot_exhibition
 from dynmap_sim.experiments.figures_dynamic import write_dynamic_figures
 from dynmap_sim.experiments.map_structure import (
-    dynamic_map_snapshots,
-    map_structure_from_db,
     plot_map_structure,
     write_map_structure_csv,
 )
@@ -381,17 +379,14 @@ def write_report(out_dir: str | Path) -> list[Path]:
             figs.append(lik)
         # B&D Figs. 10-13 per day and overall, for localizers that report those values
         figs += write_dynamic_figures(out)
-        snaps = dynamic_map_snapshots(db)  # a dynamic-map's daily maps (read once)
-        exhibition = exhibition_from_db(db, snaps)  # B&D Fig. 9, when a dynamic-map saw one
+        # B&D §5 claims, Fig. 9 and §5.2 against the truth, when a dynamic-map ran
+        findings, exhibition, structure = measure_findings(db)
         if exhibition is not None:
             mem, snaps, geom, ex_days = exhibition
             figs.append(plot_exhibition(mem, snaps, geom, ex_days, out / "exhibition.png"))
-        structure = map_structure_from_db(db, snaps)  # §5.2 against the truth, per day
         if structure is not None:
             figs.append(plot_map_structure(structure, out / "map_structure.png"))
             written.append(write_map_structure_csv(structure, out / "map_structure.csv"))
-        # B&D §5 claims, when a dynamic-map ran
-        findings = findings_from_db(db, exhibition, structure)
         if findings is not None:
             written += write_findings(findings, out)
         written.append(_summary_md(db, out / "summary.md", figs, findings))

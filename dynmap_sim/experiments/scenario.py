@@ -29,6 +29,8 @@ world file and its calendar)::
     no_collisions = true
     [expectations.localizers.odom]
     mean_error_m = 0.3               # every day's mean position error <= 0.3 m
+    # with a dynamic-map: B&D findings that must hold (keys of findings.md)
+    # findings = ["likelihood_above_static", "ltm_usage_rises"]
 """
 
 from __future__ import annotations
@@ -191,6 +193,11 @@ class Expectations(_Strict):
     no_collisions: bool = False
     max_skipped_waypoints: int | None = Field(None, ge=0)
     localizers: dict[str, LocalizerExpectation] = Field(default_factory=dict)
+    findings: list[str] = Field(
+        default_factory=list,
+        description="Biber & Duckett findings (findings.md keys) that must hold; needs a "
+        "dynamic-map localizer",
+    )
 
 
 def _parse_days(v: Any) -> Any:
@@ -327,6 +334,20 @@ def _semantic_errors(scn: Scenario) -> list[tuple[str, str]]:
                     f"no localizer has label {key!r} (labels: {', '.join(labels)})",
                 )
             )
+    from dynmap_sim.experiments.bd_findings import FINDING_KEYS
+
+    for i, key in enumerate(scn.expectations.findings):
+        if key not in FINDING_KEYS:
+            errors.append(
+                (
+                    f"expectations.findings.{i}",
+                    f"unknown finding {key!r}; known: {', '.join(FINDING_KEYS)}",
+                )
+            )
+    if scn.expectations.findings and "dynamic-map" not in [loc.name for loc in scn.localizers]:
+        errors.append(
+            ("expectations.findings", "the findings need a localizer named 'dynamic-map'")
+        )
     for i, k in enumerate(scn.kidnappings):
         if not scn.days[0] <= k.day <= scn.days[1]:
             errors.append((f"kidnappings.{i}.day", f"day {k.day} is outside days {list(scn.days)}"))

@@ -11,6 +11,7 @@ import pytest
 
 from dynmap_sim.agent.maps.dynamic_map import MapSnapshot
 from dynmap_sim.experiments.bd_findings import structure_finding
+from dynmap_sim.experiments.check import evaluate
 from dynmap_sim.experiments.map_structure import (
     map_structure,
     plot_map_structure,
@@ -123,3 +124,25 @@ def test_a_dynamic_map_report_measures_its_maps_against_the_truth(dynamic_report
     assert "static_structure_emerges" in found
     assert found["static_structure_emerges"]["holds"] in (True, False)
     assert "likelihood_above_static" in found and "safe_mode_rare" in found
+
+
+def test_scenario_expectations_on_findings(dynamic_report):
+    """``[expectations] findings``: one check row per finding, failing when it does not hold
+    or cannot be measured (the apartment has no exhibition)."""
+    out, _ = dynamic_report
+    data = {
+        "name": "ci-dynamic",
+        "world": "apartment",
+        "days": [1, 3],
+        "localizers": [{"name": "dynamic-map"}],
+        "expectations": {"findings": ["safe_mode_rare", "exhibition_fades"]},
+    }
+    scn = parse_scenario(data, out.parent / "ci-dynamic.toml")
+    rows = {r.criterion: r for r in evaluate(scn, out, seed=0)}
+    assert set(rows) == {"finding safe_mode_rare fails", "finding exhibition_fades fails"}
+    found = {f["key"]: f for f in json.loads((out / "findings.json").read_text())}
+    safe = rows["finding safe_mode_rare fails"]
+    assert safe.passed is (found["safe_mode_rare"]["holds"] is True)
+    assert safe.measured == (0.0 if safe.passed else 1.0) and safe.limit == 0
+    ex = rows["finding exhibition_fades fails"]
+    assert not ex.passed and ex.measured == 1.0 and ex.where == "not measurable"

@@ -104,6 +104,29 @@ mean_error_m = 1
     assert "28 days" in errs["days"]
 
 
+def test_required_findings_are_known_keys_and_need_a_dynamic_map(tmp_path):
+    p = write(
+        tmp_path,
+        """
+name = "f"
+world = "lab"
+days = 2
+[[localizers]]
+name = "static-map"
+[expectations]
+findings = ["ltm_usage_rises", "lambda5_is_great"]
+""",
+    )
+    with pytest.raises(ScenarioFileError) as ei:
+        load_scenario(p)
+    errs = dict(ei.value.errors)
+    assert "unknown finding 'lambda5_is_great'" in errs["expectations.findings.1"]
+    assert "ltm_usage_rises" in errs["expectations.findings.1"]  # the known keys are listed
+    assert "dynamic-map" in errs["expectations.findings"]
+    assert "expectations.findings.0" not in errs
+    assert str(p) in str(ei.value)
+
+
 def test_same_class_twice_with_labels_and_module_path(tmp_path):
     p = write(
         tmp_path,
