@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from synthetic_scans import LASER, raycast, room_segments
+from synthetic_scans import LASER, polyline_path, raycast, room_segments
 
 from dynmap_sim.types import LaserSpec
 
@@ -29,22 +29,7 @@ def cast():
 def loop_path(step_m: float = 0.05, turn_rad: float = 0.1, laps: int = 2) -> np.ndarray:
     """True poses ``(T, 3)`` along a rectangle around the pillar, turning in place at corners."""
     corners = np.array([[1.0, 1.0], [4.0, 1.0], [4.0, 3.8], [1.0, 3.8]])
-    poses = []
-    th = 0.0
-    for _ in range(laps):
-        for c in range(4):
-            a, b = corners[c], corners[(c + 1) % 4]
-            heading = np.arctan2(b[1] - a[1], b[0] - a[0])
-            dth = (heading - th + np.pi) % (2 * np.pi) - np.pi
-            for k in range(int(np.ceil(abs(dth) / turn_rad))):
-                th += np.sign(dth) * min(turn_rad, abs(dth) - k * turn_rad)
-                poses.append([a[0], a[1], th])
-            th = heading
-            n = int(np.hypot(*(b - a)) / step_m)
-            for k in range(n):
-                p = a + (b - a) * (k + 1) / n
-                poses.append([p[0], p[1], th])
-    return np.array(poses)
+    return polyline_path(np.tile(corners, (laps, 1)), step_m, turn_rad)
 
 
 def drifting_odometry(truth: np.ndarray, rng: np.random.Generator) -> np.ndarray:
