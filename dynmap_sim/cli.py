@@ -88,7 +88,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         workers=args.workers,
     )
     if args.report:
-        from dynmap_sim.experiments.report import write_report
+        from dynmap_sim.analysis.report import write_report
 
         for path in write_report(out):
             print(f"wrote {path}")
@@ -97,7 +97,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from dynmap_sim.experiments.report import write_report
+    from dynmap_sim.analysis.report import write_report
 
     for path in write_report(Path(args.dir)):
         print(f"wrote {path}")
@@ -105,7 +105,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
 
 def _cmd_export(args: argparse.Namespace) -> int:
-    from dynmap_sim.experiments.export import export_tum
+    from dynmap_sim.analysis.export import export_tum
 
     for path in export_tum(Path(args.dir), Path(args.tum)):
         print(f"wrote {path}")
@@ -113,7 +113,7 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 
 def _cmd_check(args: argparse.Namespace) -> int:
-    from dynmap_sim.experiments.check import check_scenario
+    from dynmap_sim.analysis.check import check_scenario
 
     result = check_scenario(args.scenario, out_dir=args.out, progress=not args.quiet)
     print(result.table())
@@ -134,7 +134,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
 
 def _cmd_toy(args: argparse.Namespace) -> int:
-    from dynmap_sim.experiments.toy import run_toy
+    from dynmap_sim.studies.biber_duckett.toy import run_toy
 
     for path in run_toy(Path(args.out), seed=args.seed):
         print(f"wrote {path}")
@@ -214,7 +214,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``dynmap-sim``; returns the exit status."""
     args = build_parser().parse_args(argv)
     from dynmap_sim.errors import InputError
-    from dynmap_sim.experiments.workers import LocalizerError
+    from dynmap_sim.experiments.bench import LocalizerError
 
     try:
         return int(args.func(args))

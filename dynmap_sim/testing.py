@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from dynmap_sim.experiments.check import CheckResult, check_scenario
+from dynmap_sim.analysis.check import CheckResult, check_scenario
 
 
 def run_scenario(

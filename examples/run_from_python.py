@@ -13,7 +13,7 @@ import sqlite3
 import sys
 from pathlib import Path
 
-from dynmap_sim.experiments.report import write_report
+from dynmap_sim.analysis.report import write_report
 from dynmap_sim.experiments.runner import run_experiment
 from dynmap_sim.experiments.scenario import load_scenario
 

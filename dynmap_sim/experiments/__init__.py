@@ -1,9 +1,13 @@
-"""Experiments: scenarios, the calendar loop, results, reports and regression checks.
+"""The experiment engine: scenarios, the episode loop, drivers, the localizer bench, results.
 
 * :mod:`.scenario` — scenario files (TOML, validated; ``load_scenario``);
 * :mod:`.runner` — ``run_experiment``: days x runs, localizers side by side, checkpoints;
-* :mod:`.drivers` — the ``tour`` operator that steers along the route (sees the truth);
+* :mod:`.drivers` — who steers a run (the ``tour`` operator sees the truth);
+* :mod:`.bench` — the localizer bench: a run's stream through every localizer, in-process
+  or in worker processes;
 * :mod:`.results` — the SQLite results store (one per experiment);
-* :mod:`.report`, :mod:`.export` — figures, ``summary.md``, ``per_day.csv``, TUM files;
-* :mod:`.check` — regression checks against a scenario's ``[expectations]``.
+* :mod:`.replay` — mapping and localizers on a recorded CARMEN log.
+
+Reports, exports and expectation checks are in :mod:`dynmap_sim.analysis`, the papers'
+findings in :mod:`dynmap_sim.studies`; the engine imports neither.
 """

@@ -29,16 +29,16 @@ import numpy as np
 
 from dynmap_sim.agent.localizer import Localizer, make_localizer
 from dynmap_sim.errors import InputError
-from dynmap_sim.experiments.drivers import TourDriver, TourParams, clip_route
-from dynmap_sim.experiments.results import Checkpoint, ResultsDB, RunRecord
-from dynmap_sim.experiments.scenario import Scenario, env_kwargs
-from dynmap_sim.experiments.workers import (
+from dynmap_sim.experiments.bench import (
     InProcessLocalizers,
     LocalizerOutput,
     LocalizerPool,
     RunStream,
     pickle_localizer,
 )
+from dynmap_sim.experiments.drivers import TourDriver, TourParams, clip_route
+from dynmap_sim.experiments.results import Checkpoint, ResultsDB, RunRecord
+from dynmap_sim.experiments.scenario import Scenario, env_kwargs
 from dynmap_sim.metrics import (
     heading_errors,
     lost_stats,

@@ -334,7 +334,7 @@ def _semantic_errors(scn: Scenario) -> list[tuple[str, str]]:
                     f"no localizer has label {key!r} (labels: {', '.join(labels)})",
                 )
             )
-    from dynmap_sim.experiments.bd_findings import FINDING_KEYS
+    from dynmap_sim.studies.biber_duckett.findings import FINDING_KEYS
 
     for i, key in enumerate(scn.expectations.findings):
         if key not in FINDING_KEYS:

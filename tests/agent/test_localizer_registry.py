@@ -60,3 +60,14 @@ def test_dead_reckoning_composes_odometry_onto_the_prior():
     assert est1.cov[0, 0] > est0.cov[0, 0]
     clone = pickle.loads(pickle.dumps(loc))
     np.testing.assert_allclose(clone.update(Odometry(odom1), scan).mean, est1.mean)
+
+
+def test_a_name_registered_twice_is_an_error():
+    from dynmap_sim.registry import DuplicateNameError
+
+    class Other(ConstantLocalizer):
+        pass
+
+    with pytest.raises(DuplicateNameError, match="'odometry' is already taken by .*DeadReckoning"):
+        LOCALIZERS.add("odometry", Other)
+    assert LOCALIZERS.get("odometry").__name__ != "Other"

@@ -7,7 +7,7 @@ import json
 
 import numpy as np
 
-from dynmap_sim.experiments.bd_findings import (
+from dynmap_sim.studies.biber_duckett.findings import (
     FINDING_KEYS,
     evaluate_findings,
     weeks_of_days,

@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from dynmap_sim.experiments.check import check_scenario
-from dynmap_sim.experiments.export import export_tum
-from dynmap_sim.experiments.report import PER_DAY_COLUMNS, write_report
+from dynmap_sim.analysis.check import check_scenario
+from dynmap_sim.analysis.export import export_tum
+from dynmap_sim.analysis.report import PER_DAY_COLUMNS, write_report
 from dynmap_sim.experiments.runner import run_experiment
 from dynmap_sim.experiments.scenario import load_scenario, parse_scenario
 from dynmap_sim.testing import run_scenario

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from dynmap_sim.agent.maps.dynamic_map import MapSnapshot
-from dynmap_sim.experiments.bd_findings import exhibition_finding
-from dynmap_sim.experiments.exhibition import exhibit_memory, fig9_days, first_hits
+from dynmap_sim.studies.biber_duckett.exhibition import exhibit_memory, fig9_days, first_hits
+from dynmap_sim.studies.biber_duckett.findings import exhibition_finding
 from dynmap_sim.types import BeamClass
 
 ROOM = np.array([[-5, -5, 5, -5], [5, -5, 5, 5], [5, 5, -5, 5], [-5, 5, -5, -5]], float)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dynmap_sim.experiments.figures_dynamic import (
+from dynmap_sim.studies.biber_duckett.figures import (
     daily_means,
     plot_timescale_trend,
     plot_timescale_usage,
@@ -44,7 +44,7 @@ def test_plots_write_files(tmp_path):
 
 def test_local_map_snapshot_figure(tmp_path):
     from dynmap_sim.agent.maps.dynamic_map import DynamicMap
-    from dynmap_sim.experiments.figures_dynamic import plot_local_map_timescales
+    from dynmap_sim.studies.biber_duckett.figures import plot_local_map_timescales
 
     rng = np.random.default_rng(0)
     dmap = DynamicMap()

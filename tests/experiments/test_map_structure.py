@@ -10,17 +10,17 @@ import numpy as np
 import pytest
 
 from dynmap_sim.agent.maps.dynamic_map import MapSnapshot
-from dynmap_sim.experiments.bd_findings import structure_finding
-from dynmap_sim.experiments.check import evaluate
-from dynmap_sim.experiments.map_structure import (
+from dynmap_sim.analysis.check import evaluate
+from dynmap_sim.analysis.report import write_report
+from dynmap_sim.experiments.runner import run_experiment
+from dynmap_sim.experiments.scenario import parse_scenario
+from dynmap_sim.studies.biber_duckett.findings import structure_finding
+from dynmap_sim.studies.biber_duckett.map_structure import (
     map_structure,
     plot_map_structure,
     surface_samples,
     write_map_structure_csv,
 )
-from dynmap_sim.experiments.report import write_report
-from dynmap_sim.experiments.runner import run_experiment
-from dynmap_sim.experiments.scenario import parse_scenario
 from dynmap_sim.types import BeamClass
 
 LEVELS = (1, 2, 3, 4)

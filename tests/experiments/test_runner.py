@@ -137,7 +137,7 @@ def test_days_outside_the_calendar_are_refused(tmp_path):
 
 
 def test_check_rows_from_a_kidnapped_run(tmp_path):
-    from dynmap_sim.experiments.check import evaluate
+    from dynmap_sim.analysis.check import evaluate
 
     scn = scenario(
         tmp_path,
@@ -188,7 +188,7 @@ def test_an_unpicklable_localizer_is_named(tmp_path):
 def test_report_with_extras_and_point_classes(tmp_path):
     import csv
 
-    from dynmap_sim.experiments.report import write_report
+    from dynmap_sim.analysis.report import write_report
 
     scn = scenario(tmp_path, days=[1, 2])
     run(scn, tmp_path / "o")

@@ -5,8 +5,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from dynmap_sim.agent.planning.grid_astar import GridPlanner, build_clearance_grid
 from dynmap_sim.experiments.drivers import TourDriver, TourParams, clip_route
-from dynmap_sim.experiments.drivers.grid_planner import GridPlanner, build_clearance_grid
 from dynmap_sim.types import BeamClass
 
 

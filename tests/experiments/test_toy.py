@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from dynmap_sim.agent.maps.sample_set import SampleSets
-from dynmap_sim.experiments.toy import (
+from dynmap_sim.studies.biber_duckett.toy import (
     CUPBOARD_M,
     WALL_M,
     ToyConfig,

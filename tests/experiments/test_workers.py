@@ -15,9 +15,9 @@ sys.path.insert(0, str(Path(__file__).parent))
 from fake_env import FakeEnv  # noqa: E402
 
 from dynmap_sim.errors import InputError  # noqa: E402
+from dynmap_sim.experiments.bench import LocalizerError  # noqa: E402
 from dynmap_sim.experiments.runner import ExperimentRunner, default_workers  # noqa: E402
 from dynmap_sim.experiments.scenario import parse_scenario  # noqa: E402
-from dynmap_sim.experiments.workers import LocalizerError  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 TABLES = (
@@ -138,7 +138,7 @@ def test_an_unpicklable_localizer_is_named_before_any_worker_starts(tmp_path):
 
 
 def test_rebalancing_moves_localizers_and_keeps_the_numbers(tmp_path):
-    from dynmap_sim.experiments.workers import LocalizerPool
+    from dynmap_sim.experiments.bench import LocalizerPool
 
     scn = scenario(tmp_path)
     r = ExperimentRunner(scn, tmp_path / "o", scn.days, 0, resume=False, env=FakeEnv())

@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynmap_sim import se2
-from dynmap_sim.experiments.drivers.grid_planner import GridPlanner, build_clearance_grid
+from dynmap_sim.agent.planning.grid_astar import GridPlanner, build_clearance_grid
 from dynmap_sim.types import BeamClass
 
 FloatArray = NDArray[np.float64]

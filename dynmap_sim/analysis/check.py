@@ -11,11 +11,11 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from dynmap_sim.experiments.bd_findings import measure_findings
 from dynmap_sim.experiments.results import ResultsDB
 from dynmap_sim.experiments.runner import run_experiment
 from dynmap_sim.experiments.scenario import Scenario, load_scenario
 from dynmap_sim.metrics import lost_stats
+from dynmap_sim.studies.biber_duckett.findings import measure_findings
 
 
 @dataclass(frozen=True)

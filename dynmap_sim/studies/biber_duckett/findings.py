@@ -34,9 +34,12 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dynmap_sim.experiments.exhibition import exhibition_from_db
-from dynmap_sim.experiments.figures_dynamic import daily_means, selection_counts_per_day
-from dynmap_sim.experiments.map_structure import dynamic_map_snapshots, map_structure_from_db
+from dynmap_sim.studies.biber_duckett.exhibition import exhibition_from_db
+from dynmap_sim.studies.biber_duckett.figures import daily_means, selection_counts_per_day
+from dynmap_sim.studies.biber_duckett.map_structure import (
+    dynamic_map_snapshots,
+    map_structure_from_db,
+)
 
 #: Share of days (after the first ones) on which the dynamic map must beat a static variant.
 DAY_SHARE = 0.8
@@ -246,7 +249,7 @@ def evaluate_findings(
 def exhibition_finding(mem: Any, exhibition_days: list[int]) -> Finding:
     """Fig. 9: the exhibition in λ2/λ3 on its last day (>= 50 % of the exhibit rays), gone
     from them three days after its removal (<= 20 %), never in λ5 (<= 30 %); ``mem`` is an
-    :class:`~dynmap_sim.experiments.exhibition.ExhibitMemory`."""
+    :class:`~dynmap_sim.studies.biber_duckett.exhibition.ExhibitMemory`."""
     paper = (
         "the exhibition enters the short timescales and fades after its removal while λ5 "
         "stays stable (Fig. 9); here the share of the exhibit rays of the local map that sees "
@@ -280,7 +283,7 @@ def exhibition_finding(mem: Any, exhibition_days: list[int]) -> Finding:
 def structure_finding(ms: Any) -> Finding:
     """§5.2 (ground truth): the share of λ5's points on walls rises by at least
     :data:`MIN_TREND` over the days (fitted line); ``ms`` is a
-    :class:`~dynmap_sim.experiments.map_structure.MapStructure`."""
+    :class:`~dynmap_sim.studies.biber_duckett.map_structure.MapStructure`."""
     paper = (
         "the accuracy of the local maps increased over time: static parts like walls emerge "
         "while moving objects like chairs disappear (§5.2, seen in the maps; measured here "
@@ -316,9 +319,9 @@ def findings_from_db(
 ) -> list[Finding] | None:
     """:func:`evaluate_findings` on a :class:`ResultsDB`, plus :func:`exhibition_finding`
     when ``exhibition`` (the result of
-    :func:`~dynmap_sim.experiments.exhibition.exhibition_from_db`) is given and
+    :func:`~dynmap_sim.studies.biber_duckett.exhibition.exhibition_from_db`) is given and
     :func:`structure_finding` when ``structure`` (a
-    :class:`~dynmap_sim.experiments.map_structure.MapStructure`) is; None without a
+    :class:`~dynmap_sim.studies.biber_duckett.map_structure.MapStructure`) is; None without a
     ``dynamic-map``."""
     rows = db.query("SELECT idx, label, name, params FROM localizers ORDER BY idx")
     by_name: dict[str, list[tuple[int, str, dict[str, Any]]]] = {}

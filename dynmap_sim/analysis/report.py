@@ -14,20 +14,20 @@ from typing import Any
 
 import numpy as np
 
-from dynmap_sim.experiments.bd_findings import (
+from dynmap_sim.experiments.results import ResultsDB
+from dynmap_sim.metrics import ate, class_scores, lost_stats, rpe
+from dynmap_sim.studies.biber_duckett.exhibition import plot_exhibition
+from dynmap_sim.studies.biber_duckett.figures import write_dynamic_figures
+from dynmap_sim.studies.biber_duckett.findings import (
     Finding,
     findings_table,
     measure_findings,
     write_findings,
 )
-from dynmap_sim.experiments.exhibition import plot_exhibition
-from dynmap_sim.experiments.figures_dynamic import write_dynamic_figures
-from dynmap_sim.experiments.map_structure import (
+from dynmap_sim.studies.biber_duckett.map_structure import (
     plot_map_structure,
     write_map_structure_csv,
 )
-from dynmap_sim.experiments.results import ResultsDB
-from dynmap_sim.metrics import ate, class_scores, lost_stats, rpe
 from dynmap_sim.types import BeamClass
 
 #: Columns of ``per_day.csv``, in order.

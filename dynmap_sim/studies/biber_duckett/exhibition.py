@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dynmap_sim.experiments.map_structure import dynamic_map_snapshots
+from dynmap_sim.studies.biber_duckett.map_structure import dynamic_map_snapshots
 from dynmap_sim.types import BeamClass
 
 FloatArray = NDArray[np.float64]

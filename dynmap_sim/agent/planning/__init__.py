@@ -1,0 +1,1 @@
+"""Planning (agent role): paths on the agent's own obstacle grid (A*)."""

@@ -1,0 +1,8 @@
+"""Paper studies: one package per paper, each with its findings and figures.
+
+* :mod:`.biber_duckett` — Biber & Duckett 2009 §5: findings checked on an experiment's
+  results, the exhibition in the timescales (Fig. 9), map structure (§5.2), timescale usage
+  (Figs. 12-13) and the toy example (§3.5, Fig. 2).
+
+A study reads the results store; the engine never imports it.
+"""
