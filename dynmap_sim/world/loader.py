@@ -24,6 +24,7 @@ from dynmap_sim.world.spec import (
     GrowEvent,
     InstallEvent,
     MoveEvent,
+    ObjectSpec,
     PresentEvent,
     RemoveEvent,
     ShuffleEvent,
@@ -89,16 +90,53 @@ def load_world(path: str | Path) -> WorldSpec:
 
 
 def _segment_poly(a, b) -> np.ndarray:
+    """The segment ``a``-``b`` as a two-vertex polygon (for :func:`sat_separation`)."""
     return np.array([a, b], dtype=np.float64)
+
+
+_Errors = list[tuple[str, str]]
+#: Events that happen at one moment (``at``, ``run``); the others span ``start`` .. ``end``.
+_AT_EVENTS = AddEvent | RemoveEvent | InstallEvent | MoveEvent | DoorEvent
 
 
 def check_world(spec: WorldSpec) -> list[tuple[str, str]]:
     """Semantic errors of a structurally valid world, as ``(dotted path, message)``."""
-    errs: list[tuple[str, str]] = []
     cal = Calendar(spec.calendar)
-    rpd = cal.runs_per_day
+    errs, objects = _check_ids(spec)
+    errs += _check_schedule(spec, cal, objects)
+    walls = wall_pieces(spec)
+    errs += _check_object_poses(spec, objects, walls)
+    errs += _check_wall_points(spec)
+    errs += _check_route(spec, walls)
+    errs += _check_start(spec, walls)
+    errs += _check_people(spec, cal)
+    return errs
 
-    # ids
+
+def _in_bounds(x: float, y: float, bounds: tuple[float, float, float, float]) -> bool:
+    """True where the point ``(x, y)`` lies in ``bounds`` (a NaN coordinate does not)."""
+    bx0, by0, bx1, by1 = bounds
+    return bx0 <= x <= bx1 and by0 <= y <= by1
+
+
+def _box_outside(box, bounds: tuple[float, float, float, float]) -> bool:
+    """True where the box ``(xmin, ymin, xmax, ymax)`` reaches out of ``bounds``."""
+    x0, y0, x1, y1 = box
+    bx0, by0, bx1, by1 = bounds
+    return x0 < bx0 or y0 < by0 or x1 > bx1 or y1 > by1
+
+
+def _first_wall_crossed(poly: np.ndarray, walls: list[tuple[str, np.ndarray]]) -> str | None:
+    """Id of the first wall piece that ``poly`` overlaps, or None."""
+    for pid, wp in walls:
+        if sat_separation(poly, wp) < 0:
+            return pid
+    return None
+
+
+def _check_ids(spec: WorldSpec) -> tuple[_Errors, dict[str, ObjectSpec]]:
+    """Duplicate ids of walls and objects (one namespace) and of people; objects by id."""
+    errs: _Errors = []
     seen: dict[str, str] = {}
     for i, w in enumerate(spec.walls):
         if w.id in seen:
@@ -117,71 +155,112 @@ def check_world(spec: WorldSpec) -> list[tuple[str, str]]:
         if p.id in pids:
             errs.append((f"people.{i}.id", f"duplicate id {p.id!r}"))
         pids.add(p.id)
-    groups = {o.group for o in spec.objects if o.group is not None}
+    return errs, objects
 
-    # schedule references and times
-    installed: dict[str, int] = {}
+
+def _check_schedule(spec: WorldSpec, cal: Calendar, objects: dict[str, ObjectSpec]) -> _Errors:
+    """Each event in turn: its references, times, installations and shuffle region."""
+    errs: _Errors = []
+    groups = {o.group for o in spec.objects if o.group is not None}
+    installed: dict[str, int] = {}  # permanently installed object -> day of installation
     for i, ev in enumerate(spec.schedule):
         loc = f"schedule.{i}"
-        target = getattr(ev, "target", None)
-        group = getattr(ev, "group", None)
-        if target is not None and target not in objects:
-            errs.append((f"{loc}.target", f"unknown object id {target!r}"))
-        if group is not None and group not in groups:
-            errs.append((f"{loc}.group", f"unknown group {group!r}"))
-        if isinstance(ev, DoorEvent) and target in objects and objects[target].kind != "door":
-            errs.append((f"{loc}.target", f"{target!r} is not a door"))
-        times: list[tuple[str, Any]] = []
-        if isinstance(ev, AddEvent | RemoveEvent | InstallEvent | MoveEvent | DoorEvent):
-            times.append(("at", ev.at))
-            if ev.run > rpd:
-                errs.append((f"{loc}.run", f"run {ev.run} but the calendar has {rpd} per day"))
-        else:
-            times.append(("start", ev.start))
-            if getattr(ev, "end", None) is not None:
-                times.append(("end", ev.end))
-        days = {}
-        for key, when in times:
-            d = cal.day_of(when)
-            if d is None:
-                errs.append(
-                    (
-                        f"{loc}.{key}",
-                        f"{when} is outside the calendar "
-                        f"({cal.dates[0]} .. {cal.dates[-1]}, days 1..{cal.n_days})",
-                    )
-                )
-            days[key] = d
-        if days.get("start") and days.get("end") and days["end"] < days["start"]:
-            errs.append((f"{loc}.end", "end is before start"))
-        if isinstance(ev, InstallEvent):
-            for oid in [target] if target else [o.id for o in spec.objects if o.group == group]:
-                installed[oid] = days.get("at") or 0
-        if isinstance(ev, RemoveEvent) or (isinstance(ev, PresentEvent)):
-            for oid in [target] if target else [o.id for o in spec.objects if o.group == group]:
-                if (
-                    oid in installed
-                    and (days.get("at") or days.get("start") or 0) >= installed[oid]
-                ):
-                    errs.append((loc, f"{oid!r} is a permanent installation and cannot be removed"))
+        errs += _event_references(ev, loc, objects, groups)
+        time_errs, days = _event_times(ev, loc, cal)
+        errs += time_errs
+        errs += _event_installations(spec, ev, loc, days, installed)
         if isinstance(ev, ShuffleEvent):
-            x0, y0, x1, y1 = ev.region
-            bx0, by0, bx1, by1 = spec.bounds
-            if x0 < bx0 or y0 < by0 or x1 > bx1 or y1 > by1:
-                errs.append((f"{loc}.region", "region is outside the world bounds"))
-            for o in spec.objects:
-                if o.group == group:
-                    theta = 0.0 if ev.rotate else o.pose[2]
-                    v = transform(o.local_vertices(), (0.0, 0.0, theta))
-                    w, h = v.max(axis=0) - v.min(axis=0)
-                    fits = (w <= x1 - x0 and h <= y1 - y0) or (
-                        ev.rotate and h <= x1 - x0 and w <= y1 - y0
-                    )
-                    if not fits:
-                        errs.append((f"{loc}.region", f"{o.id!r} does not fit in the region"))
+            errs += _shuffle_region(spec, ev, loc)
+    return errs
 
-    # geometry: objects inside walls, route/start through walls
-    walls = wall_pieces(spec)
+
+def _event_references(
+    ev: Any, loc: str, objects: dict[str, ObjectSpec], groups: set[str]
+) -> _Errors:
+    """An event's target is a known object (a door for door events), its group a known one."""
+    errs: _Errors = []
+    target = getattr(ev, "target", None)
+    group = getattr(ev, "group", None)
+    if target is not None and target not in objects:
+        errs.append((f"{loc}.target", f"unknown object id {target!r}"))
+    if group is not None and group not in groups:
+        errs.append((f"{loc}.group", f"unknown group {group!r}"))
+    if isinstance(ev, DoorEvent) and target in objects and objects[target].kind != "door":
+        errs.append((f"{loc}.target", f"{target!r} is not a door"))
+    return errs
+
+
+def _event_times(ev: Any, loc: str, cal: Calendar) -> tuple[_Errors, dict[str, int | None]]:
+    """An event's run and days inside the calendar, its end not before its start; the days."""
+    errs: _Errors = []
+    rpd = cal.runs_per_day
+    times: list[tuple[str, Any]] = []
+    if isinstance(ev, _AT_EVENTS):
+        times.append(("at", ev.at))
+        if ev.run > rpd:
+            errs.append((f"{loc}.run", f"run {ev.run} but the calendar has {rpd} per day"))
+    else:
+        times.append(("start", ev.start))
+        if getattr(ev, "end", None) is not None:
+            times.append(("end", ev.end))
+    days = {}
+    for key, when in times:
+        d = cal.day_of(when)
+        if d is None:
+            errs.append(
+                (
+                    f"{loc}.{key}",
+                    f"{when} is outside the calendar "
+                    f"({cal.dates[0]} .. {cal.dates[-1]}, days 1..{cal.n_days})",
+                )
+            )
+        days[key] = d
+    if days.get("start") and days.get("end") and days["end"] < days["start"]:
+        errs.append((f"{loc}.end", "end is before start"))
+    return errs, days
+
+
+def _event_installations(
+    spec: WorldSpec, ev: Any, loc: str, days: dict[str, int | None], installed: dict[str, int]
+) -> _Errors:
+    """Record installations in ``installed``; a later removal or presence of one is an error."""
+    errs: _Errors = []
+    if isinstance(ev, InstallEvent):
+        for oid in _event_object_ids(spec, ev):
+            installed[oid] = days.get("at") or 0
+    if isinstance(ev, RemoveEvent) or (isinstance(ev, PresentEvent)):
+        for oid in _event_object_ids(spec, ev):
+            if oid in installed and (days.get("at") or days.get("start") or 0) >= installed[oid]:
+                errs.append((loc, f"{oid!r} is a permanent installation and cannot be removed"))
+    return errs
+
+
+def _event_object_ids(spec: WorldSpec, ev: Any) -> list[str]:
+    """Ids an event applies to: its target, else every object of its group."""
+    target = getattr(ev, "target", None)
+    group = getattr(ev, "group", None)
+    return [target] if target else [o.id for o in spec.objects if o.group == group]
+
+
+def _shuffle_region(spec: WorldSpec, ev: ShuffleEvent, loc: str) -> _Errors:
+    """A shuffle region lies in the bounds and fits each object of its group (turned if it may)."""
+    errs: _Errors = []
+    x0, y0, x1, y1 = ev.region
+    if _box_outside(ev.region, spec.bounds):
+        errs.append((f"{loc}.region", "region is outside the world bounds"))
+    for o in spec.objects:
+        if o.group == ev.group:
+            theta = 0.0 if ev.rotate else o.pose[2]
+            v = transform(o.local_vertices(), (0.0, 0.0, theta))
+            w, h = v.max(axis=0) - v.min(axis=0)
+            fits = (w <= x1 - x0 and h <= y1 - y0) or (ev.rotate and h <= x1 - x0 and w <= y1 - y0)
+            if not fits:
+                errs.append((f"{loc}.region", f"{o.id!r} does not fit in the region"))
+    return errs
+
+
+def _object_poses(spec: WorldSpec, objects: dict[str, ObjectSpec]) -> list[tuple[str, str, tuple]]:
+    """Every pose an object takes ``(location, id, pose)``: initial, open, then moved to."""
     poses: list[tuple[str, str, tuple]] = [
         (f"objects.{i}", o.id, o.pose) for i, o in enumerate(spec.objects)
     ]
@@ -191,12 +270,25 @@ def check_world(spec: WorldSpec) -> list[tuple[str, str]]:
     for i, ev in enumerate(spec.schedule):
         if isinstance(ev, MoveEvent) and ev.target in objects:
             poses.append((f"schedule.{i}.pose", ev.target, ev.pose))
-    bx0, by0, bx1, by1 = spec.bounds
+    return poses
+
+
+def _max_scales(spec: WorldSpec, objects: dict[str, ObjectSpec]) -> dict[str, float]:
+    """The largest scale each object grows to (1 without a grow event)."""
     scale = {oid: 1.0 for oid in objects}
     for ev in spec.schedule:
         if isinstance(ev, GrowEvent) and ev.target in scale:
             scale[ev.target] = max(scale[ev.target], ev.scale_start, ev.scale_end)
-    for loc, oid, pose in poses:
+    return scale
+
+
+def _check_object_poses(
+    spec: WorldSpec, objects: dict[str, ObjectSpec], walls: list[tuple[str, np.ndarray]]
+) -> _Errors:
+    """At each of its poses, fully grown, an object is in the bounds and not inside a wall."""
+    errs: _Errors = []
+    scale = _max_scales(spec, objects)
+    for loc, oid, pose in _object_poses(spec, objects):
         o = objects.get(oid)
         if o is None:
             continue
@@ -208,39 +300,57 @@ def check_world(spec: WorldSpec) -> list[tuple[str, str]]:
                     errs.append((loc, f"object {oid!r} is inside wall {pid!r} by {depth:.2f} m"))
                     break
         lo, hi = poly.min(axis=0), poly.max(axis=0)
-        if lo[0] < bx0 or lo[1] < by0 or hi[0] > bx1 or hi[1] > by1:
+        if _box_outside((lo[0], lo[1], hi[0], hi[1]), spec.bounds):
             errs.append((loc, f"object {oid!r} is outside the world bounds"))
+    return errs
+
+
+def _check_wall_points(spec: WorldSpec) -> _Errors:
+    """Every wall point lies in the bounds."""
+    errs: _Errors = []
     for i, w in enumerate(spec.walls):
         for k, (x, y) in enumerate(w.points):
-            if not (bx0 <= x <= bx1 and by0 <= y <= by1):
+            if not _in_bounds(x, y, spec.bounds):
                 errs.append((f"walls.{i}.points.{k}", "point outside the world bounds"))
+    return errs
+
+
+def _check_route(spec: WorldSpec, walls: list[tuple[str, np.ndarray]]) -> _Errors:
+    """No leg of the robot's route goes through a wall; its waypoints lie in the bounds."""
+    errs: _Errors = []
     route = np.array(spec.robot.waypoints, dtype=np.float64)
     for k in range(len(route) - 1):
-        seg = _segment_poly(route[k], route[k + 1])
-        for pid, wp in walls:
-            if sat_separation(seg, wp) < 0:
-                errs.append(
-                    (f"robot.route.{k}", f"route leg {k}->{k + 1} goes through wall {pid!r}")
-                )
-                break
+        pid = _first_wall_crossed(_segment_poly(route[k], route[k + 1]), walls)
+        if pid is not None:
+            errs.append((f"robot.route.{k}", f"route leg {k}->{k + 1} goes through wall {pid!r}"))
     for k, (x, y) in enumerate(route):
-        if not (bx0 <= x <= bx1 and by0 <= y <= by1):
+        if not _in_bounds(x, y, spec.bounds):
             errs.append((f"robot.route.{k}", "waypoint outside the world bounds"))
+    return errs
+
+
+def _check_start(spec: WorldSpec, walls: list[tuple[str, np.ndarray]]) -> _Errors:
+    """The robot's start (a 0.4 m square) is not inside a wall."""
     sx, sy, _ = spec.robot.start
     start = np.array(
         [[sx - 0.2, sy - 0.2], [sx + 0.2, sy - 0.2], [sx + 0.2, sy + 0.2], [sx - 0.2, sy + 0.2]]
     )
-    for pid, wp in walls:
-        if sat_separation(start, wp) < 0:
-            errs.append(("robot.start", f"start pose is inside wall {pid!r}"))
-            break
+    pid = _first_wall_crossed(start, walls)
+    if pid is not None:
+        return [("robot.start", f"start pose is inside wall {pid!r}")]
+    return []
+
+
+def _check_people(spec: WorldSpec, cal: Calendar) -> _Errors:
+    """People's areas, goals and routes lie in the bounds; their start and end in the calendar."""
+    errs: _Errors = []
     for i, p in enumerate(spec.people):
-        for k, (x0, y0, x1, y1) in enumerate(p.areas):
-            if x0 < bx0 or y0 < by0 or x1 > bx1 or y1 > by1:
+        for k, area in enumerate(p.areas):
+            if _box_outside(area, spec.bounds):
                 errs.append((f"people.{i}.areas.{k}", "area is outside the world bounds"))
         for key in ("goals", "route"):
             for k, (x, y) in enumerate(getattr(p, key)):
-                if not (bx0 <= x <= bx1 and by0 <= y <= by1):
+                if not _in_bounds(x, y, spec.bounds):
                     errs.append((f"people.{i}.{key}.{k}", "point outside the world bounds"))
         for key in ("start", "end"):
             when = getattr(p, key)
