@@ -11,10 +11,10 @@ import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from dynmap_sim.analysis.report import overall_of
 from dynmap_sim.experiments.results import ResultsDB
 from dynmap_sim.experiments.runner import run_experiment
 from dynmap_sim.experiments.scenario import Scenario, load_scenario
-from dynmap_sim.metrics import lost_stats
 from dynmap_sim.studies.biber_duckett.findings import measure_findings
 
 
@@ -90,6 +90,7 @@ def evaluate(scenario: Scenario, out_dir: Path, seed: int) -> list[CheckRow]:
             rows += _finding_rows(db, exp.findings, seed)
         for label, e in exp.localizers.items():
             k = labels.index(label)
+            overall = overall_of(db, k) if _needs_scans(e) else None
             days = db.query(
                 "SELECT day, mean_error_m, rmse_m, mean_heading_error_rad FROM day_summaries "
                 "WHERE loc=? ORDER BY day",
@@ -129,25 +130,22 @@ def evaluate(scenario: Scenario, out_dir: Path, seed: int) -> list[CheckRow]:
                         seed, label, "mean heading error per day [rad]", lim, v, _le(v, lim), w
                     )
                 )
-            if e.max_error_m is not None:
-                r = db.query(
-                    "SELECT max(err_m), count(*) - count(err_m) FROM estimates WHERE loc=?", (k,)
-                )[0]
-                v = math.inf if r[1] else (math.nan if r[0] is None else float(r[0]))
+            if e.max_error_m is not None and overall is not None:
+                v = overall.worst_error_m
                 rows.append(
                     CheckRow(seed, label, "max error [m]", e.max_error_m, v, _le(v, e.max_error_m))
                 )
-            if e.max_time_to_recover_s is not None:
-                v, w = _worst_recovery(db, k)
+            if e.max_time_to_recover_s is not None and overall is not None:
+                v = overall.worst_time_to_recover_s
+                w = (
+                    "day {} run {}".format(*overall.worst_recovery_run)
+                    if overall.worst_recovery_run
+                    else ""
+                )
                 lim = e.max_time_to_recover_s
                 rows.append(CheckRow(seed, label, "time to recover [s]", lim, v, _le(v, lim), w))
-            if e.lost_fraction is not None:
-                r = db.query(
-                    "SELECT avg(CASE WHEN err_m <= 0.5 THEN 0.0 ELSE 1.0 END) FROM estimates "
-                    "WHERE loc=?",
-                    (k,),
-                )[0]
-                v = math.nan if r[0] is None else float(r[0])
+            if e.lost_fraction is not None and overall is not None:
+                v = overall.lost_fraction
                 rows.append(
                     CheckRow(
                         seed, label, "lost fraction", e.lost_fraction, v, _le(v, e.lost_fraction)
@@ -173,17 +171,10 @@ def _finding_rows(db: ResultsDB, keys: list[str], seed: int) -> list[CheckRow]:
     return rows
 
 
-def _worst_recovery(db: ResultsDB, k: int) -> tuple[float, str]:
-    """Longest time to recover over all runs (inf when an episode never recovers)."""
-    d = db.per_scan(k)
-    worst, where = 0.0, ""
-    for day, run in sorted({(int(a), int(b)) for a, b in zip(d["day"], d["run"], strict=True)}):
-        m = (d["day"] == day) & (d["run"] == run)
-        ls = lost_stats(d["err_m"][m], d["t_s"][m])
-        v = math.inf if ls.n_recovered < ls.n_episodes else (ls.max_time_to_recover_s or 0.0)
-        if ls.n_episodes and (v > worst or not where):
-            worst, where = v, f"day {day} run {run}"
-    return worst, where
+def _needs_scans(e: object) -> bool:
+    """Whether a localizer's expectations need its whole-experiment summary (per-scan data)."""
+    keys = ("max_error_m", "max_time_to_recover_s", "lost_fraction")
+    return any(getattr(e, key) is not None for key in keys)
 
 
 def check_scenario(

@@ -15,7 +15,16 @@ from typing import Any
 import numpy as np
 
 from dynmap_sim.experiments.results import ResultsDB
-from dynmap_sim.metrics import ate, class_scores, lost_stats, rpe
+from dynmap_sim.metrics import (
+    LOST_THRESHOLD_M,
+    RUN_RPE_DELTA,
+    RUN_RPE_UNIT,
+    OverallSummary,
+    class_scores,
+    mean_per_scan,
+    overall_summary,
+    rpe_label,
+)
 from dynmap_sim.studies.biber_duckett.exhibition import plot_exhibition
 from dynmap_sim.studies.biber_duckett.figures import write_dynamic_figures
 from dynmap_sim.studies.biber_duckett.findings import (
@@ -92,52 +101,23 @@ def write_per_day_csv(db: ResultsDB, path: Path) -> Path:
 
 
 def overall_stats(db: ResultsDB) -> list[dict[str, Any]]:
-    """Whole-experiment figures per localizer (ATE, RPE, lost/recovered, collisions)."""
+    """Whole-experiment figures per localizer (ATE, RPE, lost/recovered; update time), from
+    :func:`dynmap_sim.metrics.overall_summary` (its fields, the label, ``update_ms_per_scan``)."""
     out = []
     for k, label in enumerate(db.labels()):
-        d = db.per_scan(k)
-        err = d["err_m"]
-        # lost episodes never span two runs: evaluate run by run
-        n_ep = n_rec = 0
-        rec_times: list[float] = []
-        rpes: list[float] = []
-        n_rpe = 0
-        for day, run in sorted({(a, b) for a, b in zip(d["day"], d["run"], strict=True)}):
-            m = (d["day"] == day) & (d["run"] == run)
-            ls = lost_stats(err[m], d["t_s"][m])
-            n_ep += ls.n_episodes
-            n_rec += ls.n_recovered
-            if ls.n_recovered:
-                rec_times.append(ls.mean_time_to_recover_s * ls.n_recovered)
-            r = rpe(d["truth"][m], d["estimate"][m], delta=10)
-            if r.translation.n:
-                rpes.append(r.translation.rmse**2 * r.translation.n)
-                n_rpe += r.translation.n
-        a = ate(d["truth"], d["estimate"]) if len(err) else None
-        t_row = db.query(
-            "SELECT sum(update_ms_per_scan * n_scans), sum(n_scans) FROM run_summaries "
-            "WHERE loc=? AND update_ms_per_scan IS NOT NULL",
-            (k,),
-        )[0]
-        out.append(
-            {
-                "localizer": label,
-                "n_scans": int(len(err)),
-                "ate_rmse_m": a.rmse if a else math.nan,
-                "mean_error_m": a.mean if a else math.nan,
-                "max_error_m": a.max if a else math.nan,
-                "mean_heading_error_rad": float(np.nanmean(d["err_theta_rad"]))
-                if len(err)
-                else math.nan,
-                "rpe_1s_rmse_m": math.sqrt(sum(rpes) / n_rpe) if n_rpe else math.nan,
-                "lost_fraction": float(np.mean(~(err <= 0.5))) if len(err) else math.nan,
-                "lost_episodes": n_ep,
-                "recovered": n_rec,
-                "mean_time_to_recover_s": sum(rec_times) / n_rec if n_rec else math.nan,
-                "update_ms_per_scan": t_row[0] / t_row[1] if t_row[1] else math.nan,
-            }
-        )
+        s = overall_of(db, k)
+        t_rows = db.query("SELECT update_ms_per_scan, n_scans FROM run_summaries WHERE loc=?", (k,))
+        update_ms = mean_per_scan([_f(u) for u, _ in t_rows], [n for _, n in t_rows])
+        row = {"localizer": label, **s.to_dict(), "rpe_label": s.rpe_label}
+        out.append(row | {"update_ms_per_scan": update_ms})
     return out
+
+
+def overall_of(db: ResultsDB, loc: int) -> OverallSummary:
+    """:func:`dynmap_sim.metrics.overall_summary` of localizer ``loc`` (runs by day and run)."""
+    d = db.per_scan(loc)
+    runs = np.column_stack([d["day"], d["run"]])
+    return overall_summary(d["truth"], d["estimate"], d["t_s"], runs)
 
 
 def _summary_md(
@@ -151,6 +131,8 @@ def _summary_md(
         "coalesce(sum(wall_s),0), coalesce(avg(route_progress),0) FROM runs"
     )[0]
     n_runs, n_steps, robot_s, coll, skipped, wall_s, prog = runs
+    overall = overall_stats(db)
+    rpe = overall[0]["rpe_label"] if overall else rpe_label(RUN_RPE_DELTA, RUN_RPE_UNIT)
     lines = [
         f"# {meta.get('scenario_name', 'experiment')}",
         "",
@@ -164,15 +146,15 @@ def _summary_md(
         "",
         "## Overall (position error in the map frame, no alignment)",
         "",
-        "| localizer | ATE RMSE [m] | mean [m] | max [m] | mean heading [rad] | RPE 1 s [m] "
+        f"| localizer | ATE RMSE [m] | mean [m] | max [m] | mean heading [rad] | {rpe} [m] "
         "| lost | lost episodes | recovered | mean time to recover [s] | update [ms/scan] |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
-    for s in overall_stats(db):
+    for s in overall:
         lines.append(
             f"| {s['localizer']} | {_fmt(s['ate_rmse_m'])} | {_fmt(s['mean_error_m'])} "
             f"| {_fmt(s['max_error_m'])} | {_fmt(s['mean_heading_error_rad'])} "
-            f"| {_fmt(s['rpe_1s_rmse_m'])} | {100.0 * s['lost_fraction']:.1f} % "
+            f"| {_fmt(s['rpe_rmse_m'])} | {100.0 * s['lost_fraction']:.1f} % "
             f"| {s['lost_episodes']} | {s['recovered']} | {_fmt(s['mean_time_to_recover_s'], 1)} "
             f"| {_fmt(s['update_ms_per_scan'], 2)} |"
         )
@@ -280,7 +262,7 @@ def _fig_error_over_time(db: ResultsDB, path: Path) -> Path:
         for k, label in enumerate(db.labels()):
             d = db.per_scan(k, day, run)
             ax.plot(d["t_s"] - d["t_s"][0] if len(d["t_s"]) else [], d["err_m"], label=label)
-        ax.axhline(0.5, color="gray", ls=":", lw=1)
+        ax.axhline(LOST_THRESHOLD_M, color="gray", ls=":", lw=1)
         ax.set_title(f"day {day}, run {run}", fontsize="small")
         ax.set_ylabel("error [m]")
     axes[-1, 0].set_xlabel("time in run [s]")

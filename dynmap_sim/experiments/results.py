@@ -40,7 +40,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynmap_sim.errors import InputError
-from dynmap_sim.metrics import heading_errors, position_errors, summarize
+from dynmap_sim.metrics import RunSummary, day_summary, n_onsets, scan_errors
 
 DB_NAME = "results.db"
 #: Folder (next to ``results.db``) of the checkpoint's localizer files.
@@ -215,14 +215,15 @@ class ResultsDB:
     def write_run(
         self,
         rec: RunRecord,
-        run_summaries: list[dict[str, float]],
+        run_summaries: list[RunSummary],
         day_done: bool,
         checkpoint: Checkpoint | None,
         scenario_hash: str,
         seed: int,
     ) -> None:
-        """Write one run's rows, its summaries, the day's summaries (when ``day_done``: after
-        the day's last run) and the checkpoint, in ONE transaction."""
+        """Write one run's rows, its summaries (``run_summaries[k]`` of localizer ``k``), the
+        day's summaries (when ``day_done``: after the day's last run) and the checkpoint, in
+        ONE transaction. Every number is computed by :mod:`dynmap_sim.metrics`."""
         d, r = rec.day, rec.run
         n_loc, n = rec.estimates.shape[:2]
         steps = np.arange(n)
@@ -250,8 +251,7 @@ class ResultsDB:
             self.con.executemany("INSERT INTO scans VALUES (?,?,?,?,?,?,?,?)", scan_tab.tolist())
             for k in range(n_loc):
                 est = rec.estimates[k]
-                err = position_errors(rec.truth, est) if n else np.zeros(0)
-                herr = heading_errors(rec.truth, est) if n else np.zeros(0)
+                err, herr = scan_errors(rec.truth, est)
                 tab = np.column_stack(
                     [
                         k * ones,
@@ -287,7 +287,7 @@ class ResultsDB:
                     rec.start_s,
                     n,
                     float(rec.t_s[-1] - rec.t_s[0]) if n else 0.0,
-                    int(_count_onsets(rec.collision)),
+                    n_onsets(rec.collision),
                     rec.skipped_waypoints,
                     rec.route_progress,
                     int(rec.terminated),
@@ -308,14 +308,15 @@ class ResultsDB:
                         np.ascontiguousarray(rec.segment_class, dtype="i1").tobytes(),
                     ),
                 )
-            for s in run_summaries:
+            for k, s in enumerate(run_summaries):
                 self.con.execute(
                     "INSERT INTO run_summaries VALUES (:loc, :day, :run, :n_scans, "
                     ":mean_error_m, :max_error_m, :rmse_m, :lost_fraction, "
                     ":mean_heading_error_rad, :mean_scan_loglik, :mean_lambda_min, "
                     ":n_lost_episodes, :n_recovered, :mean_time_to_recover_s, :rpe_m, "
                     ":update_ms_per_scan)",
-                    {"update_ms_per_scan": None} | {k: _none_if_nan(v) for k, v in s.items()},
+                    {"loc": k, "day": d, "run": r}
+                    | {key: _none_if_nan(v) for key, v in s.to_dict().items()},
                 )
             for s in self._day_summaries(d, n_loc) if day_done else []:
                 self.con.execute(
@@ -339,7 +340,7 @@ class ResultsDB:
                 (k, day),
             ).fetchall()
             a = np.array(rows, dtype=np.float64).reshape(-1, 4)
-            s = summarize(a[:, 0], a[:, 1], a[:, 2], a[:, 3])
+            s = day_summary(a[:, 0], a[:, 1], a[:, 2], a[:, 3])
             out.append({"loc": k, "day": day, **s.to_dict()})
         return out
 
@@ -491,13 +492,6 @@ class ResultsDB:
             return None
         seg = np.frombuffer(row[0], dtype="<f8").reshape(-1, 4)
         return seg, np.frombuffer(row[1], dtype="i1")
-
-
-def _count_onsets(flags: np.ndarray) -> int:
-    f = np.asarray(flags, dtype=bool)
-    if f.size == 0:
-        return 0
-    return int(f[0]) + int(np.count_nonzero(f[1:] & ~f[:-1]))
 
 
 def _none_if_nan(v: Any) -> Any:

@@ -39,17 +39,8 @@ from dynmap_sim.experiments.bench import (
 from dynmap_sim.experiments.drivers import TourDriver, TourParams, clip_route
 from dynmap_sim.experiments.results import Checkpoint, ResultsDB, RunRecord
 from dynmap_sim.experiments.scenario import Scenario, env_kwargs
-from dynmap_sim.metrics import (
-    heading_errors,
-    lost_stats,
-    position_errors,
-    rpe,
-    summarize,
-)
+from dynmap_sim.metrics import RunSummary, run_summary
 from dynmap_sim.types import Prior
-
-#: Steps between poses for the per-run RPE (1 s at the URG-04LX's 10 Hz).
-RPE_DELTA_STEPS = 10
 
 
 def default_out_dir(scenario: Scenario) -> Path:
@@ -494,23 +485,16 @@ class ExperimentRunner:
         return now
 
     @staticmethod
-    def _run_summary(k: int, rec: RunRecord) -> dict[str, float]:
-        err = position_errors(rec.truth, rec.estimates[k])
-        herr = heading_errors(rec.truth, rec.estimates[k])
-        s = summarize(err, herr, rec.extras[k, :, 0], rec.extras[k, :, 1])
-        lost = lost_stats(err, rec.t_s)
-        r = rpe(rec.truth, rec.estimates[k], delta=RPE_DELTA_STEPS)
-        out: dict[str, float] = {"loc": k, "day": rec.day, "run": rec.run}
-        out.update(s.to_dict())
-        out["n_lost_episodes"] = lost.n_episodes
-        out["n_recovered"] = lost.n_recovered
-        out["mean_time_to_recover_s"] = lost.mean_time_to_recover_s
-        out["rpe_m"] = r.translation.rmse
-        n = len(rec.t_s)
-        out["update_ms_per_scan"] = (
-            1e3 * float(rec.update_s[k]) / n if rec.update_s is not None and n else math.nan
+    def _run_summary(k: int, rec: RunRecord) -> RunSummary:
+        """The run summary of localizer ``k`` (:func:`dynmap_sim.metrics.run_summary`)."""
+        return run_summary(
+            rec.truth,
+            rec.estimates[k],
+            rec.t_s,
+            scan_loglik=rec.extras[k, :, 0],
+            lambda_min=rec.extras[k, :, 1],
+            update_s=None if rec.update_s is None else float(rec.update_s[k]),
         )
-        return out
 
 
 def run_experiment(

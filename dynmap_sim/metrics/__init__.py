@@ -1,10 +1,18 @@
-"""Metrics: pure functions over arrays comparing estimates with ground truth (DESIGN.md §6).
+"""Metrics: pure functions over arrays comparing estimates with ground truth.
 
-No I/O and no simulator imports; results are small frozen dataclasses with ``to_dict``.
+No I/O and no simulator imports. Results are small frozen dataclasses that save to JSON and
+load back equal (:class:`~.result.Result`). Every summary the experiments store and report
+(per run, per day, overall) is computed in :mod:`.summaries`.
 """
 
 from dynmap_sim.metrics.daily import GroupSummary, summarize, summarize_groups
-from dynmap_sim.metrics.lost import LOST_THRESHOLD_M, LostStats, lost_episodes, lost_stats
+from dynmap_sim.metrics.lost import (
+    LOST_THRESHOLD_M,
+    LostStats,
+    lost_episodes,
+    lost_fraction,
+    lost_stats,
+)
 from dynmap_sim.metrics.point_classes import (
     BEAM_TO_POINT_CLASS,
     POINT_CLASSES,
@@ -13,6 +21,7 @@ from dynmap_sim.metrics.point_classes import (
     confusion_matrix,
 )
 from dynmap_sim.metrics.pose_error import (
+    RPE_UNITS,
     ErrorStats,
     RPEResult,
     ate,
@@ -20,26 +29,58 @@ from dynmap_sim.metrics.pose_error import (
     heading_errors,
     position_errors,
     rpe,
+    rpe_label,
+    rpe_pairs,
+)
+from dynmap_sim.metrics.result import Result
+from dynmap_sim.metrics.summaries import (
+    RUN_RPE_DELTA,
+    RUN_RPE_UNIT,
+    DaySummary,
+    OverallSummary,
+    RunSummary,
+    day_summary,
+    mean_per_scan,
+    n_onsets,
+    overall_summary,
+    run_summary,
+    scan_errors,
 )
 
 __all__ = [
     "BEAM_TO_POINT_CLASS",
     "LOST_THRESHOLD_M",
     "POINT_CLASSES",
+    "RPE_UNITS",
+    "RUN_RPE_DELTA",
+    "RUN_RPE_UNIT",
     "ClassScores",
+    "DaySummary",
     "ErrorStats",
     "GroupSummary",
     "LostStats",
+    "OverallSummary",
     "RPEResult",
+    "Result",
+    "RunSummary",
     "ate",
     "class_scores",
     "confusion_matrix",
+    "day_summary",
     "error_stats",
     "heading_errors",
     "lost_episodes",
+    "lost_fraction",
     "lost_stats",
+    "mean_per_scan",
+    "n_onsets",
+    "overall_summary",
     "position_errors",
     "rpe",
+    "rpe_label",
+    "rpe_pairs",
+    "run_summary",
+    "scan_errors",
     "summarize",
     "summarize_groups",
 ]

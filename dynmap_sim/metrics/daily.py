@@ -3,16 +3,17 @@ localization error per day)."""
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike
 
-from dynmap_sim.metrics.lost import LOST_THRESHOLD_M
+from dynmap_sim.metrics.lost import LOST_THRESHOLD_M, lost_fraction
+from dynmap_sim.metrics.result import Result
 
 
-@dataclass(frozen=True)
-class GroupSummary:
+@dataclass(frozen=True, eq=False)
+class GroupSummary(Result):
     """Summary of one group of scans (one run or one day) for one localizer.
 
     ``mean_scan_loglik`` and ``mean_lambda_min`` are NaN when the localizer reports none.
@@ -26,9 +27,6 @@ class GroupSummary:
     mean_heading_error_rad: float
     mean_scan_loglik: float
     mean_lambda_min: float
-
-    def to_dict(self) -> dict[str, float]:
-        return asdict(self)
 
 
 def _nanmean(a: np.ndarray) -> float:
@@ -60,7 +58,7 @@ def summarize(
         mean_error_m=float(finite.mean()) if finite.size else nan,
         max_error_m=float(finite.max()) if finite.size else nan,
         rmse_m=float(np.sqrt(np.mean(finite**2))) if finite.size else nan,
-        lost_fraction=float(np.mean(~(e <= lost_threshold_m))),
+        lost_fraction=lost_fraction(e, lost_threshold_m),
         mean_heading_error_rad=_nanmean(h),
         mean_scan_loglik=_nanmean(np.asarray(scan_loglik, dtype=np.float64).ravel())
         if scan_loglik is not None

@@ -8,17 +8,26 @@ the time from its first lost scan to that first good scan.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from dynmap_sim.metrics.result import Result
 
 #: Position error above which a localizer counts as lost [m].
 LOST_THRESHOLD_M = 0.5
 
 
-@dataclass(frozen=True)
-class LostStats:
+def lost_fraction(errors_m: ArrayLike, threshold_m: float = LOST_THRESHOLD_M) -> float:
+    """Share of the scans whose position error exceeds ``threshold_m`` (NaN counts as lost;
+    NaN for no scans)."""
+    e = np.asarray(errors_m, dtype=np.float64).ravel()
+    return float(np.mean(~(e <= threshold_m))) if e.size else float("nan")
+
+
+@dataclass(frozen=True, eq=False)
+class LostStats(Result):
     """Lost/recovered summary of one sequence (e.g. a run)."""
 
     n_scans: int
@@ -27,13 +36,6 @@ class LostStats:
     n_recovered: int
     mean_time_to_recover_s: float
     max_time_to_recover_s: float
-
-    def to_dict(self) -> dict[str, float]:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict[str, float]) -> LostStats:
-        return cls(**d)
 
 
 def lost_episodes(lost: ArrayLike) -> NDArray[np.int64]:

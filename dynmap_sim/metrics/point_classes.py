@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from dynmap_sim.metrics.result import Result
 from dynmap_sim.types import BeamClass
 
 #: Point classes a localizer reports (``PoseEstimate.extras["point_classes"]``).
@@ -41,8 +42,8 @@ def confusion_matrix(beam_class: ArrayLike, predicted: ArrayLike) -> NDArray[np.
     return np.bincount(t * n + np.clip(p, 0, n - 1), minlength=n * n).reshape(n, n)
 
 
-@dataclass(frozen=True)
-class ClassScores:
+@dataclass(frozen=True, eq=False)
+class ClassScores(Result):
     """Precision and recall per point class (dynamic, semi-static, static); NaN if undefined."""
 
     precision: tuple[float, float, float]
