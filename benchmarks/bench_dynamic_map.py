@@ -25,9 +25,9 @@ import numpy as np
 
 from dynmap_sim import se2
 from dynmap_sim.agent.localizer import make_localizer
-from dynmap_sim.agent.mapping.first_run import scan_points_base, voxel_downsample
 from dynmap_sim.agent.mapping.scan_matcher import PointMap, match_scan
 from dynmap_sim.agent.mapping.scan_matcher_numba import numba_available
+from dynmap_sim.agent.mapping.scan_points import scan_points_base, voxel_downsample
 from dynmap_sim.agent.maps.dynamic_map import DynamicMap
 from dynmap_sim.agent.maps.local_map import LocalMap
 from dynmap_sim.agent.maps.sample_set import SampleSets, robust_estimates

@@ -22,12 +22,15 @@ registered twice is an error).
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from dynmap_sim.registry import Registry
 from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Prior, Scan
+
+if TYPE_CHECKING:
+    from dynmap_sim.agent.grid import OccupancyGrid
 
 
 class Localizer(ABC):
@@ -55,6 +58,20 @@ class Localizer(ABC):
 
     def end_day(self) -> None:  # noqa: B027 - optional hook
         """The day is over (B&D §4.4: daily timescales are learned here)."""
+
+
+class MapUser(ABC):
+    """Capability of a :class:`Localizer` that localizes on a fixed occupancy grid: it accepts
+    one handed to it instead of making its own (e.g. ``static-mcl``, whose map otherwise comes
+    from its map source, :mod:`dynmap_sim.agent.maps.map_source`).
+
+    Whoever has a map for such localizers (replay's map from a log's poses) tests
+    ``isinstance(loc, MapUser)`` and calls :meth:`set_map` before the first run.
+    """
+
+    @abstractmethod
+    def set_map(self, grid: OccupancyGrid) -> None:
+        """Localize on ``grid`` from now on; no map of its own is built any more."""
 
 
 #: The localizer registry (built-in localizers register themselves on first lookup).

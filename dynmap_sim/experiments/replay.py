@@ -31,7 +31,7 @@ import numpy as np
 
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import OccupancyGrid
-from dynmap_sim.agent.localizer import Localizer, make_localizer
+from dynmap_sim.agent.localizer import Localizer, MapUser, make_localizer
 from dynmap_sim.errors import InputError
 from dynmap_sim.experiments.results import EXTRA_COLUMNS, ResultsDB, RunRecord
 from dynmap_sim.experiments.runner import ExperimentRunner, localizer_seeds
@@ -138,7 +138,7 @@ def replay_log(log: Path, localizers: list[str], out_dir: Path, map_from_log_pos
     if map_from_log_poses:
         grid = map_from_poses(data)
         for i, loc in enumerate(locs):
-            if hasattr(loc, "set_map"):
+            if isinstance(loc, MapUser):
                 loc.set_map(grid)
                 given_map[i] = True
     start = data.reference[0] if data.reference is not None else np.zeros(3)

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import pickle
+from dataclasses import replace
 
 import numpy as np
 import pytest
 from synthetic_scans import LASER, box, drifting_stream, polyline_path
 
 from dynmap_sim.agent.localization.dynamic_map_localizer import (
+    DynamicMapConfig,
     DynamicMapLocalizer,
     lambda_min,
 )
@@ -146,9 +148,21 @@ def test_bad_mode_is_rejected():
         DynamicMapLocalizer(LASER, np.random.default_rng(0), mode="frozen")
 
 
+def test_params_build_the_config_and_unknown_ones_are_named():
+    """A scenario's flat ``params`` become a DynamicMapConfig (typed like its defaults)."""
+    loc = make_localizer("static-map", laser=LASER, rng=np.random.default_rng(0), kappa0=1)
+    assert loc.config == replace(DynamicMapConfig(), kappa0=1.0)
+    assert isinstance(loc.config.kappa0, float) and loc.mode == "static"
+    with pytest.raises(TypeError, match=r"unknown parameters \['kapa0'\]"):
+        make_localizer("dynamic-map", laser=LASER, rng=np.random.default_rng(0), kapa0=1.0)
+    base = DynamicMapConfig(min_update_dist_m=0.1)
+    loc = DynamicMapLocalizer(LASER, np.random.default_rng(0), config=base, kappa0=0.5)
+    assert (loc.config.min_update_dist_m, loc.config.kappa0) == (0.1, 0.5)
+
+
 def test_min_update_motion_skips_scans_with_odometry_prediction(learned):
     loc = pickle.loads(pickle.dumps(learned[0]["dynamic-map"]))
-    loc.min_update_dist_m, loc.min_update_angle_rad = 0.3, 0.3
+    loc.config = replace(loc.config, min_update_dist_m=0.3, min_update_angle_rad=0.3)
     truth = learned[2]
     rng = np.random.default_rng(9)
     loc.begin_run(Prior(initial_pose=truth[0].copy(), day=2, run=1))

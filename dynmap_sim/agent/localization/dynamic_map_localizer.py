@@ -52,18 +52,21 @@ the short-term memory λ1 learning online.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from dynmap_sim import se2
 from dynmap_sim.agent.localizer import Localizer, register_localizer
-from dynmap_sim.agent.mapping.first_run import BeamDirections, FirstRunMapper, scan_points_base
+from dynmap_sim.agent.mapping.first_run import FirstRunMapper
 from dynmap_sim.agent.mapping.scan_matcher import MatchResult, PointMap, match_scan
+from dynmap_sim.agent.mapping.scan_points import BeamDirections, scan_points_base
 from dynmap_sim.agent.maps.current_map import CurrentMap, SynthesisParams, synthesize_current_map
 from dynmap_sim.agent.maps.dynamic_map import DynamicMap, MapSnapshot
 from dynmap_sim.agent.maps.local_map import TABLE1
 from dynmap_sim.agent.maps.sample_set import to_mm
+from dynmap_sim.agent.params import coerce_fields, config_from_params
 from dynmap_sim.types import FloatArray, LaserSpec, Odometry, PoseEstimate, Prior, Scan
 
 _MODES = ("dynamic", "static", "static+stm")
@@ -87,78 +90,133 @@ def odometry_covariance(
     return np.diag([sxy**2, sxy**2, sth**2])
 
 
+@dataclass(frozen=True)
+class DynamicMapConfig:
+    """Parameters of the dynamic-map localizer and its static variants (lengths in m,
+    angles in rad). A scenario's ``params`` table gives them by name."""
+
+    #: Static variants (§5.3): the map freezes after the end of this day ("a snapshot of the
+    #: dynamic map after the first day").
+    freeze_after_day: int = 1
+    #: Local maps within this distance of the pose are the "nearby local maps" of the
+    #: current-map synthesis (§4.3 step 1: "4 meters in our experiments").
+    select_radius_m: float = 4.0
+    #: Local maps within this distance learn a scan online and offline (§4.4: "< 2.5 m");
+    #: with no local map that near, a new one is made.
+    update_radius_m: float = 2.5
+    #: The first run's keyframes become the initial local maps (§4), thinned to one per this
+    #: distance (the paper's lab: 76 local maps on ~9.6 km / 75 runs of a few-room lab).
+    local_map_spacing_m: float = 2.0
+    #: The synthesis selects timescales until fewer readings than this are unexplained
+    #: (§4.3 step 5: "20 in our experiments").
+    min_readings: int = 20
+    #: At most this many readings (evenly subsampled) enter the synthesis (0: all): the
+    #: selection needs far fewer than a scan's 682 to tell timescales apart, and it is the
+    #: most expensive step.
+    max_select_readings: int = 240
+    #: Only rays whose estimated standard deviation is at most this become current-map points
+    #: (§4.3 step 6: "5 cm in our experiments").
+    sigma_max_m: float = 0.05
+    #: A reading counts as explained when its density ``p(d)`` (eq. 6) is at least this
+    #: [1/m] (§4.3 step 4: "a threshold is used here"; 0.5/m: about 3 sigma of a 5 cm ray).
+    explained_density: float = 0.5
+    #: Floor of the perceptual model's sigma [m] (eq. 7) (1 cm, the URG-04LX's noise at 1 m;
+    #: a ray learned from a few equal samples is not infinitely sharp).
+    sigma_min_m: float = 0.01
+    #: ``C_O`` (§4.3: "a covariance matrix that was acquired experimentally"; ours is a
+    #: parameter): standard deviation in x and y ``odom_sigma_xy0_m + odom_k_xy (d + a/2)``
+    #: [m] for a step of ``d`` [m] and turn ``a`` [rad] ...
+    odom_sigma_xy0_m: float = 0.01
+    #: ... (10 % of the motion: loose, the adaptive κ of eq. 9 only needs a plausible region)
+    odom_k_xy: float = 0.1
+    #: ... and in theta ``odom_sigma_th0_rad + odom_k_th (a + d/2)`` [rad] ...
+    odom_sigma_th0_rad: float = 0.01
+    #: ... (10 % of the motion, as in x and y).
+    odom_k_th: float = 0.1
+    #: First non-zero κ of eq. 9 (§4.3 step 4 doubles it from here).
+    kappa0: float = 0.25
+    #: At most this many doublings of κ; if none brings the result within two standard
+    #: deviations of the odometry prediction, the prediction is used (0.25 * 2^12 = 1024).
+    max_kappa_doublings: int = 12
+    #: At most this many scan points (evenly subsampled) enter ICP.
+    max_match_points: int = 200
+    #: ICP correspondence gate [m].
+    max_correspondence_m: float = 0.3
+    #: ICP iterations per κ.
+    max_iterations: int = 20
+    #: Fewer matched points (or current-map points) than this: the prediction is used.
+    min_matched: int = 20
+    #: The current map is thinned to one point per square cell of this side [m] (0: off):
+    #: the long-term maps hold several nearly equal points per surface.
+    map_voxel_m: float = 0.05
+    #: λ2 learns a uniformly random subset of this many of a run's scans (0: all; §4.4 picks
+    #: random measurements anyway, and 1500 scans still hold far more than ``u n`` per ray).
+    ltm_scans_per_run: int = 1500
+    #: Scans taken before the robot moved this far [m] ...
+    min_update_dist_m: float = 0.0
+    #: ... and turned this much [rad] since the last processed scan get the odometry
+    #: prediction only (0: every scan, as in the paper; like AMCL's ``update_min_*``).
+    min_update_angle_rad: float = 0.0
+    #: λ3-λ5 learn this many random scans of each of the day's runs (0: all).
+    ltm_day_scans_per_run: int = 1500
+    #: Keep a snapshot of λ2-λ5 after each day's learning (for figures like B&D Fig. 9;
+    #: ~0.5 MB a day in the lab).
+    day_snapshots: bool = True
+    #: A ray's first time step takes up to ``n`` measurements (the toy example of §3.5);
+    #: False: ``u n`` per step until full, as §3.1 states (λ5 then fills in ~20 days, one
+    #: of §5.4's reasons why λ5 is used more and more).
+    first_step_fills: bool = False
+
+    def __post_init__(self) -> None:
+        coerce_fields(self)
+
+    @property
+    def synthesis(self) -> SynthesisParams:
+        """The current-map synthesis thresholds (§4.3)."""
+        return SynthesisParams(
+            select_radius_m=self.select_radius_m,
+            min_readings=self.min_readings,
+            sigma_max_m=self.sigma_max_m,
+            explained_density=self.explained_density,
+            sigma_min_m=self.sigma_min_m,
+            max_readings=self.max_select_readings,
+        )
+
+    @property
+    def odom_params(self) -> tuple[float, float, float, float]:
+        """The arguments of :func:`odometry_covariance` after ``delta``."""
+        return (self.odom_sigma_xy0_m, self.odom_k_xy, self.odom_sigma_th0_rad, self.odom_k_th)
+
+
 class DynamicMapLocalizer(Localizer):
-    """Scan matching on a multi-timescale dynamic map (B&D §4); see the module docstring."""
+    """Scan matching on a multi-timescale dynamic map (B&D §4); see the module docstring.
+
+    ``mode``: ``"dynamic"``, ``"static"`` or ``"static+stm"`` (the registered variants set
+    it); ``config``: a :class:`DynamicMapConfig`; ``params``: its fields by name (replacing
+    those of ``config``), e.g. a scenario's ``params`` table.
+    """
 
     def __init__(
         self,
         laser: LaserSpec,
         rng: np.random.Generator,
         mode: str = "dynamic",
-        freeze_after_day: int = 1,
-        select_radius_m: float = 4.0,
-        update_radius_m: float = 2.5,
-        local_map_spacing_m: float = 2.0,
-        min_readings: int = 20,
-        max_select_readings: int = 240,
-        sigma_max_m: float = 0.05,
-        explained_density: float = 0.5,
-        sigma_min_m: float = 0.01,
-        odom_sigma_xy0_m: float = 0.01,
-        odom_k_xy: float = 0.1,
-        odom_sigma_th0_rad: float = 0.01,
-        odom_k_th: float = 0.1,
-        kappa0: float = 0.25,
-        max_kappa_doublings: int = 12,
-        max_match_points: int = 200,
-        max_correspondence_m: float = 0.3,
-        max_iterations: int = 20,
-        min_matched: int = 20,
-        map_voxel_m: float = 0.05,
-        ltm_scans_per_run: int = 1500,
-        min_update_dist_m: float = 0.0,
-        min_update_angle_rad: float = 0.0,
-        ltm_day_scans_per_run: int = 1500,
-        day_snapshots: bool = True,
-        first_step_fills: bool = False,
+        config: DynamicMapConfig | None = None,
         **params: Any,
     ) -> None:
-        super().__init__(laser, rng, **params)
+        if config is not None and not isinstance(config, DynamicMapConfig):
+            raise TypeError(f"{type(self).__name__}: config must be a DynamicMapConfig")
+        cfg = config_from_params(
+            DynamicMapConfig, type(self).__name__, params, config or DynamicMapConfig()
+        )
+        super().__init__(laser, rng)
         if mode not in _MODES:
             raise ValueError(f"mode must be one of {_MODES}, got {mode!r}")
-        self.ltm_scans_per_run = int(ltm_scans_per_run)
-        self.min_update_dist_m = float(min_update_dist_m)
-        self.min_update_angle_rad = float(min_update_angle_rad)
-        self.ltm_day_scans_per_run = int(ltm_day_scans_per_run)
-
         self.mode = mode
+        self.config = cfg
         self._beams = BeamDirections(laser)
-        self.freeze_after_day = int(freeze_after_day)
-        self.update_radius_m = float(update_radius_m)
-        self.local_map_spacing_m = float(local_map_spacing_m)
-        self.synthesis = SynthesisParams(
-            select_radius_m=float(select_radius_m),
-            min_readings=int(min_readings),
-            sigma_max_m=float(sigma_max_m),
-            explained_density=float(explained_density),
-            sigma_min_m=float(sigma_min_m),
-            max_readings=int(max_select_readings),
-        )
-        self.odom_params = (
-            float(odom_sigma_xy0_m),
-            float(odom_k_xy),
-            float(odom_sigma_th0_rad),
-            float(odom_k_th),
-        )
-        self.kappa0 = float(kappa0)
-        self.max_kappa_doublings = int(max_kappa_doublings)
-        self.max_match_points = int(max_match_points)
-        self.max_correspondence_m = float(max_correspondence_m)
-        self.max_iterations = int(max_iterations)
-        self.min_matched = int(min_matched)
-        self.map_voxel_m = float(map_voxel_m)
         self.dmap = DynamicMap(
-            TABLE1, float(laser.range_max_m), self.update_radius_m, bool(first_step_fills)
+            TABLE1, float(laser.range_max_m), cfg.update_radius_m, cfg.first_step_fills
         )
         self.frozen = False
         self.days_done = 0
@@ -175,9 +233,8 @@ class DynamicMapLocalizer(Localizer):
         self._day_ranges: list[np.ndarray] = []
         self.n_scans = 0
         self.n_safe_mode = 0
-        #: (day, MapSnapshot of λ2–λ5) after each day's offline learning, while learning:
-        #: the map's own history, for figures like B&D Fig. 9 (~0.5 MB a day in the lab)
-        self.keep_day_snapshots = bool(day_snapshots)
+        #: (day, MapSnapshot of λ2–λ5) after each day's offline learning, while learning
+        #: and ``config.day_snapshots``: the map's own history, for figures like B&D Fig. 9
         self.day_snapshots: list[tuple[int, MapSnapshot]] = []
         self._day = 0
 
@@ -255,10 +312,10 @@ class DynamicMapLocalizer(Localizer):
         if self._last_odom is not None:
             delta = se2.between(self._last_odom, opose)
             if (
-                np.hypot(delta[0], delta[1]) < self.min_update_dist_m
-                and abs(delta[2]) < self.min_update_angle_rad
+                np.hypot(delta[0], delta[1]) < self.config.min_update_dist_m
+                and abs(delta[2]) < self.config.min_update_angle_rad
             ):  # not moved enough: odometry only, the scan is not used (like AMCL's update_min_*)
-                c_o = odometry_covariance(delta, *self.odom_params)
+                c_o = odometry_covariance(delta, *self.config.odom_params)
                 return PoseEstimate(
                     mean=se2.compose(self._pose, delta),
                     cov=self._propagated_cov(c_o),
@@ -270,12 +327,12 @@ class DynamicMapLocalizer(Localizer):
         else:
             self._last_odom = opose.copy()
             pred = se2.compose(self._pose, delta)
-            c_o = odometry_covariance(delta, *self.odom_params)
+            c_o = odometry_covariance(delta, *self.config.odom_params)
             pose, cov, kappa = self._match(pts_base, pred, c_o)
             self._pose, self._cov = pose, cov
         pts_map = se2.transform_points(self._pose, pts_base)
         cur = synthesize_current_map(
-            self.dmap, self._pose, pts_map, self.selectable_levels, self.synthesis
+            self.dmap, self._pose, pts_map, self.selectable_levels, self.config.synthesis
         )
         self._set_current_map(cur)
         if self.learns_stm:
@@ -302,10 +359,11 @@ class DynamicMapLocalizer(Localizer):
         self, pts_base: FloatArray, pred: FloatArray, c_o: FloatArray
     ) -> tuple[FloatArray, FloatArray, float]:
         """Scan matching with the adaptive odometry prior (§4.3, eq. 9)."""
+        c = self.config
         target = self._current_point_map()
-        if target is None or len(pts_base) < self.min_matched:
+        if target is None or len(pts_base) < c.min_matched:
             return pred, self._propagated_cov(c_o), float("nan")
-        step = max(1, int(np.ceil(len(pts_base) / self.max_match_points)))
+        step = max(1, int(np.ceil(len(pts_base) / c.max_match_points)))
         pts = pts_base[::step]
         info_o = np.linalg.inv(c_o)
 
@@ -313,24 +371,24 @@ class DynamicMapLocalizer(Localizer):
             e = res.pose - pred
             e[2] = float(se2.wrap_angle(e[2]))
             return (
-                res.n_matched >= self.min_matched
+                res.n_matched >= c.min_matched
                 and np.all(np.isfinite(res.pose))
                 and float(e @ info_o @ e) <= 4.0  # two standard deviations
             )
 
-        kw = {"max_correspondence_m": self.max_correspondence_m}
-        res = match_scan(pts, target, pred, max_iterations=self.max_iterations, **kw)
+        kw = {"max_correspondence_m": c.max_correspondence_m}
+        res = match_scan(pts, target, pred, max_iterations=c.max_iterations, **kw)
         kappa = 0.0
         if not within(res):
-            kappa = self.kappa0
-            for _ in range(self.max_kappa_doublings):
+            kappa = c.kappa0
+            for _ in range(c.max_kappa_doublings):
                 res = match_scan(
                     pts,
                     target,
                     pred,
                     prior_mean=pred,
                     prior_info=kappa * info_o,
-                    max_iterations=self.max_iterations,
+                    max_iterations=c.max_iterations,
                     **kw,
                 )
                 if within(res):
@@ -348,8 +406,8 @@ class DynamicMapLocalizer(Localizer):
     # ------------------------------------------------------------------ current map
     def _set_current_map(self, cur: CurrentMap) -> None:
         pts = cur.points
-        if len(pts) and self.map_voxel_m > 0:
-            key = np.floor(pts / self.map_voxel_m).astype(np.int64)
+        if len(pts) and self.config.map_voxel_m > 0:
+            key = np.floor(pts / self.config.map_voxel_m).astype(np.int64)
             _, idx = np.unique(key[:, 0] * 1_000_003 + key[:, 1], return_index=True)
             pts = pts[np.sort(idx)]
         if self._cmap is not None and np.array_equal(pts, self._cmap_points):
@@ -358,7 +416,7 @@ class DynamicMapLocalizer(Localizer):
         self._cmap = None
 
     def _current_point_map(self) -> PointMap | None:
-        if self._cmap is None and len(self._cmap_points) >= self.min_matched:
+        if self._cmap is None and len(self._cmap_points) >= self.config.min_matched:
             self._cmap = PointMap(self._cmap_points)
         return self._cmap
 
@@ -385,11 +443,11 @@ class DynamicMapLocalizer(Localizer):
                 self._run_poses = [p.copy() for p in smap.trajectory]
             self._init_local_maps(smap.keyframes)
         if self.learns_ltm and self._run_poses:
-            sel = self._random_subset(len(self._run_poses), self.ltm_scans_per_run)
+            sel = self._random_subset(len(self._run_poses), self.config.ltm_scans_per_run)
             poses = [self._run_poses[k] for k in sel]
             pts = self._stored_points(poses, [self._run_ranges[k] for k in sel])
             self.dmap.learn_offline(self.dmap.levels("run"), np.array(poses), pts, self.rng)
-            sel = self._random_subset(len(self._run_poses), self.ltm_day_scans_per_run)
+            sel = self._random_subset(len(self._run_poses), self.config.ltm_day_scans_per_run)
             self._day_poses += [self._run_poses[k] for k in sel]
             self._day_ranges += [self._run_ranges[k] for k in sel]
         self._run_poses, self._run_ranges = [], []
@@ -407,11 +465,11 @@ class DynamicMapLocalizer(Localizer):
             self.dmap.learn_offline(
                 self.dmap.levels("day"), np.array(self._day_poses), pts, self.rng
             )
-            if self.__dict__.get("keep_day_snapshots", False):
+            if self.config.day_snapshots:
                 self.day_snapshots.append((self._day, self.dmap.snapshot()))
         self._day_poses, self._day_ranges = [], []
         self.days_done += 1
-        if self.mode != "dynamic" and self.days_done >= self.freeze_after_day:
+        if self.mode != "dynamic" and self.days_done >= self.config.freeze_after_day:
             self.frozen = True
 
     def _init_local_maps(self, keyframes: list) -> None:
@@ -419,7 +477,7 @@ class DynamicMapLocalizer(Localizer):
         apart; each is filled with its own keyframe scan."""
         for kf in keyframes:
             pose = np.asarray(kf.pose, dtype=np.float64)
-            if len(self.dmap.near(pose, self.local_map_spacing_m)):
+            if len(self.dmap.near(pose, self.config.local_map_spacing_m)):
                 continue
             self.dmap.add_local_map(pose[:2], self._points_map(pose, kf.ranges_m), self.rng)
 

@@ -35,10 +35,11 @@ Table 8.4 "KLD_Sampling_MCL"; Fox 2003) exactly as nav2_amcl composes it:
   taken from the weighted set after the sensor update (AMCL takes it after resampling, when
   freshly injected random poses weigh as much as the rest and can drag the mean).
 
-The map is either the first run's SLAM map (built by
-:class:`~dynmap_sim.agent.mapping.first_run.FirstRunMapper` on the experiment's first run,
-whose estimates it reports meanwhile) or the prior
-walls rasterized to a 5 cm grid. It never changes afterwards.
+The map comes from a map source (:mod:`dynmap_sim.agent.maps.map_source`): the first run's
+SLAM map (built by :class:`~dynmap_sim.agent.mapping.first_run.FirstRunMapper` on the
+experiment's first run, whose estimates it reports meanwhile) or the prior walls rasterized
+to a 5 cm grid; or it is handed over (:class:`~dynmap_sim.agent.localizer.MapUser`). It never
+changes afterwards.
 """
 
 from __future__ import annotations
@@ -68,8 +69,8 @@ from dynmap_sim.agent.localization.likelihood_field import (
 )
 from dynmap_sim.agent.localization.motion_model import sample_odometry_motion
 from dynmap_sim.agent.localization.resampling import low_variance_resample
-from dynmap_sim.agent.localizer import Localizer, register_localizer
-from dynmap_sim.agent.mapping.first_run import FirstRunMapper, StaticMap
+from dynmap_sim.agent.localizer import Localizer, MapUser, register_localizer
+from dynmap_sim.agent.maps.map_source import MapSource, make_map_source
 from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Prior, Scan
 
 FloatArray = NDArray[np.float64]
@@ -191,7 +192,6 @@ TUNED = MCLConfig(
 MIN_RECOVERY_BEAM_SHARE = 0.5
 
 CONFIGS: dict[str, MCLConfig] = {"nav2-default": NAV2_DEFAULT, "tuned": TUNED}
-MAP_SOURCES = ("first-run", "prior-walls")
 
 
 #: Smallest variance [m^2 / rad^2] kept in a reported covariance: a particle set collapsed onto
@@ -480,15 +480,16 @@ class AMCLFilter:
 
 
 @register_localizer("static-mcl")
-class StaticMCL(Localizer):
+class StaticMCL(Localizer, MapUser):
     """AMCL-faithful MCL on a map that never changes (the baseline of every comparison).
 
-    ``config``: ``"tuned"`` or ``"nav2-default"``; ``map_source``: ``"first-run"`` (build the
-    map by static SLAM on the experiment's first run) or ``"prior-walls"`` (the walls the
+    ``config``: ``"tuned"`` or ``"nav2-default"``; ``map_source``: where the map comes from,
+    a :class:`~dynmap_sim.agent.maps.map_source.MapSource` or its name: ``"first-run"``
+    (built by static SLAM on the experiment's first run) or ``"prior-walls"`` (the walls the
     prior grants); ``overrides``: individual :class:`MCLConfig` fields to change;
     ``global_localization``: start every run from particles spread over the free space;
-    ``mapper_params``: keyword arguments of the first-run
-    :class:`~dynmap_sim.agent.mapping.first_run.FirstRunMapper`.
+    ``mapper_params``: fields of the first-run SLAM's
+    :class:`~dynmap_sim.agent.mapping.first_run.FirstRunConfig` (flat names).
     """
 
     def __init__(
@@ -496,7 +497,7 @@ class StaticMCL(Localizer):
         laser: LaserSpec,
         rng: np.random.Generator,
         config: str = "tuned",
-        map_source: str = "first-run",
+        map_source: str | MapSource = "first-run",
         overrides: dict[str, Any] | None = None,
         global_localization: bool = False,
         mapper_params: dict[str, Any] | None = None,
@@ -505,8 +506,6 @@ class StaticMCL(Localizer):
         super().__init__(laser, rng, **params)
         if config not in CONFIGS:
             raise ValueError(f"static-mcl: unknown config {config!r}; known: {sorted(CONFIGS)}")
-        if map_source not in MAP_SOURCES:
-            raise ValueError(f"static-mcl: unknown map_source {map_source!r}; known: {MAP_SOURCES}")
         cfg = CONFIGS[config]
         if overrides:
             unknown = set(overrides) - set(asdict(cfg))
@@ -515,41 +514,45 @@ class StaticMCL(Localizer):
             cfg = replace(cfg, **overrides)
         self.config_name = config
         self.config = cfg
-        self.map_source = map_source
+        if isinstance(map_source, MapSource):
+            if mapper_params:
+                raise ValueError("static-mcl: mapper_params go with a map_source name only")
+            self.map_source = map_source
+        else:
+            try:
+                self.map_source = make_map_source(map_source, laser, mapper_params)
+            except ValueError as exc:
+                raise ValueError(f"static-mcl: {exc}") from None
         self.global_localization = bool(global_localization)
-        # The grid takes hits up to the sensor's range (FirstRunMapper's default, 3 m, keeps
-        # walls sharper but leaves the lab's hallway walls out of the map, so the filter
-        # followed shuffled chairs there: 32 % of lab scans lost on days 1-4, 6.7 % with
-        # the full range).
-        self.mapper_params = {"map_max_hit_range_m": laser.range_max_m, **(mapper_params or {})}
-        self.grid: OccupancyGrid | None = None
-        self.static_map: StaticMap | None = None
         self.filter: AMCLFilter | None = None
-        self._mapper: FirstRunMapper | None = None
         self._odom_at_update: FloatArray | None = None
         self._est_at_update = np.zeros(3)
         self._cov = np.eye(3)
         self._n_updates = 0
 
     # -- map -----------------------------------------------------------------------------
+    @property
+    def grid(self) -> OccupancyGrid | None:
+        """The (fixed) map, once the map source has it."""
+        return self.map_source.grid
+
     def set_map(self, grid: OccupancyGrid) -> None:
-        """Use ``grid`` as the (fixed) map."""
-        self.grid = grid
+        """Use ``grid`` as the (fixed) map (:class:`~dynmap_sim.agent.localizer.MapUser`)."""
+        self.map_source.set_grid(grid)
         self.filter = AMCLFilter(grid, self.laser, self.config)
 
+    def _use_map_when_ready(self) -> None:
+        """The filter on the map source's map, once it is there (made once)."""
+        if self.filter is None and self.map_source.grid is not None:
+            self.filter = AMCLFilter(self.map_source.grid, self.laser, self.config)
+
     def begin_run(self, prior: Prior) -> None:
-        self._mapper = None
         self._odom_at_update = None
         self._n_updates = 0
-        if self.grid is None and self.map_source == "prior-walls":
-            if prior.walls is None or len(prior.walls) == 0:
-                raise ValueError("static-mcl map_source='prior-walls' needs prior.walls")
-            seed = None if prior.initial_pose is None else np.asarray(prior.initial_pose)[:2]
-            self.set_map(OccupancyGrid.from_segments(prior.walls, free_seed_xy_m=seed))
-        if self.grid is None:  # first-run SLAM map still to build: map during this run
-            start = np.zeros(3) if prior.initial_pose is None else np.asarray(prior.initial_pose)
-            self._mapper = FirstRunMapper(self.laser, start, **self.mapper_params)
+        self.map_source.begin_run(prior)
+        if self.map_source.building:  # the map source reports its estimates meanwhile
             return
+        self._use_map_when_ready()
         assert self.filter is not None
         if prior.initial_pose is None or self.global_localization:
             self.filter.init_uniform(self.rng)
@@ -563,16 +566,14 @@ class StaticMCL(Localizer):
         self._est_at_update, self._cov = self.filter.estimate()
 
     def end_run(self) -> None:
-        if self._mapper is not None:
-            self.static_map = self._mapper.finish()
-            self.set_map(self.static_map.grid)
-            self._mapper = None
+        self.map_source.end_run()
+        self._use_map_when_ready()
 
     # -- filtering -----------------------------------------------------------------------
     def update(self, odom: Odometry, scan: Scan) -> PoseEstimate:
         pose_odom = np.asarray(odom.pose, dtype=np.float64)
-        if self._mapper is not None:
-            est = self._mapper.update(odom, scan)
+        if self.map_source.building:
+            est = self.map_source.update(odom, scan)
             est.extras["lambda_min"] = information_lambda_min(est.cov)
             return est
         f = self.filter

@@ -6,9 +6,9 @@ import numpy as np
 
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import OCCUPIED
-from dynmap_sim.agent.mapping.first_run import (
+from dynmap_sim.agent.mapping.first_run import FirstRunMapper
+from dynmap_sim.agent.mapping.scan_points import (
     BeamDirections,
-    FirstRunMapper,
     free_space_violations,
     range_discontinuities,
     scan_points_base,
