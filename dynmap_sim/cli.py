@@ -29,7 +29,8 @@ def _days(text: str) -> tuple[int, int]:
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
-    from dynmap_sim.experiments.scenario import ScenarioFileError, is_scenario_file, load_scenario
+    from dynmap_sim.analysis.scenarios import load_scenario
+    from dynmap_sim.experiments.scenario import ScenarioFileError, is_scenario_file
     from dynmap_sim.world import WorldFileError, load_world
 
     status = 0
@@ -74,8 +75,8 @@ def _cmd_render_world(args: argparse.Namespace) -> int:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
+    from dynmap_sim.analysis.scenarios import load_scenario
     from dynmap_sim.experiments.runner import run_experiment
-    from dynmap_sim.experiments.scenario import load_scenario
 
     scenario = load_scenario(args.scenario)
     out = run_experiment(

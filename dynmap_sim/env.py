@@ -15,6 +15,7 @@ from dynmap_sim.robot.diff_drive import DiffDriveRobot, RobotParams
 from dynmap_sim.robot.route import RouteProgress
 from dynmap_sim.sensors.lidar import LidarNoise, make_lidar
 from dynmap_sim.sensors.odometry import EncoderNoise, WheelOdometry
+from dynmap_sim.truth import ObstacleSnapshot, RunSlot, WorldFacts, read_only
 from dynmap_sim.types import LaserSpec
 from dynmap_sim.world import World, WorldSpec, load_world, resolve_world_path
 
@@ -296,6 +297,35 @@ class DynMapEnv(gymnasium.Env):
             raise ValueError(f"teleport pose must be 3 finite numbers (x, y, theta), got {pose!r}")
         self.robot.set_pose(p)
         self.world.sync_space()  # people's bodies far from the old pose lag behind
+
+    @property
+    def robot_radius_m(self) -> float:
+        """The robot's radius [m]."""
+        return float(self.robot_params.radius_m)
+
+    def world_facts(self) -> WorldFacts:
+        """The current world's fixed facts (a read-only view; see :mod:`dynmap_sim.truth`)."""
+        spec = self.spec_world
+        return WorldFacts(
+            name=spec.name,
+            bounds=tuple(float(b) for b in spec.bounds),  # type: ignore[arg-type]
+            start_pose=read_only(np.asarray(spec.robot.start, dtype=np.float64)),
+            route=read_only(np.asarray(spec.robot.route, dtype=np.float64)),
+            wall_segments=read_only(np.asarray(self.world.wall_segments(), dtype=np.float64)),
+            slots=tuple(
+                RunSlot(s.day, s.run, s.date, s.start_s) for s in self.world.calendar.slots
+            ),
+        )
+
+    def obstacles(self) -> ObstacleSnapshot:
+        """A read-only snapshot of the current world's obstacles (people's legs included)."""
+        g = self.world.geometry
+        return ObstacleSnapshot(
+            segments=read_only(np.asarray(g.segments, dtype=np.float64)),
+            segment_class=read_only(np.asarray(g.segment_class, dtype=np.int8)),
+            circles=read_only(np.asarray(g.circles, dtype=np.float64).reshape(-1, 3)),
+            circle_class=read_only(np.asarray(g.circle_class, dtype=np.int8).ravel()),
+        )
 
     @property
     def day_run(self) -> tuple[int, int]:

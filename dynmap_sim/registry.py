@@ -99,7 +99,7 @@ class Registry(Generic[T]):
         except ImportError as exc:
             raise ValueError(
                 f"cannot load {self.role} {ref!r}: {exc}. The module must be importable: "
-                "installed, or in a folder on PYTHONPATH"
+                "next to the scenario file, installed, or in a folder on PYTHONPATH"
             ) from exc
         cls = getattr(mod, cls_name, None)
         if cls is None:

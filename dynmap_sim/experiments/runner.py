@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import math
 import os
 import pickle
 import time
@@ -28,19 +27,20 @@ from typing import Any
 import numpy as np
 
 from dynmap_sim.agent.localizer import Localizer, make_localizer
+from dynmap_sim.env_factory import SimSpecError
+from dynmap_sim.env_factory import make_env as build_env
 from dynmap_sim.errors import InputError
 from dynmap_sim.experiments.bench import (
     InProcessLocalizers,
     LocalizerOutput,
     LocalizerPool,
-    RunStream,
     pickle_localizer,
 )
-from dynmap_sim.experiments.drivers import TourDriver, TourParams, clip_route
+from dynmap_sim.experiments.drivers import DriverContext, clip_route, make_driver
+from dynmap_sim.experiments.episode import EngineState, Episode, EpisodeLoop, LoopConfig
 from dynmap_sim.experiments.results import Checkpoint, ResultsDB, RunRecord
-from dynmap_sim.experiments.scenario import Scenario, env_kwargs
+from dynmap_sim.experiments.scenario import Scenario
 from dynmap_sim.metrics import RunSummary, run_summary
-from dynmap_sim.types import Prior
 
 
 def default_out_dir(scenario: Scenario) -> Path:
@@ -50,11 +50,9 @@ def default_out_dir(scenario: Scenario) -> Path:
 
 def make_env(scenario: Scenario) -> Any:
     """The env a scenario describes (world file, sensor and robot presets, people)."""
-    from dynmap_sim.env import DynMapEnv
-
     try:
-        return DynMapEnv(**env_kwargs(scenario))
-    except (TypeError, ValueError, KeyError) as exc:
+        return build_env(scenario.sim_spec())
+    except (SimSpecError, TypeError, ValueError, KeyError) as exc:
         where = scenario.source_path or scenario.name
         raise InputError(f"{where}: cannot build the env: {exc}") from None
 
@@ -88,29 +86,6 @@ def default_workers(n_localizers: int, robot_time_s: float | None = None) -> int
     return max(1, min(2, os.cpu_count() or 1, n_localizers))
 
 
-@dataclasses.dataclass
-class _Kidnap:
-    step: int
-    pose: np.ndarray | None  # None: random (drawn at the kidnapping from the runner's RNG)
-
-
-@dataclasses.dataclass
-class _SimRun:
-    """A simulated run waiting for its localizers' outputs."""
-
-    index: int
-    stream: RunStream
-    truth: np.ndarray
-    collision: np.ndarray
-    events: list[tuple[int, float, str, str]]
-    terminated: bool
-    route_progress: float
-    skipped_waypoints: int
-    segments: np.ndarray
-    segment_class: np.ndarray
-    state_after: dict[str, Any]
-
-
 class ExperimentRunner:
     """Holds an experiment's env, localizers, driver and results store (see module doc)."""
 
@@ -134,13 +109,27 @@ class ExperimentRunner:
         self.env = env if env is not None else make_env(scenario)
         self.u = self.env.unwrapped
         self.laser = self.u.laser_spec
-        self.spec = self.world.spec
-        self.slots = [s for s in self.world.calendar.slots if days[0] <= s.day <= days[1]]
+        self.facts = self.u.world_facts()
+        self.slots = [s for s in self.facts.slots if days[0] <= s.day <= days[1]]
         if not self.slots:
             raise InputError(
                 f"days {days[0]}-{days[1]}: the world's calendar has days "
-                f"1-{self.world.calendar.n_days}"
+                f"1-{max(s.day for s in self.facts.slots)}"
             )
+        self.route = clip_route(np.asarray(self.facts.route, float), scenario.driver.route_fraction)
+        d = scenario.driver
+        self.loop = EpisodeLoop(
+            self.env,
+            LoopConfig(
+                seed=self.seed,
+                route=self.route,
+                speed_mps=d.speed_mps,
+                max_run_s=d.max_run_s,
+                prior=scenario.prior,
+                kidnappings=tuple(scenario.kidnappings),
+            ),
+            self.slots,
+        )
         if workers is None:
             run_s = scenario.driver.max_run_s
             robot_s = None if run_s is None else len(self.slots) * float(run_s)
@@ -148,7 +137,7 @@ class ExperimentRunner:
         self.workers = int(workers)
         self.hash = experiment_hash(scenario, self.seed, days)
         self.start_index = 0
-        state: dict[str, Any] | None = None
+        state: EngineState | None = None
         #: the localizers pickled after the last stored run (None: fresh, in _fresh_locs)
         self._loc_states: list[bytes] | None = None
         self._fresh_locs: list[Localizer] = []
@@ -171,6 +160,14 @@ class ExperimentRunner:
                     "inputs or start a new experiment with another --out"
                 )
             cp = self.db.load_checkpoint(self.hash, self.seed)
+            if cp is not None and not isinstance(cp.state, EngineState):
+                self.db.close()
+                raise InputError(
+                    f"{db_file}: the checkpoint was written by an earlier version of dynmap_sim "
+                    "(before the episode loop and the Driver role); it cannot be resumed with "
+                    "this version. Its finished runs still load in `dynmap-sim report`; rerun "
+                    "the experiment with another --out"
+                )
             if cp is not None:
                 self.start_index = cp.next_index
                 state = cp.state
@@ -182,12 +179,6 @@ class ExperimentRunner:
             self._write_meta()
         self.state = state if state is not None else self._fresh_state()
 
-    @property
-    def world(self) -> Any:
-        """The env's current world: the env builds a new one when ``reset`` gets another
-        seed, so a reference kept from before would show another seed's objects."""
-        return self.u.world
-
     # ------------------------------------------------------------------ setup
     def _write_meta(self) -> None:
         sc = self.scenario
@@ -195,39 +186,39 @@ class ExperimentRunner:
             scenario=sc.model_dump(mode="json"),
             scenario_path=str(sc.source_path) if sc.source_path else None,
             scenario_name=sc.name,
-            world=self.spec.name,
+            world=self.facts.name,
             world_path=str(sc.world_path),
             seed=self.seed,
             days=list(self.days),
             experiment_hash=self.hash,
             laser=dataclasses.asdict(self.laser),
-            route=np.asarray(self.spec.robot.route, float).tolist(),
-            bounds=list(self.spec.bounds),
+            route=np.asarray(self.facts.route, float).tolist(),
+            bounds=list(self.facts.bounds),
             slots=[[s.day, s.run, s.date.isoformat(), s.start_s] for s in self.slots],
             first_date=self.slots[0].date.isoformat(),
             complete=False,
         )
         self.db.set_localizers([(loc.display, loc.name, dict(loc.params)) for loc in sc.localizers])
 
-    def _fresh_state(self) -> dict[str, Any]:
+    def _fresh_state(self) -> EngineState:
         sc = self.scenario
         rngs = localizer_seeds(self.seed, len(sc.localizers))
         self._fresh_locs = [
             make_localizer(c.name, laser=self.laser, rng=rngs[k + 1], **c.params)
             for k, c in enumerate(sc.localizers)
         ]
-        robot_params = getattr(self.u, "robot_params", None)
-        robot_radius = float(getattr(robot_params, "radius_m", 0.2))
-        d = sc.driver
-        params = TourParams(
-            speed_mps=d.speed_mps,
-            robot_radius_m=robot_radius,
-            clearance_m=d.clearance_m,
-            wait_for_people=d.wait_for_people,
+        context = DriverContext(
+            route=self.route,
+            speed_mps=sc.driver.speed_mps,
+            robot_radius_m=float(self.u.robot_radius_m),
             dt_s=float(self.laser.scan_period_s),
+            laser=self.laser,
         )
-        route = clip_route(np.asarray(self.spec.robot.route, float), d.route_fraction)
-        return {"driver": TourDriver(route, params), "rng": rngs[0]}
+        try:
+            driver = make_driver(sc.driver.kind, context, dict(sc.driver.params))
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"driver {sc.driver.kind!r}: {exc}") from None
+        return EngineState(driver=driver, rng=rngs[0])
 
     # ------------------------------------------------------------------ running
     def localizers(self) -> list[Localizer]:
@@ -278,7 +269,7 @@ class ExperimentRunner:
         engine = None
         try:
             engine = self._start_localizers()
-            pending: _SimRun | None = None
+            pending: tuple[Episode, EngineState] | None = None
             done_at = time.perf_counter()  # when storing the previous run began
             for i in range(self.start_index, last):
                 slot = self.slots[i]
@@ -286,17 +277,17 @@ class ExperimentRunner:
                 sim = self._simulate(i)
                 # pipelined: collect the previous run, start this one, then store the previous
                 outs = engine.result() if pending is not None else None
-                engine.submit(sim.stream)
+                engine.submit(sim[0].stream)
                 if pending is not None and outs is not None:
-                    done_at = self._write(pending, outs, done_at)
+                    done_at = self._write(*pending, outs, done_at)
                     bar.update(1)
                 pending = sim
                 if not engine.pipelined:
-                    done_at = self._write(pending, engine.result(), done_at)
+                    done_at = self._write(*pending, engine.result(), done_at)
                     bar.update(1)
                     pending = None
             if pending is not None:
-                self._write(pending, engine.result(), done_at)
+                self._write(*pending, engine.result(), done_at)
                 bar.update(1)
         finally:
             if engine is not None:
@@ -308,141 +299,15 @@ class ExperimentRunner:
         self.env.close()
         return self.out_dir
 
-    def _prior(self, i: int) -> Prior:
-        sc, slot = self.scenario, self.slots[i]
-        known = sc.prior.initial_pose == "known"
-        sxy, sth = sc.prior.initial_pose_sigma_xy_m, sc.prior.initial_pose_sigma_theta_rad
-        return Prior(
-            initial_pose=np.asarray(self.spec.robot.start, float).copy() if known else None,
-            initial_pose_cov=np.diag([sxy**2, sxy**2, sth**2]) if known else None,
-            walls=np.asarray(self.world.wall_segments(), float).copy()
-            if sc.prior.map == "walls"
-            else None,
-            bounds=tuple(float(b) for b in self.spec.bounds),  # type: ignore[arg-type]
-            day=slot.day,
-            run=slot.run,
-            first_run=i == 0,
-        )
+    def _simulate(self, i: int) -> tuple[Episode, EngineState]:
+        """Drive run ``i`` through the episode loop; the state to checkpoint after it (copied
+        now: the next run is simulated before this one is written)."""
+        episode = self.loop.run(i, self.state)
+        return episode, pickle.loads(pickle.dumps(self.state, pickle.HIGHEST_PROTOCOL))
 
-    def _kidnaps(self, day: int, run: int, rng: np.random.Generator) -> list[_Kidnap]:
-        dt_s = float(self.laser.scan_period_s)
-        out = []
-        driver: TourDriver = self.state["driver"]
-        route_len = float(np.sum(np.hypot(*np.diff(driver.route, axis=0).T)))
-        expected_s = route_len / self.scenario.driver.speed_mps
-        if self.scenario.driver.max_run_s is not None:
-            expected_s = min(expected_s, self.scenario.driver.max_run_s)
-        for k in self.scenario.kidnappings:
-            if (k.day, k.run) != (day, run):
-                continue
-            t = rng.uniform(0.2, 0.6) * expected_s if k.time_s == "random" else float(k.time_s)
-            pose = None if k.pose == "random" else np.asarray(k.pose, dtype=np.float64)
-            out.append(_Kidnap(max(1, int(round(t / dt_s))), pose))
-        return sorted(out, key=lambda kp: kp.step)
-
-    def _random_route_pose(self, rng: np.random.Generator) -> np.ndarray:
-        route = np.asarray(self.state["driver"].route, float)
-        seg = np.hypot(*np.diff(route, axis=0).T)
-        s = rng.uniform(0.0, seg.sum())
-        k = int(min(np.searchsorted(np.cumsum(seg), s), len(seg) - 1))
-        u = (s - (np.cumsum(seg)[k] - seg[k])) / max(seg[k], 1e-12)
-        xy = route[k] + u * (route[k + 1] - route[k])
-        return np.array([xy[0], xy[1], rng.uniform(-math.pi, math.pi)])
-
-    def _simulate(self, i: int) -> _SimRun:
-        """Drive run ``i`` through the env and record its sensor stream (no localizers: the
-        driver follows the true pose and kidnappings use the runner's RNG)."""
-        slot = self.slots[i]
-        sc = self.scenario
-        driver: TourDriver = self.state["driver"]
-        rng: np.random.Generator = self.state["rng"]
-        obs, info = self.env.reset(seed=self.seed, options={"day": slot.day, "run": slot.run})
-        geom = self.world.geometry
-        prior = self._prior(i)
-        start = np.asarray(info["truth"]["pose"], dtype=np.float64)
-        driver.begin_run(geom, start)
-        kidnaps = self._kidnaps(slot.day, slot.run, rng)
-        events: list[tuple[int, float, str, str]] = []
-        max_steps = (
-            int(round(sc.driver.max_run_s / self.laser.scan_period_s))
-            if sc.driver.max_run_s is not None
-            else None
-        )
-        t_l: list[float] = []
-        odom_l: list[np.ndarray] = []
-        scan_l: list[np.ndarray] = []
-        class_l: list[np.ndarray] = []
-        truth_l: list[np.ndarray] = []
-        coll_l: list[bool] = []
-        terminated = truncated = False
-        collision = False
-        step = 0
-        progress_frac = 0.0
-        while True:
-            truth = info["truth"]
-            pose = np.array(truth["pose"], dtype=np.float64)  # copies: the history must not
-            t_s = float(truth["time"][2])  # change if a producer reuses its arrays
-            t_l.append(t_s)
-            odom_l.append(np.array(obs["odom"], dtype=np.float64))
-            scan_l.append(np.array(obs["scan"], dtype=np.float32))
-            class_l.append(np.array(truth["beam_class"], dtype=np.int8))
-            truth_l.append(pose)
-            coll_l.append(collision)
-            progress_frac = float(info.get("route_progress", progress_frac))
-            if terminated or truncated or driver.done:
-                break
-            if max_steps is not None and step >= max_steps:
-                events.append((step, t_s, "time_limit", f"stopped after {sc.driver.max_run_s} s"))
-                break
-            if kidnaps and kidnaps[0].step <= step:
-                kp = kidnaps.pop(0)
-                target = kp.pose if kp.pose is not None else self._random_route_pose(rng)
-                free = driver.free_place_near(target[:2], 1.0)
-                if free is None:
-                    events.append((step, t_s, "kidnap_skipped", "no free place near the target"))
-                else:
-                    new_pose = np.array([free[0], free[1], target[2]])
-                    self.u.teleport(new_pose)
-                    driver.notify_teleport(new_pose, t_s)
-                    events.append((step, t_s, "kidnap", f"to {np.round(new_pose, 3).tolist()}"))
-                    pose = new_pose
-            action = driver.act(pose, truth["people"], t_s, bumped=collision)
-            obs, _, terminated, truncated, info = self.env.step(action)
-            collision = bool(info.get("collision", False))
-            step += 1
-        events += [
-            (step, t_s, "kidnap_not_reached", f"planned at step {kp.step}") for kp in kidnaps
-        ]
-        driver_events, skipped = list(driver.events), driver.skipped_waypoints
-        finished = driver.done
-        driver.end_run()
-        last_of_day = i + 1 == len(self.slots) or self.slots[i + 1].day != slot.day
-        stream = RunStream(
-            index=i,
-            prior=prior,
-            stamps_s=np.asarray(t_l, dtype=np.float64),
-            odom=np.asarray(odom_l, dtype=np.float64).reshape(-1, 3),
-            scans=np.asarray(scan_l, dtype=np.float32).reshape(len(t_l), -1),
-            beam_class=np.asarray(class_l, dtype=np.int8).reshape(len(t_l), -1),
-            last_of_day=last_of_day,
-        )
-        return _SimRun(
-            index=i,
-            stream=stream,
-            truth=np.asarray(truth_l, dtype=np.float64).reshape(-1, 3),
-            collision=np.asarray(coll_l, dtype=bool),
-            events=sorted(events + driver_events, key=lambda e: e[0]),
-            terminated=bool(terminated or finished),
-            route_progress=progress_frac,
-            skipped_waypoints=skipped,
-            segments=np.asarray(geom.segments, dtype=np.float64).copy(),
-            segment_class=np.asarray(geom.segment_class, dtype=np.int8).copy(),
-            # what the checkpoint after this run holds besides the localizers (copied now:
-            # the next run is simulated before this one is written)
-            state_after=pickle.loads(pickle.dumps(self.state, pickle.HIGHEST_PROTOCOL)),
-        )
-
-    def _write(self, sim: _SimRun, outs: list[LocalizerOutput], since: float) -> float:
+    def _write(
+        self, sim: Episode, state_after: EngineState, outs: list[LocalizerOutput], since: float
+    ) -> float:
         """Store a localized run with the checkpoint after it (one transaction); return when
         that began. The run's ``wall_s`` is the time since the previous run's store began
         (so the runs' wall times add up to the experiment's, also when pipelined)."""
@@ -478,7 +343,7 @@ class ExperimentRunner:
             next_index=i + 1,
             next_day=nxt.day if nxt else -1,
             next_run=nxt.run if nxt else -1,
-            state=sim.state_after,
+            state=state_after,
             localizers=tuple(self._loc_states),
         )
         self.db.write_run(rec, run_sum, stream.last_of_day, cp, self.hash, self.seed)

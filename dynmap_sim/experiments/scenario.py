@@ -38,7 +38,9 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import sys
 import tomllib
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, Literal
 
@@ -54,7 +56,10 @@ from pydantic import (
     model_validator,
 )
 
+from dynmap_sim.agent.localizer import LOCALIZERS, make_localizer
+from dynmap_sim.env_factory import SimSpec, resolve_world, sim_spec_errors
 from dynmap_sim.errors import FileError, pydantic_errors, read_toml
+from dynmap_sim.experiments.drivers import DRIVERS, DriverContext, make_driver
 from dynmap_sim.types import LaserSpec
 
 #: Keys only a scenario file has at its top level (world files have none of them).
@@ -81,9 +86,11 @@ class PresetConfig(_Strict):
 
 
 class DriverConfig(_Strict):
-    """Who drives the robot. ``tour``: a scripted operator steering along the world's route."""
+    """Who drives the robot: a driver by registry name (``tour``: a scripted operator
+    steering along the world's route) or ``"package.module:ClassName"``, with its ``params``.
+    ``speed_mps``, ``max_run_s`` and ``route_fraction`` hold for every driver."""
 
-    kind: Literal["tour", "autonomous"] = "tour"
+    kind: str = Field("tour", description="driver registry name or 'package.module:Class'")
     speed_mps: float = Field(0.35, gt=0.0, le=2.0, description="cruise speed [m/s]")
     max_run_s: float | None = Field(
         None, gt=0.0, description="robot-time limit per run [s] (None: until the route ends)"
@@ -91,16 +98,31 @@ class DriverConfig(_Strict):
     route_fraction: float = Field(
         1.0, gt=0.0, le=1.0, description="drive only this leading fraction of the route"
     )
-    wait_for_people: bool = True
-    clearance_m: float = Field(
-        0.12, ge=0.0, le=1.0, description="extra clearance kept from obstacles [m]"
+    params: dict[str, ParamValue] = Field(
+        default_factory=dict,
+        description="the driver's own parameters (tour: wait_for_people, clearance_m, "
+        "planner, controller, ...)",
     )
 
-    @model_validator(mode="after")
-    def _autonomous_not_yet(self) -> DriverConfig:
-        if self.kind == "autonomous":
-            raise ValueError("driver 'autonomous' is not available yet; use 'tour'")
-        return self
+    @model_validator(mode="before")
+    @classmethod
+    def _tour_shorthand(cls, data: Any) -> Any:
+        """``wait_for_people`` and ``clearance_m`` at the top level (the first file format)
+        are the tour's parameters."""
+        if isinstance(data, dict) and ({"wait_for_people", "clearance_m"} & set(data)):
+            data = dict(data)
+            params = dict(data.get("params") or {})
+            for key in ("wait_for_people", "clearance_m"):
+                if key in data:
+                    params.setdefault(key, data.pop(key))
+            data["params"] = params
+        return data
+
+    @field_validator("kind")
+    @classmethod
+    def _known_driver(cls, v: str) -> str:
+        DRIVERS.get(v)  # raises ValueError with the known names
+        return v
 
 
 class PriorConfig(_Strict):
@@ -122,8 +144,6 @@ class LocalizerConfig(_Strict):
     @field_validator("name")
     @classmethod
     def _known(cls, v: str) -> str:
-        from dynmap_sim.agent.localizer import LOCALIZERS
-
         LOCALIZERS.get(v)  # raises ValueError with the known names
         return v
 
@@ -149,6 +169,15 @@ _DUMMY_LASER = LaserSpec(
     range_max_m=8.0,
     scan_period_s=0.1,
     time_increment_s=0.0,
+)
+
+#: What a driver is built with when only its parameters are validated.
+_DUMMY_DRIVER_CONTEXT = DriverContext(
+    route=np.array([[0.0, 0.0], [1.0, 0.0]]),
+    speed_mps=0.35,
+    robot_radius_m=0.2,
+    dt_s=0.1,
+    laser=_DUMMY_LASER,
 )
 
 
@@ -257,7 +286,7 @@ class Scenario(_Strict):
     @classmethod
     def _world_ok(cls, v: str, info: ValidationInfo) -> str:
         base = (info.context or {}).get("base_dir")
-        _resolve_world(v, base)  # raises ValueError with a readable message
+        resolve_world(v, base)  # raises ValueError with a readable message
         return v
 
     # ----------------------------------------------------------------- helpers
@@ -271,13 +300,24 @@ class Scenario(_Strict):
         """The world file (resolved against the scenario file's folder)."""
         if self._world_path is None:
             base = self._source.parent if self._source else None
-            self._world_path = _resolve_world(self.world, base)
+            self._world_path = resolve_world(self.world, base)
         return self._world_path
 
     @property
     def labels(self) -> list[str]:
         """Display labels of the localizers, in file order."""
         return [loc.display for loc in self.localizers]
+
+    def sim_spec(self) -> SimSpec:
+        """The simulation this scenario asks for (world, people, robot, sensor)."""
+        return SimSpec(
+            world=self.world_path,
+            people=self.people,
+            robot_preset=self.robot.preset,
+            robot_overrides=dict(self.robot.overrides),
+            sensor_preset=self.sensor.preset,
+            sensor_overrides=dict(self.sensor.overrides),
+        )
 
     def content_hash(self) -> str:
         """SHA-256 of the scenario's content and its world file (keys checkpoints)."""
@@ -287,35 +327,9 @@ class Scenario(_Strict):
         return h.hexdigest()
 
 
-def _resolve_world(world: str, base_dir: str | Path | None) -> Path:
-    """Resolve a world reference: a path (relative to ``base_dir``) or a shipped name."""
-    cand = Path(world)
-    if base_dir is not None and not cand.is_absolute():
-        rel = Path(base_dir) / cand
-        if rel.is_file():
-            return rel.resolve()
-    if cand.is_file():
-        return cand.resolve()
-    if cand.suffix == "" and "/" not in world:
-        try:
-            from dynmap_sim.world import resolve_world_path
-        except ImportError as exc:  # the world package is missing
-            raise ValueError(f"cannot resolve world {world!r}: {exc}") from None
-        try:
-            path = Path(resolve_world_path(world))
-        except Exception as exc:  # noqa: BLE001 - any failure is a bad reference
-            raise ValueError(f"unknown world {world!r}: {exc}") from None
-        if path.is_file():
-            return path.resolve()
-    raise ValueError(f"world file {world!r} not found")
-
-
 def _semantic_errors(scn: Scenario) -> list[tuple[str, str]]:
     """Checks across fields and files: labels, expectation keys, kidnapping days, localizer
-    parameters, the world file and the day range against its calendar."""
-    from dynmap_sim.agent.localizer import make_localizer
-    from dynmap_sim.world import WorldFileError, load_world
-
+    and driver parameters, robot and sensor overrides, the world file and its calendar."""
     errors: list[tuple[str, str]] = []
     labels = scn.labels
     for i, lab in enumerate(labels):
@@ -334,20 +348,6 @@ def _semantic_errors(scn: Scenario) -> list[tuple[str, str]]:
                     f"no localizer has label {key!r} (labels: {', '.join(labels)})",
                 )
             )
-    from dynmap_sim.studies.biber_duckett.findings import FINDING_KEYS
-
-    for i, key in enumerate(scn.expectations.findings):
-        if key not in FINDING_KEYS:
-            errors.append(
-                (
-                    f"expectations.findings.{i}",
-                    f"unknown finding {key!r}; known: {', '.join(FINDING_KEYS)}",
-                )
-            )
-    if scn.expectations.findings and "dynamic-map" not in [loc.name for loc in scn.localizers]:
-        errors.append(
-            ("expectations.findings", "the findings need a localizer named 'dynamic-map'")
-        )
     for i, k in enumerate(scn.kidnappings):
         if not scn.days[0] <= k.day <= scn.days[1]:
             errors.append((f"kidnappings.{i}.day", f"day {k.day} is outside days {list(scn.days)}"))
@@ -357,114 +357,64 @@ def _semantic_errors(scn: Scenario) -> list[tuple[str, str]]:
             make_localizer(loc.name, laser=_DUMMY_LASER, rng=rng, **loc.params)
         except (TypeError, ValueError) as exc:
             errors.append((f"localizers.{i}.params", f"rejected by {loc.name!r}: {exc}"))
-    for check in (robot_kwargs, sensor_kwargs):
-        try:
-            check(scn)
-        except (TypeError, ValueError) as exc:
-            where, _, msg = str(exc).partition(": ")
-            errors.append((where, msg))
     try:
-        spec = load_world(scn.world_path)
-    except WorldFileError as exc:
-        first = exc.errors[0] if exc.errors else ("", "")
-        more = f" (+{len(exc.errors) - 1} more)" if len(exc.errors) > 1 else ""
-        errors.append(("world", f"world file {exc.path} is invalid: {first[0]}: {first[1]}{more}"))
-        return errors
-    n_days = _calendar_days(spec)
-    if n_days is not None and scn.days[1] > n_days:
+        make_driver(scn.driver.kind, _DUMMY_DRIVER_CONTEXT, scn.driver.params)
+    except (TypeError, ValueError) as exc:
+        errors.append(("driver.params", f"rejected by {scn.driver.kind!r}: {exc}"))
+    steers_on = DRIVERS.get(scn.driver.kind).steers_on
+    if steers_on is not None and steers_on not in labels:
         errors.append(
-            ("days", f"the world's calendar has {n_days} days; days {list(scn.days)} ask more")
+            (
+                "driver.kind",
+                f"{scn.driver.kind!r} steers on localizer {steers_on!r}, which the "
+                f"scenario does not run (labels: {', '.join(labels)})",
+            )
         )
+    errors += sim_spec_errors(scn.sim_spec(), scn.days)
     return errors
 
 
-#: Robot presets: overrides of :class:`dynmap_sim.robot.diff_drive.RobotParams` defaults.
-ROBOT_PRESETS: dict[str, dict[str, Any]] = {"default": {}}
+def _importable_from(folder: Path) -> None:
+    """Put a scenario file's folder on the import path (once), so its ``module:Class`` roles
+    are found next to it, as a user expects; worker processes inherit the path."""
+    if folder.is_dir():
+        entry = str(folder.resolve())
+        if entry not in sys.path:
+            sys.path.append(entry)
 
 
-def robot_kwargs(scn: Scenario) -> dict[str, Any]:
-    """``robot`` and ``encoder`` arguments of ``DynMapEnv`` (ValueError on bad values).
-
-    ``[robot] overrides``: any ``RobotParams`` field (``radius_m``, ``max_v_mps``, ...), plus
-    ``wheels`` (``WheelGeometry``: ``e_d``, ``e_b``, ...) and ``encoder`` (``EncoderNoise``).
-    """
-    from dynmap_sim.robot.diff_drive import RobotParams
-    from dynmap_sim.sensors.odometry import EncoderNoise, WheelGeometry
-
-    preset = scn.robot.preset or "default"
-    if preset not in ROBOT_PRESETS:
-        raise ValueError(f"robot.preset: unknown robot {preset!r}; known: {sorted(ROBOT_PRESETS)}")
-    rob = {**ROBOT_PRESETS[preset], **scn.robot.overrides}
-    try:
-        wheels = WheelGeometry(**dict(rob.pop("wheels", {})))  # type: ignore[arg-type]
-        encoder = EncoderNoise(**dict(rob.pop("encoder", {})))  # type: ignore[arg-type]
-        robot = RobotParams(wheels=wheels, **rob)  # type: ignore[arg-type]
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"robot.overrides: {exc}") from None
-    return {"robot": robot, "encoder": encoder}
+#: An extra check of a valid scenario: ``(dotted field, message)`` pairs, [] when fine.
+ScenarioCheck = Callable[[Scenario], list[tuple[str, str]]]
 
 
-def sensor_kwargs(scn: Scenario) -> dict[str, Any]:
-    """``sensor``, ``sensor_options`` and ``lidar_noise`` arguments of ``DynMapEnv``.
-
-    ``[sensor] overrides``: ``make_lidar`` overrides (``LaserSpec`` fields, ``beams``,
-    ``mode``, ``mount_pose``) and ``noise`` (``LidarNoise`` fields). ValueError on bad values.
-    """
-    from dynmap_sim.sensors.lidar import make_lidar
-
-    sensor = scn.sensor.preset or "urg-04lx"
-    opts = dict(scn.sensor.overrides)
-    noise = opts.pop("noise", None)
-    if "mount_pose" in opts:
-        opts["mount_pose"] = tuple(opts["mount_pose"])  # type: ignore[arg-type]
-    try:
-        make_lidar(sensor, noise=noise, **opts)  # type: ignore[arg-type]
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"sensor: {exc}") from None
-    return {"sensor": sensor, "sensor_options": opts, "lidar_noise": noise}
-
-
-def env_kwargs(scn: Scenario) -> dict[str, Any]:
-    """Keyword arguments of ``DynMapEnv`` for a scenario's world, robot, sensor and people."""
-    return {
-        "world": str(scn.world_path),
-        "people": scn.people,
-        **robot_kwargs(scn),
-        **sensor_kwargs(scn),
-    }
-
-
-def _calendar_days(spec: Any) -> int | None:
-    """Number of working days of a world spec's calendar, or None when it cannot be told."""
-    try:
-        from dynmap_sim.world.calendar import Calendar
-
-        return int(Calendar(spec.calendar).n_days)
-    except Exception:  # noqa: BLE001 - the run itself will report a real problem
-        return None
-
-
-def parse_scenario(data: dict[str, Any], path: str | Path = "<scenario>") -> Scenario:
+def parse_scenario(
+    data: dict[str, Any], path: str | Path = "<scenario>", checks: Sequence[ScenarioCheck] = ()
+) -> Scenario:
     """Validate scenario data (a parsed TOML table); ``path`` is used for messages and for
-    resolving relative world paths."""
+    resolving relative world paths. ``checks`` add checks of layers above the engine (the
+    analysis checks that required findings exist); their errors are reported with the rest."""
     p = Path(path)
+    _importable_from(p.parent)
     try:
         scn = Scenario.model_validate(data, context={"base_dir": p.parent})
     except ValidationError as exc:
         raise ScenarioFileError(p, pydantic_errors(exc)) from None
     scn._source = p.resolve() if p.exists() else None
     if scn._source is None:
-        scn._world_path = _resolve_world(scn.world, p.parent)
+        scn._world_path = resolve_world(scn.world, p.parent)
     errors = _semantic_errors(scn)
+    for check in checks:
+        errors += check(scn)
     if errors:
         raise ScenarioFileError(p, errors)
     return scn
 
 
-def load_scenario(path: str | Path) -> Scenario:
-    """Load and validate a scenario file; raise :class:`ScenarioFileError` listing all errors."""
+def load_scenario(path: str | Path, checks: Sequence[ScenarioCheck] = ()) -> Scenario:
+    """Load and validate a scenario file; raise :class:`ScenarioFileError` listing all errors
+    (``checks``: see :func:`parse_scenario`)."""
     data = read_toml(path, ScenarioFileError)
-    return parse_scenario(data, path)
+    return parse_scenario(data, path, checks)
 
 
 def is_scenario_file(path: str | Path) -> bool:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from dynmap_sim import se2
+from dynmap_sim.truth import ObstacleSnapshot, RunSlot, WorldFacts
 from dynmap_sim.types import LaserSpec
 from dynmap_sim.world import World, load_world, resolve_world_path
 
@@ -51,6 +52,23 @@ class FakeEnv:
         self.world.step(dt, robot_pose=tuple(self.pose))
         obs, info = self._obs()
         return obs, 0.0, False, False, info
+
+    def world_facts(self):
+        spec = self.world.spec
+        return WorldFacts(
+            name=spec.name,
+            bounds=tuple(float(b) for b in spec.bounds),
+            start_pose=np.asarray(spec.robot.start, float),
+            route=np.asarray(spec.robot.route, float),
+            wall_segments=self.world.wall_segments(),
+            slots=tuple(
+                RunSlot(s.day, s.run, s.date, s.start_s) for s in self.world.calendar.slots
+            ),
+        )
+
+    def obstacles(self):
+        g = self.world.geometry
+        return ObstacleSnapshot(g.segments, g.segment_class, g.circles, g.circle_class)
 
     def teleport(self, pose):
         self.pose = np.asarray(pose, float).copy()

@@ -142,7 +142,7 @@ def test_rebalancing_moves_localizers_and_keeps_the_numbers(tmp_path):
 
     scn = scenario(tmp_path)
     r = ExperimentRunner(scn, tmp_path / "o", scn.days, 0, resume=False, env=FakeEnv())
-    sims = [r._simulate(i) for i in range(3)]
+    sims = [r._simulate(i)[0] for i in range(3)]
     seq = r._start_localizers()  # in-process: the reference
     ref = []
     for s in sims:

@@ -1,0 +1,245 @@
+"""The episode loop: one run of the calendar through the env, steered by a driver.
+
+``env.reset(seed, day, run)``, the run's :class:`~dynmap_sim.types.Prior`, then every control
+step: record the sensors (odometry, scan) and the truth (``info["truth"]``), carry out a
+kidnapping when one is due, ask the driver for the action, ``env.step``. The result is an
+:class:`Episode`: the run's sensor stream (:class:`~dynmap_sim.experiments.bench.RunStream`,
+what the localizers consume) and its truth (what the metrics compare them with).
+
+Truth reaches the loop only through ``info["truth"]`` and the env's documented read-only
+views (:mod:`dynmap_sim.truth`: ``world_facts()``, ``obstacles()``); the loop acts on the
+world only through ``env.step`` and ``env.teleport`` (a kidnapping). The driver sees the truth
+only when it declares ``sees_truth``.
+
+What carries over between runs besides the localizers — the driver and the engine's random
+generator (kidnapping times and places) — is the :class:`EngineState`, which the runner
+checkpoints after every run.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
+from dynmap_sim.experiments.bench import RunStream
+from dynmap_sim.experiments.drivers import Driver, RunStart, StepInput
+from dynmap_sim.experiments.drivers.tour import static_clearance_grid
+from dynmap_sim.experiments.scenario import Kidnapping, PriorConfig
+from dynmap_sim.truth import RunSlot, WorldFacts
+from dynmap_sim.types import Odometry, Prior, Scan
+
+FloatArray = NDArray[np.float64]
+
+#: A kidnapped robot is put where it fits: its radius plus this margin free [m] ...
+KIDNAP_MARGIN_M = 0.05
+#: ... on a clearance grid of this resolution [m] ...
+KIDNAP_GRID_RESOLUTION_M = 0.05
+#: ... within this distance of the target [m] (else the kidnapping is skipped).
+KIDNAP_SEARCH_M = 1.0
+
+
+@dataclass
+class EngineState:
+    """What carries over between runs besides the localizers (checkpointed after each run):
+    the ``driver`` and the engine's ``rng`` (kidnapping times and places)."""
+
+    driver: Driver
+    rng: np.random.Generator
+
+
+@dataclass(frozen=True)
+class _Kidnap:
+    step: int
+    pose: FloatArray | None  # None: random (drawn at the kidnapping from the engine's RNG)
+
+
+@dataclass
+class Episode:
+    """One simulated run: its sensor ``stream`` and its truth, waiting for the localizers.
+
+    ``truth`` ``(T, 3)`` true poses; ``collision`` ``(T,)`` bumper pressed before the scan;
+    ``events`` ``(step, t_s, kind, detail)``; ``terminated`` the route was finished;
+    ``route_progress`` fraction of the route; ``segments`` ``(N, 4)`` / ``segment_class`` the
+    run's obstacles (for figures).
+    """
+
+    index: int
+    stream: RunStream
+    truth: FloatArray
+    collision: NDArray[np.bool_]
+    events: list[tuple[int, float, str, str]]
+    terminated: bool
+    route_progress: float
+    skipped_waypoints: int
+    segments: FloatArray
+    segment_class: NDArray[np.int8]
+
+
+@dataclass(frozen=True)
+class LoopConfig:
+    """The scenario's settings the loop needs: the world ``seed``, the ``route`` the driver
+    drives (for random kidnapping places), ``speed_mps`` and ``max_run_s`` (robot-time limit
+    per run, None: none), the ``prior`` granted and the ``kidnappings``."""
+
+    seed: int
+    route: FloatArray
+    speed_mps: float
+    max_run_s: float | None
+    prior: PriorConfig
+    kidnappings: tuple[Kidnapping, ...]
+
+
+class EpisodeLoop:
+    """Runs episodes of ``env`` (see the module doc)."""
+
+    def __init__(self, env: Any, config: LoopConfig, slots: list[RunSlot]) -> None:
+        self.env = env
+        self.u = env.unwrapped
+        self.config = config
+        self.slots = slots
+        self.dt_s = float(self.u.laser_spec.scan_period_s)
+
+    def prior(self, i: int, facts: WorldFacts) -> Prior:
+        """The prior of run ``i`` (of :attr:`slots`): what the scenario grants the agent."""
+        pc, slot = self.config.prior, self.slots[i]
+        known = pc.initial_pose == "known"
+        sxy, sth = pc.initial_pose_sigma_xy_m, pc.initial_pose_sigma_theta_rad
+        return Prior(
+            initial_pose=np.array(facts.start_pose, dtype=float) if known else None,
+            initial_pose_cov=np.diag([sxy**2, sxy**2, sth**2]) if known else None,
+            walls=np.array(facts.wall_segments, dtype=float) if pc.map == "walls" else None,
+            bounds=facts.bounds,
+            day=slot.day,
+            run=slot.run,
+            first_run=i == 0,
+        )
+
+    def _kidnaps(self, slot: RunSlot, rng: np.random.Generator) -> list[_Kidnap]:
+        route = self.config.route
+        route_len = float(np.sum(np.hypot(*np.diff(route, axis=0).T)))
+        expected_s = route_len / self.config.speed_mps
+        if self.config.max_run_s is not None:
+            expected_s = min(expected_s, self.config.max_run_s)
+        out = []
+        for k in self.config.kidnappings:
+            if (k.day, k.run) != (slot.day, slot.run):
+                continue
+            t = rng.uniform(0.2, 0.6) * expected_s if k.time_s == "random" else float(k.time_s)
+            pose = None if k.pose == "random" else np.asarray(k.pose, dtype=np.float64)
+            out.append(_Kidnap(max(1, int(round(t / self.dt_s))), pose))
+        return sorted(out, key=lambda kp: kp.step)
+
+    def _random_route_pose(self, rng: np.random.Generator) -> FloatArray:
+        route = self.config.route
+        seg = np.hypot(*np.diff(route, axis=0).T)
+        s = rng.uniform(0.0, seg.sum())
+        k = int(min(np.searchsorted(np.cumsum(seg), s), len(seg) - 1))
+        u = (s - (np.cumsum(seg)[k] - seg[k])) / max(seg[k], 1e-12)
+        xy = route[k] + u * (route[k + 1] - route[k])
+        return np.array([xy[0], xy[1], rng.uniform(-math.pi, math.pi)])
+
+    def run(self, i: int, state: EngineState) -> Episode:
+        """Drive run ``i`` of :attr:`slots` and record it; ``state`` carries on."""
+        slot = self.slots[i]
+        cfg = self.config
+        driver, rng = state.driver, state.rng
+        obs, info = self.env.reset(seed=cfg.seed, options={"day": slot.day, "run": slot.run})
+        facts = self.u.world_facts()  # after reset: another seed builds another world
+        obstacles = self.u.obstacles()
+        prior = self.prior(i, facts)
+        start = np.asarray(info["truth"]["pose"], dtype=np.float64)
+        sees = driver.sees_truth
+        driver.begin_run(RunStart(prior, start if sees else None, obstacles if sees else None))
+        kidnaps = self._kidnaps(slot, rng)
+        kidnap_grid: ClearanceGrid | None = None
+        if kidnaps:
+            kidnap_grid = static_clearance_grid(obstacles, KIDNAP_GRID_RESOLUTION_M)
+        free_clearance_m = float(self.u.robot_radius_m) + KIDNAP_MARGIN_M
+        events: list[tuple[int, float, str, str]] = []
+        max_steps = int(round(cfg.max_run_s / self.dt_s)) if cfg.max_run_s is not None else None
+        t_l: list[float] = []
+        odom_l: list[FloatArray] = []
+        scan_l: list[NDArray[np.float32]] = []
+        class_l: list[NDArray[np.int8]] = []
+        truth_l: list[FloatArray] = []
+        coll_l: list[bool] = []
+        terminated = truncated = False
+        collision = False
+        step = 0
+        progress_frac = 0.0
+        while True:
+            truth = info["truth"]
+            pose = np.array(truth["pose"], dtype=np.float64)  # copies: the history must not
+            t_s = float(truth["time"][2])  # change if a producer reuses its arrays
+            t_l.append(t_s)
+            odom_l.append(np.array(obs["odom"], dtype=np.float64))
+            scan_l.append(np.array(obs["scan"], dtype=np.float32))
+            class_l.append(np.array(truth["beam_class"], dtype=np.int8))
+            truth_l.append(pose)
+            coll_l.append(collision)
+            progress_frac = float(info.get("route_progress", progress_frac))
+            if terminated or truncated or driver.done:
+                break
+            if max_steps is not None and step >= max_steps:
+                events.append((step, t_s, "time_limit", f"stopped after {cfg.max_run_s} s"))
+                break
+            if kidnaps and kidnaps[0].step <= step:
+                kp = kidnaps.pop(0)
+                target = kp.pose if kp.pose is not None else self._random_route_pose(rng)
+                assert kidnap_grid is not None
+                free = kidnap_grid.nearest_free(target[:2], free_clearance_m, KIDNAP_SEARCH_M)
+                if free is None:
+                    events.append((step, t_s, "kidnap_skipped", "no free place near the target"))
+                else:
+                    new_pose = np.array([free[0], free[1], target[2]])
+                    self.u.teleport(new_pose)
+                    if sees:
+                        driver.teleported(new_pose, t_s)
+                    events.append((step, t_s, "kidnap", f"to {np.round(new_pose, 3).tolist()}"))
+                    pose = new_pose
+            action = driver.act(
+                StepInput(
+                    t_s=t_s,
+                    odom=Odometry(pose=odom_l[-1].copy(), stamp_s=t_s),
+                    scan=Scan(ranges_m=scan_l[-1].copy(), stamp_s=t_s),
+                    bumped=collision,
+                    pose=pose if sees else None,
+                    people=truth["people"] if sees else None,
+                )
+            )
+            obs, _, terminated, truncated, info = self.env.step(action)
+            collision = bool(info.get("collision", False))
+            step += 1
+        events += [
+            (step, t_s, "kidnap_not_reached", f"planned at step {kp.step}") for kp in kidnaps
+        ]
+        driver_events, skipped = list(driver.events), driver.skipped_waypoints
+        finished = driver.done
+        driver.end_run()
+        last_of_day = i + 1 == len(self.slots) or self.slots[i + 1].day != slot.day
+        stream = RunStream(
+            index=i,
+            prior=prior,
+            stamps_s=np.asarray(t_l, dtype=np.float64),
+            odom=np.asarray(odom_l, dtype=np.float64).reshape(-1, 3),
+            scans=np.asarray(scan_l, dtype=np.float32).reshape(len(t_l), -1),
+            beam_class=np.asarray(class_l, dtype=np.int8).reshape(len(t_l), -1),
+            last_of_day=last_of_day,
+        )
+        return Episode(
+            index=i,
+            stream=stream,
+            truth=np.asarray(truth_l, dtype=np.float64).reshape(-1, 3),
+            collision=np.asarray(coll_l, dtype=bool),
+            events=sorted(events + driver_events, key=lambda e: e[0]),
+            terminated=bool(terminated or finished),
+            route_progress=progress_frac,
+            skipped_waypoints=skipped,
+            segments=np.array(obstacles.segments, dtype=np.float64),
+            segment_class=np.array(obstacles.segment_class, dtype=np.int8),
+        )

@@ -1,0 +1,63 @@
+"""Read-only views of the ground truth, as the env hands them to the experiment engine.
+
+The env's ``info["truth"]`` carries what changes every step (pose, beam labels, people); the
+views here carry what an experiment needs besides: the calendar's runs, the world's fixed
+facts (start pose, route, bounds, the static walls a scenario may grant as a prior) and a
+snapshot of the current obstacles (for the truth-seeing ``tour`` operator and the figures).
+They are plain frozen data with read-only arrays, so nothing downstream can change the
+simulation through them. The agent never imports this module (an import contract).
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+FloatArray = NDArray[np.float64]
+
+
+def read_only(a: NDArray[np.generic]) -> NDArray[np.generic]:
+    """A read-only copy of ``a``."""
+    out = np.array(a, copy=True)
+    out.setflags(write=False)
+    return out
+
+
+@dataclass(frozen=True)
+class RunSlot:
+    """One run of the calendar: working ``day`` and ``run`` (1-based), ``date``, clock
+    ``start_s`` [s since midnight]."""
+
+    day: int
+    run: int
+    date: dt.date
+    start_s: float
+
+
+@dataclass(frozen=True)
+class WorldFacts:
+    """What does not change within a world: ``name``; ``bounds`` ``(xmin, ymin, xmax, ymax)``
+    [m]; the robot's ``start_pose`` ``(3,)`` and ``route`` ``(K, 2)`` in the map frame; the
+    static ``wall_segments`` ``(N, 4)`` (the 'walls' prior); the calendar's ``slots``."""
+
+    name: str
+    bounds: tuple[float, float, float, float]
+    start_pose: FloatArray
+    route: FloatArray
+    wall_segments: FloatArray
+    slots: tuple[RunSlot, ...]
+
+
+@dataclass(frozen=True)
+class ObstacleSnapshot:
+    """The obstacles now [m]: ``segments`` ``(N, 4)`` with their ``segment_class`` (int8
+    :class:`dynmap_sim.types.BeamClass`), ``circles`` ``(M, 3)`` ``x, y, r`` with their
+    ``circle_class`` (people's legs included, class PERSON)."""
+
+    segments: FloatArray
+    segment_class: NDArray[np.int8]
+    circles: FloatArray
+    circle_class: NDArray[np.int8]
