@@ -43,6 +43,12 @@ from dynmap_sim.experiments.scenario import Scenario
 from dynmap_sim.metrics import RunSummary, run_summary
 
 
+#: The layout of what the runner checkpoints (format 1: a dict of the tour driver and the RNG,
+#: before the episode loop; 2: an :class:`EngineState` with a registered Driver). Resuming
+#: needs the same format; it is stored in the results' ``meta``.
+CHECKPOINT_FORMAT = 2
+
+
 def default_out_dir(scenario: Scenario) -> Path:
     """``results/<scenario name>`` under the current directory."""
     return Path("results") / scenario.name
@@ -146,6 +152,16 @@ class ExperimentRunner:
         if resume and db_file.exists():
             self.db = ResultsDB.open(out_dir)
             meta = self.db.meta()
+            made_with = meta.get("checkpoint_format", 1)
+            if made_with != CHECKPOINT_FORMAT:
+                self.db.close()
+                raise InputError(
+                    f"{db_file}: these results were written by another version of dynmap_sim "
+                    f"(checkpoint format {made_with}, this version writes {CHECKPOINT_FORMAT}"
+                    f"{'' if made_with != 1 else ': before the episode loop and the Driver role'}"
+                    "); --resume needs the version that wrote them. Their finished runs still "
+                    "load in `dynmap-sim report`; to continue, rerun into another --out"
+                )
             if meta.get("experiment_hash") != self.hash:
                 self.db.close()
                 if meta.get("seed") != self.seed or meta.get("days") != list(days):
@@ -160,14 +176,6 @@ class ExperimentRunner:
                     "inputs or start a new experiment with another --out"
                 )
             cp = self.db.load_checkpoint(self.hash, self.seed)
-            if cp is not None and not isinstance(cp.state, EngineState):
-                self.db.close()
-                raise InputError(
-                    f"{db_file}: the checkpoint was written by an earlier version of dynmap_sim "
-                    "(before the episode loop and the Driver role); it cannot be resumed with "
-                    "this version. Its finished runs still load in `dynmap-sim report`; rerun "
-                    "the experiment with another --out"
-                )
             if cp is not None:
                 self.start_index = cp.next_index
                 state = cp.state
@@ -191,6 +199,7 @@ class ExperimentRunner:
             seed=self.seed,
             days=list(self.days),
             experiment_hash=self.hash,
+            checkpoint_format=CHECKPOINT_FORMAT,
             laser=dataclasses.asdict(self.laser),
             route=np.asarray(self.facts.route, float).tolist(),
             bounds=list(self.facts.bounds),
