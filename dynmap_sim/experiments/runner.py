@@ -42,7 +42,6 @@ from dynmap_sim.experiments.results import Checkpoint, ResultsDB, RunRecord
 from dynmap_sim.experiments.scenario import Scenario
 from dynmap_sim.metrics import RunSummary, run_summary
 
-
 #: The layout of what the runner checkpoints (format 1: a dict of the tour driver and the RNG,
 #: before the episode loop; 2: an :class:`EngineState` with a registered Driver). Resuming
 #: needs the same format; it is stored in the results' ``meta``.
