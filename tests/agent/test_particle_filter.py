@@ -31,7 +31,8 @@ from dynmap_sim.agent.localization.particle_filter import (
     weighted_pose_stats,
 )
 from dynmap_sim.agent.localization.resampling import low_variance_resample
-from dynmap_sim.agent.localizer import make_localizer
+from dynmap_sim.agent.localizer import MapUser, make_localizer
+from dynmap_sim.agent.maps.map_source import FirstRunMap, PriorWallsMap, make_map_source
 from dynmap_sim.types import Odometry, Prior, Scan
 
 
@@ -223,6 +224,40 @@ def test_first_run_map_then_localize_and_pickle():
     errs, est = _run(loc2, truth, odometry(truth, rng), segs, rng)
     assert errs.mean() < 0.05 and errs.max() < 0.2
     assert est.extras["scan_loglik"] > np.log(0.1 / 5.6)
+
+
+def test_map_sources_by_name_and_as_objects():
+    """``map_source`` names a :class:`MapSource` (or is one); a given map (replay) is used
+    from the first run on: no SLAM, the filter's estimates."""
+    segs = room()
+    with pytest.raises(ValueError, match="static-mcl: unknown map_source 'walls'"):
+        StaticMCL(LASER, np.random.default_rng(0), map_source="walls")
+    with pytest.raises(ValueError, match="first-run"):
+        StaticMCL(LASER, np.random.default_rng(0), map_source="prior-walls", mapper_params={"a": 1})
+    with pytest.raises(TypeError, match=r"unknown parameters \['voxel'\]"):
+        StaticMCL(LASER, np.random.default_rng(0), mapper_params={"voxel": 0.05})
+    first = make_map_source("first-run", LASER, {"global_loops": False})
+    assert isinstance(first, FirstRunMap) and not first.config.loops.global_loops
+    assert first.config.map_max_hit_range_m == LASER.range_max_m  # MCL wants far walls too
+    assert isinstance(make_map_source("prior-walls", LASER), PriorWallsMap)
+    with pytest.raises(RuntimeError, match="not building"):
+        first.update(None, None)
+    rng = np.random.default_rng(3)
+    truth = path(laps=1)[:80]
+    loc = StaticMCL(LASER, np.random.default_rng(0), map_source=PriorWallsMap())
+    assert loc.map_source.name == "prior-walls" and loc.grid is None
+    loc.begin_run(Prior(initial_pose=truth[0], walls=segs))
+    errs, _ = _run(loc, truth, odometry(truth, rng), segs, rng)
+    assert loc.map_source.ready and errs.max() < 0.2
+    # A map handed over: the first-run source builds nothing.
+    loc = make_localizer("static-mcl", laser=LASER, rng=np.random.default_rng(0))
+    odometry_only = make_localizer("odometry", laser=LASER, rng=np.random.default_rng(0))
+    assert isinstance(loc, MapUser) and not isinstance(odometry_only, MapUser)
+    loc.set_map(OccupancyGrid.from_segments(segs, free_seed_xy_m=(1, 1)))
+    loc.begin_run(Prior(initial_pose=truth[0], first_run=True))
+    assert not loc.map_source.building
+    _, est = _run(loc, truth, odometry(truth, rng), segs, rng)
+    assert "n_particles" in est.extras
 
 
 def test_global_localization_and_kidnap_recovery():

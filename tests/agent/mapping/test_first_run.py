@@ -2,11 +2,16 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
+import pytest
 
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import OCCUPIED
-from dynmap_sim.agent.mapping.first_run import FirstRunMapper
+from dynmap_sim.agent.mapping.first_run import FirstRunConfig, FirstRunMapper
+from dynmap_sim.agent.mapping.keyframe_slam import KeyframeSLAMConfig
+from dynmap_sim.agent.mapping.loop_closure import LoopClosureConfig
 from dynmap_sim.agent.mapping.scan_points import (
     BeamDirections,
     free_space_violations,
@@ -99,3 +104,20 @@ def test_scan_points_with_cached_beam_directions_are_the_same(laser):
     r[::11] = np.nan
     beams = BeamDirections(laser)
     assert np.array_equal(scan_points_base(laser, r, beams), scan_points_base(laser, r))
+
+
+def test_flat_mapper_params_fill_both_parts_of_the_config():
+    """A scenario's flat ``mapper_params`` go to the front end, loop closure or the grid,
+    typed like the defaults; an unknown name is an error that names it."""
+    cfg = FirstRunConfig.from_params(
+        voxel_m=0.05, global_loops=False, map_max_hit_range_m=5, loop_stride=0, seq_sigma=[1] * 5
+    )
+    assert cfg.slam == replace(KeyframeSLAMConfig(), voxel_m=0.05)
+    loops = replace(LoopClosureConfig(), global_loops=False, loop_stride=1, seq_sigma=(1.0,) * 5)
+    assert cfg.loops == loops
+    assert cfg.map_max_hit_range_m == 5.0 and isinstance(cfg.map_max_hit_range_m, float)
+    assert FirstRunConfig.from_params() == FirstRunConfig()
+    with pytest.raises(TypeError, match=r"unknown parameters \['voxel'\]"):
+        FirstRunConfig.from_params(voxel=0.05)
+    with pytest.raises(ValueError, match="drop_edges"):
+        FirstRunConfig.from_params(drop_edges="some")
