@@ -217,7 +217,7 @@ def test_inside_test_agrees_with_convex_containment():
     for o in w.objects:
         ref |= points_in_convex(pts, o.polygon)
     assert ref.any()
-    np.testing.assert_array_equal(w._forces._inside_any(pts), ref)
+    np.testing.assert_array_equal(w._forces.obstacles.inside_any(pts), ref)
 
 
 def test_a_robot_standing_on_a_persons_goal_does_not_cause_a_deadlock(base_world):

@@ -1,0 +1,96 @@
+"""The static geometry people walk among: free space, line of sight, nearby segments."""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dynmap_sim.world.people.broad_phase import SegmentGrid
+from dynmap_sim.world.people.params import REACH_M
+from dynmap_sim.world.polygons import FloatArray, point_segment_distance
+
+
+class Obstacles:
+    """Fixed ``segments`` ``(N, 4)`` of a run (closed outlines start at ``outline_starts``).
+
+    With ``broad_phase`` the segments near a point come from a :class:`SegmentGrid`;
+    without it every segment is a candidate (the naive reference).
+    """
+
+    def __init__(
+        self,
+        segments: FloatArray,
+        broad_phase: bool = True,
+        outline_starts: NDArray[np.int64] | None = None,
+    ) -> None:
+        self.segments = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
+        self.broad_phase = broad_phase
+        #: first segment of each closed outline in ``segments`` (for inside tests), or None
+        self.outline_starts = outline_starts
+        s = self.segments
+        # per segment, complex: start p0, direction d and conj(d) (line-of-sight tests)
+        self._seg_p0 = s[:, 0] + 1j * s[:, 1]
+        self._seg_d = (s[:, 2] - s[:, 0]) + 1j * (s[:, 3] - s[:, 1])
+        self._seg_dc = self._seg_d.conjugate()
+        self.grid = SegmentGrid(s)
+
+    def rows(self, z: NDArray[np.complex128]) -> NDArray[np.complex128]:
+        """Candidate segments near each person as ``(P, K, 3)`` complex rows
+        ``p0, conj(d), 1/|d|^2`` (padded with a far dummy).
+
+        Without ``broad_phase`` every segment is a candidate (the naive reference).
+        """
+        if not self.broad_phase:
+            return self.grid.all_rows(len(z))  # all segments and the far dummy (never empty)
+        return self.grid.rows(z)
+
+    def inside_any(self, points: FloatArray) -> NDArray[np.bool_]:
+        """True where points ``(P, 2)`` lie inside a closed outline (crossing-number parity of
+        a ray toward +x, counted per outline)."""
+        if self.outline_starts is None or len(self.segments) == 0:
+            return np.zeros(len(points), dtype=bool)
+        s = self.segments
+        y0, y1 = s[None, :, 1], s[None, :, 3]
+        py = points[:, 1:2]
+        straddle = (y0 > py) != (y1 > py)
+        t = (py - y0) / np.where(y1 == y0, 1.0, y1 - y0)
+        x_cross = s[None, :, 0] + t * (s[None, :, 2] - s[None, :, 0])
+        hits = (straddle & (x_cross > points[:, 0:1])).astype(np.int64)
+        per_outline = np.add.reduceat(hits, self.outline_starts, axis=1)
+        return np.any(per_outline % 2 == 1, axis=1)
+
+    def free_mask(self, points: FloatArray, r: float) -> NDArray[np.bool_]:
+        """True where a body of radius ``r`` fits at ``points`` ``(P, 2)`` (clear of outlines
+        by 5 cm and not inside any)."""
+        if len(self.segments) == 0:
+            return np.ones(len(points), dtype=bool)
+        if self.broad_phase and r + 0.05 < REACH_M:  # the grid lists every segment that near
+            pts = np.ascontiguousarray(points, dtype=np.float64)
+            z = pts.view(np.complex128)[:, 0]
+            rows = self.rows(z)
+            a = z[:, None] - rows[..., 0]
+            cd = rows[..., 1]
+            t = (a * cd).real * rows[..., 2].real
+            np.minimum(np.maximum(t, 0.0, out=t), 1.0, out=t)
+            clear = np.abs(a - t * cd.conjugate()).min(axis=1) > r + 0.05
+        else:
+            clear = point_segment_distance(points, self.segments).min(axis=1) > r + 0.05
+        return clear & ~self.inside_any(points)
+
+    def free(self, xy: FloatArray, r: float) -> bool:
+        """True where a body of radius ``r`` fits at the point ``xy``."""
+        return bool(self.free_mask(xy[None, :], r)[0])
+
+    def visible(self, a: FloatArray, b: FloatArray) -> bool:
+        """True where no segment properly crosses the line of sight ``a``-``b``."""
+        if len(self.segments) == 0:
+            return True
+        # proper crossings of a-b with each segment p0 + s d: the endpoints of each lie on
+        # opposite sides of the other (signs of 2-D cross products, Im(conj(u) w) = u x w)
+        za, ab = complex(a[0], a[1]), complex(b[0] - a[0], b[1] - a[1])
+        w0 = self._seg_p0 - za  # p0 - a
+        o1 = (ab.conjugate() * w0).imag
+        o2 = (ab.conjugate() * (w0 + self._seg_d)).imag
+        o3 = (self._seg_dc * w0).imag  # = -(d x (a - p0))
+        o4 = (self._seg_dc * (w0 - ab)).imag  # = -(d x (b - p0))
+        return not bool(((o1 * o2 < 0.0) & (o3 * o4 < 0.0)).any())

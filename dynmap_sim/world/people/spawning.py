@@ -1,0 +1,159 @@
+"""Where people appear and where they head: spawning, goal choice and goal renewal.
+
+Random draws come from the run's generator in a fixed order (the same seed gives the same
+people and the same goals).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dynmap_sim.world.people.crowd import Crowd, profile_fraction
+from dynmap_sim.world.people.obstacles import Obstacles
+from dynmap_sim.world.people.params import GOAL_TOL_M, PAUSE_S
+from dynmap_sim.world.polygons import FloatArray
+from dynmap_sim.world.spec import PeopleSpec
+
+
+def random_point(
+    obstacles: Obstacles, rng: np.random.Generator, pop: PeopleSpec, r: float
+) -> FloatArray | None:
+    """A uniformly drawn free point of the population's areas (up to 8 batches of 8)."""
+    boxes = np.array(pop.areas, dtype=np.float64)
+    for _ in range(8):
+        k = rng.integers(len(boxes), size=8)
+        u = rng.uniform(0.0, 1.0, size=(8, 2))
+        cand = boxes[k, :2] + u * (boxes[k, 2:] - boxes[k, :2])
+        if len(obstacles.segments) == 0:
+            return cand[0]
+        idx = np.flatnonzero(obstacles.free_mask(cand, r))
+        if len(idx):
+            return cand[idx[0]].copy()
+    return None
+
+
+def pick_goal(
+    obstacles: Obstacles,
+    rng: np.random.Generator,
+    pop: PeopleSpec,
+    frm: FloatArray,
+    r: float,
+    avoid: tuple[FloatArray, float] | None = None,
+) -> FloatArray:
+    """A goal in line of sight of ``frm``: an attraction point or a free point of the areas,
+    not within ``avoid = (centre, radius_m) + r`` (the robot's disc); ``frm`` if none."""
+    for _ in range(20):
+        if pop.goals:
+            g = np.array(pop.goals[int(rng.integers(len(pop.goals)))], dtype=float)
+        else:
+            g = random_point(obstacles, rng, pop, r)
+            if g is None:
+                continue
+        gx, gy = float(g[0]), float(g[1])
+        if avoid is not None and math.hypot(gx - avoid[0][0], gy - avoid[0][1]) < avoid[1] + r:
+            continue
+        if math.hypot(gx - frm[0], gy - frm[1]) > GOAL_TOL_M and obstacles.visible(frm, g):
+            return g
+    return frm.copy()
+
+
+def spawn(
+    populations: tuple[PeopleSpec, ...],
+    obstacles: Obstacles,
+    rng: np.random.Generator,
+    time_s: float,
+    day_active: list[bool],
+    keep_away: FloatArray | None = None,
+) -> Crowd:
+    """Place the people present at ``time_s`` (profile x count) on free spots of their areas."""
+    pos, goal, v0, rad, popi, ids, wps = [], [], [], [], [], [], []
+    for k, pop in enumerate(populations):
+        if not day_active[k]:
+            continue
+        n = int(round(pop.count * profile_fraction(pop.profile, time_s)))
+        for j in range(n):
+            wp = int(rng.integers(len(pop.route))) if pop.route else -1
+            xy = _free_spot(obstacles, rng, pop, wp, pos, rad, keep_away)
+            if xy is None:
+                continue
+            pos.append(xy)
+            rad.append(pop.radius_m)
+            v0.append(rng.uniform(*pop.speed_mps))
+            if wp >= 0:
+                goal.append(np.array(pop.route[wp], dtype=float))
+            else:
+                goal.append(pick_goal(obstacles, rng, pop, xy, pop.radius_m))
+            wps.append(wp)
+            popi.append(k)
+            ids.append(f"person:{pop.id}:{j}")
+    n = len(pos)
+    return Crowd(
+        pos=np.array(pos, dtype=np.float64).reshape(n, 2),
+        vel=np.zeros((n, 2)),
+        goal=np.array(goal, dtype=np.float64).reshape(n, 2),
+        v0=np.array(v0, dtype=np.float64),
+        radius=np.array(rad, dtype=np.float64),
+        population=np.array(popi, dtype=np.int64),
+        phase=rng.uniform(0, 2 * np.pi, n),
+        stuck_s=np.zeros(n),
+        ids=tuple(ids),
+        waypoint=np.array(wps, dtype=np.int64),
+        best_goal_m=np.hypot(*(np.reshape(goal, (n, 2)) - np.reshape(pos, (n, 2))).T),
+    )
+
+
+def _free_spot(
+    obstacles: Obstacles,
+    rng: np.random.Generator,
+    pop: PeopleSpec,
+    wp: int,
+    pos: list[FloatArray],
+    rad: list[float],
+    keep_away: FloatArray | None,
+) -> FloatArray | None:
+    """A spot for a new person (up to 30 draws): on the route leg toward waypoint ``wp``
+    (``-1``: in the areas), clear of the people placed at ``pos`` and 1 m from ``keep_away``."""
+    for _ in range(30):
+        if wp >= 0:  # on a route: somewhere along the leg toward waypoint wp
+            a = np.array(pop.route[wp - 1], dtype=float)
+            b = np.array(pop.route[wp], dtype=float)
+            c = a + rng.uniform(0.0, 1.0) * (b - a)
+            if not obstacles.free(c, pop.radius_m):
+                continue
+        else:
+            c = random_point(obstacles, rng, pop, pop.radius_m)
+        if c is None:
+            break
+        ok = all(np.hypot(*(c - p)) > r + pop.radius_m + 0.1 for p, r in zip(pos, rad, strict=True))
+        if keep_away is not None:
+            ok = ok and np.hypot(*(c - keep_away)) > 1.0
+        if ok:
+            return c
+    return None
+
+
+def renew_goals(
+    crowd: Crowd,
+    redo: NDArray[np.bool_],
+    populations: tuple[PeopleSpec, ...],
+    obstacles: Obstacles,
+    rng: np.random.Generator,
+    avoid: tuple[FloatArray, float] | None,
+) -> None:
+    """New goals for the people in ``redo``: the next waypoint of a (closed) route, or a goal
+    in sight (not in ``avoid``); who finds none pauses ``PAUSE_S`` before trying again."""
+    pos = crowd.pos
+    for i in np.flatnonzero(redo):
+        pop = populations[int(crowd.population[i])]
+        if pop.route:  # next waypoint of the (closed) route
+            crowd.waypoint[i] = (crowd.waypoint[i] + 1) % len(pop.route)
+            crowd.goal[i] = pop.route[int(crowd.waypoint[i])]
+        else:
+            crowd.goal[i] = pick_goal(obstacles, rng, pop, pos[i], float(crowd.radius[i]), avoid)
+        crowd.stuck_s[i] = 0.0
+        if np.array_equal(crowd.goal[i], pos[i]):  # no goal found: pause, then retry
+            crowd.stuck_s[i] = -PAUSE_S
+        crowd.best_goal_m[i] = float(np.hypot(*(crowd.goal[i] - pos[i])))
