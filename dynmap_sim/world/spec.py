@@ -374,7 +374,7 @@ Event = Annotated[
 
 
 class PeopleSpec(_Model):
-    """A population of pedestrians (Helbing & Molnár social force, see ``people.py``).
+    """A population of pedestrians (Helbing & Molnár social force, see the ``people`` package).
 
     Up to ``count`` people walk inside ``areas`` between ``goals`` (attraction points; random
     points of the areas if empty), or along a ``route`` of waypoints (a closed loop, each
