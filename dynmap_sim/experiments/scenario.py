@@ -103,6 +103,11 @@ class DriverConfig(_Strict):
         description="the driver's own parameters (tour: wait_for_people, clearance_m, "
         "planner, controller, ...)",
     )
+    localizer: str | None = Field(
+        None,
+        description="label of the localizer whose estimate the driver steers on, in lock-step "
+        "with the simulation (drivers that steer on an estimate need one; tour sees the truth)",
+    )
 
     @model_validator(mode="before")
     @classmethod
@@ -361,14 +366,27 @@ def _semantic_errors(scn: Scenario) -> list[tuple[str, str]]:
         make_driver(scn.driver.kind, _DUMMY_DRIVER_CONTEXT, scn.driver.params)
     except (TypeError, ValueError) as exc:
         errors.append(("driver.params", f"rejected by {scn.driver.kind!r}: {exc}"))
-    steers_on = DRIVERS.get(scn.driver.kind).steers_on
-    if steers_on is not None and steers_on not in labels:
+    needs = DRIVERS.get(scn.driver.kind).needs_estimate
+    steer = scn.driver.localizer
+    if needs and steer is None:
         errors.append(
             (
-                "driver.kind",
-                f"{scn.driver.kind!r} steers on localizer {steers_on!r}, which the "
-                f"scenario does not run (labels: {', '.join(labels)})",
+                "driver.localizer",
+                f"driver {scn.driver.kind!r} steers on a localizer's estimate: "
+                f"name one of the labels ({', '.join(labels)})",
             )
+        )
+    elif steer is not None and not needs:
+        errors.append(
+            (
+                "driver.localizer",
+                f"driver {scn.driver.kind!r} does not steer on an estimate "
+                "(it sees the truth or only the sensors); remove 'localizer'",
+            )
+        )
+    elif steer is not None and steer not in labels:
+        errors.append(
+            ("driver.localizer", f"no localizer has label {steer!r} (labels: {', '.join(labels)})")
         )
     errors += sim_spec_errors(scn.sim_spec(), scn.days)
     return errors

@@ -41,7 +41,7 @@ def test_a_users_controller_and_planner_serve_the_tour(tmp_path):
 
 def test_the_tour_builds_the_roles_it_is_given():
     d = DRIVERS.get("tour")
-    assert d is TourDriver and d.sees_truth and d.steers_on is None
+    assert d is TourDriver and d.sees_truth and not d.needs_estimate
     assert PLANNERS.get("grid-dijkstra") is GridDijkstra
     assert CONTROLLERS.get("pure-pursuit") is PurePursuit
 
@@ -83,6 +83,12 @@ def test_driver_errors_name_the_field(tmp_path):
         _scenario(tmp_path, {"params": {"controller": "no_such_module:X"}})
     msg = dict(ei.value.errors)["driver.params"]
     assert "cannot load controller 'no_such_module:X'" in msg and "PYTHONPATH" in msg
+
+
+def test_the_steering_localizer_is_checked(tmp_path):
+    with pytest.raises(ScenarioFileError) as ei:
+        _scenario(tmp_path, {"localizer": "odometry"})
+    assert "does not steer on an estimate" in dict(ei.value.errors)["driver.localizer"]
 
 
 def test_the_first_formats_tour_fields_still_load(tmp_path):

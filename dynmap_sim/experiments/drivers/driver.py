@@ -13,10 +13,11 @@ What a driver may see is declared, not assumed:
 * ``sees_truth = True`` — the papers' human operator (``tour``): :class:`StepInput` and
   :class:`RunStart` carry the true pose, the people and the obstacles. Without it they are
   None, and the driver steers on what the robot senses;
-* ``steers_on = "<label>"`` — the driver steers on that localizer's estimate, in lock-step
-  with the simulation: the episode loop runs that localizer scan by scan, hands its estimate
-  in :attr:`StepInput.estimate`, and the localizer bench reuses those very outputs while the
-  other localizers ride along on the recorded stream (H&W §7.3 compared static MCL this way).
+* ``needs_estimate = True`` — the driver steers on a localizer's estimate, the one the
+  scenario names (``[driver] localizer = "<label>"``), in lock-step with the simulation: the
+  episode loop runs that localizer scan by scan and hands its estimate in
+  :attr:`StepInput.estimate`, and those very outputs are stored for it, while the other
+  localizers ride along on the recorded stream (H&W §7.3 compared static MCL this way).
 
 Drivers are pickled into the checkpoint after every run; keep them picklable. A user's own
 driver is named ``"package.module:ClassName"`` in the scenario.
@@ -68,7 +69,7 @@ class RunStart:
 class StepInput:
     """One control step: time ``t_s`` [s since midnight], the sensors (``odom``, ``scan``),
     ``bumped`` (the bumper was pressed in the last step), the steering localizer's
-    ``estimate`` (with ``steers_on``), and with ``sees_truth`` the true ``pose`` and
+    ``estimate`` (with ``needs_estimate``), and with ``sees_truth`` the true ``pose`` and
     ``people`` ``(P, 3)`` (padding rows are inf)."""
 
     t_s: float
@@ -87,8 +88,8 @@ class Driver(ABC):
     name: str = "driver"
     #: True: the driver is given the truth (a human operator). False: only the sensors.
     sees_truth: ClassVar[bool] = False
-    #: The label of the localizer it steers on in lock-step (None: it needs no estimate).
-    steers_on: ClassVar[str | None] = None
+    #: True: the driver steers on the estimate of the localizer the scenario names.
+    needs_estimate: ClassVar[bool] = False
 
     def __init__(self, context: DriverContext, **params: Any) -> None:
         if params:
