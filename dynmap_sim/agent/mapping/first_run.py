@@ -44,7 +44,7 @@ class FirstRunConfig:
     resolution_m: float = 0.05
     #: Readings farther than this [m] only clear free space in the grid (the range noise is
     #: 1 % of the range: far hits blur the walls). ``static-mcl`` raises it to the sensor's
-    #: range (see :class:`~dynmap_sim.agent.maps.map_source.FirstRunMap`).
+    #: range (:func:`~dynmap_sim.agent.maps.map_source.make_map_source`).
     map_max_hit_range_m: float = 3.0
 
     def __post_init__(self) -> None:
