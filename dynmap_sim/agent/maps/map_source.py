@@ -16,6 +16,12 @@ there is no map yet), :meth:`MapSource.update` while :attr:`MapSource.building`,
 :meth:`MapSource.end_run` (the map is done), then :attr:`MapSource.grid` is
 :attr:`MapSource.ready`. A map handed over from outside (replay's map from a log's poses)
 is :meth:`MapSource.set_grid`.
+
+``dynamic-map`` maps its first run with the same
+:class:`~dynmap_sim.agent.mapping.first_run.FirstRunMapper`, but what it needs are the
+keyframes (its initial local maps, B&D §4) and the corrected trajectory, not a grid: it uses
+the mapper itself rather than a map source, which would render a grid it never reads and
+keep the first run's keyframes in every checkpoint.
 """
 
 from __future__ import annotations
