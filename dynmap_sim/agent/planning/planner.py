@@ -38,7 +38,12 @@ class Planner(ABC):
 
 #: The planner registry.
 PLANNERS: Registry[Planner] = Registry(
-    "planner", Planner, builtin_modules=("dynmap_sim.agent.planning.grid_dijkstra",)
+    "planner",
+    Planner,
+    builtin_modules=(
+        "dynmap_sim.agent.planning.grid_dijkstra",
+        "dynmap_sim.agent.planning.grid_astar",
+    ),
 )
 
 #: Class decorator: make a :class:`Planner` available under a name.
