@@ -60,7 +60,12 @@ class Controller(ABC):
 
 #: The controller registry.
 CONTROLLERS: Registry[Controller] = Registry(
-    "controller", Controller, builtin_modules=("dynmap_sim.agent.control.pure_pursuit",)
+    "controller",
+    Controller,
+    builtin_modules=(
+        "dynmap_sim.agent.control.pure_pursuit",
+        "dynmap_sim.agent.control.corridor_follower",
+    ),
 )
 
 #: Class decorator: make a :class:`Controller` available under a name.

@@ -82,23 +82,12 @@ class PurePursuit(Controller):
         assert self._path is not None
         verts = self._path
         x, y, th = float(pose[0]), float(pose[1]), float(pose[2])
-        # advance past reached vertices
         n_seg = len(verts) - 1
-        while (
-            self._seg < n_seg
-            and math.hypot(verts[self._seg + 1, 0] - x, verts[self._seg + 1, 1] - y)
-            < p.goal_tolerance_m
-        ):
-            self._seg += 1
+        self._seg = advance_segment(verts, self._seg, x, y, p.goal_tolerance_m)
         if self.done:
             return np.zeros(2, dtype=np.float32)
-        ax, ay = verts[self._seg]
-        bx, by = verts[self._seg + 1]
-        abx, aby = bx - ax, by - ay
-        len_ab = math.hypot(abx, aby)
-        u = min(max(((x - ax) * abx + (y - ay) * aby) / max(len_ab * len_ab, 1e-12), 0.0), 1.0)
-        s = min(u * len_ab + p.lookahead_m, len_ab) / max(len_ab, 1e-12)
-        dx, dy = ax + abx * s - x, ay + aby * s - y
+        cx, cy = carrot_on_segment(verts[self._seg], verts[self._seg + 1], x, y, p.lookahead_m)
+        dx, dy = cx - x, cy - y
         # the carrot in the robot frame
         c, sn = math.cos(th), math.sin(th)
         rx, ry = c * dx + sn * dy, -sn * dx + c * dy
@@ -119,7 +108,38 @@ class PurePursuit(Controller):
         if v == 0.0:
             return np.zeros(2, dtype=np.float32)
         # pure pursuit: curvature 2 sin(alpha) / L_d towards the carrot
-        kappa = 2.0 * math.sin(alpha) / max(dist, 1e-3)
-        w_max = p.max_omega_radps
-        omega = min(max(max(v, p.min_steering_speed_mps) * kappa, -w_max), w_max)
+        omega = pursuit_turn_rate(alpha, dist, max(v, p.min_steering_speed_mps), p.max_omega_radps)
         return np.array([v, omega], dtype=np.float32)
+
+
+def advance_segment(verts: FloatArray, seg: int, x: float, y: float, tolerance_m: float) -> int:
+    """The segment to follow from ``seg`` on: past every segment whose end vertex is within
+    ``tolerance_m`` of ``(x, y)`` (returns ``len(verts) - 1`` when the path's end is reached)."""
+    n_seg = len(verts) - 1
+    while seg < n_seg and math.hypot(verts[seg + 1, 0] - x, verts[seg + 1, 1] - y) < tolerance_m:
+        seg += 1
+    return seg
+
+
+def carrot_on_segment(
+    a: FloatArray, b: FloatArray, x: float, y: float, lookahead_m: float
+) -> tuple[float, float]:
+    """The pure-pursuit carrot: ``lookahead_m`` along segment ``a -> b`` beyond the projection
+    of ``(x, y)`` on it, clamped to the segment (never past ``b``: corners are not cut)."""
+    ax, ay = a
+    bx, by = b
+    abx, aby = bx - ax, by - ay
+    len_ab = math.hypot(abx, aby)
+    u = min(max(((x - ax) * abx + (y - ay) * aby) / max(len_ab * len_ab, 1e-12), 0.0), 1.0)
+    s = min(u * len_ab + lookahead_m, len_ab) / max(len_ab, 1e-12)
+    return ax + abx * s, ay + aby * s
+
+
+def pursuit_turn_rate(
+    alpha_rad: float, dist_m: float, steering_speed_mps: float, max_omega_radps: float
+) -> float:
+    """The pure-pursuit turn rate towards a carrot at bearing ``alpha_rad`` and distance
+    ``dist_m``: ``steering_speed * 2 sin(alpha) / L_d`` (Coulter 1992), clipped to
+    ``+-max_omega_radps``."""
+    kappa = 2.0 * math.sin(alpha_rad) / max(dist_m, 1e-3)
+    return min(max(steering_speed_mps * kappa, -max_omega_radps), max_omega_radps)

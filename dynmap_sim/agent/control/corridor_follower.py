@@ -1,0 +1,340 @@
+"""``corridor-follower``: Hentschel & Wagner's hybrid path controller (H&W 2011 §6.3).
+
+H&W §6.3 follow the planned path ``P`` with "a hybrid feedback controller" that tracks the path
+precisely and avoids obstacles *reactively* "by adjusting the lateral offset of the robot with
+respect to the base trajectory of the path", the offset of each path segment bounded by the
+corridor half-width ``l`` of the route (H&W §5, eq. 18); it reduces the speed "in dependence of
+the distance to the perceived obstacles", and an obstacle that no offset inside the corridor
+avoids is left to global replanning. This module is that controller:
+
+* **Tracking**: the carrot of ``pure-pursuit`` (:func:`.pure_pursuit.carrot_on_segment`:
+  ``lookahead_m`` ahead of the robot's projection on the current segment, never past its end),
+  steered to with the pure-pursuit curvature ``2 sin(alpha) / L_d`` (Coulter 1992).
+* **Reactive avoidance by a lateral offset**: ``n_offsets`` candidate offsets ``d`` in
+  ``[-l, +l]`` shift the path sideways along each segment's normal. For each, the clearance
+  grid is probed along the shifted path from the robot's projection ``probe_ahead_m`` ahead
+  and on the straight line from the robot to the shifted carrot. An offset is *free* when
+  every probe point keeps the hard clearance; of the free ones the follower takes the one with
+  the most clearance, the clearance saturating at ``clearance_enough_m`` (beyond it more room
+  buys nothing) and small costs on the offset (``offset_cost_per_m``: back to the base path
+  when there is room, H&W's "precise tracking") and on changing it (``switch_cost_per_m``:
+  no dithering between equal offsets). The corridor narrows to the goal point over the last
+  ``l`` metres of the path, so the robot ends on the path's end, not beside it.
+* **Blocked**: when no offset is free, :attr:`CorridorFollower.blocked` turns True and the
+  command is zero: H&W's cue for global replanning (issue 15's L11/L12).
+* **Speed** (the regulation of nav2's Regulated Pure Pursuit): the clearance law
+  :func:`speed_for_clearance` (issue 15 L13: ``v_max * clip((d - d_stop) / (d_full - d_stop),
+  0, 1)`` with a floor so a free offset is always driven), RPP's curvature regulation
+  (``v * R / R_min`` below ``regulated_min_radius_m``), RPP's approach regulation on the last
+  segment, and the external speed limit of :class:`.controller.Controller`.
+* **Rotate to heading** (RPP's ``use_rotate_to_heading``): a heading error to the carrot above
+  ``turn_in_place_rad`` turns on the spot (the robot is a disc: turning never sweeps new space).
+
+The grid is whatever the stack gives it (its own costmap, scans included, so people near the
+robot count as obstacles: the scan tells, not the truth).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dynmap_sim.agent.control.controller import Controller, SpeedLimit, register_controller
+from dynmap_sim.agent.control.pure_pursuit import (
+    advance_segment,
+    carrot_on_segment,
+    pursuit_turn_rate,
+)
+from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class CorridorFollowerParams:
+    """Tunables (SI units) of :class:`CorridorFollower` (H&W §6.3 leave all of them open)."""
+
+    #: cruise speed v_max [m/s]
+    speed_mps: float = 0.35
+    #: the hard clearance (robot radius + safety margin) [m]: no offset may go below it
+    min_clearance_m: float = 0.25
+    max_omega_radps: float = 0.8
+    #: pure-pursuit lookahead [m] (the tour's value: tight tracking of short indoor segments)
+    lookahead_m: float = 0.35
+    #: rotate to heading above this heading error to the carrot [rad] (RPP uses 0.785)
+    turn_in_place_rad: float = 0.6
+    #: a vertex within this distance is reached [m]
+    goal_tolerance_m: float = 0.12
+    #: corridor half-width l where ``set_path`` gets none [m] (issue 15 L10: H&W's routes in a
+    #: doorway-sized apartment)
+    default_half_width_m: float = 0.35
+    #: candidate offsets across ``[-l, l]`` (odd, so the base path itself is one)
+    n_offsets: int = 15
+    #: how far ahead of the robot the offsets are probed [m]: about 3 s at 0.35 m/s, enough to
+    #: start moving sideways before a box on the path is reached
+    probe_ahead_m: float = 1.0
+    #: spacing of the probe points [m] (the grid's usual 5 cm cells)
+    probe_step_m: float = 0.05
+    #: clearance beyond which an offset is not better for more room [m] (= the full-speed
+    #: clearance of L13: more room would not make the robot faster)
+    clearance_enough_m: float = 0.8
+    #: cost of an offset [m of clearance per m of offset]: back to the path when free
+    offset_cost_per_m: float = 0.3
+    #: cost of changing the offset [m of clearance per m]: hysteresis (< offset cost, so the
+    #: robot still returns to the path)
+    switch_cost_per_m: float = 0.1
+    #: clearance law (L13): zero speed at ``min_clearance_m``, full speed from this on [m]
+    full_speed_clearance_m: float = 0.8
+    #: the clearance law looks this far ahead along the chosen offset [m]
+    speed_probe_m: float = 0.5
+    #: speed floor while a free offset is driven [m/s] (RPP's regulated minimum speed, scaled
+    #: to this slower robot): the robot creeps past a box rather than stalling beside it
+    min_speed_mps: float = 0.05
+    #: RPP curvature regulation: slower on turns tighter than this radius [m] (RPP's 0.9)
+    regulated_min_radius_m: float = 0.9
+    #: RPP approach regulation: slower within this distance of the path's end [m] ...
+    approach_dist_m: float = 0.6
+    #: ... but at least this [m/s] (RPP's ``min_approach_linear_velocity`` 0.05)
+    approach_min_speed_mps: float = 0.05
+    #: the turn rate is ``max(v, this) * curvature`` [m/s], so slow driving still steers
+    min_steering_speed_mps: float = 0.1
+
+    def __post_init__(self) -> None:
+        if self.n_offsets < 1 or self.n_offsets % 2 == 0:
+            raise ValueError(f"n_offsets must be odd and >= 1, got {self.n_offsets}")
+        if self.full_speed_clearance_m <= self.min_clearance_m:
+            raise ValueError("full_speed_clearance_m must exceed min_clearance_m")
+        if self.probe_step_m <= 0.0 or self.probe_ahead_m <= 0.0:
+            raise ValueError("probe_step_m and probe_ahead_m must be > 0")
+
+
+def speed_for_clearance(clearance_m: float, p: CorridorFollowerParams) -> float:
+    """The clearance law [m/s] (H&W §6.3 "speed reduced in dependence of the distance to the
+    perceived obstacles"; the shape of RPP's proximity regulation, issue 15 L13):
+    ``v_max * clip((d - d_stop) / (d_full - d_stop), 0, 1)`` with ``d_stop`` the hard
+    clearance and ``d_full`` ``full_speed_clearance_m``, floored at ``min_speed_mps`` above
+    ``d_stop``. Non-decreasing in ``clearance_m``; zero at or below the hard clearance."""
+    d_stop = p.min_clearance_m
+    if not clearance_m > d_stop:
+        return 0.0
+    frac = min((clearance_m - d_stop) / (p.full_speed_clearance_m - d_stop), 1.0)
+    return max(p.speed_mps * frac, min(p.min_speed_mps, p.speed_mps))
+
+
+@register_controller("corridor-follower")
+class CorridorFollower(Controller):
+    """H&W §6.3's hybrid controller (module doc); ``params``: :class:`CorridorFollowerParams`
+    fields. ``set_path(path, half_widths)`` takes per-vertex corridor half-widths ``l``."""
+
+    def __init__(self, speed_mps: float, min_clearance_m: float, **params: float) -> None:
+        super().__init__(speed_mps, min_clearance_m)
+        self.params = CorridorFollowerParams(
+            speed_mps=speed_mps, min_clearance_m=min_clearance_m, **params
+        )
+        k = self.params.n_offsets
+        self._unit_offsets = np.linspace(-1.0, 1.0, k) if k > 1 else np.zeros(1)
+        self._path: FloatArray | None = None
+        self._n_seg = 0  # segments of the path (0: none)
+        self._seg = 0
+        self._offset_m = 0.0
+        self._blocked = False
+        self._clearance_ahead_m = math.inf
+
+    # ----------------------------------------------------------------- path
+    def set_path(self, path: FloatArray | None, half_widths: FloatArray | None = None) -> None:
+        """Follow ``path`` ``(K, 2)`` [m]; ``half_widths`` ``(K,)`` [m] is the corridor
+        half-width ``l`` at each vertex (None: ``default_half_width_m``). Segment ``i`` may be
+        left by ``min(l_i, l_{i+1})`` (the narrower end bounds it, e.g. a doorway waypoint).
+        Bad ``half_widths`` raise ``ValueError`` and leave no path."""
+        self._seg = 0
+        self._offset_m = 0.0
+        self._blocked = False
+        self._clearance_ahead_m = math.inf
+        self._path, self._n_seg = None, 0
+        if path is None:
+            return
+        verts = np.asarray(path, dtype=np.float64).reshape(-1, 2)
+        if len(verts) < 2:
+            return
+        if half_widths is None:
+            hw = np.full(len(verts), self.params.default_half_width_m)
+        else:
+            hw = np.asarray(half_widths, dtype=np.float64).reshape(-1)
+            if hw.shape != (len(verts),) or not np.all(np.isfinite(hw) & (hw >= 0.0)):
+                raise ValueError(
+                    f"half_widths must be {len(verts)} finite values >= 0, got {half_widths!r}"
+                )
+        d = np.diff(verts, axis=0)
+        length = np.hypot(d[:, 0], d[:, 1])
+        self._seg_len = length
+        self._tangent = d / np.maximum(length, 1e-12)[:, None]
+        self._normal = np.stack([-self._tangent[:, 1], self._tangent[:, 0]], axis=1)  # left
+        self._cum = np.concatenate([[0.0], np.cumsum(length)])
+        self._seg_hw = np.minimum(hw[:-1], hw[1:])
+        self._path, self._n_seg = verts, len(verts) - 1
+
+    @property
+    def segment(self) -> int:
+        """Index of the segment being followed (its start vertex)."""
+        return self._seg
+
+    @property
+    def done(self) -> bool:
+        """True with no path (or a single vertex) and once its end is reached."""
+        return self._seg >= self._n_seg
+
+    @property
+    def blocked(self) -> bool:
+        """True when, at the last command, no lateral offset inside the corridor was free: the
+        stack should replan globally (H&W §6.3)."""
+        return self._blocked
+
+    @property
+    def offset_m(self) -> float:
+        """The lateral offset chosen at the last command [m] (+ left of the path)."""
+        return self._offset_m
+
+    @property
+    def clearance_ahead_m(self) -> float:
+        """The clearance the speed law used at the last command [m] (inf before any)."""
+        return self._clearance_ahead_m
+
+    # ----------------------------------------------------------------- geometry
+    def _along(self, x: float, y: float) -> tuple[float, float]:
+        """Arc length of the robot's projection on the current segment and its signed lateral
+        distance (+ left) from it [m]."""
+        a = self._path[self._seg]  # type: ignore[index]
+        t, n = self._tangent[self._seg], self._normal[self._seg]
+        rel = np.array([x - a[0], y - a[1]])
+        u = min(max(float(rel @ t), 0.0), float(self._seg_len[self._seg]))
+        return float(self._cum[self._seg]) + u, float(rel @ n)
+
+    def _half_width_at(self, s_m: FloatArray, seg: NDArray[np.int64]) -> FloatArray:
+        """The corridor half-width at arc lengths ``s_m`` on segments ``seg``, narrowing to
+        zero over the last ``l`` metres so the path ends on its end point."""
+        return np.minimum(self._seg_hw[seg], np.maximum(self._cum[-1] - s_m, 0.0))
+
+    def _shifted(self, s_m: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """Base points, left normals and half-widths at arc lengths ``s_m`` of the path."""
+        k = np.clip(np.searchsorted(self._cum, s_m, side="right") - 1, 0, self._n_seg - 1)
+        base = self._path[k] + (s_m - self._cum[k])[:, None] * self._tangent[k]  # type: ignore[index]
+        return base, self._normal[k], self._half_width_at(s_m, k)
+
+    def _choose_offset(
+        self,
+        xy: FloatArray,
+        s_robot: float,
+        carrot: FloatArray,
+        s_carrot: float,
+        grid: ClearanceGrid,
+    ) -> tuple[int | None, FloatArray, FloatArray]:
+        """Index of the best free offset (None: none is free), the candidate offsets [m] and
+        each candidate's minimum clearance within ``speed_probe_m`` ahead."""
+        p = self.params
+        hw_seg = float(self._seg_hw[self._seg])
+        offsets = self._unit_offsets * hw_seg  # (K,)
+        # the shifted path ahead: (K, M) points
+        s = s_robot + np.arange(0.0, p.probe_ahead_m + 1e-9, p.probe_step_m)
+        s = np.minimum(s, self._cum[-1])
+        base, normal, hw = self._shifted(s)
+        d = np.clip(offsets[:, None], -hw[None, :], hw[None, :])  # (K, M)
+        pts = base[None, :, :] + d[..., None] * normal[None, :, :]
+        clear = grid.clearance_at(pts)  # (K, M)
+        # the way there: robot -> shifted carrot (K, T)
+        hw_c = float(self._half_width_at(np.array([s_carrot]), np.array([self._seg]))[0])
+        targets = carrot + np.clip(offsets, -hw_c, hw_c)[:, None] * self._normal[self._seg]
+        n_t = max(2, int(math.ceil(p.lookahead_m / p.probe_step_m)) + 1)
+        w = np.linspace(0.0, 1.0, n_t)[1:]
+        way = xy + w[None, :, None] * (targets[:, None, :] - xy)
+        clear_way = grid.clearance_at(way)
+        # the robot may already be inside the hard clearance (something came to it): then the
+        # way out only must not get worse than where it stands
+        here = float(grid.clearance_at(xy))
+        need_way = min(p.min_clearance_m, here)
+        free = np.all(clear >= p.min_clearance_m, axis=1) & np.all(clear_way >= need_way, axis=1)
+        near = s - s_robot <= p.speed_probe_m
+        clear_near = np.minimum(clear[:, near].min(axis=1), clear_way.min(axis=1))
+        if not free.any():
+            return None, offsets, clear_near
+        score = (
+            np.minimum(clear.min(axis=1), p.clearance_enough_m)
+            - p.offset_cost_per_m * np.abs(offsets)
+            - p.switch_cost_per_m * np.abs(offsets - self._offset_m)
+        )
+        score[~free] = -np.inf
+        return int(np.argmax(score)), offsets, clear_near
+
+    # ----------------------------------------------------------------- control
+    def command(
+        self, pose: FloatArray, grid: ClearanceGrid, speed_limit: SpeedLimit | None = None
+    ) -> NDArray[np.float32]:
+        """The command ``[v_mps, omega_radps]`` at ``pose`` (map frame); zero when done or
+        :attr:`blocked`."""
+        p = self.params
+        stop = np.zeros(2, dtype=np.float32)
+        if self.done:
+            self._blocked = False
+            return stop
+        verts = self._path
+        assert verts is not None
+        x, y, th = float(pose[0]), float(pose[1]), float(pose[2])
+        n_seg = self._n_seg
+        while True:
+            self._seg = advance_segment(verts, self._seg, x, y, p.goal_tolerance_m)
+            if self.done:
+                self._blocked = False
+                return stop
+            # with an offset the robot passes a vertex beside it: past the end of an inner
+            # segment and inside its corridor is reached, too
+            s_robot, lat = self._along(x, y)
+            at_end = s_robot >= self._cum[self._seg + 1] - p.goal_tolerance_m
+            inside = abs(lat) <= self._seg_hw[self._seg] + p.goal_tolerance_m
+            if self._seg < n_seg - 1 and at_end and inside:
+                self._seg += 1
+                continue
+            break
+        cx, cy = carrot_on_segment(verts[self._seg], verts[self._seg + 1], x, y, p.lookahead_m)
+        carrot = np.array([cx, cy])
+        s_carrot = float(self._cum[self._seg]) + float(np.hypot(*(carrot - verts[self._seg])))
+        xy = np.array([x, y])
+        best, offsets, clear_near = self._choose_offset(xy, s_robot, carrot, s_carrot, grid)
+        if best is None:
+            self._blocked = True
+            self._clearance_ahead_m = float(clear_near.max())
+            return stop
+        self._blocked = False
+        self._offset_m = float(offsets[best])
+        hw_c = float(self._half_width_at(np.array([s_carrot]), np.array([self._seg]))[0])
+        d_c = min(max(self._offset_m, -hw_c), hw_c)
+        tx, ty = carrot + d_c * self._normal[self._seg]
+        # the shifted carrot in the robot frame
+        c, sn = math.cos(th), math.sin(th)
+        dx, dy = tx - x, ty - y
+        rx, ry = c * dx + sn * dy, -sn * dx + c * dy
+        alpha = math.atan2(ry, rx)
+        dist = math.hypot(rx, ry)
+        if abs(alpha) > p.turn_in_place_rad:  # rotate to heading
+            return np.array([0.0, math.copysign(p.max_omega_radps, alpha)], dtype=np.float32)
+        # speed: clearance law on the chosen offset (the robot's own spot counts unless it
+        # is already inside the hard clearance: then it creeps out along the free offset)
+        here = float(grid.clearance_at(xy))
+        d_speed = float(clear_near[best])
+        if here > p.min_clearance_m:
+            d_speed = min(d_speed, here)
+        self._clearance_ahead_m = d_speed
+        v = speed_for_clearance(d_speed, p)
+        kappa = abs(2.0 * math.sin(alpha)) / max(dist, 1e-3)
+        if kappa * p.regulated_min_radius_m > 1.0:  # RPP curvature regulation: v * R / R_min
+            v = max(v / (kappa * p.regulated_min_radius_m), min(v, p.min_speed_mps))
+        if self._seg == n_seg - 1:  # RPP approach regulation
+            to_end = math.hypot(verts[-1, 0] - x, verts[-1, 1] - y)
+            v = min(v, max(p.speed_mps * to_end / p.approach_dist_m, p.approach_min_speed_mps))
+        if speed_limit is not None:
+            v *= speed_limit()
+        if v <= 0.0:
+            return stop
+        omega = pursuit_turn_rate(alpha, dist, max(v, p.min_steering_speed_mps), p.max_omega_radps)
+        return np.array([v, omega], dtype=np.float32)

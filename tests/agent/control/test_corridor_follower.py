@@ -1,0 +1,154 @@
+"""``corridor-follower`` (H&W 2011 §6.3) on synthetic corridors with a unicycle robot: tracking,
+passing a box by a lateral offset inside the corridor, stopping and reporting ``blocked``, the
+speed law."""
+
+import math
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from synthetic_scans import box
+
+sys.path.insert(0, str(Path(__file__).parent))
+from control_world import HARD_M, SPEED_MPS, corridor, drive, grid_of, seg_distance  # noqa: E402
+
+from dynmap_sim.agent.control.controller import CONTROLLERS  # noqa: E402
+from dynmap_sim.agent.control.corridor_follower import (  # noqa: E402
+    CorridorFollower,
+    CorridorFollowerParams,
+    speed_for_clearance,
+)
+
+STRAIGHT = np.array([[0.0, 0.0], [8.0, 0.0]])
+START = np.array([0.0, 0.0, 0.0])
+
+
+def follower(**params) -> CorridorFollower:
+    return CorridorFollower(SPEED_MPS, HARD_M, **params)
+
+
+def test_registered_under_its_name():
+    assert CONTROLLERS.get("corridor-follower") is CorridorFollower
+    assert CorridorFollower.name == "corridor-follower"
+
+
+def test_tracks_a_straight_path_in_a_free_corridor():
+    c = follower()
+    c.set_path(STRAIGHT)
+    poses, cmds = drive(c, grid_of(corridor()), START)
+    assert c.done and not c.blocked
+    assert np.abs(poses[:, 1]).max() < 0.01  # on the path
+    assert np.linalg.norm(poses[-1, :2] - STRAIGHT[-1]) < c.params.goal_tolerance_m
+    assert cmds[:, 0].max() == pytest.approx(SPEED_MPS)  # 1 m from the walls: full speed
+    assert len(cmds) * 0.1 < 1.2 * 8.0 / SPEED_MPS + 3.0  # hardly slower than cruising
+
+
+def test_follows_corners_of_a_polyline():
+    path = np.array([[0.0, 0.0], [3.0, 0.0], [3.0, 3.0], [0.0, 3.0]])
+    c = follower()
+    c.set_path(path)
+    poses, _ = drive(c, grid_of(box(-1.5, -1.5, 4.5, 4.5)), START)
+    assert c.done
+    # every vertex is passed close by (corners are not cut)
+    for v in path:
+        assert np.hypot(*(poses[:, :2] - v).T).min() < 0.15
+
+
+@pytest.mark.parametrize("side", [+1.0, -1.0])
+def test_passes_a_box_in_the_corridor_by_a_lateral_offset(side):
+    # a box covering 0.35 m of the corridor's centre line on one side; walls 1 m away
+    blocker = box(3.5, min(0.0, side * 0.35), 4.0, max(0.0, side * 0.35))
+    segs = corridor(blocker)
+    c = follower(default_half_width_m=0.6)
+    c.set_path(STRAIGHT)
+    poses, cmds = drive(c, grid_of(segs), START)
+    assert c.done and not c.blocked
+    lateral = poses[:, 1]
+    beside = (poses[:, 0] > 3.4) & (poses[:, 0] < 4.1)
+    # it passes on the free side, inside the corridor, and returns to the path afterwards
+    assert np.all(-side * lateral[beside] > 0.2)
+    assert np.abs(lateral).max() <= 0.6 + 0.05
+    assert abs(lateral[-1]) < 0.05
+    clearance = [seg_distance(p[:2], segs) for p in poses]
+    assert min(clearance) >= HARD_M
+    # slower beside the box than in the open
+    assert cmds[beside[:-1], 0].max() < 0.6 * SPEED_MPS
+
+
+def test_blocked_corridor_stops_and_reports_blocked():
+    segs = corridor(box(3.5, -1.0, 4.0, 1.0))  # wall to wall
+    c = follower(default_half_width_m=0.6)
+    c.set_path(STRAIGHT)
+    poses, cmds = drive(c, grid_of(segs), START, steps=400)
+    assert not c.done and c.blocked
+    assert np.all(cmds[-5:] == 0.0)
+    assert min(seg_distance(p[:2], segs) for p in poses) >= HARD_M
+    # stopped short of the block, then stays put
+    assert poses[-1, 0] < 3.5 - HARD_M
+    assert np.allclose(poses[-1], poses[-5])
+    # the block is gone (a fresh grid): not blocked any more, it drives on
+    cmd = c.command(poses[-1], grid_of(corridor()))
+    assert not c.blocked and cmd[0] > 0.0
+
+
+def test_corridor_half_widths_bound_the_offset():
+    segs = corridor(box(3.5, -0.05, 4.0, 0.35))  # passable at about -0.4 m
+    wide, narrow = follower(), follower()
+    wide.set_path(STRAIGHT, half_widths=np.array([0.6, 0.6]))
+    narrow.set_path(STRAIGHT, half_widths=np.array([0.6, 0.2]))  # segment gets min: 0.2 m
+    drive(wide, grid_of(segs), START)
+    assert wide.done and not wide.blocked
+    drive(narrow, grid_of(segs), START, steps=400)
+    assert narrow.blocked and not narrow.done
+    with pytest.raises(ValueError, match="half_widths"):
+        narrow.set_path(STRAIGHT, half_widths=np.array([0.3]))
+
+
+def test_speed_law_is_monotone_in_clearance():
+    p = CorridorFollowerParams()
+    d = np.linspace(0.0, 2.0, 401)
+    v = np.array([speed_for_clearance(float(x), p) for x in d])
+    assert np.all(np.diff(v) >= 0.0)
+    assert np.all(v[d <= p.min_clearance_m] == 0.0)
+    assert np.all(v[d >= p.full_speed_clearance_m] == pytest.approx(p.speed_mps))
+    assert np.all(v[d > p.min_clearance_m] >= p.min_speed_mps)
+    slow = replace(p, min_speed_mps=0.0)  # the plain L13 law: linear in between
+    assert speed_for_clearance(0.525, slow) == pytest.approx(0.5 * p.speed_mps)
+
+
+def test_commanded_speed_grows_with_the_distance_to_an_obstacle_beside_the_path():
+    speeds = []
+    for gap in (0.3, 0.4, 0.5, 0.7, 0.9):
+        c = follower(default_half_width_m=0.0)  # no offset: the speed law alone
+        c.set_path(STRAIGHT)
+        grid = grid_of(corridor(box(0.0, gap, 3.0, gap + 0.2), half_m=2.0))
+        speeds.append(float(c.command(START, grid)[0]))
+    assert np.all(np.diff(speeds) >= 0.0) and speeds[-1] > speeds[0]
+
+
+def test_rotates_to_heading_for_a_large_heading_error():
+    c = follower()
+    c.set_path(STRAIGHT)
+    v, w = c.command(np.array([0.0, 0.0, math.pi * 0.75]), grid_of(corridor()))
+    assert v == 0.0 and abs(w) == pytest.approx(c.params.max_omega_radps)
+    assert w < 0.0  # the short way round
+
+
+def test_no_path_or_end_reached_gives_zero_and_done():
+    c = follower()
+    grid = grid_of(corridor())
+    assert c.done and np.all(c.command(START, grid) == 0.0)
+    c.set_path(STRAIGHT)
+    assert not c.done
+    assert np.all(c.command(np.array([8.0, 0.0, 0.0]), grid) == 0.0) and c.done
+    c.set_path(None)
+    assert c.done
+
+
+def test_bad_params_are_refused():
+    with pytest.raises(ValueError, match="n_offsets"):
+        follower(n_offsets=4)
+    with pytest.raises(TypeError):
+        follower(no_such_param=1.0)
