@@ -1,0 +1,166 @@
+"""A* on the route graph, minimizing travel time: Hentschel & Wagner 2011 §6.2 (eq. 18).
+
+The graph is :meth:`dynmap_sim.agent.navigation.RouteMemory.graph`: nodes are waypoints,
+edges are route segments and joins costed in seconds (learned travel time, else length /
+``v``; ``inf`` while blocked, §6.3). ``g`` sums those costs; ``h`` is the straight-line
+distance to the goal over a speed ``v_h`` (H&W: "the straight-line distance divided by the
+maximum robot velocity").
+
+**Admissibility.** ``v_h`` is the largest of the given robot speed, every node's ``v`` and
+every finite edge's effective speed ``length / cost``. Then every edge costs at least its
+length / ``v_h``, a path costs at least its length / ``v_h``, and its length is at least the
+straight-line distance (triangle inequality): ``h`` never overestimates. It is also
+consistent (``h(a) <= c(a, b) + h(b)``), so a node is never expanded twice. Taking the
+robot's speed alone would not do: a learned travel time can be shorter than length / v
+(a segment whose waypoints drifted apart after it was timed, or a robot that was faster).
+
+The result (eq. 18) is the path's waypoints with the corridor half-width of the edge that
+reaches each (the first point takes the first edge's), i.e. the base trajectory and the
+corridor the controller may use for reactive avoidance (§6.3). Graphs are small (hundreds of
+nodes), so a binary heap is plenty.
+"""
+
+from __future__ import annotations
+
+import heapq
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from dynmap_sim.agent.navigation.route_memory import Edge, RouteGraph
+
+FloatArray = NDArray[np.float64]
+
+#: Id of the virtual start node of :func:`plan_route` (waypoint ids are >= 0).
+START = -1
+
+
+@dataclass(frozen=True)
+class PlannedPath:
+    """A planned path P (eq. 18): ``xy (m, 2)`` [m] base trajectory, ``half_width_m (m,)``
+    corridor half-width of the edge ending at each point, ``v_max_mps (m,)`` the speed limit
+    approaching it, ``node_ids`` the graph nodes (:data:`START` for a projected start point),
+    ``travel_time_s`` the summed cost [s]."""
+
+    node_ids: tuple[int, ...]
+    xy: FloatArray
+    half_width_m: FloatArray
+    v_max_mps: FloatArray
+    travel_time_s: float
+
+
+def heuristic_speed_mps(graph: RouteGraph, v_max_mps: float | None = None) -> float:
+    """``v_h`` of the module docstring [m/s]: at least every edge's effective speed, so
+    ``h = distance / v_h`` is admissible; ``inf`` (``h = 0``, Dijkstra) if some edge of
+    positive length costs nothing."""
+    v = max([float(v_max_mps or 0.0), *graph.v_max_mps.tolist(), 1e-9])
+    for e in graph.edges:
+        if math.isfinite(e.travel_time_s) and e.length_m > 0.0:
+            if e.travel_time_s <= 0.0:
+                return math.inf
+            v = max(v, e.length_m / e.travel_time_s)
+    return v
+
+
+def astar(
+    graph: RouteGraph,
+    start: int,
+    goal: int,
+    v_max_mps: float | None = None,
+    start_edges: list[Edge] | None = None,
+    start_xy: ArrayLike | None = None,
+) -> tuple[float, list[int], list[Edge]] | None:
+    """Least-travel-time path from node ``start`` to node ``goal`` (H&W §6.2): ``(cost [s],
+    node ids, edges taken)``, or None when the goal is unreachable (blocked edges never are
+    taken). ``start_edges`` / ``start_xy`` add a virtual start node (see :func:`plan_route`)."""
+    v_h = heuristic_speed_mps(graph, v_max_mps)
+    goal_xy = graph.position(goal)
+
+    def h(n: int) -> float:
+        if math.isinf(v_h):
+            return 0.0
+        p = np.asarray(start_xy, float)[:2] if n == START else graph.position(n)
+        return float(np.hypot(*(p - goal_xy))) / v_h
+
+    g: dict[int, float] = {start: 0.0}
+    came: dict[int, Edge] = {}
+    done: set[int] = set()
+    heap: list[tuple[float, int, int]] = [(h(start), 0, start)]
+    tie = 1
+    while heap:
+        _, _, n = heapq.heappop(heap)
+        if n in done:
+            continue
+        if n == goal:
+            nodes, edges = [n], []
+            while n != start:
+                e = came[n]
+                edges.append(e)
+                n = e.u
+                nodes.append(n)
+            return g[goal], nodes[::-1], edges[::-1]
+        done.add(n)
+        out = start_edges if (n == START and start_edges is not None) else graph.out.get(n, [])
+        for e in out:
+            if not math.isfinite(e.travel_time_s) or e.v in done:
+                continue
+            cand = g[n] + e.travel_time_s
+            if cand < g.get(e.v, math.inf):
+                g[e.v] = cand
+                came[e.v] = e
+                heapq.heappush(heap, (cand + h(e.v), tie, e.v))
+                tie += 1
+    return None
+
+
+def plan_route(
+    graph: RouteGraph,
+    start_xy: ArrayLike,
+    goal_xy: ArrayLike,
+    v_max_mps: float | None = None,
+) -> PlannedPath | None:
+    """Plan from the robot's position ``start_xy`` to the node nearest ``goal_xy`` [m].
+
+    The robot enters the graph at its projection onto the nearest passable segment (heading
+    on along the segment's direction, for the remaining fraction of its travel time) or at
+    the nearest node (straight-line distance / ``v_h``), whichever A* finds cheaper; so a
+    robot in the middle of a segment does not turn back to its start waypoint. Returns None
+    when the graph is empty or the goal unreachable.
+    """
+    if graph.node_ids.size == 0:
+        return None
+    p = np.asarray(start_xy, float)[:2]
+    goal = graph.nearest_node(goal_xy)
+    v_h = heuristic_speed_mps(graph, v_max_mps)
+    near = graph.nearest_node(p)
+    d = float(np.hypot(*(graph.position(near) - p)))
+    hw_near = float(graph.half_width_m[graph.index[near]])
+    starts = [Edge(START, near, d, 0.0 if math.isinf(v_h) else d / v_h, False, hw_near, -1)]
+    hit = graph.nearest_edge(p)
+    start_point = p
+    if hit is not None:
+        e, u, proj = hit
+        rest_m, rest_s = (1.0 - u) * e.length_m, (1.0 - u) * e.travel_time_s
+        starts.append(Edge(START, e.v, rest_m, rest_s, e.learned, e.half_width_m, e.route_id))
+    found = astar(graph, START, goal, v_max_mps, start_edges=starts, start_xy=p)
+    if found is None:
+        return None
+    cost, nodes, edges = found
+    if hit is not None and edges[0] is starts[-1]:
+        start_point = proj
+    xy = [start_point]
+    hw = [edges[0].half_width_m]
+    v = [float(graph.v_max_mps[graph.index[edges[0].v]])]
+    ids = [START]
+    for e in edges:
+        q = graph.position(e.v)
+        if np.hypot(*(q - xy[-1])) < 1e-9:  # a join of coincident waypoints
+            ids[-1] = e.v
+            continue
+        xy.append(q)
+        hw.append(e.half_width_m)
+        v.append(float(graph.v_max_mps[graph.index[e.v]]))
+        ids.append(e.v)
+    return PlannedPath(tuple(ids), np.array(xy), np.array(hw), np.array(v), float(cost))

@@ -1,0 +1,214 @@
+"""Route memory, H&W §5: locating (§5.1), learning and new routes (§5.2), forgetting, graph."""
+
+from __future__ import annotations
+
+import math
+import pickle
+
+import numpy as np
+import pytest
+
+from dynmap_sim.agent.navigation import RouteMemory, RouteMemoryParams
+from dynmap_sim.agent.navigation.route_memory import JOIN
+from dynmap_sim.agent.planning.route_astar import plan_route
+
+DAY_S = 86_400.0
+
+#: A detour around a block on the straight prior route from (0, 0) to (10, 0).
+DETOUR = [(0.0, 0.0), (3.0, 0.0), (3.0, 1.2), (7.0, 1.2), (7.0, 0.0), (10.0, 0.0)]
+
+
+def straight(now_s: float = 0.0, **kw) -> RouteMemory:
+    """Prior route (0, 0) -> (10, 0), v 0.2 m/s, l 0.35 m, densified to 0.5 m."""
+    return RouteMemory.from_prior([[0.0, 0.0], [10.0, 0.0]], 0.2, 0.35, now_s, **kw)
+
+
+# ---------------------------------------------------------------------------- §5.1 locate
+def test_locate_inside_and_outside_the_corridor():
+    mem = RouteMemory.from_prior([[0.0, 0.0], [4.0, 0.0]], 0.2, 0.35, 0.0, densify=False)
+    pos = mem.locate([1.5, 0.2, 0.0])
+    assert pos.inside and pos.route_id == 0 and pos.segment == 1
+    assert pos.distance_m == pytest.approx(0.2)
+    assert pos.lateral_m == pytest.approx(0.2)  # left of the direction of travel
+    assert pos.progress == pytest.approx(1.5 / 4.0)
+    assert pos.along_m == pytest.approx(1.5)
+    assert pos.projection_xy == pytest.approx((1.5, 0.0))
+    out = mem.locate([2.0, -0.5, 0.0])
+    assert not out.inside
+    assert out.distance_m == pytest.approx(0.5) and out.lateral_m == pytest.approx(-0.5)
+    # beyond the end: the distance is to the segment's end point
+    assert mem.locate([5.0, 0.0, 0.0]).distance_m == pytest.approx(1.0)
+    assert RouteMemory().locate([0.0, 0.0, 0.0]) is None
+
+
+def test_locate_picks_the_route_at_minimal_lateral_distance():
+    mem = straight()
+    rid = mem.add_route([[0.0, 1.0], [10.0, 1.0]], 0.2, 0.35, 0.0)
+    assert mem.locate([4.2, 0.7, 0.0]).route_id == rid
+    pos = mem.locate([4.2, 0.3, 0.0])
+    assert pos.route_id == 0 and pos.segment == 9 and pos.distance_m == pytest.approx(0.3)
+
+
+# ---------------------------------------------------------------------------- §5.2 learning
+def test_travel_times_learned_and_ema_converges(drive_fn):
+    mem = straight()
+    t = drive_fn(mem, [(0, 0), (10.3, 0)], 0.25, 0.0)
+    r = mem.routes[0]
+    # every segment of 0.5 m driven at 0.25 m/s: 2 s, the first one too (start of the run)
+    assert np.isnan(r.wp[0, 5])
+    np.testing.assert_allclose(r.wp[1:, 5], 2.0, atol=1e-9)
+    np.testing.assert_array_less(0.0, r.wp[1:, 4])
+    # now the robot drives at half the speed: Δt_n = 4 - 2 (1 - α)^n
+    a = mem.params.travel_time_alpha
+    for n in range(1, 9):
+        mem.reset_run()
+        t = drive_fn(mem, [(0, 0), (10.3, 0)], 0.125, t + 100.0)
+        np.testing.assert_allclose(r.wp[1:, 5], 4.0 - 2.0 * (1 - a) ** n, atol=1e-9)
+    assert r.wp[5, 5] == pytest.approx(4.0, abs=0.15)
+    # updated in the last run: the travel time when passing w5 at x = 2.5 m, its coordinates
+    # (t of eq. 17: "any parameter") when the pass of w6 ends its samples
+    t_start = t - 10.3 / 0.125
+    assert r.wp[5, 4] == pytest.approx(t_start + 3.0 / 0.125, abs=0.11)
+
+
+def test_last_value_when_alpha_is_one(drive_fn):
+    mem = straight(params=RouteMemoryParams(travel_time_alpha=1.0))
+    t = drive_fn(mem, [(0, 0), (10.3, 0)], 0.25, 0.0)
+    mem.reset_run()
+    drive_fn(mem, [(0, 0), (10.3, 0)], 0.1, t + 10.0)
+    np.testing.assert_allclose(mem.routes[0].wp[1:, 5], 5.0, atol=1e-9)
+
+
+def test_waypoints_adapt_toward_the_driven_line(drive_fn):
+    mem = straight()
+    t = 0.0
+    for n in range(1, 4):
+        mem.reset_run()
+        t = drive_fn(mem, [(0, 0.2), (10.3, 0.2)], 0.25, t + 10.0)
+        y = mem.routes[0].xy[:, 1]
+        np.testing.assert_allclose(y, 0.2 * (1 - 0.9**n), atol=1e-6)
+        np.testing.assert_allclose(mem.routes[0].xy[:, 0], np.arange(21) * 0.5, atol=1e-12)
+
+
+def test_a_detour_becomes_a_new_route_joined_at_both_ends(drive_fn):
+    mem = straight()
+    drive_fn(mem, DETOUR, 0.25, 100.0, dt_s=0.1)
+    assert not mem.recording and len(mem.routes) == 2
+    prior, new = mem.routes[0], mem.routes[1]
+    assert not new.prior and prior.prior
+    # starts where the robot left the corridor, ends where it re-entered, on the centre line
+    np.testing.assert_allclose(new.xy[0], (3.0, 0.0), atol=0.05)
+    np.testing.assert_allclose(new.xy[-1], (7.0, 0.0), atol=0.1)
+    start_on_prior = np.hypot(*(prior.xy - new.xy[0]).T).min()
+    end_on_prior = np.hypot(*(prior.xy - new.xy[-1]).T).min()
+    assert start_on_prior < 1e-9 and end_on_prior < 1e-9
+    # a waypoint every Δd (never further apart than Δd + one step of 0.025 m), but for the
+    # last leg: from the last recorded waypoint to the centre line, up to Δd + l
+    gaps = np.hypot(*np.diff(new.xy, axis=0).T)
+    assert gaps[:-1].max() <= 0.5 + 0.025 + 1e-9 and gaps[-1] <= 0.5 + 0.35 + 0.025
+    legs = new.xy[(new.xy[:, 1] > 1.15) & (new.xy[:, 0] > 3.1) & (new.xy[:, 0] < 6.4)]
+    np.testing.assert_allclose(np.diff(legs[:, 0]), 0.5, atol=0.03)
+    assert np.all(new.wp[:, 3] == 0.35) and np.all(new.wp[:, 2] == 0.2)
+    # its segments were driven at 0.25 m/s: learned times ≈ length / speed
+    np.testing.assert_allclose(new.wp[1:, 5], gaps / 0.25, rtol=0.1, atol=0.15)
+    # joined in the graph: coincident waypoints get join edges both ways
+    g = mem.graph()
+    joins = [e for e in g.edges if e.route_id == JOIN and e.length_m < 1e-9]
+    assert {e.u for e in joins} >= {int(new.ids[0]), int(new.ids[-1])}
+    assert {e.v for e in joins} >= {int(new.ids[0]), int(new.ids[-1])}
+
+
+def test_a_detour_is_planned_when_the_prior_is_blocked(drive_fn):
+    mem = straight()
+    drive_fn(mem, DETOUR, 0.25, 100.0)
+    prior = mem.routes[0]
+    for k in range(1, len(prior.ids)):
+        if 3.2 < prior.xy[k, 0] < 6.8:
+            mem.block((int(prior.ids[k - 1]), int(prior.ids[k])))
+    path = plan_route(mem.graph(), [0.0, 0.0], [10.0, 0.0])
+    assert path is not None and path.xy[:, 1].max() == pytest.approx(1.2, abs=0.05)
+
+
+def test_a_wobble_at_the_corridor_edge_is_no_new_route(drive_fn):
+    mem = straight()
+    drive_fn(mem, [(0, 0), (2, 0), (2.2, 0.45), (2.4, 0), (10.2, 0)], 0.25, 0.0)
+    for k in range(50):  # and an estimate flickering across the corridor's edge
+        mem.observe([6.0 + 0.01 * k, 0.34 + 0.02 * (k % 2), 0.0], 100.0 + 0.1 * k)
+    assert len(mem.routes) == 1 and len(mem.routes[0].ids) == 21
+    # the travel times around the wobble were still learned (the pass continues)
+    assert np.isfinite(mem.routes[0].wp[1:, 5]).all()
+
+
+def test_driving_a_blocked_segment_unblocks_it(drive_fn):
+    mem = straight()
+    ids = mem.routes[0].ids
+    mem.block((int(ids[4]), int(ids[5])))
+    assert math.isinf([e for e in mem.graph().edges if e.u == ids[4]][0].travel_time_s)
+    drive_fn(mem, [(0, 0), (10.3, 0)], 0.25, 0.0)
+    assert not mem.blocked
+
+
+# ---------------------------------------------------------------------------- forgetting
+def test_forgetting_after_the_age(drive_fn):
+    mem = straight()
+    drive_fn(mem, DETOUR, 0.25, 100.0)  # day 0: the detour is recorded
+    for day in range(1, 5):  # then the detour is the way, the prior's middle is unused
+        mem.reset_run()
+        drive_fn(mem, DETOUR, 0.25, day * DAY_S)
+    assert mem.forget(3 * DAY_S) == 0  # the middle is 3 days old: not older than the age
+    n = mem.forget(4 * DAY_S + 1000.0)
+    assert n == 8  # the prior from x = 3 to x = 7 (8 segments of 0.5 m) was bypassed
+    priors = sorted((r for r in mem.routes.values() if r.prior), key=lambda r: r.xy[0, 0])
+    assert len(priors) == 2
+    assert priors[0].xy[-1, 0] == pytest.approx(3.0) and priors[1].xy[0, 0] == pytest.approx(7.0)
+    path = plan_route(mem.graph(), [0.0, 0.0], [10.0, 0.0])
+    assert path is not None and path.xy[-1] == pytest.approx((10.0, 0.0))
+
+
+def test_a_stale_learned_route_is_forgotten_when_bypassed():
+    mem = straight()
+    rid = mem.add_route([(3.0, 0.0), (5.0, 1.0), (7.0, 0.0)], 0.2, 0.35, 0.0)
+    mem.routes[0].wp[:, 4] = 10 * DAY_S  # the prior was driven on day 10
+    assert mem.forget(10 * DAY_S) == 2 and rid not in mem.routes
+    assert len(mem.routes) == 1 and len(mem.routes[0].ids) == 21
+
+
+def test_nothing_that_the_graph_needs_is_forgotten():
+    mem = straight()
+    assert mem.forget(100 * DAY_S) == 0  # everything is stale, nothing is bypassed
+    assert len(mem.routes[0].ids) == 21
+
+
+# ---------------------------------------------------------------------------- graph, storage
+def test_graph_costs_and_joins():
+    mem = RouteMemory.from_prior([[0.0, 0.0], [2.0, 0.0]], 0.5, 0.35, 0.0, densify=False)
+    mem.add_route([[2.3, 0.0], [2.3, 2.0]], 0.2, 0.3, 0.0, travel_time_s=[np.nan, 7.0])
+    mem.add_route([[5.0, 0.0], [6.0, 0.0]], 0.2, 0.3, 0.0)
+    g = mem.graph()
+    seg = {(e.u, e.v): e for e in g.edges}
+    assert seg[(0, 1)].travel_time_s == pytest.approx(2.0 / 0.5) and not seg[(0, 1)].learned
+    assert seg[(2, 3)].travel_time_s == 7.0 and seg[(2, 3)].learned
+    assert seg[(1, 2)].route_id == JOIN and seg[(2, 1)].route_id == JOIN
+    assert seg[(1, 2)].travel_time_s == pytest.approx(0.3 / 0.5)  # over the largest v
+    assert not any(4 in (e.u, e.v) and e.route_id == JOIN for e in g.edges)
+
+
+def test_to_dict_and_pickle_round_trip(drive_fn):
+    mem = straight()
+    drive_fn(mem, DETOUR, 0.25, 100.0)
+    mem.block((int(mem.routes[0].ids[2]), int(mem.routes[0].ids[3])))
+    for copy in (RouteMemory.from_dict(mem.to_dict()), pickle.loads(pickle.dumps(mem))):
+        assert copy.params == mem.params and copy.blocked == mem.blocked
+        assert copy.graph().edges == mem.graph().edges
+        for rid, r in mem.routes.items():
+            np.testing.assert_array_equal(copy.routes[rid].wp, r.wp)
+            np.testing.assert_array_equal(copy.routes[rid].ids, r.ids)
+    d = mem.to_dict()
+    assert set(d["routes"][0]["waypoints"][0]) == {
+        "x_m",
+        "y_m",
+        "v_max_mps",
+        "half_width_m",
+        "last_update_s",
+        "travel_time_s",
+    }
