@@ -15,7 +15,7 @@ ratios against references measured in the same run:
 from __future__ import annotations
 
 import argparse
-import math
+import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -29,23 +29,15 @@ from dynmap_sim.agent.planning.clearance_grid import build_clearance_grid
 from dynmap_sim.agent.planning.costmap import Costmap, CostmapParams
 from dynmap_sim.agent.planning.grid_astar import GridAStar, plan_around
 from dynmap_sim.agent.planning.grid_dijkstra import GridDijkstra
-from dynmap_sim.types import LaserSpec
 
 # the synthetic geometry the agent tests use (one exact ray caster)
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_mcl import URG as URG_04LX  # noqa: E402
 from synthetic_scans import box, raycast  # noqa: E402
 
-URG = LaserSpec(
-    name="urg-04lx",
-    n_beams=683,
-    angle_min_rad=-2.0862,
-    angle_increment_rad=2 * math.pi / 1024,
-    range_min_m=0.02,
-    range_max_m=5.6,
-    scan_period_s=0.1,
-    time_increment_s=0.0,
-    mount_pose=(0.1, 0.0, 0.0),
-)
+#: the URG-04LX of the MCL benchmark, mounted 10 cm ahead of the robot's centre
+URG = dataclasses.replace(URG_04LX, mount_pose=(0.1, 0.0, 0.0))
 MIN_C, PREF_C = 0.25, 0.32  # robot radius 0.2 m + 5 cm; tour's preferred 0.2 + 0.12
 
 

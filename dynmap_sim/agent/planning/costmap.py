@@ -93,6 +93,12 @@ class CostmapParams:
     default (nav2 planners' ``allow_unknown``): a first-run map is unknown ahead of the robot,
     and the obstacle layer marks what is really there once it is in range."""
 
+    no_map_half_size_m: float = 10.0
+    """Half the side [m] of the square around the initial pose that :meth:`Costmap.for_prior`
+    covers when the prior has neither bounds nor walls (a first run without a map): 20 m x
+    20 m holds a flat or a lab floor (the apartment is 8 m x 10 m); 441 x 441 cells, 0.2 MB a
+    layer."""
+
     def __post_init__(self) -> None:
         if self.resolution_m <= 0:
             raise ValueError(f"resolution_m must be > 0, got {self.resolution_m}")
@@ -162,8 +168,8 @@ class Costmap:
     @classmethod
     def for_prior(cls, prior: Prior, params: CostmapParams | None = None) -> Costmap:
         """A costmap over ``prior.bounds`` (else the walls' extent) with the walls as static
-        layer. A prior with neither gets 10 m around its initial pose (a first run without a
-        map); :class:`ValueError` when it has no initial pose either."""
+        layer. A prior with neither gets ``no_map_half_size_m`` around its initial pose (a first
+        run without a map); :class:`ValueError` when it has no initial pose either."""
         walls = None if prior.walls is None else np.asarray(prior.walls, float).reshape(-1, 4)
         if prior.bounds is not None:
             bounds = tuple(float(b) for b in prior.bounds)  # type: ignore[assignment]
@@ -172,7 +178,8 @@ class Costmap:
             bounds = (*pts.min(axis=0).tolist(), *pts.max(axis=0).tolist())
         elif prior.initial_pose is not None:
             x, y = np.asarray(prior.initial_pose, float)[:2]
-            bounds = (x - 10.0, y - 10.0, x + 10.0, y + 10.0)
+            r = (params or CostmapParams()).no_map_half_size_m
+            bounds = (x - r, y - r, x + r, y + r)
         else:
             raise ValueError("a costmap needs the prior's bounds, walls or initial pose")
         cmap = cls(params, bounds)
