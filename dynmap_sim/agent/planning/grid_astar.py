@@ -261,7 +261,8 @@ def plan_around(
     for k in first_free[first_free > blocked[0]]:
         leg = planner.plan(start, ahead[k], grid)
         if leg is not None:
-            return np.concatenate([lead, leg, _vertices_after(path_xy, s[k0 + k]), pts[-1:]])
+            tail = [_vertices_after(path_xy, s[k0 + k]), pts[-1:]] if k < len(ahead) - 1 else []
+            return np.concatenate([lead, leg, *tail])
     return None
 
 

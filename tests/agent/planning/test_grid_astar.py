@@ -175,3 +175,12 @@ def test_plan_around_without_a_block_and_with_a_blocked_end(kernel) -> None:
         resolution_m=RES,
     )
     assert plan_around(path, np.array([2.0, 1.5]), closed, planner) is None
+
+
+def test_plan_around_a_block_just_before_the_goal(kernel) -> None:
+    path, grid = corridor()
+    planner = GridAStar(MIN_C, PREF_C)
+    short = np.array([[0.5, 1.5], [5.0, 1.5], [5.67, 1.5]])  # the first free point is its end
+    out = plan_around(short, np.array([2.0, 1.5]), grid, planner)
+    assert out is not None and np.allclose(out[-1], short[-1])
+    assert np.all(np.hypot(*np.diff(out, axis=0).T) > 0)  # no repeated vertex
