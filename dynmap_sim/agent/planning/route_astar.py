@@ -41,14 +41,17 @@ START = -1
 class PlannedPath:
     """A planned path P (eq. 18): ``xy (m, 2)`` [m] base trajectory, ``half_width_m (m,)``
     corridor half-width of the edge ending at each point, ``v_max_mps (m,)`` the speed limit
-    approaching it, ``node_ids`` the graph nodes (:data:`START` for a projected start point),
-    ``travel_time_s`` the summed cost [s]."""
+    approaching it, ``node_ids`` the graph nodes (:data:`START` for a projected start point;
+    a join of coincident waypoints shows only its far end), ``travel_time_s`` the summed cost
+    [s], ``edges`` every edge taken as ``(from_id, to_id)`` (joins included; what to
+    :meth:`~dynmap_sim.agent.navigation.RouteMemory.block` when one is seen blocked)."""
 
     node_ids: tuple[int, ...]
     xy: FloatArray
     half_width_m: FloatArray
     v_max_mps: FloatArray
     travel_time_s: float
+    edges: tuple[tuple[int, int], ...] = ()
 
 
 def heuristic_speed_mps(graph: RouteGraph, v_max_mps: float | None = None) -> float:
@@ -163,4 +166,5 @@ def plan_route(
         hw.append(e.half_width_m)
         v.append(float(graph.v_max_mps[graph.index[e.v]]))
         ids.append(e.v)
-    return PlannedPath(tuple(ids), np.array(xy), np.array(hw), np.array(v), float(cost))
+    taken = tuple((e.u, e.v) for e in edges if e.u != START)
+    return PlannedPath(tuple(ids), np.array(xy), np.array(hw), np.array(v), float(cost), taken)

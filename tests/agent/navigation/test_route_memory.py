@@ -204,11 +204,5 @@ def test_to_dict_and_pickle_round_trip(drive_fn):
             np.testing.assert_array_equal(copy.routes[rid].wp, r.wp)
             np.testing.assert_array_equal(copy.routes[rid].ids, r.ids)
     d = mem.to_dict()
-    assert set(d["routes"][0]["waypoints"][0]) == {
-        "x_m",
-        "y_m",
-        "v_max_mps",
-        "half_width_m",
-        "last_update_s",
-        "travel_time_s",
-    }
+    names = "x_m y_m v_max_mps half_width_m last_update_s travel_time_s"
+    assert set(d["routes"][0]["waypoints"][0]) == set(names.split())

@@ -1,0 +1,133 @@
+"""A* on the route graph by travel time (H&W §6.2, eq. 18), blocked edges (§6.3)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra
+
+from dynmap_sim.agent.navigation import Edge, RouteGraph, RouteMemory
+from dynmap_sim.agent.planning.route_astar import START, astar, heuristic_speed_mps, plan_route
+
+#: Two ways from (0, 0) to (4, 0): straight (4 m) and over (2, 1.5) (5 m).
+SHORT = [(0.0, 0.0), (2.0, 0.0), (4.0, 0.0)]
+LONG = [(0.0, 0.0), (2.0, 1.5), (4.0, 0.0)]
+
+
+def two_ways(short_s=None, long_s=None) -> RouteMemory:
+    """The short way is the prior; the long one a learned route joined at both ends.
+    ``*_s``: learned travel time per segment (None: never driven)."""
+    mem = RouteMemory.from_prior(SHORT, 0.2, 0.35, 0.0, densify=False)
+    tt = None if long_s is None else [np.nan, long_s, long_s]
+    mem.add_route(LONG, 0.2, 0.35, 0.0, travel_time_s=tt)
+    if short_s is not None:
+        mem.routes[0].wp[1:, 5] = short_s
+    return mem
+
+
+def test_unlearned_edges_cost_length_over_v_and_the_shorter_way_wins():
+    path = plan_route(two_ways().graph(), [0.0, 0.0], [4.0, 0.0])
+    assert path.xy[:, 1].max() == 0.0
+    assert path.travel_time_s == pytest.approx(4.0 / 0.2)
+    np.testing.assert_allclose(path.half_width_m, 0.35)
+    np.testing.assert_allclose(path.v_max_mps, 0.2)
+
+
+def test_the_faster_way_by_learned_travel_time_wins_not_the_shorter():
+    # people on the short way: 30 s per segment there; the long way was driven in 10 s each
+    mem = two_ways(short_s=30.0, long_s=10.0)
+    path = plan_route(mem.graph(), [0.0, 0.0], [4.0, 0.0])
+    np.testing.assert_allclose(path.xy, LONG)
+    assert path.travel_time_s == pytest.approx(20.0)
+    # the edges taken, joins of coincident waypoints included (to the long way at the
+    # prior's start, back to the prior's end, the goal node)
+    a, b, c = (int(i) for i in mem.routes[1].ids)
+    assert path.edges == ((0, a), (a, b), (b, c), (c, int(mem.routes[0].ids[-1])))
+    assert path.node_ids[0] != START  # the start coincides with a node
+
+
+def test_a_blocked_edge_is_avoided_and_unblocking_restores_it():
+    mem = two_ways(short_s=5.0, long_s=10.0)
+    ids = mem.routes[0].ids
+    edge = (int(ids[1]), int(ids[2]))
+    assert plan_route(mem.graph(), [0, 0], [4, 0]).xy[:, 1].max() == 0.0
+    mem.block(edge)
+    path = plan_route(mem.graph(), [0, 0], [4, 0])
+    assert path.xy[:, 1].max() == pytest.approx(1.5)
+    mem.unblock(edge)
+    assert plan_route(mem.graph(), [0, 0], [4, 0]).xy[:, 1].max() == 0.0
+    # both ways blocked: unreachable
+    mem.block(edge)
+    long_ids = mem.routes[1].ids
+    mem.block((int(long_ids[0]), int(long_ids[1])))
+    assert plan_route(mem.graph(), [0, 0], [4, 0]) is None
+
+
+def test_the_start_is_projected_onto_the_nearest_segment():
+    corner = [(0.0, 0.0), (4.0, 0.0), (4.0, 4.0)]
+    mem = RouteMemory.from_prior(corner, 0.2, 0.35, 0.0, densify=False)
+    path = plan_route(mem.graph(), [1.0, 0.2], [4.0, 4.0])
+    assert path.node_ids[0] == START
+    np.testing.assert_allclose(path.xy, [(1.0, 0.0), (4.0, 0.0), (4.0, 4.0)])
+    assert path.travel_time_s == pytest.approx((3.0 + 4.0) / 0.2)
+
+
+def test_empty_and_unreachable():
+    assert plan_route(RouteMemory().graph(), [0, 0], [1, 1]) is None
+    mem = RouteMemory.from_prior(SHORT, 0.2, 0.35, 0.0, densify=False)
+    assert plan_route(mem.graph(), [4.0, 0.0], [0.0, 0.0]) is None  # routes are directed
+
+
+@st.composite
+def graphs(draw):
+    """Random directed graphs: nodes in a 10 m square, edges with travel times unrelated to
+    their lengths (learned times can be anything), some blocked."""
+    n = draw(st.integers(2, 12))
+    coord = st.floats(0.0, 10.0, allow_nan=False)
+    xy = np.array([[draw(coord), draw(coord)] for _ in range(n)])
+    pairs = draw(
+        st.lists(
+            st.tuples(st.integers(0, n - 1), st.integers(0, n - 1)).filter(lambda p: p[0] != p[1]),
+            max_size=4 * n,
+            unique=True,
+        )
+    )
+    edges = []
+    for u, v in pairs:
+        cost = draw(st.one_of(st.floats(0.01, 100.0), st.just(math.inf)))
+        length = float(np.hypot(*(xy[u] - xy[v])))
+        edges.append(Edge(u, v, length, cost, True, 0.35, 0))
+    v_max = draw(st.floats(0.05, 1.0))
+    g = RouteGraph(np.arange(n), xy, np.full(n, v_max), np.full(n, 0.35), edges)
+    return g, draw(st.integers(0, n - 1)), draw(st.integers(0, n - 1))
+
+
+@settings(max_examples=200, deadline=None)
+@given(graphs())
+def test_astar_cost_equals_dijkstra_and_h_never_overestimates(case):
+    g, s, t = case
+    n = len(g.node_ids)
+    finite = [e for e in g.edges if math.isfinite(e.travel_time_s)]
+    m = csr_matrix(
+        ([e.travel_time_s for e in finite], ([e.u for e in finite], [e.v for e in finite])),
+        shape=(n, n),
+    )
+    dist = dijkstra(m, directed=True)
+    found = astar(g, s, t)
+    if math.isinf(dist[s, t]):
+        assert found is None
+    else:
+        cost, nodes, edges = found
+        assert cost == pytest.approx(dist[s, t], rel=1e-9, abs=1e-9)
+        assert nodes[0] == s and nodes[-1] == t
+        assert sum(e.travel_time_s for e in edges) == pytest.approx(cost)
+    # admissible: h(n) <= true cost to the goal, for every node that reaches it
+    v_h = heuristic_speed_mps(g)
+    for k in range(n):
+        if math.isfinite(dist[k, t]):
+            assert np.hypot(*(g.xy[k] - g.xy[t])) / v_h <= dist[k, t] + 1e-9
