@@ -28,19 +28,146 @@ def _days(text: str) -> tuple[int, int]:
     return first, last
 
 
+#: Seeds are stored as SQLite integers: 0 .. 2**63 - 1.
+MAX_SEED = 2**63 - 1
+
+
+def _seed(text: str) -> int:
+    """A seed: an integer in 0 .. 2**63 - 1."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"seed must be an integer, not {text!r}") from None
+    if not 0 <= v <= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"seed must be in 0..2**63-1, not {v}")
+    return v
+
+
+def _positive(text: str) -> int:
+    """An integer >= 1 (a day, a run, a number of workers)."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, not {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, not {v}")
+    return v
+
+
+def _localizer_arg(text: str) -> str:
+    """``--localizer NAME[,key=value,...]``: the name must not be empty."""
+    if not text.split(",")[0].strip():
+        raise argparse.ArgumentTypeError(f"expected NAME[,key=value,...], not {text!r}")
+    return text
+
+
+def _output_file(path: str) -> Path:
+    """An output file named by ``-o``: its folder must exist (a typo does not create folders)
+    and it must not be a folder itself."""
+    from dynmap_sim.errors import InputError
+
+    p = Path(path)
+    if p.is_dir():
+        raise InputError(f"-o {path}: is a folder; give a file name, e.g. {p / 'out'}")
+    if not p.parent.is_dir():
+        raise InputError(f"-o {path}: folder {p.parent} does not exist; create it first")
+    return p
+
+
+def _output_dir(path: str | Path) -> Path:
+    """An output folder (created with its parents); InputError when it cannot be."""
+    from dynmap_sim.errors import InputError
+
+    p = Path(path)
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"cannot create folder {path}: {exc.strerror or exc}") from None
+    return p
+
+
+def _refuse_results(out: str | Path | None, force: bool, what: str) -> None:
+    """Refuse to write into a folder that holds results (``out/results.db``, or
+    ``out/seed-*/results.db``) unless ``--force``."""
+    from dynmap_sim.errors import InputError
+    from dynmap_sim.experiments.results import DB_NAME
+
+    if out is None or force:
+        return
+    d = Path(out)
+    held = [d / DB_NAME, *sorted(d.glob(f"seed-*/{DB_NAME}"))]
+    held = [h for h in held if h.exists()]
+    if held:
+        raise InputError(
+            f"{held[0]} already holds results; {what} would replace them: pass --force to "
+            "replace them or choose another --out"
+        )
+
+
+def _wrote(path: Path, existed: bool) -> str:
+    return f"wrote {path}" + (" (replaced the earlier file)" if existed else "")
+
+
+def _shipped_worlds() -> list[str]:
+    from dynmap_sim.registration import WORLDS_DIR
+
+    return sorted(p.stem for p in WORLDS_DIR.glob("*.toml"))
+
+
+def _load_world_arg(ref: str):  # -> WorldSpec
+    """A world by file or shipped name; an unknown name lists the shipped worlds."""
+    from dynmap_sim.world import WorldFileError, load_world
+
+    try:
+        return load_world(ref)
+    except WorldFileError as exc:
+        p = Path(ref)
+        if exc.errors == [("", "file not found")] and p.suffix == "" and len(p.parts) == 1:
+            raise WorldFileError(
+                ref,
+                [("", f"no such file or shipped world; shipped: {', '.join(_shipped_worlds())}")],
+            ) from None
+        raise
+
+
+def _refuse_world_file(path: str) -> None:
+    """A world file given where a scenario is expected: say so (instead of listing every
+    scenario field it lacks)."""
+    from dynmap_sim.errors import FileError, read_toml
+    from dynmap_sim.experiments.scenario import ScenarioFileError, is_scenario_file
+
+    data = read_toml(path, ScenarioFileError)  # a bad file is reported here, read safely
+    if is_scenario_file(path):
+        return
+    if {"calendar", "walls", "bounds"} & set(data):
+        raise FileError(
+            path,
+            [
+                (
+                    "",
+                    "this is a world file, not a scenario; a scenario names its world "
+                    '(world = "path/to/world.toml") and the localizers to run, '
+                    "e.g. worlds/scenarios/ci-apartment.toml",
+                )
+            ],
+        )
+
+
 def _cmd_validate(args: argparse.Namespace) -> int:
     from dynmap_sim.analysis.scenarios import load_scenario
+    from dynmap_sim.errors import FileError, read_toml
     from dynmap_sim.experiments.scenario import ScenarioFileError, is_scenario_file
     from dynmap_sim.world import WorldFileError, load_world
 
     status = 0
     for path in args.files:
         try:
+            read_toml(path, FileError)  # refuses devices, FIFOs and huge files at once
             if is_scenario_file(path):
                 load_scenario(path)
             else:
                 load_world(path)
-        except (WorldFileError, ScenarioFileError) as exc:
+        except (WorldFileError, ScenarioFileError, FileError) as exc:
             print(exc, file=sys.stderr)
             status = 1
         else:
@@ -55,22 +182,47 @@ def _cmd_schema(args: argparse.Namespace) -> int:
     schema = world_json_schema() if args.kind == "world" else scenario_json_schema()
     text = json.dumps(schema, indent=2)
     if args.output:
-        Path(args.output).write_text(text + "\n")
+        out = _output_file(args.output)
+        existed = out.exists()
+        out.write_text(text + "\n", encoding="utf-8")
+        print(_wrote(out, existed))
     else:
         print(text)
     return 0
 
 
 def _cmd_render_world(args: argparse.Namespace) -> int:
-    from dynmap_sim.world import load_world
-    from dynmap_sim.world.render import render_sheet, render_snapshot
+    from dynmap_sim.errors import InputError
+    from dynmap_sim.world import Calendar
+    from dynmap_sim.world.render import MAX_SHEET_SCAN, image_path, render_sheet, render_snapshot
 
-    spec = load_world(args.world)
+    out = _output_file(args.output)
+    try:
+        out = image_path(out)
+    except ValueError as exc:
+        raise InputError(f"-o {args.output}: {exc}") from None
+    spec = _load_world_arg(args.world)
+    cal = Calendar(spec.calendar)
     if args.sheet:
-        render_sheet(spec, seed=args.seed, out_path=args.output)
+        if args.day is not None or args.run is not None:
+            raise InputError("--sheet shows runs over the whole calendar: drop --day and --run")
     else:
-        render_snapshot(spec, seed=args.seed, day=args.day, run=args.run, out_path=args.output)
-    print(f"wrote {args.output}")
+        try:
+            cal.slot_index(args.day or 1, args.run or 1)
+        except ValueError as exc:
+            raise InputError(f"{args.world}: {exc}") from None
+    existed = out.exists()
+    if args.sheet:
+        out = render_sheet(spec, seed=args.seed, out_path=out)
+        if cal.n_slots > MAX_SHEET_SCAN:
+            print(
+                f"note: the calendar has {cal.n_slots} runs; the sheet shows runs picked from "
+                f"{MAX_SHEET_SCAN} evenly spaced ones"
+            )
+    else:
+        day, run = args.day or 1, args.run or 1
+        out = render_snapshot(spec, seed=args.seed, day=day, run=run, out_path=out)
+    print(_wrote(out, existed))
     return 0
 
 
@@ -78,6 +230,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from dynmap_sim.analysis.scenarios import load_scenario
     from dynmap_sim.experiments.runner import run_experiment
 
+    _refuse_world_file(args.scenario)
     scenario = load_scenario(args.scenario)
     out = run_experiment(
         scenario,
@@ -108,7 +261,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
 def _cmd_export(args: argparse.Namespace) -> int:
     from dynmap_sim.analysis.export import export_tum
 
-    for path in export_tum(Path(args.dir), Path(args.tum)):
+    for path in export_tum(Path(args.dir), _output_dir(args.tum)):
         print(f"wrote {path}")
     return 0
 
@@ -116,6 +269,8 @@ def _cmd_export(args: argparse.Namespace) -> int:
 def _cmd_check(args: argparse.Namespace) -> int:
     from dynmap_sim.analysis.check import check_scenario
 
+    _refuse_world_file(args.scenario)
+    _refuse_results(args.out, args.force, "check")
     result = check_scenario(args.scenario, out_dir=args.out, progress=not args.quiet)
     print(result.table())
     return 0 if result.passed else 1
@@ -124,6 +279,7 @@ def _cmd_check(args: argparse.Namespace) -> int:
 def _cmd_replay(args: argparse.Namespace) -> int:
     from dynmap_sim.experiments.replay import replay_log
 
+    _refuse_results(args.out, args.force, "replay")
     out = replay_log(
         Path(args.log),
         localizers=args.localizer,
@@ -137,76 +293,120 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 def _cmd_toy(args: argparse.Namespace) -> int:
     from dynmap_sim.studies.biber_duckett.toy import run_toy
 
-    for path in run_toy(Path(args.out), seed=args.seed):
-        print(f"wrote {path}")
+    out = _output_dir(args.out)
+    existed = {p.name for p in out.iterdir()}
+    for path in run_toy(out, seed=args.seed):
+        print(_wrote(path, path.name in existed))
     return 0
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``dynmap-sim``."""
+    from dynmap_sim import __version__
+
     p = argparse.ArgumentParser(
         prog="dynmap-sim", description="Long-term SLAM testbed in changing indoor worlds."
     )
+    p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
+    seed_help = "world and noise seed, an integer >= 0"
 
     s = sub.add_parser("validate", help="validate world or scenario files")
-    s.add_argument("files", nargs="+")
+    s.add_argument("files", nargs="+", metavar="FILE", help="world or scenario TOML files")
     s.set_defaults(func=_cmd_validate)
 
     s = sub.add_parser("schema", help="print the JSON schema of world or scenario files")
-    s.add_argument("kind", choices=["world", "scenario"], nargs="?", default="world")
-    s.add_argument("-o", "--output")
+    s.add_argument(
+        "kind", choices=["world", "scenario"], nargs="?", default="world", help="default: world"
+    )
+    s.add_argument(
+        "-o", "--output", metavar="FILE", help="write to FILE (its folder must exist), not stdout"
+    )
     s.set_defaults(func=_cmd_schema)
 
     s = sub.add_parser("render-world", help="draw a world at a day and run (or a sheet)")
-    s.add_argument("world")
-    s.add_argument("--day", type=int, default=1)
-    s.add_argument("--run", type=int, default=1)
-    s.add_argument("--seed", type=int, default=0)
-    s.add_argument("--sheet", action="store_true", help="a grid of snapshots over the calendar")
-    s.add_argument("-o", "--output", required=True)
+    s.add_argument("world", help="a world file, or a shipped world's name (apartment, lab)")
+    s.add_argument("--day", type=_positive, help="working day of the calendar (default: 1)")
+    s.add_argument("--run", type=_positive, help="run of that day (default: 1)")
+    s.add_argument("--seed", type=_seed, default=0, help=seed_help + " (default: 0)")
+    s.add_argument(
+        "--sheet",
+        action="store_true",
+        help="a grid of snapshots over the calendar (a long calendar is sampled evenly)",
+    )
+    s.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        metavar="FILE",
+        help="image file: .png, .pdf, .svg, ... (.png is added to a name without a suffix); "
+        "its folder must exist",
+    )
     s.set_defaults(func=_cmd_render_world)
 
     s = sub.add_parser("run", help="run a multi-day experiment from a scenario file")
-    s.add_argument("scenario")
+    s.add_argument("scenario", help="scenario TOML file")
     s.add_argument("--days", type=_days, help="day range, e.g. 1-7 (default: the scenario's)")
-    s.add_argument("--seed", type=int)
+    s.add_argument("--seed", type=_seed, help=seed_help + " (default: the scenario's first)")
     s.add_argument("--out", help="results folder (default: results/<scenario name>)")
     s.add_argument("--resume", action="store_true", help="continue from the last checkpoint")
     s.add_argument("--report", action="store_true", help="write the report when done")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     s.add_argument(
         "--workers",
-        type=int,
+        type=_positive,
         help="localizer worker processes (1: sequential in-process; default: up to 2)",
     )
     s.set_defaults(func=_cmd_run)
 
     s = sub.add_parser("report", help="figures, summary.md and per_day.csv of a results folder")
-    s.add_argument("dir")
+    s.add_argument("dir", help="a results folder (written by run, check or replay)")
     s.set_defaults(func=_cmd_report)
 
     s = sub.add_parser("export", help="export trajectories of a results folder")
-    s.add_argument("dir")
+    s.add_argument("dir", help="a results folder (written by run, check or replay)")
     s.add_argument("--tum", required=True, help="output folder for TUM trajectory files")
     s.set_defaults(func=_cmd_export)
 
     s = sub.add_parser("check", help="run a scenario and check its expectations (exit 1 on fail)")
-    s.add_argument("scenario")
-    s.add_argument("--out")
-    s.add_argument("-q", "--quiet", action="store_true")
+    s.add_argument("scenario", help="scenario TOML file with [expectations]")
+    s.add_argument(
+        "--out",
+        help="keep the results in this folder (seed-<n> subfolders for several seeds; "
+        "default: a temporary folder, removed afterwards)",
+    )
+    s.add_argument(
+        "--force", action="store_true", help="replace earlier results in --out (else refused)"
+    )
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_cmd_check)
 
     s = sub.add_parser("replay", help="run mapping and localizers on a CARMEN log")
-    s.add_argument("log")
-    s.add_argument("--localizer", action="append", required=True)
-    s.add_argument("--map-from-log-poses", action="store_true")
-    s.add_argument("--out", required=True)
+    s.add_argument("log", help="CARMEN log file")
+    s.add_argument(
+        "--localizer",
+        action="append",
+        required=True,
+        type=_localizer_arg,
+        metavar="NAME",
+        help="a localizer to run, by registry name or package.module:Class, with optional "
+        "parameters (static-mcl,config=nav2-default); repeat for several",
+    )
+    s.add_argument(
+        "--map-from-log-poses",
+        action="store_true",
+        help="build the map from the poses in the log's laser lines and give it to every "
+        "localizer that accepts a map (e.g. static-mcl); the others still map on day 1",
+    )
+    s.add_argument("--out", required=True, help="results folder")
+    s.add_argument(
+        "--force", action="store_true", help="replace earlier results in --out (else refused)"
+    )
     s.set_defaults(func=_cmd_replay)
 
     s = sub.add_parser("toy", help="Biber & Duckett §3.5 toy example (Fig. 2)")
-    s.add_argument("--out", required=True)
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--out", required=True, help="output folder (created) for toy.csv, toy.png")
+    s.add_argument("--seed", type=_seed, default=0, help="noise seed, an integer >= 0 (default: 0)")
     s.set_defaults(func=_cmd_toy)
     return p
 
@@ -237,6 +437,10 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except OSError as exc:  # the file system said no (permissions, disk full, ...)
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -24,6 +24,59 @@ FloatArray = NDArray[np.float64]
 #: Tags that make each noise stream of a run independent (SeedSequence entropy words).
 _LIDAR, _ODOM, _SLIP = 0x1DA2, 0x0D0, 0x511
 
+#: The keys ``reset(options=...)`` knows.
+RESET_OPTIONS = ("day", "run")
+#: Largest ``render_size_px`` (a frame of 8192 x 8192 RGB is 200 MB).
+MAX_RENDER_SIZE_PX = 8192
+
+
+def _real(v: Any) -> bool:
+    """True for a finite real number (not a bool)."""
+    return (
+        isinstance(v, int | float | np.integer | np.floating)
+        and not isinstance(v, bool | np.bool_)
+        and math.isfinite(v)
+    )
+
+
+def _positive_int(v: Any) -> bool:
+    return isinstance(v, int | np.integer) and not isinstance(v, bool) and v >= 1
+
+
+def _check_args(
+    render_mode: Any, max_episode_steps: Any, collision_penalty: Any, goal_tolerance_m: Any
+) -> None:
+    """Check :class:`DynMapEnv`'s scalar arguments; ValueError naming the argument and value."""
+    modes = DynMapEnv.metadata["render_modes"]
+    if render_mode is not None and render_mode not in modes:
+        raise ValueError(
+            f"render_mode {render_mode!r} is not supported; render modes: None, "
+            + ", ".join(map(repr, modes))
+            + " (env.render() returns an RGB image to show or save)"
+        )
+    if max_episode_steps is not None and not _positive_int(max_episode_steps):
+        raise ValueError(f"max_episode_steps must be an integer >= 1, got {max_episode_steps!r}")
+    if not (_real(collision_penalty) and collision_penalty >= 0):
+        raise ValueError(
+            f"collision_penalty must be a finite number >= 0, got {collision_penalty!r}"
+        )
+    if not (_real(goal_tolerance_m) and goal_tolerance_m > 0):
+        raise ValueError(f"goal_tolerance_m must be a finite number > 0, got {goal_tolerance_m!r}")
+
+
+def _check_args_more(people: Any, sensor_options: Any, dt_s: Any, render_size_px: Any) -> None:
+    """Check the rest of :class:`DynMapEnv`'s arguments."""
+    if not isinstance(people, bool | np.bool_):
+        raise ValueError(f"people must be True or False, got {people!r}")
+    if sensor_options is not None and not isinstance(sensor_options, dict):
+        raise ValueError(f"sensor_options must be a dict, got {sensor_options!r}")
+    if dt_s is not None and not (_real(dt_s) and dt_s > 0):
+        raise ValueError(f"dt_s must be a finite number > 0 (seconds), got {dt_s!r}")
+    if not (_positive_int(render_size_px) and render_size_px <= MAX_RENDER_SIZE_PX):
+        raise ValueError(
+            f"render_size_px must be an integer in 1..{MAX_RENDER_SIZE_PX}, got {render_size_px!r}"
+        )
+
 
 class DynMapEnv(gymnasium.Env):
     """A mobile robot driving its route through an indoor world that changes over weeks.
@@ -90,6 +143,8 @@ class DynMapEnv(gymnasium.Env):
     ``lidar_noise``: a ``LidarNoise``. ``people``: False removes all people. ``robot``:
     ``RobotParams`` (limits, wheel geometry with UMBmark errors ``E_d``/``E_b``, slip);
     ``encoder``: ``EncoderNoise``. ``dt_s``: step period (default the scan period).
+    ``render_mode``: None or ``"rgb_array"`` (``"human"`` is not supported: show the frames
+    yourself). A bad argument raises ``ValueError`` naming it and its value.
 
     ## Seeding and episodes
 
@@ -97,13 +152,15 @@ class DynMapEnv(gymnasium.Env):
     seed ``s``. A reset with a ``seed`` and no day/run starts the first run; without a seed
     it starts the next run of the calendar (wrapping to the first). Lidar, odometry and slip
     noise of a run come from ``SeedSequence([seed, day, run, tag])``, so a run is the same
-    whatever ran before it.
+    whatever ran before it. Other option keys, a non-dict ``options``, a day or run outside the
+    calendar and a negative seed raise ``ValueError`` before anything changes, so a ``reset``
+    that raised leaves the env as it was.
 
     ## Worlds
 
     ``dynmap_sim/Apartment-v0`` (Hentschel & Wagner 2011 §7, 28 days, 1 run a day),
     ``dynmap_sim/Lab-v0`` (Biber & Duckett 2009 §5, 23 working days, 3 runs a day) and
-    ``dynmap_sim/World-v0`` (``world=PATH``).
+    ``dynmap_sim/World-v0`` (``world=PATH``, required).
 
     ## Version history
 
@@ -132,8 +189,8 @@ class DynMapEnv(gymnasium.Env):
         goal_tolerance_m: float = 0.3,
         render_size_px: int = 640,
     ) -> None:
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        _check_args(render_mode, max_episode_steps, collision_penalty, goal_tolerance_m)
+        _check_args_more(people, sensor_options, dt_s, render_size_px)
         spec = world if isinstance(world, WorldSpec) else load_world(resolve_world_path(world))
         if not people:
             spec = spec.model_copy(update={"people": ()})
@@ -143,9 +200,13 @@ class DynMapEnv(gymnasium.Env):
         self.laser_spec: LaserSpec = self.lidar.spec
         self.robot_params = robot if robot is not None else RobotParams()
         self.encoder = encoder if encoder is not None else EncoderNoise()
-        self.dt_s = float(dt_s) if dt_s is not None else self.laser_spec.scan_period_s
-        if not (math.isfinite(self.dt_s) and self.dt_s > 0.0):
-            raise ValueError(f"dt_s must be > 0, got {dt_s!r}")
+        period = self.laser_spec.scan_period_s
+        if dt_s is None and not (_real(period) and period > 0.0):
+            raise ValueError(
+                f"the sensor's scan_period_s must be > 0 (it is the step period dt_s unless "
+                f"dt_s is given), got {period!r}"
+            )
+        self.dt_s = float(dt_s) if dt_s is not None else period
         self.collision_penalty = float(collision_penalty)
         self.route = RouteProgress(spec.robot.route, goal_tolerance_m=goal_tolerance_m)
         if max_episode_steps is None:
@@ -187,6 +248,9 @@ class DynMapEnv(gymnasium.Env):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        # every argument is checked before any state changes: a reset that raised leaves the
+        # env as it was
+        asked_slot = self._check_reset_args(seed, options)
         super().reset(seed=seed)
         if seed is None and not self._started:
             seed = int(self.np_random.integers(2**31))
@@ -195,14 +259,8 @@ class DynMapEnv(gymnasium.Env):
             self.world = World(self.spec_world, seed=self.world_seed)
             self.robot.attach(self.world.space)
         cal = self.world.calendar
-        options = options or {}
-        if "day" in options or "run" in options:
-            day = self._option_int(options, "day", 1)
-            run = self._option_int(options, "run", 1)
-            try:
-                self._slot = cal.slot_index(day, run)
-            except ValueError as exc:
-                raise ValueError(f"reset options: {exc}") from None
+        if asked_slot is not None:
+            self._slot = asked_slot
         elif seed is not None or not self._started:
             self._slot = 0
         else:
@@ -222,6 +280,32 @@ class DynMapEnv(gymnasium.Env):
         self.route.update(float(pose[0]), float(pose[1]))
         return self._observe(pose, collision=False)
 
+    def _check_reset_args(self, seed: Any, options: Any) -> int | None:
+        """Check ``reset``'s arguments; the slot index that ``options`` ask for, or None."""
+        if seed is not None and (isinstance(seed, bool) or not isinstance(seed, int) or seed < 0):
+            raise ValueError(f"reset seed must be None or an integer >= 0, got {seed!r}")
+        if options is None:
+            return None
+        if not isinstance(options, dict):
+            raise ValueError(
+                f"reset options must be a dict with keys from {list(RESET_OPTIONS)}, "
+                f"got {options!r}"
+            )
+        unknown = [k for k in options if k not in RESET_OPTIONS]
+        if unknown:
+            raise ValueError(
+                f"reset options: unknown key(s) {', '.join(map(repr, unknown))}; "
+                f"known: {', '.join(map(repr, RESET_OPTIONS))}"
+            )
+        if not options:
+            return None
+        day = self._option_int(options, "day", 1)
+        run = self._option_int(options, "run", 1)
+        try:
+            return self.world.calendar.slot_index(day, run)
+        except ValueError as exc:
+            raise ValueError(f"reset options: {exc}") from None
+
     @staticmethod
     def _option_int(options: dict[str, Any], key: str, default: int) -> int:
         v = options.get(key, default)
@@ -232,6 +316,12 @@ class DynMapEnv(gymnasium.Env):
     def step(self, action: Any) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
         if not self._started:
             raise RuntimeError("call reset() before step()")
+        kind = np.asarray(action).dtype.kind
+        if kind not in "iuf":
+            raise ValueError(
+                "action must be 2 real numbers (v_mps, omega_radps), got "
+                f"{np.asarray(action).dtype} values {action!r}"
+            )
         a = np.asarray(action, dtype=np.float64)
         if a.shape != (2,):
             raise ValueError(f"action must have shape (2,) = (v_mps, omega_radps), got {a.shape}")

@@ -13,6 +13,7 @@ the file and field: :func:`sim_spec_errors` collects them all at once.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -93,16 +94,41 @@ def _robot_kwargs(spec: SimSpec) -> dict[str, Any]:
     return {"robot": robot, "encoder": encoder}
 
 
+def _finite_number(v: Any) -> bool:
+    """True for an int or float (not a bool) that is finite."""
+    return isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+
+
 def _sensor_kwargs(spec: SimSpec) -> dict[str, Any]:
     sensor = spec.sensor_preset or DEFAULT_SENSOR
     opts = dict(spec.sensor_overrides)
     noise = opts.pop("noise", None)
+    if noise is not None and not isinstance(noise, Mapping):
+        raise SimSpecError(
+            "sensor.overrides.noise",
+            f"must be a table of LidarNoise fields (e.g. {{ sigma_m = 0.02 }}), got {noise!r}",
+        )
     if "mount_pose" in opts:
-        opts["mount_pose"] = tuple(opts["mount_pose"])
+        pose = opts["mount_pose"]
+        if not (
+            isinstance(pose, list | tuple)
+            and len(pose) == 3
+            and all(_finite_number(v) for v in pose)
+        ):
+            raise SimSpecError(
+                "sensor.overrides.mount_pose",
+                f"must be 3 finite numbers [x_m, y_m, theta_rad], got {pose!r}",
+            )
+        opts["mount_pose"] = tuple(pose)
     try:
-        make_lidar(sensor, noise=noise, **opts)
+        period = make_lidar(sensor, noise=noise, **opts).spec.scan_period_s
     except (TypeError, ValueError) as exc:
         raise SimSpecError("sensor", str(exc)) from None
+    if not (_finite_number(period) and period > 0):
+        raise SimSpecError(
+            "sensor.overrides.scan_period_s",
+            f"must be > 0 (the scan period is the simulation step), got {period!r}",
+        )
     return {"sensor": sensor, "sensor_options": opts, "lidar_noise": noise}
 
 

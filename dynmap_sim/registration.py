@@ -1,10 +1,29 @@
-"""Gymnasium registration of the shipped worlds (entry points are strings: nothing heavy loads)."""
+"""Gymnasium registration of the shipped worlds (entry points are strings: nothing heavy loads).
+
+The entry points are the functions :func:`make_env` and :func:`make_world_env`, not the env
+class, for two reasons:
+
+* ``gymnasium.make(..., render_mode="human")`` wraps an env whose class declares
+  ``rgb_array`` in ``HumanRendering``, which needs pygame (not a dependency); through a
+  function the render mode reaches :class:`~dynmap_sim.env.DynMapEnv`, whose error names
+  the render modes it has.
+* ``dynmap_sim/World-v0`` needs ``world=PATH``; without it the env would silently be the lab.
+
+Gymnasium's passive env checker is off (``disable_env_checker=True``): in Gymnasium 1.4 it
+marks the first ``reset`` checked before calling it, so after a first ``reset`` that raised
+(``options={"day": 99}``) the first ``step`` fails inside the checker with ``TypeError:
+cannot unpack non-iterable NoneType``. The env passes the full ``check_env`` in the tests.
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import gymnasium
+
+if TYPE_CHECKING:
+    from dynmap_sim.env import DynMapEnv
 
 #: Folder of the worlds that ship with the package's source tree.
 WORLDS_DIR = Path(__file__).resolve().parent.parent / "worlds"
@@ -12,11 +31,35 @@ WORLDS_DIR = Path(__file__).resolve().parent.parent / "worlds"
 ENV_IDS = ("dynmap_sim/Apartment-v0", "dynmap_sim/Lab-v0", "dynmap_sim/World-v0")
 
 
+def make_env(**kwargs: Any) -> DynMapEnv:
+    """A :class:`~dynmap_sim.env.DynMapEnv` from the keyword arguments ``gymnasium.make``
+    passes (the entry point of the envs of the shipped worlds)."""
+    from dynmap_sim.env import DynMapEnv
+
+    return DynMapEnv(**kwargs)
+
+
+def make_world_env(world: Any = None, **kwargs: Any) -> DynMapEnv:
+    """The entry point of ``dynmap_sim/World-v0``: ``world`` (a world file or a
+    ``WorldSpec``) is required."""
+    if world is None:
+        raise ValueError(
+            f"{ENV_IDS[2]} needs world=PATH (a world TOML file) or a WorldSpec; the shipped "
+            f"worlds are {ENV_IDS[0]} and {ENV_IDS[1]}"
+        )
+    return make_env(world=world, **kwargs)
+
+
 def register_envs() -> None:
     """Register the envs once; calling again is a no-op."""
     if ENV_IDS[0] in gymnasium.registry:
         return
-    entry = "dynmap_sim.env:DynMapEnv"
-    gymnasium.register(id=ENV_IDS[0], entry_point=entry, kwargs={"world": "apartment"})
-    gymnasium.register(id=ENV_IDS[1], entry_point=entry, kwargs={"world": "lab"})
-    gymnasium.register(id=ENV_IDS[2], entry_point=entry)
+    entry = "dynmap_sim.registration:make_env"
+    common: dict[str, Any] = {"entry_point": entry, "disable_env_checker": True}
+    gymnasium.register(id=ENV_IDS[0], kwargs={"world": "apartment"}, **common)
+    gymnasium.register(id=ENV_IDS[1], kwargs={"world": "lab"}, **common)
+    gymnasium.register(
+        id=ENV_IDS[2],
+        entry_point="dynmap_sim.registration:make_world_env",
+        disable_env_checker=True,
+    )

@@ -94,12 +94,24 @@ class Registry(Generic[T]):
 
     def _load(self, ref: str) -> type[T]:
         mod_name, _, cls_name = ref.partition(":")
+        if not (
+            all(part.isidentifier() for part in mod_name.split(".")) and cls_name.isidentifier()
+        ):
+            raise ValueError(
+                f"cannot load {self.role} {ref!r}: give 'package.module:ClassName' (an absolute "
+                "dotted module path, one ':' and a class name)"
+            )
         try:
             mod = importlib.import_module(mod_name)
         except ImportError as exc:
             raise ValueError(
                 f"cannot load {self.role} {ref!r}: {exc}. The module must be importable: "
                 "next to the scenario file, installed, or in a folder on PYTHONPATH"
+            ) from exc
+        except Exception as exc:  # the module's own code failed (a SyntaxError, ...)
+            raise ValueError(
+                f"cannot load {self.role} {ref!r}: importing {mod_name} failed: "
+                f"{type(exc).__name__}: {exc}"
             ) from exc
         cls = getattr(mod, cls_name, None)
         if cls is None:

@@ -168,3 +168,157 @@ def test_a_failing_localizer_is_named_with_its_traceback_and_exit_1(capsys, tmp_
     assert "error: localizer 'mine' failed on day 1 run 1 at scan 0" in err
     assert "ZeroDivisionError: my localizer divides by zero" in err
     assert 'boom_loc.py", line 4, in update' in err  # the plugin author sees where
+
+
+# -- issue 14: every bad argument is one clear line, never a traceback ---------------------------
+
+WORLD = ROOT / "worlds" / "apartment.toml"
+
+
+def _one_line_error(capsys, *args):
+    """Run the CLI; assert exit 1 or 2 and no traceback; the last line of stderr."""
+    try:
+        code = main([str(a) for a in args])
+    except SystemExit as exc:  # argparse
+        code = exc.code
+    out, err = capsys.readouterr()
+    assert code in (1, 2), (args, code, out, err)
+    assert "Traceback" not in out + err, (args, err)
+    return err.strip().splitlines()[-1]
+
+
+def _scenario(tmp_path, old, new, name="scn.toml"):
+    text = CI.read_text().replace('world = "apartment"', f'world = "{WORLD}"')
+    assert old in text, old
+    path = tmp_path / name
+    path.write_text(text.replace(old, new))
+    return path
+
+
+def test_bad_invocations_of_every_command(capsys, tmp_path):
+    import os
+
+    (tmp_path / "dir").mkdir()
+    fifo = tmp_path / "fifo.toml"
+    os.mkfifo(fifo)
+    cases = [
+        (["validate", "/dev/zero"], "/dev/zero: not a regular file but a device"),
+        (["validate", fifo], f"{fifo}: not a regular file but a FIFO"),
+        (["validate", tmp_path / "dir"], "not a regular file but a directory"),
+        (["validate", tmp_path / "nope.toml"], "nope.toml: file not found"),
+        (["run", "/dev/zero"], "error: /dev/zero: not a regular file but a device"),
+        (["run", fifo], "not a regular file but a FIFO"),
+        (["run", WORLD], "this is a world file, not a scenario"),
+        (["check", WORLD], "this is a world file, not a scenario"),
+        (["run", CI, "--seed", "-1"], "argument --seed: seed must be in 0..2**63-1, not -1"),
+        (["run", CI, "--seed", str(2**64)], "argument --seed: seed must be in 0..2**63-1"),
+        (["run", CI, "--workers", "0"], "argument --workers: must be at least 1, not 0"),
+        (["toy", "--out", tmp_path, "--seed", "-1"], "argument --seed: seed must be in"),
+        (
+            ["toy", "--out", "/dev/null/x"],
+            "error: cannot create folder /dev/null/x: Not a directory",
+        ),
+        (["schema", "-o", "/nonexistent/x.json"], "folder /nonexistent does not exist"),
+        (["schema", "-o", tmp_path / "dir"], "is a folder; give a file name"),
+        (["export", tmp_path, "--tum", "/dev/null/x"], "cannot create folder /dev/null/x"),
+        (["run", CI, "--out", "/dev/null/x", "-q"], "/dev/null/x: Not a directory"),
+        (["replay", tmp_path / "x.log", "--localizer", "", "--out", tmp_path / "r"], "NAME"),
+        (
+            ["render-world", "apartment", "--day", "9", "--run", "2", "-o", tmp_path / "a.png"],
+            "run 2 outside 1..1",
+        ),
+    ]
+    for args, msg in cases:
+        line = _one_line_error(capsys, *args)
+        assert msg in line, (args, line)
+
+
+def test_version_and_python_dash_m(capsys):
+    import subprocess
+    import sys
+
+    from dynmap_sim import __version__
+
+    with pytest.raises(SystemExit) as ei:
+        main(["--version"])
+    assert ei.value.code == 0 and capsys.readouterr().out.strip() == f"dynmap-sim {__version__}"
+    res = subprocess.run(
+        [sys.executable, "-m", "dynmap_sim", "validate", str(WORLD)],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert res.returncode == 0 and res.stdout.strip() == f"{WORLD}: OK", res.stderr
+
+
+def test_every_option_of_every_command_has_help():
+    import argparse
+
+    from dynmap_sim.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    missing = [
+        f"{cmd} {action.dest}"
+        for cmd, parser in sub.choices.items()
+        for action in parser._actions
+        if not isinstance(action, argparse._HelpAction) and not action.help
+    ]
+    assert missing == []
+    assert set(sub.choices) >= {"run", "check", "replay", "toy", "render-world", "validate"}
+
+
+@pytest.mark.parametrize(
+    "old, new, field, msg",
+    [
+        ('name = "odometry"', 'name = ".relative:X"', "localizers.0.name", "give 'package.module"),
+        (
+            'preset = "urg-04lx"',
+            'preset = "urg-04lx"\noverrides = { noise = 5 }',
+            "sensor.overrides.noise",
+            "must be a table of LidarNoise fields",
+        ),
+        (
+            'preset = "urg-04lx"',
+            'preset = "urg-04lx"\noverrides = { mount_pose = [1, 2] }',
+            "sensor.overrides.mount_pose",
+            "must be 3 finite numbers",
+        ),
+        (
+            'preset = "urg-04lx"',
+            'preset = "urg-04lx"\noverrides = { scan_period_s = 0 }',
+            "sensor.overrides.scan_period_s",
+            "must be > 0",
+        ),
+    ],
+)
+def test_scenario_values_that_crashed_validate(capsys, tmp_path, old, new, field, msg):
+    bad = _scenario(tmp_path, old, new)
+    line = _one_line_error(capsys, "validate", bad)
+    assert line.startswith(f"{bad}: {field}: ") and msg in line, line
+
+
+def test_a_scenario_with_a_byte_order_mark_loads(capsys, tmp_path):
+    scn = tmp_path / "scenarios" / "bom.toml"
+    scn.parent.mkdir()
+    text = CI.read_text().replace('world = "apartment"', f'world = "{WORLD}"')
+    scn.write_text(text, encoding="utf-8-sig")
+    code, out, err = run_cli(capsys, "validate", scn)
+    assert code == 0 and out.strip() == f"{scn}: OK", err
+
+
+def test_check_and_replay_do_not_overwrite_results_without_force(capsys, tmp_path):
+    scn = _scenario(tmp_path, "days = [1, 3]", "days = [1, 1]")
+    out = tmp_path / "o"
+    assert run_cli(capsys, "check", scn, "-q", "--out", out)[0] == 0
+    before = (out / "results.db").stat().st_mtime_ns
+    line = _one_line_error(capsys, "check", scn, "-q", "--out", out)
+    assert line == (
+        f"error: {out / 'results.db'} already holds results; check would replace them: pass "
+        "--force to replace them or choose another --out"
+    )
+    assert (out / "results.db").stat().st_mtime_ns == before
+    assert run_cli(capsys, "check", scn, "-q", "--out", out, "--force")[0] == 0
+    line = _one_line_error(
+        capsys, "replay", tmp_path / "x.log", "--localizer", "odometry", "--out", out
+    )
+    assert "already holds results; replay would replace them: pass --force" in line

@@ -258,3 +258,97 @@ def test_info_people_are_the_worlds_people_padded():
     assert n == poses.shape[0] > 0
     np.testing.assert_array_equal(info["truth"]["people"][:n], poses)
     assert np.all(np.isposinf(info["truth"]["people"][n:, :2]))
+
+
+def test_a_reset_that_raised_leaves_the_env_usable():
+    """Through gymnasium.make (its wrappers included): a first reset that raised, then a
+    good reset and a step work, and give the same numbers as without the failed reset."""
+    env = gymnasium.make("dynmap_sim/Apartment-v0")
+    with pytest.raises(ValueError, match=r"day 99 outside the calendar \(1\.\.28\)"):
+        env.reset(seed=5, options={"day": 99})
+    obs, _ = env.reset(seed=0, options={"day": 2})
+    obs2, *_ = env.step(np.array([0.2, 0.0], np.float32))
+    fresh = gymnasium.make("dynmap_sim/Apartment-v0")
+    ref, _ = fresh.reset(seed=0, options={"day": 2})
+    ref2, *_ = fresh.step(np.array([0.2, 0.0], np.float32))
+    np.testing.assert_array_equal(obs["scan"], ref["scan"])
+    np.testing.assert_array_equal(obs2["scan"], ref2["scan"])
+    # a failed reset changes nothing: not the world's seed, not the run
+    u = env.unwrapped
+    before = (u.world_seed, u.day_run)
+    with pytest.raises(ValueError):
+        env.reset(seed=7, options={"day": 1, "run": 9})
+    assert (u.world_seed, u.day_run) == before
+    env.close()
+    fresh.close()
+
+
+@pytest.mark.parametrize(
+    "options, msg",
+    [
+        ({"dayy": 3}, "reset options: unknown key(s) 'dayy'; known: 'day', 'run'"),
+        ([1, 2], "reset options must be a dict with keys from ['day', 'run'], got [1, 2]"),
+        ({"day": True}, "reset options: 'day' must be an integer, got True"),
+    ],
+)
+def test_bad_reset_options_name_the_known_keys(apartment, options, msg):
+    with pytest.raises(ValueError) as ei:
+        apartment.reset(seed=0, options=options)
+    assert str(ei.value) == msg
+
+
+@pytest.mark.parametrize("seed", [-1, 1.5, "3", True])
+def test_bad_reset_seed(apartment, seed):
+    with pytest.raises(ValueError, match="reset seed must be None or an integer >= 0"):
+        apartment.reset(seed=seed)
+
+
+def test_world_env_needs_a_world():
+    with pytest.raises(ValueError, match=r"dynmap_sim/World-v0 needs world=PATH"):
+        gymnasium.make("dynmap_sim/World-v0")
+
+
+@pytest.mark.parametrize(
+    "kwargs, msg",
+    [
+        ({"max_episode_steps": -1}, "max_episode_steps must be an integer >= 1, got -1"),
+        ({"max_episode_steps": 2.5}, "max_episode_steps must be an integer >= 1, got 2.5"),
+        ({"collision_penalty": float("nan")}, "collision_penalty must be a finite number >= 0"),
+        ({"render_size_px": 0}, "render_size_px must be an integer in 1..8192, got 0"),
+        ({"goal_tolerance_m": -0.1}, "goal_tolerance_m must be a finite number > 0, got -0.1"),
+        ({"dt_s": 0.0}, "dt_s must be a finite number > 0 (seconds), got 0.0"),
+        ({"dt_s": float("inf")}, "dt_s must be a finite number > 0 (seconds), got inf"),
+        ({"people": "no"}, "people must be True or False, got 'no'"),
+        ({"sensor_options": [1]}, "sensor_options must be a dict, got [1]"),
+        (
+            {"sensor_options": {"scan_period_s": 0.0}},
+            "the sensor's scan_period_s must be > 0 (it is the step period dt_s unless dt_s is "
+            "given), got 0.0",
+        ),
+        (
+            {"render_mode": "human"},
+            "render_mode 'human' is not supported; render modes: None, 'rgb_array'",
+        ),
+    ],
+)
+def test_constructor_arguments_are_checked_with_their_value(kwargs, msg):
+    with pytest.raises(ValueError) as ei:
+        DynMapEnv(world="apartment", **kwargs)
+    assert str(ei.value).startswith(msg)
+
+
+def test_human_render_mode_through_make_names_the_render_modes():
+    """No HumanRendering wrapper (it needs pygame, not a dependency): the env's own error."""
+    with pytest.raises(ValueError, match=r"render modes: None, 'rgb_array'"):
+        gymnasium.make("dynmap_sim/Lab-v0", render_mode="human")
+
+
+@pytest.mark.parametrize(
+    "action",
+    [np.array([0.1 + 1j, 0.0]), np.array([True, False]), [None, 0.1], "ab"],
+    ids=["complex", "bool", "none", "str"],
+)
+def test_non_real_actions_are_refused(apartment, action):
+    apartment.reset(seed=0)
+    with pytest.raises(ValueError, match=r"action must be 2 real numbers \(v_mps, omega_radps\)"):
+        apartment.step(action)

@@ -10,6 +10,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.axes import Axes  # noqa: E402
+from matplotlib.backend_bases import FigureCanvasBase  # noqa: E402
 from matplotlib.patches import Circle, Patch, Polygon  # noqa: E402
 
 from dynmap_sim.world.schedule import Snapshot  # noqa: E402
@@ -48,6 +49,8 @@ def draw_snapshot(ax: Axes, spec: WorldSpec, snap: Snapshot, title: str | None =
     ax.set_ylim(y0, y1)
     ax.set_aspect("equal")
     ax.tick_params(labelsize=6)
+    ax.set_xlabel("x [m]", fontsize=7)
+    ax.set_ylabel("y [m]", fontsize=7)
     if title:
         ax.set_title(title, fontsize=8)
 
@@ -58,6 +61,30 @@ def _title(world: World, day: int, run: int) -> str:
     return f"day {day} run {run}  {slot.date.isoformat()} {h:02d}:{m:02d}"
 
 
+#: Most runs a sheet examines for changes (each costs a snapshot, ~15 ms): a longer calendar
+#: is sampled evenly, and the sheet says so.
+MAX_SHEET_SCAN = 240
+
+
+def image_formats() -> list[str]:
+    """The image file types figures can be saved as (``png``, ``pdf``, ``svg``, ...)."""
+    return sorted(FigureCanvasBase.get_supported_filetypes())
+
+
+def image_path(out_path: str | Path) -> Path:
+    """The file a figure for ``out_path`` is written to: ``.png`` appended to a name without
+    a suffix (as matplotlib does); ValueError for a suffix that is no image format."""
+    out = Path(out_path)
+    fmt = out.suffix[1:].lower()
+    if not fmt:
+        return out.with_name(out.name + ".png")
+    if fmt not in image_formats():
+        raise ValueError(
+            f"unsupported image format {fmt!r}; supported: {', '.join(image_formats())}"
+        )
+    return out
+
+
 def _legend(fig) -> None:
     handles = [Patch(facecolor=c, label=k) for k, c in KIND_COLOURS.items()]
     fig.legend(handles=handles, loc="lower center", ncol=len(handles), fontsize=7, frameon=False)
@@ -66,7 +93,9 @@ def _legend(fig) -> None:
 def render_snapshot(
     spec: WorldSpec, seed: int = 0, day: int = 1, run: int = 1, out_path: str | Path = "world.png"
 ) -> Path:
-    """Draw the state at the start of ``(day, run)`` to ``out_path`` (PNG/PDF/SVG)."""
+    """Draw the state at the start of ``(day, run)`` to ``out_path`` (PNG/PDF/SVG; see
+    :func:`image_path`); returns the file written."""
+    out = image_path(out_path)
     world = World(spec, seed=seed)
     snap = world.snapshot(day, run)
     x0, y0, x1, y1 = spec.bounds
@@ -74,7 +103,6 @@ def render_snapshot(
     fig, ax = plt.subplots(figsize=(w, w * (y1 - y0) / (x1 - x0) + 0.8))
     draw_snapshot(ax, spec, snap, f"{spec.name}: {_title(world, day, run)}")
     _legend(fig)
-    out = Path(out_path)
     fig.savefig(out, dpi=120, bbox_inches="tight")
     plt.close(fig)
     return out
@@ -85,11 +113,15 @@ def sheet_slots(world: World, n_panels: int = 12) -> list[tuple[int, int]]:
 
     Groups shuffled more often than once a day are ignored when looking for changes (they
     change every run); with more change points than panels they are subsampled evenly, with
-    fewer the sheet is filled with evenly spaced runs.
+    fewer the sheet is filled with evenly spaced runs. A calendar of more than
+    :data:`MAX_SHEET_SCAN` runs is sampled evenly first (the changes are looked for at those).
     """
     slots = world.calendar.slots
     if len(slots) <= n_panels:
         return [(s.day, s.run) for s in slots]
+    if len(slots) > MAX_SHEET_SCAN:
+        keep = np.linspace(0, len(slots) - 1, MAX_SHEET_SCAN).round().astype(int)
+        slots = tuple(slots[i] for i in sorted(set(keep.tolist())))
     rpd = world.calendar.runs_per_day
     frequent = {
         ev.group
@@ -112,7 +144,9 @@ def sheet_slots(world: World, n_panels: int = 12) -> list[tuple[int, int]]:
 
 
 def render_sheet(spec: WorldSpec, seed: int = 0, out_path: str | Path = "sheet.png") -> Path:
-    """Draw a grid of snapshots spread over the whole calendar to ``out_path``."""
+    """Draw a grid of snapshots spread over the whole calendar to ``out_path`` (see
+    :func:`image_path`); returns the file written."""
+    out = image_path(out_path)
     world = World(spec, seed=seed)
     picks = sheet_slots(world)
     ncol = 4
@@ -126,9 +160,12 @@ def render_sheet(spec: WorldSpec, seed: int = 0, out_path: str | Path = "sheet.p
     for ax, (day, run) in zip(axes.flat, picks, strict=False):
         ax.set_axis_on()
         draw_snapshot(ax, spec, world.snapshot(day, run), _title(world, day, run))
-    fig.suptitle(f"{spec.name} (seed {seed})", fontsize=10)
+    title = f"{spec.name} (seed {seed})"
+    n = world.calendar.n_slots
+    if n > MAX_SHEET_SCAN:
+        title += f": {len(picks)} runs picked from {MAX_SHEET_SCAN} evenly spaced of {n}"
+    fig.suptitle(title, fontsize=10)
     _legend(fig)
-    out = Path(out_path)
     fig.savefig(out, dpi=100, bbox_inches="tight")
     plt.close(fig)
     return out

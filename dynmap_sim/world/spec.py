@@ -150,6 +150,18 @@ class CalendarSpec(_Model):
             raise ValueError("run times must be strictly increasing")
         return v
 
+    @model_validator(mode="after")
+    def _fits_before_year_10000(self) -> CalendarSpec:
+        """The working days can be laid out before ``date.max``: every week has a working
+        day, and each holiday costs at most a week more."""
+        span = 7 * (self.n_days + len(self.holidays) + 1)
+        if (dt.date.max - self.start).days < span:
+            raise ValueError(
+                f"a calendar of {self.n_days} working days from {self.start} may run past "
+                f"{dt.date.max}; start it earlier"
+            )
+        return self
+
 
 class RobotSpec(_Model):
     """Start pose and the route the operator drives, both in the map frame [m, rad]."""

@@ -146,3 +146,74 @@ def test_bad_file(tmp_path, case, old, new, loc, msg):
     assert err.path == str(bad)
     assert any(lo == loc and msg in m for lo, m in err.errors), err.errors
     assert f"{loc}: " in str(err)
+
+
+# -- reading the file itself: only regular files of sane size, a BOM is not content ------------
+
+
+def _only(exc: WorldFileError) -> str:
+    assert len(exc.errors) == 1, exc.errors
+    return exc.errors[0][1]
+
+
+def test_a_utf8_byte_order_mark_is_not_a_syntax_error(tmp_path):
+    bom = tmp_path / "bom.toml"
+    bom.write_text(ROOM.read_text(), encoding="utf-8-sig")
+    assert bom.read_bytes()[:3] == b"\xef\xbb\xbf"
+    assert load_world(bom).name == "room"
+
+
+@pytest.mark.parametrize("what", ["device", "directory"])
+def test_a_device_or_folder_is_refused_at_once(tmp_path, what):
+    path = Path("/dev/zero") if what == "device" else tmp_path
+    with pytest.raises(WorldFileError) as ei:
+        load_world(path)
+    assert _only(ei.value) == f"not a regular file but a {what}"
+    assert str(ei.value) == f"{path}: not a regular file but a {what}"  # one line
+
+
+def test_a_fifo_is_refused_without_blocking(tmp_path):
+    import os
+
+    fifo = tmp_path / "world.toml"
+    os.mkfifo(fifo)  # opening it for reading would wait for a writer forever
+    with pytest.raises(WorldFileError) as ei:
+        load_world(fifo)
+    assert _only(ei.value) == "not a regular file but a FIFO"
+
+
+def test_a_huge_file_is_refused_before_it_is_read(tmp_path, monkeypatch):
+    from dynmap_sim import errors
+
+    monkeypatch.setattr(errors, "MAX_FILE_BYTES", 1000)
+    big = tmp_path / "big.toml"
+    big.write_text(ROOM.read_text() + "#" * 2000)
+    with pytest.raises(WorldFileError) as ei:
+        load_world(big)
+    assert "file too large" in _only(ei.value) and "limit" in _only(ei.value)
+
+
+def test_absurd_nesting_is_a_clean_error(tmp_path):
+    deep = tmp_path / "deep.toml"
+    deep.write_text("x = " + "[" * 100_000 + "]" * 100_000 + "\n")
+    with pytest.raises(WorldFileError) as ei:
+        load_world(deep)
+    assert _only(ei.value) == "TOML nested too deeply to read"
+
+
+def test_not_utf8_is_a_clean_error(tmp_path):
+    bad = tmp_path / "latin1.toml"
+    bad.write_bytes(ROOM.read_text().replace('"room"', '"r\xf6om"').encode("latin-1"))
+    with pytest.raises(WorldFileError) as ei:
+        load_world(bad)
+    assert "not UTF-8 text" in _only(ei.value)
+
+
+@pytest.mark.parametrize("start", ["9999-12-31", "9999-12-01"])
+def test_a_calendar_running_past_year_9999_is_a_field_error(tmp_path, start):
+    bad = tmp_path / "late.toml"
+    bad.write_text(ROOM.read_text().replace("start = 2024-01-01", f"start = {start}"))
+    with pytest.raises(WorldFileError) as ei:
+        load_world(bad)
+    loc, msg = ei.value.errors[0]
+    assert loc == "calendar" and f"from {start} may run past 9999-12-31" in msg
