@@ -495,8 +495,15 @@ class RouteMemory:
             s0, s1 = tr.s_prev_m, pos.along_m
             if s1 > s0:
                 cum = r.cumulative_m()
-                crossed = np.flatnonzero((cum > s0) & (cum <= s1))
-                times = tr.t_prev_s + (cum[crossed] - s0) / (s1 - s0) * (t_s - tr.t_prev_s)
+                # the route's end counts as passed pass_tolerance_m before it (a robot stops
+                # at its goal within a tolerance), timed as if it drove on at its speed
+                early = min(self.params.pass_tolerance_m, 0.5 * (cum[-1] - cum[-2]))
+                mark = cum.copy()
+                mark[-1] -= early
+                crossed = np.flatnonzero((mark > s0) & (mark <= s1))
+                speed = (s1 - s0) / max(t_s - tr.t_prev_s, 1e-9)
+                times = tr.t_prev_s + (mark[crossed] - s0) / speed
+                times[crossed == len(cum) - 1] += early / speed
                 ids = r.ids[crossed].tolist()
                 for wid, tc in zip(ids, times.tolist(), strict=True):
                     self._pass(r, wid, tc)
@@ -586,7 +593,13 @@ class RouteMemory:
             rec.heading_rad = heading
 
     def _finish_recording(self, pos: RoutePosition, robot_xy: FloatArray, t_s: float) -> None:
-        """Re-entering a corridor ends the recording: join the new route at both ends."""
+        """Re-entering a corridor ends the recording: join the new route at both ends.
+
+        A blocked segment split at the exit keeps its block after the exit point (the robot
+        drove up to it), one split at the entry before the entry point (the robot re-enters
+        behind the block, H&W §6.3 "returns ... behind the obstacle"). Should a robot come
+        back before the block, it sees it again and blocks it again: one more encounter.
+        """
         rec = self._rec
         assert rec is not None
         self._rec = None
@@ -608,7 +621,7 @@ class RouteMemory:
         if rec.exit is not None:
             rid, from_id, to_id, exit_xy, t_exit = rec.exit
             try:
-                c = self._split(rid, from_id, to_id, exit_xy)
+                c = self._split(rid, from_id, to_id, exit_xy, block_half="after")
             except (KeyError, ValueError):  # the segment was forgotten meanwhile
                 c = None
             if c is not None:
@@ -619,7 +632,9 @@ class RouteMemory:
                     self._pass(r, c, t_exit)
         r2 = self.routes[pos.route_id]
         j2, _ = self._nearest_on_route(r2, np.asarray(entry))
-        d = self._split(r2.route_id, int(r2.ids[j2 - 1]), int(r2.ids[j2]), entry)
+        d = self._split(
+            r2.route_id, int(r2.ids[j2 - 1]), int(r2.ids[j2]), entry, block_half="before"
+        )
         jd = r2.index(d)
         xy[-1] = r2.xy[jd]
         dt = np.concatenate([[np.nan], np.diff(times)])
@@ -642,10 +657,18 @@ class RouteMemory:
         k = int(np.argmin(dist))
         return k + 1, proj[k]
 
-    def _split(self, route_id: int, from_id: int, to_id: int, xy: tuple[float, float]) -> int:
+    def _split(
+        self,
+        route_id: int,
+        from_id: int,
+        to_id: int,
+        xy: tuple[float, float],
+        block_half: str = "both",
+    ) -> int:
         """Insert a waypoint at ``xy`` into segment ``from_id -> to_id``; returns its id. Within
         ``record_min_spacing_m`` of an end, that end is reused. The travel time is shared in
-        proportion to length; a blocked segment stays blocked in both halves."""
+        proportion to length. A blocked segment passes its block to the half ``block_half``
+        ("after" the new waypoint, "before" it, or "both")."""
         r = self.routes[route_id]
         j = r.index(to_id)
         a, b = r.xy[j - 1].copy(), r.xy[j].copy()
@@ -666,7 +689,10 @@ class RouteMemory:
         r.ids = np.insert(r.ids, j, new_id)
         if (from_id, to_id) in self.blocked:
             self.blocked.discard((from_id, to_id))
-            self.blocked |= {(from_id, new_id), (new_id, to_id)}
+            if block_half in ("before", "both"):
+                self.blocked.add((from_id, new_id))
+            if block_half in ("after", "both"):
+                self.blocked.add((new_id, to_id))
         self._segs = None
         return new_id
 

@@ -206,3 +206,21 @@ def test_to_dict_and_pickle_round_trip(drive_fn):
     d = mem.to_dict()
     names = "x_m y_m v_max_mps half_width_m last_update_s travel_time_s"
     assert set(d["routes"][0]["waypoints"][0]) == set(names.split())
+
+
+def test_day_22_block_detour_and_replan(drive_fn):
+    """H&W §7.3, Fig. 8: the prior is blocked, the robot drives around, stops short of its goal
+    (within the pass tolerance); the block stays on the bypassed stretch only, the next plan
+    takes the recorded detour, and the segments driven were learned."""
+    mem = RouteMemory.from_prior([[0, 0], [10, 0]], 0.2, 0.35, 0.0, densify=False)
+    pos = mem.locate([5.0, 0.0, 0.0])
+    mem.block((pos.from_id, pos.to_id))
+    assert plan_route(mem.graph(), [0.0, 0.0], [10.0, 0.0]) is None
+    drive_fn(mem, [*DETOUR[:-1], (9.9, 0.0)], 0.25, 100.0)
+    prior = mem.routes[0]
+    np.testing.assert_allclose(prior.xy[:, 0], [0.0, 3.0, 7.0, 10.0], atol=0.05)
+    assert mem.blocked == {(int(prior.ids[1]), int(prior.ids[2]))}  # 3 m -> 7 m only
+    assert prior.wp[3, 5] == pytest.approx(3.0 / 0.25, abs=0.1)  # 7 m -> 10 m, goal in tolerance
+    path = plan_route(mem.graph(), [0.0, 0.0], [10.0, 0.0])
+    assert path.xy[:, 1].max() == pytest.approx(1.2, abs=0.05)
+    assert path.xy[-1] == pytest.approx((10.0, 0.0))
