@@ -108,9 +108,10 @@ class RouteMemoryParams:
     #: avoidance wobble at a corridor's edge, not a new way.
     min_new_route_m: float = 0.5
     #: On first entering a route (start of a run), a segment's start waypoint counts as passed
-    #: when the robot is within this distance along the route from it, so the first segment's
-    #: time is learned. 0.2 m ≈ two localization errors (H&W §7.3: 0.11 m); larger would time
-    #: a partial segment as a whole one.
+    #: when the robot is within this distance along the route from it, and a route's last
+    #: waypoint when the robot comes this close (it stops at its goal within a tolerance), so
+    #: the first and last segments' times are learned. 0.2 m ≈ two localization errors (H&W
+    #: §7.3: 0.11 m); larger would time a partial segment as a whole one.
     pass_tolerance_m: float = 0.2
 
 
