@@ -116,9 +116,10 @@ def speed_for_clearance(clearance_m: float, p: CorridorFollowerParams) -> float:
     perceived obstacles"; the shape of RPP's proximity regulation, issue 15 L13):
     ``v_max * clip((d - d_stop) / (d_full - d_stop), 0, 1)`` with ``d_stop`` the hard
     clearance and ``d_full`` ``full_speed_clearance_m``, floored at ``min_speed_mps`` above
-    ``d_stop``. Non-decreasing in ``clearance_m``; zero at or below the hard clearance."""
+    ``d_stop`` (a free offset keeps ``d >= d_stop``, so it is always driven). Non-decreasing in
+    ``clearance_m``; zero below the hard clearance."""
     d_stop = p.min_clearance_m
-    if not clearance_m > d_stop:
+    if not clearance_m >= d_stop:
         return 0.0
     frac = min((clearance_m - d_stop) / (p.full_speed_clearance_m - d_stop), 1.0)
     return max(p.speed_mps * frac, min(p.min_speed_mps, p.speed_mps))
@@ -232,7 +233,9 @@ class CorridorFollower(Controller):
         grid: ClearanceGrid,
     ) -> tuple[int | None, FloatArray, FloatArray]:
         """Index of the best free offset (None: none is free), the candidate offsets [m] and
-        each candidate's minimum clearance within ``speed_probe_m`` ahead."""
+        each candidate's minimum clearance within ``speed_probe_m`` ahead (the way to its
+        carrot included unless the robot stands inside the hard clearance: a free offset's
+        value is then never below the hard clearance)."""
         p = self.params
         hw_seg = float(self._seg_hw[self._seg])
         offsets = self._unit_offsets * hw_seg  # (K,)
@@ -256,7 +259,9 @@ class CorridorFollower(Controller):
         need_way = min(p.min_clearance_m, here)
         free = np.all(clear >= p.min_clearance_m, axis=1) & np.all(clear_way >= need_way, axis=1)
         near = s - s_robot <= p.speed_probe_m
-        clear_near = np.minimum(clear[:, near].min(axis=1), clear_way.min(axis=1))
+        clear_near = clear[:, near].min(axis=1)
+        if here >= p.min_clearance_m:
+            clear_near = np.minimum(clear_near, clear_way.min(axis=1))
         if not free.any():
             return None, offsets, clear_near
         score = (
@@ -322,7 +327,7 @@ class CorridorFollower(Controller):
         # is already inside the hard clearance: then it creeps out along the free offset)
         here = float(grid.clearance_at(xy))
         d_speed = float(clear_near[best])
-        if here > p.min_clearance_m:
+        if here >= p.min_clearance_m:
             d_speed = min(d_speed, here)
         self._clearance_ahead_m = d_speed
         v = speed_for_clearance(d_speed, p)

@@ -13,13 +13,14 @@ pose, the controller's command (before the collision monitor) and the controller
 flag:
 
 * **monitor**: *stuck* when the robot moved less than ``required_movement_m`` in
-  ``movement_time_s`` while commanded to move (a zero command, e.g. at the goal or waiting
-  behind a speed limit, restarts the window), or when the controller has reported ``blocked``
-  for ``blocked_time_s``. Each stuck detection runs the next behaviour of the cycle
-  **wait -> back up -> replan**; getting ``recovered_m`` away from where it was last stuck
-  resets the cycle and the count (a back-up and a drive into the same block again do not);
-  the ``max_attempts + 1``-th stuck detection without that **gives up** (an event and a
-  ``give_up`` action, never an exception).
+  ``movement_time_s`` while commanded to move, when the controller has reported ``blocked``
+  for ``blocked_time_s``, or when the command has been zero for ``idle_time_s`` (waiting behind
+  a speed limit is fine for a while; the stack calls :meth:`Recovery.step` only while a path
+  is being followed, i.e. not once the controller is done). Each stuck detection runs the
+  next behaviour of the cycle **wait -> back up -> replan**; getting ``recovered_m`` away
+  from where it was last stuck resets the cycle and the count (a back-up and a drive into the
+  same block again do not); the ``max_attempts + 1``-th stuck detection without that **gives
+  up** (an event and a ``give_up`` action, never an exception).
 * **wait** ``wait_s`` (a person or a door may move away): zero command.
 * **back up** ``backup_m`` at ``backup_mps`` (nav2's 0.3 m at 0.05 m/s), straight back, ending
   when the distance is covered, the time allowance is over, or a return appears in the box
@@ -67,8 +68,9 @@ class RecoveryParams:
     #: the robot's radius [m]
     robot_radius_m: float = 0.2
     #: progress: at least this displacement [m] ... (nav2 0.5 m; less here, so creeping past
-    #: a box at the follower's 0.05 m/s floor, halved by the monitor's slowdown, is progress)
-    required_movement_m: float = 0.25
+    #: a box at the follower's 0.05 m/s floor, halved by the monitor's slowdown to 0.025 m/s,
+    #: is progress with 25 % to spare)
+    required_movement_m: float = 0.2
     #: ... within this time [s] (nav2's ``movement_time_allowance``)
     movement_time_s: float = 10.0
     #: the recoveries' count resets once the robot is this far from where it was last found
@@ -78,6 +80,9 @@ class RecoveryParams:
     #: a controller that reports ``blocked`` this long is stuck [s] (the stack's own 1 Hz
     #: replanning has had two chances by then)
     blocked_time_s: float = 2.0
+    #: a zero command while not done and not blocked (e.g. a speed limit holding the robot
+    #: behind a person who does not go away) is stuck after this long [s]: no run hangs
+    idle_time_s: float = 30.0
     #: commands below these magnitudes are "not commanded to move" [m/s], [rad/s]
     moving_mps: float = 1e-3
     moving_radps: float = 1e-3
@@ -144,6 +149,7 @@ class Recovery:
         self._base_xy: FloatArray | None = None
         self._base_t = 0.0
         self._blocked_since: float | None = None
+        self._idle_since: float | None = None
         self._until_t = 0.0
         self._backup_start: FloatArray | None = None
         self._stuck_xy: FloatArray | None = None
@@ -217,17 +223,23 @@ class Recovery:
                 self._blocked_since = float(t_s)
         else:
             self._blocked_since = None
-        if not moving and not blocked:
-            self._restart_window(t_s, xy)
-            return None
-        why = None
+        if moving or blocked:
+            self._idle_since = None
+        elif self._idle_since is None:
+            self._idle_since = float(t_s)
+        why, since = None, float(t_s)
         if self._blocked_since is not None and t_s - self._blocked_since >= p.blocked_time_s:
-            why = f"controller blocked for {t_s - self._blocked_since:.1f} s"
+            why, since = "controller blocked", self._blocked_since
+        elif self._idle_since is not None:
+            self._restart_window(t_s, xy)  # standing still on purpose: no progress due
+            if t_s - self._idle_since >= p.idle_time_s:
+                why, since = "zero command (not done, not blocked)", self._idle_since
         elif t_s - self._base_t >= p.movement_time_s:
-            why = f"moved < {p.required_movement_m} m in {t_s - self._base_t:.1f} s"
+            why, since = f"moved < {p.required_movement_m} m", self._base_t
         if why is None:
             return None
-        self.stuck_s += t_s - self._base_t
+        why = f"{why} for {t_s - since:.1f} s"
+        self.stuck_s += t_s - since
         self._stuck_xy = xy.copy()
         self.events.append((float(t_s), "stuck", why))
         return self._start_next(t_s, pose, scan)
@@ -293,6 +305,7 @@ class Recovery:
     def _resume(self, t_s: float, xy: FloatArray) -> None:
         self._state = "monitor"
         self._blocked_since = None
+        self._idle_since = None
         self._restart_window(t_s, xy)
 
     def _restart_window(self, t_s: float, xy: FloatArray) -> None:

@@ -111,9 +111,9 @@ def test_speed_law_is_monotone_in_clearance():
     d = np.linspace(0.0, 2.0, 401)
     v = np.array([speed_for_clearance(float(x), p) for x in d])
     assert np.all(np.diff(v) >= 0.0)
-    assert np.all(v[d <= p.min_clearance_m] == 0.0)
+    assert np.all(v[d < p.min_clearance_m] == 0.0)
     assert np.all(v[d >= p.full_speed_clearance_m] == pytest.approx(p.speed_mps))
-    assert np.all(v[d > p.min_clearance_m] >= p.min_speed_mps)
+    assert np.all(v[d >= p.min_clearance_m] >= p.min_speed_mps)  # a free offset is driven
     slow = replace(p, min_speed_mps=0.0)  # the plain L13 law: linear in between
     assert speed_for_clearance(0.525, slow) == pytest.approx(0.5 * p.speed_mps)
 

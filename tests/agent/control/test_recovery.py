@@ -71,7 +71,7 @@ def test_a_robot_that_never_moves_walks_through_wait_backup_replan_give_up():
     assert rec.gave_up and rec.recoveries == 3
     # stuck first after the progress window, give-up is sticky and a zero command
     t_stuck = rec.events[0][0]
-    # (the progress window restarted at most 0.25 m, i.e. 0.83 s, before it stopped)
+    # (the progress window restarted at most 0.2 m, i.e. 0.67 s, before it stopped)
     assert rec.params.movement_time_s - 1.0 < t_stuck - t <= rec.params.movement_time_s
     assert got[-1].kind == "give_up" and np.all(got[-1].command == 0.0)
     assert rec.stuck_s > 40.0
@@ -147,10 +147,15 @@ def test_a_blocked_controller_is_stuck_after_blocked_time():
     assert rec.events[0][1] == "stuck" and "blocked" in rec.events[0][2]
 
 
-def test_standing_still_on_purpose_is_not_stuck():
+def test_standing_still_on_purpose_is_stuck_only_after_the_idle_time():
     rec = recovery()
-    assert all(a is None for a in run(rec, 0.0, np.zeros(3), 60.0, command=np.zeros(2)))
+    idle = rec.params.idle_time_s
+    assert all(a is None for a in run(rec, 0.0, np.zeros(3), idle, command=np.zeros(2)))
     assert rec.events == [] and rec.stuck_s == 0.0
+    a = rec.step(idle, np.zeros(3), np.zeros(2), False, EMPTY)
+    assert a is not None and a.kind == "wait"
+    assert rec.events[0][1] == "stuck" and "zero command" in rec.events[0][2]
+    assert rec.stuck_s == pytest.approx(idle)
 
 
 def test_reset_forgets_the_run_and_bad_params_are_refused():
@@ -164,18 +169,22 @@ def test_reset_forgets_the_run_and_bad_params_are_refused():
         RecoveryParams(unknown_behind="maybe")
 
 
-def test_the_three_stages_composed_on_a_blocked_corridor_give_up_without_touching():
-    """follower -> collision monitor -> robot, with recovery watching: the composition the
-    navigation stack uses (a replan here hands the same path again: the block stays)."""
-    segs = corridor(box(3.0, -1.0, 3.5, 1.0))
+def composed(
+    segs: np.ndarray, steps: int
+) -> tuple[CorridorFollower, CollisionMonitor, Recovery, np.ndarray, float]:
+    """follower -> collision monitor -> unicycle, with recovery watching: the composition the
+    navigation stack uses (a replan hands the same path again here). Returns the stages, the
+    final pose and the smallest true clearance met."""
     grid = grid_of(segs)
     path = np.array([[0.0, 0.0], [8.0, 0.0]])
-    ctrl = CorridorFollower(SPEED_MPS, HARD_M)
+    ctrl = CorridorFollower(SPEED_MPS, HARD_M, default_half_width_m=0.5)
     ctrl.set_path(path)
     mon = CollisionMonitor(LASER, robot_radius_m=0.2)
     rec = recovery(max_attempts=3)
-    pose, t = np.zeros(3), 0.0
-    for _ in range(2000):
+    pose, t, clearance = np.zeros(3), 0.0, np.inf
+    for _ in range(steps):
+        if ctrl.done:
+            break
         scan = Scan(raycast(pose, LASER.angles(), segs, LASER.range_max_m).astype(np.float32), t)
         cmd = ctrl.command(pose, grid)
         act = rec.step(t, pose, cmd, ctrl.blocked, scan)
@@ -188,6 +197,20 @@ def test_the_three_stages_composed_on_a_blocked_corridor_give_up_without_touchin
         v, w = (float(c) for c in mon.filter(cmd, scan, t))
         pose = pose + np.array([v * math.cos(pose[2]), v * math.sin(pose[2]), w]) * DT
         t += DT
-        assert seg_distance(pose[:2], segs) >= HARD_M - 0.05
+        clearance = min(clearance, seg_distance(pose[:2], segs))
+    return ctrl, mon, rec, pose, clearance
+
+
+def test_the_three_stages_composed_pass_a_box_without_a_recovery():
+    # a 1.4 m corridor, a box over 0.3 m of it: the gap beside it is 0.7 m
+    ctrl, mon, rec, pose, clearance = composed(corridor(box(3.5, 0.0, 4.0, 0.3), 0.7), 2000)
+    assert ctrl.done and rec.events == [] and not rec.gave_up
+    assert mon.slowdown_count > 0 and mon.stop_count == 0  # slowed beside it, never stopped
+    assert clearance >= HARD_M
+
+
+def test_the_three_stages_composed_on_a_blocked_corridor_give_up_without_touching():
+    segs = corridor(box(3.0, -1.0, 3.5, 1.0))
+    ctrl, mon, rec, pose, clearance = composed(segs, 2000)
     assert rec.gave_up and "backup" in kinds(rec) and "replan" in kinds(rec), rec.events
-    assert pose[0] < 3.0 - HARD_M
+    assert not ctrl.done and pose[0] < 3.0 - HARD_M and clearance >= HARD_M
