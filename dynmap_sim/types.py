@@ -14,6 +14,7 @@ Conventions (DESIGN.md §4):
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import Any
@@ -123,3 +124,55 @@ class PoseEstimate:
     mean: FloatArray
     cov: FloatArray
     extras: dict[str, Any] = field(default_factory=dict)
+
+
+#: When a localizer reports a :class:`Diagnostic`: with every scan, or once per run.
+DIAGNOSTIC_PER: tuple[str, ...] = ("scan", "run")
+
+
+@dataclass(frozen=True)
+class Diagnostic:
+    """A value a localizer reports besides its pose, declared so that the results store keeps
+    it (``Localizer.diagnostics``; what a localizer does not declare is not stored).
+
+    ``name``: lower case, digits and ``_`` (it names a column); ``dtype``: a numpy dtype name
+    (``"float64"``, ``"int64"``, ``"bool"``, ...); ``shape``: of one value (``()``: a scalar);
+    ``doc``: what it is, with its unit.
+
+    * ``per="scan"``: ``PoseEstimate.extras[name]`` of every scan; a scan without it stores
+      nothing (NULL).
+    * ``per="run"``: one value per run: with ``counts_of``, counted from the per-scan extra of
+      that name (an integer or a sequence of integers per scan; value ``v`` counts in bin
+      ``v`` of ``shape[0]`` bins, others are ignored), else ``Localizer.run_diagnostics()``
+      after ``end_run``.
+    """
+
+    name: str
+    dtype: str
+    shape: tuple[int, ...] = ()
+    per: str = "scan"
+    doc: str = ""
+    counts_of: str | None = None
+
+    def __post_init__(self) -> None:
+        if not re.fullmatch(r"[a-z][a-z0-9_]*", self.name or ""):
+            raise ValueError(f"diagnostic name {self.name!r}: lower case letters, digits and _")
+        try:
+            kind = np.dtype(self.dtype).kind
+        except TypeError:
+            kind = ""
+        if kind not in "biuf" or not kind:
+            raise ValueError(f"diagnostic {self.name!r}: dtype {self.dtype!r} is not numeric")
+        object.__setattr__(self, "dtype", np.dtype(self.dtype).name)
+        object.__setattr__(self, "shape", tuple(int(s) for s in self.shape))
+        if any(s < 1 for s in self.shape):
+            raise ValueError(f"diagnostic {self.name!r}: shape {self.shape} has an empty axis")
+        if self.per not in DIAGNOSTIC_PER:
+            raise ValueError(f"diagnostic {self.name!r}: per must be one of {DIAGNOSTIC_PER}")
+        if self.counts_of is not None and (
+            self.per != "run" or len(self.shape) != 1 or kind not in "iu"
+        ):
+            raise ValueError(
+                f"diagnostic {self.name!r}: counts_of needs per='run', one axis and an "
+                "integer dtype"
+            )

@@ -22,12 +22,13 @@ registered twice is an error).
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import TYPE_CHECKING, Any
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
 from dynmap_sim.registry import Registry
-from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Prior, Scan
+from dynmap_sim.types import Diagnostic, LaserSpec, Odometry, PoseEstimate, Prior, Scan
 
 if TYPE_CHECKING:
     from dynmap_sim.agent.grid import OccupancyGrid
@@ -38,6 +39,11 @@ class Localizer(ABC):
 
     #: Registry name (set by :func:`register_localizer`).
     name: str = "localizer"
+
+    #: The diagnostics this localizer reports, per scan (in ``PoseEstimate.extras``) and per
+    #: run (:class:`~dynmap_sim.types.Diagnostic`). The results store keeps exactly these:
+    #: a column or a table row each, made from the declaration; other extras are not stored.
+    diagnostics: ClassVar[tuple[Diagnostic, ...]] = ()
 
     def __init__(self, laser: LaserSpec, rng: np.random.Generator, **params: Any) -> None:
         if params:
@@ -58,6 +64,17 @@ class Localizer(ABC):
 
     def end_day(self) -> None:  # noqa: B027 - optional hook
         """The day is over (B&D §4.4: daily timescales are learned here)."""
+
+    def run_diagnostics(self) -> Mapping[str, Any]:
+        """The values of the declared per-run diagnostics without ``counts_of``, asked for
+        after :meth:`end_run`: name -> array-like of the declared shape (none: empty)."""
+        return {}
+
+    def day_artifacts(self) -> Mapping[str, bytes | Mapping[str, np.ndarray]]:
+        """What this localizer hands over for the day, asked for after :meth:`end_day`:
+        name -> bytes or named arrays (e.g. a compact snapshot of its map). The results store
+        keeps them per day without pickling (``ResultsDB.artifacts``); empty: nothing today."""
+        return {}
 
 
 class MapUser(ABC):

@@ -38,9 +38,9 @@ from numpy.typing import NDArray
 
 from dynmap_sim.agent.localizer import Localizer
 from dynmap_sim.errors import InputError
-from dynmap_sim.experiments.results import N_TIMESCALES
+from dynmap_sim.experiments.results import LocalizerDiagnostics
 from dynmap_sim.metrics import confusion_matrix
-from dynmap_sim.types import Odometry, Prior, Scan
+from dynmap_sim.types import Diagnostic, Odometry, Prior, Scan
 
 #: A rebalanced assignment must shorten the slowest worker's busy time by this fraction.
 REBALANCE_GAIN = 0.15
@@ -83,25 +83,76 @@ class RunStream:
 class LocalizerOutput:
     """What one localizer produced for one run.
 
-    ``estimates`` ``(T, 3)``; ``cov_diag`` ``(T, 3)``; ``extras`` ``(T, 4)`` (scan_loglik,
-    lambda_min, timescale, safe_mode; NaN where not reported); ``confusion`` ``(4, 4)``
-    point-class counts; ``update_s`` wall time in ``update()`` [s]; ``busy_s`` wall time of
-    the whole run including the hooks and pickling [s]; ``state`` the pickled localizer after
-    ``end_run`` (and ``end_day``); ``timescale_counts`` ``(5,)`` how often each timescale
-    was selected over the run (every selection of every scan, the ``timescales`` extra; B&D
-    Fig. 12 counts these).
+    ``estimates`` ``(T, 3)``; ``cov_diag`` ``(T, 3)``; ``confusion`` ``(4, 4)`` point-class
+    counts; ``update_s`` wall time in ``update()`` [s]; ``busy_s`` wall time of the whole run
+    including the hooks and pickling [s]; ``state`` the pickled localizer after ``end_run``
+    (and ``end_day``); ``diagnostics`` what it declared and reported
+    (:class:`DiagnosticsRecorder`).
     """
 
     estimates: NDArray[np.float64]
     cov_diag: NDArray[np.float64]
-    extras: NDArray[np.float64]
     confusion: NDArray[np.int64]
     update_s: float
     busy_s: float
     state: bytes
-    timescale_counts: NDArray[np.int64] = field(
-        default_factory=lambda: np.zeros(N_TIMESCALES, dtype=np.int64)
-    )
+    diagnostics: LocalizerDiagnostics = field(default_factory=LocalizerDiagnostics)
+
+
+def declared_diagnostics(loc: Localizer) -> tuple[Diagnostic, ...]:
+    """``loc.diagnostics``, checked: :class:`Diagnostic` each, no name twice."""
+    declared = tuple(getattr(loc, "diagnostics", ()) or ())
+    names = [d.name for d in declared if isinstance(d, Diagnostic)]
+    if len(names) != len(declared) or len(set(names)) != len(names):
+        raise InputError(
+            f"{type(loc).__module__}.{type(loc).__qualname__}.diagnostics: Diagnostic "
+            f"declarations with distinct names, not {declared!r}"
+        )
+    return declared
+
+
+class DiagnosticsRecorder:
+    """Collects one localizer's declared diagnostics over one run of ``n`` scans.
+
+    Per-scan ones from each scan's ``PoseEstimate.extras`` (:meth:`scan`); per-run ones
+    counted from them (``counts_of``) or asked for after ``end_run`` (:meth:`end_run`);
+    day artifacts after ``end_day`` (:meth:`end_day`). The result is :attr:`out`.
+    """
+
+    def __init__(self, loc: Localizer, n: int) -> None:
+        declared = declared_diagnostics(loc)
+        self._scan = [d for d in declared if d.per == "scan"]
+        self._counted = [d for d in declared if d.per == "run" and d.counts_of]
+        self.out = LocalizerDiagnostics(
+            declared,
+            {d.name: np.full((n, *d.shape), math.nan) for d in self._scan},
+            {d.name: np.zeros(d.shape, dtype=d.dtype) for d in self._counted},
+        )
+
+    def scan(self, step: int, extras: dict[str, Any]) -> None:
+        """Record the declared values among a scan's ``extras``."""
+        for d in self._scan:
+            v = extras.get(d.name)
+            if v is not None:
+                self.out.per_scan[d.name][step] = v
+        for d in self._counted:
+            n_bins = d.shape[0]
+            sel = [int(v) for v in np.ravel(extras.get(d.counts_of, ())) if 0 <= int(v) < n_bins]
+            if sel:
+                self.out.per_run[d.name] += np.bincount(sel, minlength=n_bins)
+
+    def end_run(self, loc: Localizer) -> None:
+        """Ask for the per-run values after ``end_run`` (declared ones only)."""
+        declared = {d.name: d for d in self.out.declared if d.per == "run" and not d.counts_of}
+        for name, value in loc.run_diagnostics().items():
+            d = declared.get(name)
+            if d is None:
+                raise ValueError(f"run_diagnostics(): {name!r} is not a declared per-run value")
+            self.out.per_run[name] = np.asarray(value, dtype=d.dtype).reshape(d.shape)
+
+    def end_day(self, loc: Localizer) -> None:
+        """Take the day's artifacts after ``end_day``."""
+        self.out.artifacts = dict(loc.day_artifacts())
 
 
 def _day_run(stream: RunStream) -> str:
@@ -135,9 +186,8 @@ def localize_run(label: str, loc: Localizer, stream: RunStream) -> LocalizerOutp
     n = len(stream.stamps_s)
     est = np.empty((n, 3))
     cov_diag = np.empty((n, 3))
-    extras = np.full((n, 4), math.nan)
+    diagnostics = DiagnosticsRecorder(loc, n)
     confusion = np.zeros((4, 4), dtype=np.int64)
-    ts_counts = np.zeros(N_TIMESCALES, dtype=np.int64)
     update_s = 0.0
     step = -1
     try:
@@ -153,22 +203,16 @@ def localize_run(label: str, loc: Localizer, stream: RunStream) -> LocalizerOutp
             cov_diag[step] = np.diagonal(np.asarray(e.cov, dtype=np.float64))
             ex = e.extras
             if ex:
-                extras[step] = (
-                    float(ex.get("scan_loglik", math.nan)),
-                    float(ex.get("lambda_min", math.nan)),
-                    float(ex.get("timescale", math.nan)),
-                    float(ex.get("safe_mode", math.nan)),
-                )
+                diagnostics.scan(step, ex)
                 pc = ex.get("point_classes")
                 if pc is not None:
                     confusion += confusion_matrix(stream.beam_class[step], pc)
-                sel = [int(v) for v in ex.get("timescales", ()) if 0 <= int(v) < N_TIMESCALES]
-                if sel:
-                    ts_counts += np.bincount(sel, minlength=N_TIMESCALES)
         step = -1
         loc.end_run()
+        diagnostics.end_run(loc)
         if stream.last_of_day:
             loc.end_day()
+            diagnostics.end_day(loc)
     except Exception as exc:
         where = f"at scan {step}" if step >= 0 else "in a run/day hook"
         raise LocalizerError(
@@ -178,12 +222,11 @@ def localize_run(label: str, loc: Localizer, stream: RunStream) -> LocalizerOutp
     return LocalizerOutput(
         est,
         cov_diag,
-        extras,
         confusion,
         update_s,
         time.perf_counter() - busy0,
         state,
-        timescale_counts=ts_counts,
+        diagnostics=diagnostics.out,
     )
 
 

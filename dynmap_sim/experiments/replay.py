@@ -33,7 +33,8 @@ from dynmap_sim import se2
 from dynmap_sim.agent.grid import OccupancyGrid
 from dynmap_sim.agent.localizer import Localizer, MapUser, make_localizer
 from dynmap_sim.errors import InputError
-from dynmap_sim.experiments.results import EXTRA_COLUMNS, ResultsDB, RunRecord
+from dynmap_sim.experiments.bench import DiagnosticsRecorder
+from dynmap_sim.experiments.results import ResultsDB, RunRecord
 from dynmap_sim.experiments.runner import ExperimentRunner, localizer_seeds
 from dynmap_sim.io.carmen import CarmenLog, read_carmen
 from dynmap_sim.types import Prior
@@ -81,7 +82,7 @@ def _run_pass(
     n_loc, n = len(locs), len(log)
     est = np.full((n_loc, n, 3), np.nan)
     cov = np.full((n_loc, n, 3), np.nan)
-    ext = np.full((n_loc, n, len(EXTRA_COLUMNS)), np.nan)
+    diags = [DiagnosticsRecorder(loc, n) for loc in locs]
     wall0 = time.perf_counter()
     for loc, prior in zip(locs, priors, strict=True):
         loc.begin_run(prior)
@@ -90,13 +91,13 @@ def _run_pass(
             e = loc.update(odom, scan)
             est[i, k] = e.mean
             cov[i, k] = np.diag(e.cov)
-            for j, col in enumerate(EXTRA_COLUMNS):
-                v = e.extras.get(col)
-                if v is not None:
-                    ext[i, k, j] = float(v)
-    for loc in locs:
+            if e.extras:
+                diags[i].scan(k, e.extras)
+    for loc, diag in zip(locs, diags, strict=True):
         loc.end_run()
+        diag.end_run(loc)
         loc.end_day()
+        diag.end_day(loc)
     t0 = float(log.stamps_s[0])
     start = dt.datetime.fromtimestamp(t0, tz=dt.UTC) if t0 > 0 else None
     truth = log.reference if log.reference is not None else np.full((n, 3), np.nan)
@@ -110,13 +111,13 @@ def _run_pass(
         collision=np.zeros(n, dtype=bool),
         estimates=est,
         cov_diag=cov,
-        extras=ext,
         confusion=np.zeros((n_loc, 4, 4), dtype=np.int64),
         terminated=True,
         route_progress=1.0,
         skipped_waypoints=0,
         wall_s=time.perf_counter() - wall0,
         events=[],
+        diagnostics=[d.out for d in diags],
     )
 
 

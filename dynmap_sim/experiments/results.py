@@ -1,17 +1,27 @@
-"""The results store: one SQLite database per experiment (DESIGN.md §6).
+"""The results store: one SQLite database per experiment.
 
-``results.db`` in the results folder holds, in WAL mode with one transaction per run:
+``results.db`` in the results folder holds, in WAL mode with one transaction per run (results
+format 2, ``results_format`` in ``meta``):
 
-* ``meta`` — scenario (JSON), its content hash, seed, day range, laser spec;
+* ``meta`` — scenario (JSON), its content hash, seed, day range, laser spec, results format;
 * ``localizers`` — index, label, class name, parameters;
+* ``diagnostics`` — what each localizer declared it reports
+  (:class:`~dynmap_sim.types.Diagnostic`: name, per scan or per run, dtype, shape, doc);
 * ``scans`` — per scan: day, run, step, time of day [s], true pose, collision flag;
 * ``estimates`` — per scan and localizer: estimate, position / heading error, covariance
-  diagonal and the extras (``scan_loglik``, ``lambda_min``, ``timescale``, ``safe_mode``);
+  diagonal, and a column per declared per-scan diagnostic: those of :data:`SCAN_COLUMNS`
+  (``scan_loglik``, ``lambda_min``, ``timescale``, ``safe_mode``) in every results folder,
+  NULL where a localizer does not report them; any other is added when first written (REAL
+  or INTEGER for a scalar, else a BLOB of the value's little-endian bytes);
 * ``runs``, ``run_summaries``, ``day_summaries`` — per-run and per-day summaries;
 * ``events`` — driver and experiment events (skipped waypoints, detours, kidnappings);
 * ``point_classes`` — per run and localizer, the 4x4 point-class confusion matrix;
-* ``timescale_counts`` — per run and localizer, how often each timescale λ1–λ5 was selected
-  (every selection of every scan, B&D Fig. 12);
+* ``timescale_counts`` — the per-run diagnostic of that name: per run and localizer, how often
+  each timescale λ1–λ5 was selected (every selection of every scan, B&D Fig. 12);
+* ``run_diagnostics`` — every other declared per-run diagnostic, per run and localizer (the
+  value's little-endian bytes);
+* ``artifacts`` — what a localizer handed over after a day (``Localizer.day_artifacts``, e.g.
+  the dynamic map's snapshot): bytes, or named arrays stored as ``.npz`` (read without pickle);
 * ``geometry`` — the static segments of each run's world (for report figures);
 * ``checkpoint`` — the pickled driver and RNG states, the next run to do, the scenario hash,
   the names and SHA-256 digests of the localizer files, and a SHA-256 of the blob, so a
@@ -23,16 +33,22 @@ database: a large state (the dynamic maps are tens of MB) rewritten after every 
 churn the database's pages. The files are written before the transaction that names them
 commits, and older ones are deleted after it, so a process killed at any moment leaves
 either the whole run with its checkpoint or none of it.
+
+Results format 1 (no ``results_format`` in ``meta``: written before localizers declared their
+diagnostics) has the same tables but ``diagnostics``, ``run_diagnostics`` and ``artifacts``;
+it is read (report, export, check) but not continued.
 """
 
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import os
 import pickle
 import sqlite3
-from dataclasses import dataclass
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -41,6 +57,7 @@ from numpy.typing import NDArray
 
 from dynmap_sim.errors import InputError
 from dynmap_sim.metrics import RunSummary, day_summary, n_onsets, scan_errors
+from dynmap_sim.types import Diagnostic
 
 DB_NAME = "results.db"
 #: Folder (next to ``results.db``) of the checkpoint's localizer files.
@@ -80,24 +97,74 @@ CREATE TABLE IF NOT EXISTS timescale_counts (
     loc INTEGER, day INTEGER, run INTEGER, counts BLOB, PRIMARY KEY (loc, day, run));
 CREATE TABLE IF NOT EXISTS geometry (
     day INTEGER, run INTEGER, segments BLOB, segment_class BLOB, PRIMARY KEY (day, run));
+CREATE TABLE IF NOT EXISTS diagnostics (
+    loc INTEGER, name TEXT, per TEXT, dtype TEXT, shape TEXT, counts_of TEXT, doc TEXT,
+    PRIMARY KEY (loc, name));
+CREATE TABLE IF NOT EXISTS run_diagnostics (
+    loc INTEGER, day INTEGER, run INTEGER, name TEXT, value BLOB,
+    PRIMARY KEY (loc, day, run, name));
+CREATE TABLE IF NOT EXISTS artifacts (
+    loc INTEGER, day INTEGER, name TEXT, kind TEXT, data BLOB, PRIMARY KEY (loc, day, name));
 CREATE TABLE IF NOT EXISTS checkpoint (
     id INTEGER PRIMARY KEY CHECK (id = 1), next_index INTEGER, next_day INTEGER,
     next_run INTEGER, scenario_hash TEXT, seed INTEGER, sha256 TEXT, blob BLOB, created TEXT);
 """
 
-#: Timescales of Biber & Duckett's Table 1 (λ1-λ5), the length of ``timescale_counts`` rows.
-N_TIMESCALES = 5
+#: The layout this version writes (``results_format`` in ``meta``; none: format 1).
+RESULTS_FORMAT = 2
 
-#: Per-scan extras a localizer may report, stored as columns of ``estimates``.
-EXTRA_COLUMNS = ("scan_loglik", "lambda_min", "timescale", "safe_mode")
+#: Per-scan diagnostics with a column of ``estimates`` in every results format (NULL where a
+#: localizer does not declare or report them), and the column's type.
+SCAN_COLUMNS = {
+    "scan_loglik": "REAL",
+    "lambda_min": "REAL",
+    "timescale": "INTEGER",
+    "safe_mode": "INTEGER",
+}
+
+#: Per-run diagnostics with a table of their own (``loc, day, run, counts``; int64 values,
+#: rows only where a value is not all zero), as in results format 1.
+RUN_TABLES = ("timescale_counts",)
+
+#: The columns of ``estimates`` that are not diagnostics.
+ESTIMATE_COLUMNS = (
+    "loc",
+    "day",
+    "run",
+    "step",
+    "x",
+    "y",
+    "theta",
+    "err_m",
+    "err_theta_rad",
+    "var_x",
+    "var_y",
+    "var_theta",
+)
+
+#: A day artifact: bytes, or named arrays of numbers.
+Artifact = bytes | dict[str, np.ndarray]
+
+
+@dataclass
+class LocalizerDiagnostics:
+    """One localizer's diagnostics of one run: ``declared`` (its ``Localizer.diagnostics``),
+    ``per_scan`` name -> ``(T, *shape)`` float64 (NaN: not reported at that scan),
+    ``per_run`` name -> value of the declared shape, ``artifacts`` name -> what it handed
+    over after ``end_day`` (empty but after a day's last run)."""
+
+    declared: tuple[Diagnostic, ...] = ()
+    per_scan: dict[str, NDArray[np.float64]] = field(default_factory=dict)
+    per_run: dict[str, NDArray[Any]] = field(default_factory=dict)
+    artifacts: dict[str, Artifact] = field(default_factory=dict)
 
 
 @dataclass
 class RunRecord:
     """Everything one run produces, as arrays (written in bulk by :meth:`ResultsDB.write_run`).
 
-    ``truth`` ``(T, 3)``; ``estimates`` ``(L, T, 3)``; ``cov_diag`` ``(L, T, 3)``; ``extras``
-    ``(L, T, 4)`` in :data:`EXTRA_COLUMNS` order (NaN where not reported).
+    ``truth`` ``(T, 3)``; ``estimates`` ``(L, T, 3)``; ``cov_diag`` ``(L, T, 3)``;
+    ``diagnostics`` one :class:`LocalizerDiagnostics` per localizer (empty: none declared).
     """
 
     day: int
@@ -109,7 +176,6 @@ class RunRecord:
     collision: NDArray[np.bool_]
     estimates: NDArray[np.float64]
     cov_diag: NDArray[np.float64]
-    extras: NDArray[np.float64]
     confusion: NDArray[np.int64]  # (L, 4, 4)
     terminated: bool
     route_progress: float
@@ -119,7 +185,14 @@ class RunRecord:
     segments: NDArray[np.float64] | None = None
     segment_class: NDArray[np.int8] | None = None
     update_s: NDArray[np.float64] | None = None  # (L,) wall time spent in each update()
-    timescale_counts: NDArray[np.int64] | None = None  # (L, 5) selections of each timescale
+    diagnostics: list[LocalizerDiagnostics] = field(default_factory=list)
+
+    def scan_diagnostic(self, loc: int, name: str) -> NDArray[np.float64] | None:
+        """Per-scan values ``(T, ...)`` of diagnostic ``name`` of localizer ``loc`` (None
+        when it did not declare it)."""
+        if loc >= len(self.diagnostics):
+            return None
+        return self.diagnostics[loc].per_scan.get(name)
 
 
 @dataclass(frozen=True)
@@ -163,7 +236,9 @@ class ResultsDB:
         con.execute("PRAGMA synchronous=NORMAL")
         con.executescript(_SCHEMA)
         con.commit()
-        return cls(path, con)
+        db = cls(path, con)
+        db.set_meta(results_format=RESULTS_FORMAT)
+        return db
 
     @classmethod
     def open(cls, out_dir: str | Path) -> ResultsDB:
@@ -178,7 +253,15 @@ class ResultsDB:
             con.execute("SELECT count(*) FROM meta").fetchone()
         except sqlite3.DatabaseError as exc:
             raise InputError(f"{path}: not a dynmap_sim results database ({exc})") from None
-        return cls(path, con)
+        db = cls(path, con)
+        fmt = db.format
+        if fmt > RESULTS_FORMAT:
+            con.close()
+            raise InputError(
+                f"{path}: results format {fmt}, written by a newer dynmap_sim; this version "
+                f"reads results formats 1-{RESULTS_FORMAT}"
+            )
+        return db
 
     def close(self) -> None:
         self.con.close()
@@ -211,6 +294,41 @@ class ResultsDB:
     def labels(self) -> list[str]:
         return [r[0] for r in self.con.execute("SELECT label FROM localizers ORDER BY idx")]
 
+    @property
+    def format(self) -> int:
+        """The results format of this database (1: written before ``results_format``)."""
+        row = self.con.execute("SELECT value FROM meta WHERE key = 'results_format'").fetchone()
+        return 1 if row is None else int(json.loads(row[0]))
+
+    def _require_current_format(self) -> None:
+        if self.format != RESULTS_FORMAT:
+            raise InputError(
+                f"{self.path}: results format {self.format} (written by an earlier dynmap_sim, "
+                "before localizers declared their diagnostics) can be reported, exported and "
+                f"checked but not continued by this version (format {RESULTS_FORMAT}); start a "
+                "new experiment with another --out"
+            )
+
+    def _has_table(self, name: str) -> bool:
+        row = self.con.execute(
+            "SELECT 1 FROM sqlite_master WHERE type = 'table' AND name = ?", (name,)
+        ).fetchone()
+        return row is not None
+
+    def declared(self, loc: int) -> tuple[Diagnostic, ...]:
+        """The diagnostics localizer ``loc`` declared (none in results format 1)."""
+        if not self._has_table("diagnostics"):
+            return ()
+        rows = self.con.execute(
+            "SELECT name, dtype, shape, per, doc, counts_of FROM diagnostics WHERE loc = ? "
+            "ORDER BY rowid",
+            (loc,),
+        ).fetchall()
+        return tuple(
+            Diagnostic(name, dtype, tuple(json.loads(shape)), per, doc or "", counts_of)
+            for name, dtype, shape, per, doc, counts_of in rows
+        )
+
     # ------------------------------------------------------------------ writing
     def write_run(
         self,
@@ -227,6 +345,8 @@ class ResultsDB:
         d, r = rec.day, rec.run
         n_loc, n = rec.estimates.shape[:2]
         steps = np.arange(n)
+        diags = rec.diagnostics or [LocalizerDiagnostics() for _ in range(n_loc)]
+        self._require_current_format()
         files = self._write_localizer_files(checkpoint) if checkpoint is not None else []
         with self.con:
             # a run that was written before a crash (cannot happen with one transaction, but
@@ -237,11 +357,13 @@ class ResultsDB:
                 "run_summaries",
                 "point_classes",
                 "timescale_counts",
+                "run_diagnostics",
                 "geometry",
             ):
                 self.con.execute(f"DELETE FROM {table} WHERE day=? AND run=?", (d, r))
             self.con.execute("DELETE FROM runs WHERE day=? AND run=?", (d, r))
             self.con.execute("DELETE FROM events WHERE day=? AND run=?", (d, r))
+            self._declare(diags)
             # one float64 table per insert, converted once; SQLite stores NaN as NULL and
             # turns whole-number reals into integers in INTEGER columns
             ones = np.ones(n)
@@ -252,6 +374,11 @@ class ResultsDB:
             for k in range(n_loc):
                 est = rec.estimates[k]
                 err, herr = scan_errors(rec.truth, est)
+                g = diags[k]
+                on_scan = [x for x in g.declared if x.per == "scan"]
+                scalars = [x for x in on_scan if not x.shape]
+                arrays = [x for x in on_scan if x.shape]
+                none = np.full(n, np.nan)
                 tab = np.column_stack(
                     [
                         k * ones,
@@ -262,21 +389,29 @@ class ResultsDB:
                         err,
                         herr,
                         rec.cov_diag[k],
-                        rec.extras[k],
+                        *[g.per_scan.get(x.name, none).reshape(n) for x in scalars],
                     ]
                 )
+                rows = tab.tolist()
+                for x in arrays:
+                    values = g.per_scan.get(x.name, np.full((n, *x.shape), np.nan))
+                    for row, v in zip(rows, values, strict=True):
+                        row.append(_blob(v, x))
+                cols = ESTIMATE_COLUMNS + tuple(f'"{x.name}"' for x in scalars + arrays)
                 self.con.executemany(
-                    "INSERT INTO estimates VALUES (?,?,?,?,?,?,?,?,?,?,?,?,?,?,?,?)", tab.tolist()
+                    f"INSERT INTO estimates ({', '.join(cols)}) "
+                    f"VALUES ({', '.join('?' * len(cols))})",
+                    rows,
                 )
                 self.con.execute(
                     "INSERT INTO point_classes VALUES (?,?,?,?)",
                     (k, d, r, np.ascontiguousarray(rec.confusion[k], dtype="<i8").tobytes()),
                 )
-                if rec.timescale_counts is not None and rec.timescale_counts[k].any():
-                    counts = np.ascontiguousarray(rec.timescale_counts[k], dtype="<i8")
+                self._write_run_diagnostics(k, d, r, g)
+                for name, value in g.artifacts.items():
                     self.con.execute(
-                        "INSERT INTO timescale_counts VALUES (?,?,?,?)",
-                        (k, d, r, counts.tobytes()),
+                        "INSERT OR REPLACE INTO artifacts VALUES (?,?,?,?,?)",
+                        (k, d, name, *_encode_artifact(name, value)),
                     )
             self.con.execute(
                 "INSERT INTO runs VALUES (?,?,?,?,?,?,?,?,?,?,?)",
@@ -329,6 +464,54 @@ class ResultsDB:
                 self._put_checkpoint(checkpoint, files, scenario_hash, seed)
         if checkpoint is not None:
             self._remove_stale_localizer_files({name for name, _ in files})
+
+    def _declare(self, diags: list[LocalizerDiagnostics]) -> None:
+        """Record each localizer's declarations; add a column to ``estimates`` for each
+        per-scan diagnostic that has none yet (in the open transaction)."""
+        cols = {
+            name: str(kind).upper()
+            for _, name, kind, *_ in self.con.execute("PRAGMA table_info(estimates)")
+        }
+        for k, g in enumerate(diags):
+            names = [x.name for x in g.declared]
+            for x in g.declared:
+                where = f"diagnostic {x.name!r} of localizer {k}"
+                if names.count(x.name) > 1:
+                    raise InputError(f"{where} is declared twice")
+                self.con.execute(
+                    "INSERT OR REPLACE INTO diagnostics VALUES (?,?,?,?,?,?,?)",
+                    (k, x.name, x.per, x.dtype, json.dumps(list(x.shape)), x.counts_of, x.doc),
+                )
+                if x.per != "scan":
+                    continue
+                kind = _column_type(x)
+                if x.name in ESTIMATE_COLUMNS:
+                    raise InputError(f"{where}: {x.name!r} is a column of every estimate")
+                if x.name in SCAN_COLUMNS and x.shape:
+                    raise InputError(f"{where} must be a scalar (a column since format 1)")
+                have = cols.get(x.name)
+                if have is None:
+                    self.con.execute(f'ALTER TABLE estimates ADD COLUMN "{x.name}" {kind}')
+                    cols[x.name] = kind
+                elif have != kind and x.name not in SCAN_COLUMNS:
+                    raise InputError(f"{where} is {kind} but another localizer declared it {have}")
+
+    def _write_run_diagnostics(self, k: int, d: int, r: int, g: LocalizerDiagnostics) -> None:
+        for x in g.declared:
+            if x.per != "run" or x.name not in g.per_run:
+                continue
+            value = np.asarray(g.per_run[x.name]).reshape(x.shape)
+            if x.name in RUN_TABLES:
+                if value.any():
+                    counts = np.ascontiguousarray(value, dtype="<i8")
+                    self.con.execute(
+                        f"INSERT INTO {x.name} VALUES (?,?,?,?)", (k, d, r, counts.tobytes())
+                    )
+            else:
+                self.con.execute(
+                    "INSERT INTO run_diagnostics VALUES (?,?,?,?,?)",
+                    (k, d, r, x.name, _blob(value, x)),
+                )
 
     def _day_summaries(self, day: int, n_loc: int) -> list[dict[str, float]]:
         """Summaries of all scans of ``day`` per localizer (reads uncommitted rows too)."""
@@ -387,11 +570,16 @@ class ResultsDB:
         )
 
     # ------------------------------------------------------------------ reading
-    def load_checkpoint(self, scenario_hash: str, seed: int) -> Checkpoint | None:
+    def load_checkpoint(
+        self, scenario_hash: str, seed: int, to_resume: bool = True
+    ) -> Checkpoint | None:
         """The last checkpoint, verified; None when the experiment has none yet.
 
-        Raises :class:`InputError` when it is corrupt or belongs to another scenario/seed.
+        Raises :class:`InputError` when it is corrupt or belongs to another scenario/seed, or
+        (``to_resume``) when this version cannot continue the results (an older format).
         """
+        if to_resume:
+            self._require_current_format()
         try:
             row = self.con.execute(
                 "SELECT next_index, next_day, next_run, scenario_hash, seed, sha256, blob "
@@ -456,7 +644,7 @@ class ResultsDB:
             params,
         ).fetchall()
         a = np.array(rows, dtype=np.float64).reshape(-1, 16)
-        return {
+        out = {
             "day": a[:, 0].astype(int),
             "run": a[:, 1].astype(int),
             "step": a[:, 2].astype(int),
@@ -470,19 +658,63 @@ class ResultsDB:
             "timescale": a[:, 14],
             "safe_mode": a[:, 15],
         }
+        extra = [x for x in self.declared(loc) if x.per == "scan" and x.name not in SCAN_COLUMNS]
+        if extra:
+            names = ", ".join(f'e."{x.name}"' for x in extra)
+            rows = self.con.execute(
+                f"SELECT {names} FROM estimates e WHERE {where} ORDER BY e.day, e.run, e.step",
+                params,
+            ).fetchall()
+            for j, x in enumerate(extra):
+                out[x.name] = _column_values([row[j] for row in rows], x)
+        return out
+
+    def run_diagnostic(self, loc: int, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Days, runs and values ``(n_runs, *shape)`` of the per-run diagnostic ``name`` of
+        localizer ``loc``, in day and run order (``timescale_counts``: only runs with a
+        selection; empty when there are none, or the results predate them)."""
+        x = next((x for x in self.declared(loc) if x.name == name and x.per == "run"), None)
+        if name in RUN_TABLES:
+            sql = f"SELECT day, run, counts FROM {name} WHERE loc=? ORDER BY day, run"
+            rows = self.con.execute(sql, (loc,)).fetchall()
+            values = [np.frombuffer(b, dtype="<i8") for _, _, b in rows]
+            shape = x.shape if x is not None else (values[0].shape if values else (0,))
+        elif x is not None and self._has_table("run_diagnostics"):
+            rows = self.con.execute(
+                "SELECT day, run, value FROM run_diagnostics WHERE loc=? AND name=? "
+                "ORDER BY day, run",
+                (loc, name),
+            ).fetchall()
+            values = [_from_blob(b, x) for _, _, b in rows]
+            shape = x.shape
+        else:
+            rows, values, shape = [], [], ()
+        days = np.array([int(row[0]) for row in rows], dtype=int)
+        runs = np.array([int(row[1]) for row in rows], dtype=int)
+        return days, runs, np.array(values).reshape(len(rows), *shape)
+
+    def run_diagnostic_per_day(self, loc: int, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """Days and the per-day sums ``(n_days, *shape)`` of a per-run diagnostic."""
+        days, _, values = self.run_diagnostic(loc, name)
+        uniq = np.unique(days)
+        sums = [values[days == day].sum(axis=0) for day in uniq]
+        return uniq, np.array(sums, dtype=values.dtype).reshape(len(uniq), *values.shape[1:])
 
     def timescale_counts_per_day(self, loc: int) -> tuple[np.ndarray, np.ndarray]:
-        """Days and ``(n_days, 5)`` counts of every timescale selection of localizer ``loc``
-        (empty when it selected none, or the results predate these counts)."""
-        per_day: dict[int, np.ndarray] = {}
-        for day, blob in self.con.execute(
-            "SELECT day, counts FROM timescale_counts WHERE loc=? ORDER BY day, run", (loc,)
-        ):
-            c = np.frombuffer(blob, dtype="<i8")
-            per_day[int(day)] = per_day.get(int(day), np.zeros_like(c)) + c
-        days = np.array(sorted(per_day), dtype=int)
-        counts = np.array([per_day[d] for d in days], dtype=np.int64)
-        return days, counts.reshape(len(days), N_TIMESCALES)
+        """Days and ``(n_days, n_timescales)`` counts of every timescale selection of
+        localizer ``loc`` (empty when it selected none, or the results predate these counts)."""
+        return self.run_diagnostic_per_day(loc, "timescale_counts")
+
+    def artifacts(self, loc: int, name: str) -> list[tuple[int, Artifact]]:
+        """``[(day, artifact), ...]`` that localizer ``loc`` handed over as ``name``, by day
+        (bytes, or named arrays; none in results format 1)."""
+        if not self._has_table("artifacts"):
+            return []
+        rows = self.con.execute(
+            "SELECT day, kind, data FROM artifacts WHERE loc=? AND name=? ORDER BY day",
+            (loc, name),
+        ).fetchall()
+        return [(int(day), _decode_artifact(kind, data)) for day, kind, data in rows]
 
     def geometry(self, day: int, run: int) -> tuple[np.ndarray, np.ndarray] | None:
         row = self.con.execute(
@@ -492,6 +724,60 @@ class ResultsDB:
             return None
         seg = np.frombuffer(row[0], dtype="<f8").reshape(-1, 4)
         return seg, np.frombuffer(row[1], dtype="i1")
+
+
+def _column_type(x: Diagnostic) -> str:
+    """The SQL type of a per-scan diagnostic's column."""
+    if x.shape:
+        return "BLOB"
+    return "REAL" if np.dtype(x.dtype).kind == "f" else "INTEGER"
+
+
+def _blob(value: Any, x: Diagnostic) -> bytes | None:
+    """A value's little-endian bytes in the declared dtype (None when any element is NaN)."""
+    v = np.asarray(value)
+    if v.dtype.kind == "f" and np.isnan(v).any():
+        return None
+    return np.ascontiguousarray(v, dtype=np.dtype(x.dtype).newbyteorder("<")).tobytes()
+
+
+def _from_blob(blob: bytes | None, x: Diagnostic) -> np.ndarray:
+    if blob is None:
+        return np.full(x.shape, np.nan)
+    return np.frombuffer(blob, dtype=np.dtype(x.dtype).newbyteorder("<")).reshape(x.shape)
+
+
+def _column_values(values: list[Any], x: Diagnostic) -> np.ndarray:
+    """A column of a per-scan diagnostic as float64 ``(N, *shape)`` (NaN: NULL)."""
+    if not x.shape:
+        return np.array([np.nan if v is None else v for v in values], dtype=np.float64)
+    out = np.full((len(values), *x.shape), np.nan)
+    for i, v in enumerate(values):
+        if v is not None:
+            out[i] = _from_blob(v, x)
+    return out
+
+
+def _encode_artifact(name: str, value: Any) -> tuple[str, bytes]:
+    """``("bytes", data)`` or ``("npz", data)`` of named arrays (no pickles)."""
+    if isinstance(value, bytes | bytearray | memoryview):
+        return "bytes", bytes(value)
+    if isinstance(value, Mapping):
+        arrays = {str(k): np.asarray(v) for k, v in value.items()}
+        if all(a.dtype.kind in "biuf" for a in arrays.values()):
+            buf = io.BytesIO()
+            np.savez_compressed(buf, **arrays)  # type: ignore[arg-type]
+            return "npz", buf.getvalue()
+    raise InputError(
+        f"day artifact {name!r}: bytes or named arrays of numbers, not {type(value).__name__}"
+    )
+
+
+def _decode_artifact(kind: str, data: bytes) -> Artifact:
+    if kind == "bytes":
+        return bytes(data)
+    with np.load(io.BytesIO(data), allow_pickle=False) as z:
+        return {k: z[k] for k in z.files}
 
 
 def _none_if_nan(v: Any) -> Any:

@@ -332,7 +332,6 @@ class ExperimentRunner:
             collision=sim.collision,
             estimates=np.stack([o.estimates for o in outs]).reshape(len(outs), -1, 3),
             cov_diag=np.stack([o.cov_diag for o in outs]).reshape(len(outs), -1, 3),
-            extras=np.stack([o.extras for o in outs]).reshape(len(outs), -1, 4),
             confusion=np.stack([o.confusion for o in outs]).reshape(len(outs), 4, 4),
             terminated=sim.terminated,
             route_progress=sim.route_progress,
@@ -342,7 +341,7 @@ class ExperimentRunner:
             segments=sim.segments,
             segment_class=sim.segment_class,
             update_s=np.array([o.update_s for o in outs], dtype=np.float64),
-            timescale_counts=np.stack([o.timescale_counts for o in outs]),
+            diagnostics=[o.diagnostics for o in outs],
         )
         run_sum = [self._run_summary(k, rec) for k in range(len(outs))]
         self._loc_states = [o.state for o in outs]
@@ -364,8 +363,8 @@ class ExperimentRunner:
             rec.truth,
             rec.estimates[k],
             rec.t_s,
-            scan_loglik=rec.extras[k, :, 0],
-            lambda_min=rec.extras[k, :, 1],
+            scan_loglik=rec.scan_diagnostic(k, "scan_loglik"),
+            lambda_min=rec.scan_diagnostic(k, "lambda_min"),
             update_s=None if rec.update_s is None else float(rec.update_s[k]),
         )
 

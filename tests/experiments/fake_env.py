@@ -78,11 +78,18 @@ class FakeEnv:
 
 
 from dynmap_sim.agent.localizer import Localizer  # noqa: E402
-from dynmap_sim.types import PoseEstimate  # noqa: E402
+from dynmap_sim.types import Diagnostic, PoseEstimate  # noqa: E402
 
 
 class RecordingLocalizer(Localizer):
-    """Dead reckoning that logs the calls it gets and reports every extra."""
+    """Dead reckoning that logs the calls it gets and reports (and declares) every extra."""
+
+    diagnostics = (
+        Diagnostic("scan_loglik", "float64"),
+        Diagnostic("lambda_min", "float64"),
+        Diagnostic("timescale", "int64"),
+        Diagnostic("safe_mode", "bool"),
+    )
 
     def __init__(self, laser, rng, **params):
         super().__init__(laser, rng, **params)
@@ -125,3 +132,35 @@ class UnpicklableLocalizer(RecordingLocalizer):
     def __init__(self, laser, rng, **params):
         super().__init__(laser, rng, **params)
         self.hook = lambda x: x
+
+
+class DeclaringLocalizer(RecordingLocalizer):
+    """Declares diagnostics of its own, like Hentschel & Wagner's would: point-class counts
+    and the chosen map slot per scan, slot usage counted per run, the distance driven per run
+    from its hook, and a day artifact."""
+
+    diagnostics = (
+        Diagnostic("point_class_counts", "int64", (4,)),
+        Diagnostic("map_slot", "int64"),
+        Diagnostic("slot_counts", "int64", (3,), per="run", counts_of="map_slot"),
+        Diagnostic("path_m", "float64", per="run"),
+    )
+
+    def begin_run(self, prior):
+        super().begin_run(prior)
+        self.n_updates = 0
+
+    def update(self, odom, scan):
+        est = super().update(odom, scan)
+        self.n_updates += 1
+        est.extras = {
+            "point_class_counts": [0, 1, 2, self.n_updates],
+            "map_slot": self.n_updates % 3,
+        }
+        return est
+
+    def run_diagnostics(self):
+        return {"path_m": 0.1 * self.n_updates}
+
+    def day_artifacts(self):
+        return {"day_note": {"updates": np.array([self.n_updates])}}

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import csv
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -12,6 +13,7 @@ import pytest
 from dynmap_sim.agent.maps.dynamic_map import MapSnapshot
 from dynmap_sim.analysis.check import evaluate
 from dynmap_sim.analysis.report import write_report
+from dynmap_sim.experiments.results import ResultsDB
 from dynmap_sim.experiments.runner import run_experiment
 from dynmap_sim.experiments.scenario import parse_scenario
 from dynmap_sim.studies.biber_duckett.findings import structure_finding
@@ -104,6 +106,12 @@ def dynamic_report(tmp_path_factory):
     }
     scn = parse_scenario(data, out.parent / "ci-dynamic.toml")
     run_experiment(scn, out_dir=out, progress=False, workers=1)
+    # the daily map snapshots are day artifacts in the store: no checkpoint is unpickled
+    shutil.rmtree(out / "checkpoint")
+    with ResultsDB.open(out) as db:
+        snaps = db.artifacts(0, "map_snapshot")
+        assert [day for day, _ in snaps] == [1, 2, 3]
+        assert MapSnapshot.from_arrays(snaps[0][1]).levels == LEVELS
     return out, {p.name for p in write_report(out)}
 
 

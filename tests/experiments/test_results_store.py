@@ -1,20 +1,36 @@
 """The SQLite results store: bulk rows, summaries, checkpoints and their integrity checks."""
 
+import shutil
 import sqlite3
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from dynmap_sim.errors import InputError
-from dynmap_sim.experiments.results import Checkpoint, ResultsDB, RunRecord
+from dynmap_sim.experiments.results import (
+    RESULTS_FORMAT,
+    Checkpoint,
+    LocalizerDiagnostics,
+    ResultsDB,
+    RunRecord,
+)
+from dynmap_sim.types import Diagnostic
+
+#: A results folder written by the version before declared diagnostics (results format 1).
+FORMAT_1 = Path(__file__).resolve().parents[1] / "data" / "pre-round-2" / "ci-apartment"
+
+LOGLIK = Diagnostic("scan_loglik", "float64")
+COUNTS = Diagnostic("timescale_counts", "int64", (5,), per="run", counts_of="timescales")
 
 
 def record(day, run, n=20, n_loc=2, offset=0.1):
     t = 100.0 + 0.1 * np.arange(n)
     truth = np.stack([0.1 * np.arange(n), np.zeros(n), np.zeros(n)], axis=1)
     est = np.stack([truth + [offset * (k + 1), 0.0, 0.0] for k in range(n_loc)])
-    extras = np.full((n_loc, n, 4), np.nan)
-    extras[1, :, 0] = -2.0  # the second localizer reports a scan log-likelihood
+    diagnostics = [LocalizerDiagnostics() for _ in range(n_loc)]
+    # the second localizer reports a scan log-likelihood
+    diagnostics[1] = LocalizerDiagnostics((LOGLIK,), {"scan_loglik": np.full(n, -2.0)})
     return RunRecord(
         day=day,
         run=run,
@@ -25,7 +41,6 @@ def record(day, run, n=20, n_loc=2, offset=0.1):
         collision=np.zeros(n, bool),
         estimates=est,
         cov_diag=np.full((n_loc, n, 3), 0.01),
-        extras=extras,
         confusion=np.zeros((n_loc, 4, 4), np.int64),
         terminated=True,
         route_progress=1.0,
@@ -34,6 +49,7 @@ def record(day, run, n=20, n_loc=2, offset=0.1):
         events=[(3, 100.3, "detour", "waypoint 1")],
         segments=np.array([[0.0, 0.0, 1.0, 0.0]]),
         segment_class=np.array([1], np.int8),
+        diagnostics=diagnostics,
     )
 
 
@@ -111,7 +127,8 @@ def test_timescale_selection_counts_add_up_per_day(tmp_path):
     db = make_db(tmp_path)
     for run, counts in ((1, [5, 0, 1, 2, 3]), (2, [1, 1, 1, 1, 1])):
         rec = record(1, run)
-        rec.timescale_counts = np.array([[0] * 5, counts], np.int64)  # only the second selects
+        for k, c in enumerate(([0] * 5, counts)):  # only the second selects
+            rec.diagnostics[k] = LocalizerDiagnostics((COUNTS,), {}, {COUNTS.name: np.array(c)})
         db.write_run(rec, [], run == 2, None, "h", 7)
     days, counts = db.timescale_counts_per_day(1)
     assert days.tolist() == [1] and counts.tolist() == [[6, 1, 2, 3, 4]]
@@ -120,3 +137,132 @@ def test_timescale_selection_counts_add_up_per_day(tmp_path):
     db.write_run(record(1, 2), [], True, None, "h", 7)  # a redone run replaces its counts
     assert db.timescale_counts_per_day(1)[1].tolist() == [[5, 0, 1, 2, 3]]
     db.close()
+
+
+#: What a localizer like Hentschel & Wagner's might report: point-class counts per scan, the
+#: chosen map slot, tracked objects; a per-run value from its own hook; a day artifact.
+HW = (
+    Diagnostic("point_class_counts", "int64", (4,), doc="unknown/dynamic/semi-static/static"),
+    Diagnostic("map_slot", "int64", doc="the chosen map"),
+    Diagnostic("n_tracked", "uint16"),
+    Diagnostic("slot_counts", "int64", (3,), per="run", counts_of="map_slot"),
+    Diagnostic("mean_speed", "float64", (2,), per="run"),
+)
+
+
+def hw_diagnostics(n, day_done):
+    counts = np.tile([0, 2, 5, 40], (n, 1)).astype(float)
+    counts[3] = np.nan  # not reported at scan 3
+    return LocalizerDiagnostics(
+        HW,
+        {
+            "point_class_counts": counts,
+            "map_slot": np.arange(n, dtype=float) % 3,
+            "n_tracked": np.full(n, 7.0),
+        },
+        {"slot_counts": np.array([7, 7, 6]), "mean_speed": np.array([0.5, 0.25])},
+        {"objects": {"xy": np.zeros((3, 2)), "ids": np.arange(3)}, "log": b"\x00\x01"}
+        if day_done
+        else {},
+    )
+
+
+def test_a_new_localizer_declares_its_diagnostics_and_the_store_keeps_them(tmp_path):
+    db = make_db(tmp_path)
+    assert db.format == RESULTS_FORMAT == db.meta()["results_format"]
+    for run in (1, 2):
+        rec = record(1, run)
+        rec.diagnostics[0] = hw_diagnostics(20, day_done=run == 2)
+        db.write_run(rec, [], run == 2, None, "h", 7)
+    assert db.declared(0) == HW and db.declared(1) == (LOGLIK,)
+    d = db.per_scan(0)
+    assert d["point_class_counts"].shape == (40, 4)
+    np.testing.assert_array_equal(d["point_class_counts"][0], [0, 2, 5, 40])
+    assert np.isnan(d["point_class_counts"][3]).all() and np.isnan(d["scan_loglik"]).all()
+    assert d["map_slot"][:4].tolist() == [0, 1, 2, 0] and set(d["n_tracked"]) == {7.0}
+    assert "map_slot" not in db.per_scan(1)  # declared by the other localizer only
+    cols = [r[1] for r in db.query("PRAGMA table_info(estimates)")]
+    assert cols[-3:] == ["point_class_counts", "map_slot", "n_tracked"]
+    days, runs, speed = db.run_diagnostic(0, "mean_speed")
+    assert days.tolist() == [1, 1] and runs.tolist() == [1, 2]
+    np.testing.assert_array_equal(speed, [[0.5, 0.25], [0.5, 0.25]])
+    days, per_day = db.run_diagnostic_per_day(0, "slot_counts")
+    assert days.tolist() == [1] and per_day.tolist() == [[14, 14, 12]]
+    ((day, objects),) = db.artifacts(0, "objects")
+    assert day == 1 and objects["ids"].tolist() == [0, 1, 2]
+    assert db.artifacts(0, "log") == [(1, b"\x00\x01")] and db.artifacts(1, "objects") == []
+    db.close()
+
+
+def test_declarations_that_cannot_be_stored_are_refused(tmp_path):
+    db = make_db(tmp_path)
+    for bad, match in (
+        ((Diagnostic("err_m", "float64"),), "column of every estimate"),
+        ((Diagnostic("scan_loglik", "float64", (2,)),), "must be a scalar"),
+        ((LOGLIK, LOGLIK), "declared twice"),
+    ):
+        rec = record(1, 1)
+        rec.diagnostics[0] = LocalizerDiagnostics(bad)
+        with pytest.raises(InputError, match=match):
+            db.write_run(rec, [], True, None, "h", 7)
+    rec = record(1, 1)
+    rec.diagnostics[0] = LocalizerDiagnostics((Diagnostic("slot", "int64"),))
+    rec.diagnostics[1] = LocalizerDiagnostics((Diagnostic("slot", "float64"),))
+    with pytest.raises(InputError, match="'slot' of localizer 1 is REAL but another"):
+        db.write_run(rec, [], True, None, "h", 7)
+    assert db.query("SELECT count(*) FROM scans")[0][0] == 0  # nothing of it was kept
+    db.close()
+
+
+def test_results_of_format_1_are_read_but_not_continued(tmp_path):
+    old = tmp_path / "old"
+    shutil.copytree(FORMAT_1, old)
+    with ResultsDB.open(old) as db:
+        assert db.format == 1 and db.declared(0) == ()
+        d = db.per_scan(0)
+        assert len(d["err_m"]) > 0 and set(d) >= {"scan_loglik", "timescale", "safe_mode"}
+        assert db.artifacts(0, "map_snapshot") == []
+        assert len(db.timescale_counts_per_day(0)[0]) == 0
+        with pytest.raises(InputError, match="results format 1 .* not continued"):
+            db.write_run(record(9, 1), [], True, None, "h", 0)
+        meta = db.meta()
+        with pytest.raises(InputError, match="results format 1"):
+            db.load_checkpoint(meta["experiment_hash"], meta["seed"])
+        assert db.load_checkpoint(meta["experiment_hash"], meta["seed"], to_resume=False)
+
+
+def test_a_newer_format_is_refused(tmp_path):
+    make_db(tmp_path).set_meta(results_format=RESULTS_FORMAT + 1)
+    with pytest.raises(
+        InputError, match=f"results format {RESULTS_FORMAT + 1}, written by a newer"
+    ):
+        ResultsDB.open(tmp_path)
+
+
+def test_declarations_are_checked_where_they_are_made():
+    from dynmap_sim.experiments.bench import DiagnosticsRecorder
+
+    with pytest.raises(ValueError, match="lower case"):
+        Diagnostic("Scan Loglik", "float64")
+    with pytest.raises(ValueError, match="not numeric"):
+        Diagnostic("note", "str")
+    with pytest.raises(ValueError, match="counts_of needs per='run'"):
+        Diagnostic("slots", "int64", (3,), counts_of="slot")
+
+    class Twice:
+        diagnostics = (LOGLIK, LOGLIK)
+
+    with pytest.raises(InputError, match="distinct names"):
+        DiagnosticsRecorder(Twice(), 3)
+
+    class Undeclared:
+        diagnostics = (COUNTS,)
+
+        def run_diagnostics(self):
+            return {"path_m": 1.0}
+
+    rec = DiagnosticsRecorder(Undeclared(), 2)
+    rec.scan(0, {"timescales": (0, 4, 4, 9)})  # 9 is no timescale: not counted
+    assert rec.out.per_run["timescale_counts"].tolist() == [1, 0, 0, 0, 2]
+    with pytest.raises(ValueError, match="'path_m' is not a declared per-run value"):
+        rec.end_run(Undeclared())

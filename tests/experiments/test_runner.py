@@ -204,3 +204,32 @@ def test_report_with_extras_and_point_classes(tmp_path):
     assert [float(r["mean_lambda_min"]) for r in rows] == [100.0, 100.0]
     md = (tmp_path / "o" / "summary.md").read_text()
     assert "## Point classes" in md and "| rec | static | 1.000 | 1.000 |" in md
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_declared_diagnostics_reach_the_store(tmp_path, workers):
+    """A localizer's own diagnostics get columns and rows without any schema edit."""
+    from dynmap_sim.experiments.results import ResultsDB
+
+    scn = scenario(
+        tmp_path,
+        days=[1, 2],
+        localizers=[
+            {"name": "fake_env:DeclaringLocalizer", "label": "hw"},
+            {"name": "odometry", "label": "odo"},
+        ],
+    )
+    run(scn, tmp_path / "o", workers=workers)
+    with ResultsDB.open(tmp_path / "o") as db:
+        d = db.per_scan(0)
+        n = len(d["step"])
+        assert n == 2 * 51 and d["point_class_counts"].shape == (n, 4)
+        np.testing.assert_array_equal(d["point_class_counts"][:, 3], np.tile(np.arange(1, 52), 2))
+        np.testing.assert_array_equal(d["map_slot"], np.tile(np.arange(1, 52) % 3, 2))
+        assert np.isnan(d["scan_loglik"]).all()  # it reports no standard diagnostic
+        days, counts = db.run_diagnostic_per_day(0, "slot_counts")
+        assert days.tolist() == [1, 2] and counts.tolist() == [[17, 17, 17]] * 2
+        assert db.run_diagnostic(0, "path_m")[2].tolist() == pytest.approx([5.1, 5.1])
+        notes = db.artifacts(0, "day_note")
+        assert [(day, a["updates"].tolist()) for day, a in notes] == [(1, [51]), (2, [51])]
+        assert db.declared(1) == () and "map_slot" not in db.per_scan(1)

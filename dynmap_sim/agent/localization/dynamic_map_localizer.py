@@ -67,7 +67,15 @@ from dynmap_sim.agent.maps.dynamic_map import DynamicMap, MapSnapshot
 from dynmap_sim.agent.maps.local_map import TABLE1
 from dynmap_sim.agent.maps.sample_set import to_mm
 from dynmap_sim.agent.params import coerce_fields, config_from_params
-from dynmap_sim.types import FloatArray, LaserSpec, Odometry, PoseEstimate, Prior, Scan
+from dynmap_sim.types import (
+    Diagnostic,
+    FloatArray,
+    LaserSpec,
+    Odometry,
+    PoseEstimate,
+    Prior,
+    Scan,
+)
 
 _MODES = ("dynamic", "static", "static+stm")
 
@@ -194,7 +202,36 @@ class DynamicMapLocalizer(Localizer):
     ``mode``: ``"dynamic"``, ``"static"`` or ``"static+stm"`` (the registered variants set
     it); ``config``: a :class:`DynamicMapConfig`; ``params``: its fields by name (replacing
     those of ``config``), e.g. a scenario's ``params`` table.
+
+    Besides its declared :attr:`diagnostics`, it hands over a ``map_snapshot`` artifact
+    (:meth:`day_artifacts`) on every day its map learned.
     """
+
+    diagnostics = (
+        Diagnostic(
+            "scan_loglik",
+            "float64",
+            doc="mean per-reading log-likelihood of the scan under the selected models (Fig. 10)",
+        ),
+        Diagnostic(
+            "lambda_min", "float64", doc="smallest eigenvalue of the inverse covariance (Fig. 11)"
+        ),
+        Diagnostic(
+            "timescale",
+            "int64",
+            doc="level of the best-fitting selection, 0 = λ1 ... 4 = λ5 (4 in safe mode), -1 none",
+        ),
+        Diagnostic("safe_mode", "bool", doc="the current map fell back to safe mode (§4.3)"),
+        Diagnostic(
+            "timescale_counts",
+            "int64",
+            (len(TABLE1),),
+            per="run",
+            counts_of="timescales",
+            doc="selections of each timescale λ1-λ5 over the run, every one of every scan "
+            "(Figs. 12-13)",
+        ),
+    )
 
     def __init__(
         self,
@@ -471,6 +508,14 @@ class DynamicMapLocalizer(Localizer):
         self.days_done += 1
         if self.mode != "dynamic" and self.days_done >= self.config.freeze_after_day:
             self.frozen = True
+
+    def day_artifacts(self) -> dict[str, dict[str, np.ndarray]]:
+        """``map_snapshot``: λ2–λ5 of every local map after this day's learning
+        (:meth:`MapSnapshot.to_arrays`), on the days the map learned (and
+        ``config.day_snapshots``)."""
+        if self.day_snapshots and self.day_snapshots[-1][0] == self._day:
+            return {"map_snapshot": self.day_snapshots[-1][1].to_arrays()}
+        return {}
 
     def _init_local_maps(self, keyframes: list) -> None:
         """Initial local maps from the first run's keyframes (§4), ``local_map_spacing_m``

@@ -71,7 +71,7 @@ from dynmap_sim.agent.localization.motion_model import sample_odometry_motion
 from dynmap_sim.agent.localization.resampling import low_variance_resample
 from dynmap_sim.agent.localizer import Localizer, MapUser, register_localizer
 from dynmap_sim.agent.maps.map_source import MapSource, make_map_source
-from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Prior, Scan
+from dynmap_sim.types import Diagnostic, LaserSpec, Odometry, PoseEstimate, Prior, Scan
 
 FloatArray = NDArray[np.float64]
 
@@ -491,6 +491,15 @@ class StaticMCL(Localizer, MapUser):
     ``mapper_params``: fields of the first-run SLAM's
     :class:`~dynmap_sim.agent.mapping.first_run.FirstRunConfig` (flat names).
     """
+
+    diagnostics = (
+        Diagnostic(
+            "scan_loglik",
+            "float64",
+            doc="mean per-beam log-likelihood of the scan at the estimate (likelihood field)",
+        ),
+        Diagnostic("lambda_min", "float64", doc="smallest eigenvalue of the inverse covariance"),
+    )
 
     def __init__(
         self,

@@ -11,7 +11,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,6 +41,29 @@ class MapSnapshot:
         ok = mm > 0
         r = mm[ok].astype(np.float64) / 1000.0
         return self.centres[local_map] + r[:, None] * np.column_stack([np.cos(th), np.sin(th)])[ok]
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        """The snapshot as named arrays (``centres``, ``levels``, ``sigma_max_m`` and
+        ``medians_mm_<level>``), as a day artifact is stored; :meth:`from_arrays` reads it."""
+        out = {
+            "centres": np.asarray(self.centres, dtype=np.float64),
+            "levels": np.asarray(self.levels, dtype=np.int64),
+            "sigma_max_m": np.asarray(self.sigma_max_m, dtype=np.float64),
+        }
+        for level, mm in zip(self.levels, self.medians_mm, strict=True):
+            out[f"medians_mm_{level}"] = np.asarray(mm, dtype=np.uint16)
+        return out
+
+    @classmethod
+    def from_arrays(cls, arrays: Mapping[str, np.ndarray]) -> MapSnapshot:
+        """The snapshot of :meth:`to_arrays`."""
+        levels = tuple(int(v) for v in np.asarray(arrays["levels"]).ravel())
+        return cls(
+            np.asarray(arrays["centres"], dtype=np.float64).reshape(-1, 2),
+            levels,
+            tuple(np.asarray(arrays[f"medians_mm_{v}"], dtype=np.uint16) for v in levels),
+            float(arrays["sigma_max_m"]),
+        )
 
 
 class DynamicMap:

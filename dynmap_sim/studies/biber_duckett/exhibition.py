@@ -10,8 +10,8 @@ median lies within ``tol_m`` of the exhibit says how much of the exhibition each
 remembers.
 
 :func:`exhibit_memory` is a pure function of arrays; :func:`exhibition_from_db` finds the
-exhibition and the snapshots in a results folder (the snapshots come from the checkpoint's
-``dynamic-map`` localizer), and :func:`plot_exhibition` draws the Fig. 9 look-alike.
+exhibition and the snapshots in a results folder (the ``dynamic-map``'s daily
+``map_snapshot`` artifacts), and :func:`plot_exhibition` draws the Fig. 9 look-alike.
 """
 
 from __future__ import annotations
@@ -116,7 +116,7 @@ def exhibition_from_db(
 ) -> tuple[ExhibitMemory, list, tuple, list[int]] | None:
     """(memory, snapshots, (segments, classes) of an exhibition day, exhibition days) of the
     first ``dynamic-map`` in a results database, or None (no such localizer, no exhibition,
-    no snapshots in the checkpoint). ``snapshots``: that localizer's daily snapshots when
+    no snapshots). ``snapshots``: that localizer's daily snapshots when
     already loaded (:func:`~.map_structure.dynamic_map_snapshots`)."""
     geo_rows = db.query("SELECT day, run FROM geometry ORDER BY day, run")
     ex_days, ex_geom = [], None

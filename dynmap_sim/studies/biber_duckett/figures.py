@@ -21,7 +21,9 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from dynmap_sim.experiments.results import N_TIMESCALES
+#: Biber & Duckett's timescales λ1–λ5 (Table 1): the bins of the per-scan fallback of
+#: :func:`selection_counts_per_day` (results without the per-run ``timescale_counts``).
+N_TIMESCALES = 5
 
 
 def daily_means(day: NDArray[np.integer], values: NDArray[np.floating]) -> tuple[np.ndarray, ...]:

@@ -3,9 +3,10 @@
 Biber & Duckett verified visually that the accuracy of the local maps increased over time:
 "in parts of the environment where changes often occur, static parts like walls emerge while
 moving objects like chairs that could be observed in the initial map disappear" (§5.2,
-Fig. 7). With ground truth this is a number. For every day a ``dynamic-map`` kept a
-snapshot of its sub-maps λ2–λ5 (:class:`~dynmap_sim.agent.maps.dynamic_map.MapSnapshot`:
-ray medians with ``σ ≤ 10 cm``), take all their points and measure, per timescale,
+Fig. 7). With ground truth this is a number. For every day a ``dynamic-map`` handed over a
+snapshot of its sub-maps λ2–λ5 (the ``map_snapshot`` day artifact in the results store, a
+:class:`~dynmap_sim.agent.maps.dynamic_map.MapSnapshot`: ray medians with ``σ ≤ 10 cm``),
+take all their points and measure, per timescale,
 
 * ``on_walls``: the share of points within ``tol_m`` of a wall (the building: never moves);
 * ``on_world``: the share within ``tol_m`` of any true surface of that day's last run
@@ -20,6 +21,7 @@ them. Surfaces are sampled every ``step_m`` (1 cm), so distances are exact to 5 
 from __future__ import annotations
 
 import csv
+import io
 import pickle
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -30,6 +32,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import cKDTree
 
+from dynmap_sim.agent.maps.dynamic_map import MapSnapshot
+from dynmap_sim.errors import InputError
 from dynmap_sim.types import BeamClass
 
 FloatArray = NDArray[np.float64]
@@ -106,19 +110,64 @@ def map_structure(
     )
 
 
-def dynamic_map_snapshots(db: Any) -> list[tuple[int, Any]]:
+#: The day artifact in which a ``dynamic-map`` hands over its λ2–λ5 snapshot.
+SNAPSHOT_ARTIFACT = "map_snapshot"
+
+
+def dynamic_map_snapshots(db: Any) -> list[tuple[int, MapSnapshot]]:
     """The daily snapshots ``[(day, MapSnapshot), ...]`` of the first ``dynamic-map`` in a
-    results database (from its checkpoint); empty when there are none."""
+    results database (its ``map_snapshot`` day artifacts); empty when there are none."""
     rows = db.query("SELECT idx, name FROM localizers ORDER BY idx")
     dyn = [int(i) for i, name in rows if name == "dynamic-map"]
     if not dyn:
         return []
+    if db.format < 2:
+        return _format1_snapshots(db, dyn[0])
+    return [
+        (day, MapSnapshot.from_arrays(arrays))
+        for day, arrays in db.artifacts(dyn[0], SNAPSHOT_ARTIFACT)
+    ]
+
+
+class _Gone:
+    """Stands in for a class of an old pickle that this version no longer has."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        pass
+
+    def __setstate__(self, state: Any) -> None:
+        if isinstance(state, dict):
+            self.__dict__.update(state)
+
+
+class _OldPickle(pickle.Unpickler):
+    """Loads a localizer pickled by an earlier version: classes that moved or went away
+    since become :class:`_Gone` (only the snapshots are read from it)."""
+
+    def find_class(self, module: str, name: str) -> Any:
+        try:
+            return super().find_class(module, name)
+        except (AttributeError, ImportError):
+            return type(name, (_Gone,), {"__module__": module})
+
+
+def _format1_snapshots(db: Any, loc: int) -> list[tuple[int, MapSnapshot]]:
+    """Results format 1 stored no artifacts: its snapshots are only in the checkpoint's
+    pickled localizer (its ``day_snapshots``)."""
     meta = db.meta()
-    cp = db.load_checkpoint(meta["experiment_hash"], meta["seed"])
-    if cp is None or len(cp.localizers) <= dyn[0]:
+    cp = db.load_checkpoint(meta["experiment_hash"], meta["seed"], to_resume=False)
+    if cp is None or len(cp.localizers) <= loc:
         return []
-    loc = pickle.loads(cp.localizers[dyn[0]])  # noqa: S301 - our own checksummed file
-    return list(getattr(loc, "day_snapshots", []))
+    try:
+        state = _OldPickle(io.BytesIO(cp.localizers[loc])).load()  # our own checksummed file
+        snaps = list(getattr(state, "day_snapshots", []))
+    except Exception as exc:  # noqa: BLE001 - any failure: this version cannot read it
+        raise InputError(
+            f"{db.path}: results format 1 keeps the dynamic map's daily snapshots only in its "
+            f"pickled checkpoint, which this version cannot load ({type(exc).__name__}: "
+            f"{exc}); report it with the dynmap_sim version that wrote it"
+        ) from None
+    return [(int(day), snap) for day, snap in snaps if isinstance(snap, MapSnapshot)]
 
 
 def map_structure_from_db(
