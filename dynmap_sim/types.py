@@ -97,7 +97,9 @@ class Prior:
     granted). ``bounds`` is ``(xmin, ymin, xmax, ymax)`` of the mapped area in metres, used
     for uniform initialization. ``day`` and ``run`` index the calendar (a real robot knows
     the date); ``first_run`` is True on the very first run of an experiment, when a static
-    map is to be built.
+    map is to be built. ``route`` is the desired route ``(K, 2)`` [m, map frame] in the
+    direction of travel, prior knowledge as in H&W Fig. 4 (None when not granted); a run's
+    goal is its end.
     """
 
     initial_pose: FloatArray | None
@@ -107,6 +109,7 @@ class Prior:
     day: int = 0
     run: int = 0
     first_run: bool = False
+    route: FloatArray | None = None
 
 
 @dataclass

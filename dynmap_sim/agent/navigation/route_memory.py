@@ -227,15 +227,24 @@ class RouteGraph:
         """Position ``(2,)`` [m] of a node."""
         return self.xy[self.index[node_id]]
 
-    def nearest_node(self, xy: ArrayLike) -> int:
-        """The node closest to ``xy`` [m] (the graph must not be empty)."""
+    def nearest_node(self, xy: ArrayLike, exclude: int | None = None) -> int:
+        """The node closest to ``xy`` [m] other than ``exclude`` (the graph must hold one)."""
         d = np.hypot(*(self.xy - np.asarray(xy, float)[:2]).T)
+        if exclude is not None and exclude in self.index and len(d) > 1:
+            d[self.index[exclude]] = np.inf
         return int(self.node_ids[int(np.argmin(d))])
 
-    def nearest_edge(self, xy: ArrayLike) -> tuple[Edge, float, FloatArray] | None:
+    def nearest_edge(
+        self, xy: ArrayLike, exclude_to: int | None = None
+    ) -> tuple[Edge, float, FloatArray] | None:
         """The passable route segment closest to ``xy``: ``(edge, progress ∈ [0, 1],
-        projection (2,))``, or None when there is none. Joins are not candidates."""
-        segs = [e for e in self.edges if e.route_id != JOIN and np.isfinite(e.travel_time_s)]
+        projection (2,))``, or None when there is none. Joins are not candidates, nor
+        segments ending at node ``exclude_to``."""
+        segs = [
+            e
+            for e in self.edges
+            if e.route_id != JOIN and np.isfinite(e.travel_time_s) and e.v != exclude_to
+        ]
         if not segs:
             return None
         a = self.xy[[self.index[e.u] for e in segs]]

@@ -123,25 +123,33 @@ def plan_route(
     start_xy: ArrayLike,
     goal_xy: ArrayLike,
     v_max_mps: float | None = None,
+    goal_id: int | None = None,
+    leave_goal: bool = False,
 ) -> PlannedPath | None:
-    """Plan from the robot's position ``start_xy`` to the node nearest ``goal_xy`` [m].
+    """Plan from the robot's position ``start_xy`` to the node nearest ``goal_xy`` [m] (or to
+    node ``goal_id`` when given: a loop route's end coincides with its start).
 
     The robot enters the graph at its projection onto the nearest passable segment (heading
     on along the segment's direction, for the remaining fraction of its travel time) or at
     the nearest node (straight-line distance / ``v_h``), whichever A* finds cheaper; so a
     robot in the middle of a segment does not turn back to its start waypoint. Returns None
-    when the graph is empty or the goal unreachable.
+    when the graph is empty or the goal unreachable. With ``leave_goal`` (a robot at the
+    start of a loop route, which ends where it starts) no virtual start edge ends at the
+    goal, so the plan drives the loop instead of standing still.
     """
     if graph.node_ids.size == 0:
         return None
     p = np.asarray(start_xy, float)[:2]
-    goal = graph.nearest_node(goal_xy)
+    goal = graph.nearest_node(goal_xy) if goal_id is None else int(goal_id)
+    if goal not in graph.index:
+        return None
+    avoid = goal if leave_goal else None
     v_h = heuristic_speed_mps(graph, v_max_mps)
-    near = graph.nearest_node(p)
+    near = graph.nearest_node(p, exclude=avoid)
     d = float(np.hypot(*(graph.position(near) - p)))
     hw_near = float(graph.half_width_m[graph.index[near]])
     starts = [Edge(START, near, d, 0.0 if math.isinf(v_h) else d / v_h, False, hw_near, -1)]
-    hit = graph.nearest_edge(p)
+    hit = graph.nearest_edge(p, exclude_to=avoid)
     start_point = p
     if hit is not None:
         e, u, proj = hit
