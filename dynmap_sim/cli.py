@@ -116,6 +116,7 @@ def _shipped_worlds() -> list[str]:
 
 def _load_world_arg(ref: str):  # -> WorldSpec
     """A world by file or shipped name; an unknown name lists the shipped worlds."""
+    from dynmap_sim.experiments.scenario import is_scenario_file
     from dynmap_sim.world import WorldFileError, load_world
 
     try:
@@ -126,6 +127,10 @@ def _load_world_arg(ref: str):  # -> WorldSpec
             raise WorldFileError(
                 ref,
                 [("", f"no such file or shipped world; shipped: {', '.join(_shipped_worlds())}")],
+            ) from None
+        if len(exc.errors) > 1 and is_scenario_file(p):  # readable, so safe to look into
+            raise WorldFileError(
+                ref, [("", "this is a scenario file, not a world file: give its world")]
             ) from None
         raise
 
@@ -228,10 +233,17 @@ def _cmd_render_world(args: argparse.Namespace) -> int:
 
 def _cmd_run(args: argparse.Namespace) -> int:
     from dynmap_sim.analysis.scenarios import load_scenario
+    from dynmap_sim.errors import InputError
     from dynmap_sim.experiments.runner import run_experiment
 
     _refuse_world_file(args.scenario)
     scenario = load_scenario(args.scenario)
+    if args.days is not None:  # the scenario's own days were checked when it was loaded
+        from dynmap_sim.env_factory import sim_spec_errors
+
+        for field, msg in sim_spec_errors(scenario.sim_spec(), args.days):
+            if field == "days":
+                raise InputError(f"--days: {msg}")
     out = run_experiment(
         scenario,
         out_dir=args.out,
@@ -277,8 +289,10 @@ def _cmd_check(args: argparse.Namespace) -> int:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
+    from dynmap_sim.errors import FileError, regular_file_size
     from dynmap_sim.experiments.replay import replay_log
 
+    regular_file_size(args.log, FileError)  # a FIFO or a device would hang the reader
     _refuse_results(args.out, args.force, "replay")
     out = replay_log(
         Path(args.log),

@@ -191,6 +191,11 @@ class DynMapEnv(gymnasium.Env):
     ) -> None:
         _check_args(render_mode, max_episode_steps, collision_penalty, goal_tolerance_m)
         _check_args_more(people, sensor_options, dt_s, render_size_px)
+        if not isinstance(world, str | Path | WorldSpec):
+            raise ValueError(
+                "world must be 'lab', 'apartment', a path to a world file or a WorldSpec, "
+                f"got {world!r}"
+            )
         spec = world if isinstance(world, WorldSpec) else load_world(resolve_world_path(world))
         if not people:
             spec = spec.model_copy(update={"people": ()})

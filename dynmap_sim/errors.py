@@ -62,13 +62,9 @@ def _kind(mode: int) -> str:
     return "something else"
 
 
-def read_input_text(path: str | Path, error_cls: type[FileError]) -> str:
-    """The text of an input file: only a regular file of at most :data:`MAX_FILE_BYTES`,
-    UTF-8 with or without a byte-order mark; every problem as ``error_cls``.
-
-    The file is checked with ``stat`` before it is opened, so a FIFO or a device
-    (``/dev/zero``) is refused at once instead of blocking or filling the memory.
-    """
+def regular_file_size(path: str | Path, error_cls: type[FileError]) -> int:
+    """The size of ``path`` [bytes]; ``error_cls`` unless it is a regular file (checked with
+    ``stat``, without opening it: a FIFO would block, a device never end)."""
     p = Path(path)
     try:
         st = p.stat()
@@ -78,10 +74,22 @@ def read_input_text(path: str | Path, error_cls: type[FileError]) -> str:
         raise error_cls(p, [("", f"cannot read file: {exc}")]) from None
     if not stat.S_ISREG(st.st_mode):
         raise error_cls(p, [("", f"not a regular file but {_kind(st.st_mode)}")])
+    return st.st_size
+
+
+def read_input_text(path: str | Path, error_cls: type[FileError]) -> str:
+    """The text of an input file: only a regular file of at most :data:`MAX_FILE_BYTES`,
+    UTF-8 with or without a byte-order mark; every problem as ``error_cls``.
+
+    The file is checked with ``stat`` before it is opened, so a FIFO or a device
+    (``/dev/zero``) is refused at once instead of blocking or filling the memory.
+    """
+    p = Path(path)
+    size = regular_file_size(p, error_cls)
     limit = MAX_FILE_BYTES
-    if st.st_size > limit:
+    if size > limit:
         raise error_cls(
-            p, [("", f"file too large: {st.st_size} bytes (the limit is {limit // 2**20} MiB)")]
+            p, [("", f"file too large: {size} bytes (the limit is {limit // 2**20} MiB)")]
         )
     try:
         with p.open("rb") as f:

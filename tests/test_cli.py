@@ -213,6 +213,11 @@ def test_bad_invocations_of_every_command(capsys, tmp_path):
         (["run", CI, "--seed", "-1"], "argument --seed: seed must be in 0..2**63-1, not -1"),
         (["run", CI, "--seed", str(2**64)], "argument --seed: seed must be in 0..2**63-1"),
         (["run", CI, "--workers", "0"], "argument --workers: must be at least 1, not 0"),
+        (["run", CI, "--days", "1-99"], "--days: the world's calendar has 28 days; days [1, 99]"),
+        (["replay", "/dev/zero", "--localizer", "odometry", "--out", tmp_path / "r"], "device"),
+        (["replay", fifo, "--localizer", "odometry", "--out", tmp_path / "r"], "but a FIFO"),
+        (["render-world", CI, "-o", tmp_path / "a.png"], "this is a scenario file, not a world"),
+        (["render-world", "/dev/zero", "-o", tmp_path / "a.png"], "not a regular file but a"),
         (["toy", "--out", tmp_path, "--seed", "-1"], "argument --seed: seed must be in"),
         (
             ["toy", "--out", "/dev/null/x"],

@@ -321,6 +321,10 @@ def test_world_env_needs_a_world():
         ({"people": "no"}, "people must be True or False, got 'no'"),
         ({"sensor_options": [1]}, "sensor_options must be a dict, got [1]"),
         (
+            {"world": None},
+            "world must be 'lab', 'apartment', a path to a world file or a WorldSpec",
+        ),
+        (
             {"sensor_options": {"scan_period_s": 0.0}},
             "the sensor's scan_period_s must be > 0 (it is the step period dt_s unless dt_s is "
             "given), got 0.0",
@@ -333,7 +337,7 @@ def test_world_env_needs_a_world():
 )
 def test_constructor_arguments_are_checked_with_their_value(kwargs, msg):
     with pytest.raises(ValueError) as ei:
-        DynMapEnv(world="apartment", **kwargs)
+        DynMapEnv(**{"world": "apartment", **kwargs})
     assert str(ei.value).startswith(msg)
 
 
