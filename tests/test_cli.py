@@ -323,6 +323,7 @@ def test_check_and_replay_do_not_overwrite_results_without_force(capsys, tmp_pat
     )
     assert (out / "results.db").stat().st_mtime_ns == before
     assert run_cli(capsys, "check", scn, "-q", "--out", out, "--force")[0] == 0
+    (tmp_path / "x.log").write_text("")
     line = _one_line_error(
         capsys, "replay", tmp_path / "x.log", "--localizer", "odometry", "--out", out
     )
