@@ -167,8 +167,9 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     status = 0
     for path in args.files:
         try:
-            read_toml(path, FileError)  # refuses devices, FIFOs and huge files at once
-            if is_scenario_file(path):
+            data = read_toml(path, FileError)  # refuses devices, FIFOs and huge files at once
+            # a world file has no "world" key (is_scenario_file cannot read a file with a BOM)
+            if is_scenario_file(path) or isinstance(data.get("world"), str):
                 load_scenario(path)
             else:
                 load_world(path)
@@ -244,6 +245,16 @@ def _cmd_run(args: argparse.Namespace) -> int:
         for field, msg in sim_spec_errors(scenario.sim_spec(), args.days):
             if field == "days":
                 raise InputError(f"--days: {msg}")
+    if args.resume:
+        from dynmap_sim.experiments.results import DB_NAME
+        from dynmap_sim.experiments.runner import default_out_dir
+
+        out_dir = Path(args.out) if args.out is not None else default_out_dir(scenario)
+        if not (out_dir / DB_NAME).exists():
+            print(
+                f"note: nothing to resume in {out_dir}: starting from the first run",
+                file=sys.stderr,
+            )
     out = run_experiment(
         scenario,
         out_dir=args.out,
@@ -444,7 +455,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
-        print("interrupted", file=sys.stderr)
+        if args.command == "run":
+            print(
+                "interrupted; the runs finished so far are stored: the same command with "
+                "--resume continues from the last of them",
+                file=sys.stderr,
+            )
+        else:
+            print("interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:  # `dynmap-sim schema | head`: the reader left, that is fine
         import os

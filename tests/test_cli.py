@@ -302,13 +302,30 @@ def test_scenario_values_that_crashed_validate(capsys, tmp_path, old, new, field
     assert line.startswith(f"{bad}: {field}: ") and msg in line, line
 
 
-def test_a_scenario_with_a_byte_order_mark_loads(capsys, tmp_path):
-    scn = tmp_path / "scenarios" / "bom.toml"
+@pytest.mark.parametrize("folder", ["scenarios", "elsewhere"])
+def test_a_scenario_with_a_byte_order_mark_loads(capsys, tmp_path, folder):
+    scn = tmp_path / folder / "bom.toml"
     scn.parent.mkdir()
     text = CI.read_text().replace('world = "apartment"', f'world = "{WORLD}"')
     scn.write_text(text, encoding="utf-8-sig")
     code, out, err = run_cli(capsys, "validate", scn)
     assert code == 0 and out.strip() == f"{scn}: OK", err
+
+
+def test_resume_with_nothing_to_resume_and_ctrl_c_say_what_happens(capsys, tmp_path, monkeypatch):
+    import dynmap_sim.experiments.runner as runner
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(runner, "run_experiment", interrupted)
+    code, _, err = run_cli(capsys, "run", CI, "--out", tmp_path / "new", "--resume", "-q")
+    assert code == 130
+    assert f"note: nothing to resume in {tmp_path / 'new'}: starting from the first run" in err
+    assert err.strip().splitlines()[-1] == (
+        "interrupted; the runs finished so far are stored: the same command with --resume "
+        "continues from the last of them"
+    )
 
 
 def test_check_and_replay_do_not_overwrite_results_without_force(capsys, tmp_path):
