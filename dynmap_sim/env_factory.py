@@ -31,6 +31,10 @@ ROBOT_PRESETS: dict[str, dict[str, Any]] = {"default": {}}
 #: The sensor when a scenario names none.
 DEFAULT_SENSOR = "urg-04lx"
 
+#: Shortest scan period a scenario may ask for [s]: it is the simulation step, and real
+#: scanners turn at 10-75 Hz (a microsecond period would simulate for days).
+MIN_SCAN_PERIOD_S = 0.005
+
 
 @dataclass(frozen=True)
 class SimSpec:
@@ -108,6 +112,9 @@ def _sensor_kwargs(spec: SimSpec) -> dict[str, Any]:
             "sensor.overrides.noise",
             f"must be a table of LidarNoise fields (e.g. {{ sigma_m = 0.02 }}), got {noise!r}",
         )
+    for key, v in opts.items():
+        if isinstance(v, float) and not math.isfinite(v):
+            raise SimSpecError(f"sensor.overrides.{key}", f"must be a finite number, got {v!r}")
     if "mount_pose" in opts:
         pose = opts["mount_pose"]
         if not (
@@ -124,10 +131,11 @@ def _sensor_kwargs(spec: SimSpec) -> dict[str, Any]:
         period = make_lidar(sensor, noise=noise, **opts).spec.scan_period_s
     except (TypeError, ValueError) as exc:
         raise SimSpecError("sensor", str(exc)) from None
-    if not (_finite_number(period) and period > 0):
+    if not (_finite_number(period) and period >= MIN_SCAN_PERIOD_S):
         raise SimSpecError(
             "sensor.overrides.scan_period_s",
-            f"must be > 0 (the scan period is the simulation step), got {period!r}",
+            f"must be >= {MIN_SCAN_PERIOD_S} s (the scan period is the simulation step: at "
+            f"most {round(1 / MIN_SCAN_PERIOD_S)} steps per second), got {period!r}",
         )
     return {"sensor": sensor, "sensor_options": opts, "lidar_noise": noise}
 

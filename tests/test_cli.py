@@ -292,7 +292,19 @@ def test_every_option_of_every_command_has_help():
             'preset = "urg-04lx"',
             'preset = "urg-04lx"\noverrides = { scan_period_s = 0 }',
             "sensor.overrides.scan_period_s",
-            "must be > 0",
+            "must be >= 0.005 s (the scan period is the simulation step",
+        ),
+        (
+            'preset = "urg-04lx"',
+            'preset = "urg-04lx"\noverrides = { scan_period_s = 1e-6 }',
+            "sensor.overrides.scan_period_s",
+            "at most 200 steps per second), got 1e-06",
+        ),
+        (
+            'preset = "urg-04lx"',
+            'preset = "urg-04lx"\noverrides = { angle_min_rad = nan }',
+            "sensor.overrides.angle_min_rad",
+            "must be a finite number, got nan",
         ),
     ],
 )
