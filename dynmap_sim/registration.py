@@ -18,12 +18,9 @@ cannot unpack non-iterable NoneType``. The env passes the full ``check_env`` in 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import gymnasium
-
-if TYPE_CHECKING:
-    from dynmap_sim.env import DynMapEnv
 
 #: Folder of the worlds that ship with the package's source tree.
 WORLDS_DIR = Path(__file__).resolve().parent.parent / "worlds"
@@ -31,15 +28,20 @@ WORLDS_DIR = Path(__file__).resolve().parent.parent / "worlds"
 ENV_IDS = ("dynmap_sim/Apartment-v0", "dynmap_sim/Lab-v0", "dynmap_sim/World-v0")
 
 
-def make_env(**kwargs: Any) -> DynMapEnv:
+def make_env(**kwargs: Any) -> gymnasium.Env:
     """A :class:`~dynmap_sim.env.DynMapEnv` from the keyword arguments ``gymnasium.make``
-    passes (the entry point of the envs of the shipped worlds)."""
+    passes (the entry point of the envs of the shipped worlds); ``render_mode="rgb_array_list"``
+    collects the frames (``RenderCollection``), as ``gymnasium.make`` does for an env class."""
     from dynmap_sim.env import DynMapEnv
 
+    if kwargs.get("render_mode") == "rgb_array_list":
+        from gymnasium.wrappers import RenderCollection
+
+        return RenderCollection(DynMapEnv(**{**kwargs, "render_mode": "rgb_array"}))
     return DynMapEnv(**kwargs)
 
 
-def make_world_env(world: Any = None, **kwargs: Any) -> DynMapEnv:
+def make_world_env(world: Any = None, **kwargs: Any) -> gymnasium.Env:
     """The entry point of ``dynmap_sim/World-v0``: ``world`` (a world file or a
     ``WorldSpec``) is required."""
     if world is None:

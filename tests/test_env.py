@@ -341,6 +341,15 @@ def test_constructor_arguments_are_checked_with_their_value(kwargs, msg):
     assert str(ei.value).startswith(msg)
 
 
+def test_rgb_array_list_through_make_collects_frames():
+    env = gymnasium.make("dynmap_sim/Apartment-v0", render_mode="rgb_array_list")
+    env.reset(seed=0)
+    env.step(np.array([0.2, 0.0], np.float32))
+    frames = env.render()
+    assert len(frames) == 2 and frames[0].dtype == np.uint8 and frames[0].ndim == 3
+    env.close()
+
+
 def test_human_render_mode_through_make_names_the_render_modes():
     """No HumanRendering wrapper (it needs pygame, not a dependency): the env's own error."""
     with pytest.raises(ValueError, match=r"render modes: None, 'rgb_array'"):
