@@ -284,8 +284,10 @@ def _cmd_report(args: argparse.Namespace) -> int:
 def _cmd_export(args: argparse.Namespace) -> int:
     from dynmap_sim.analysis.export import export_tum
 
-    for path in export_tum(Path(args.dir), _output_dir(args.tum)):
-        print(f"wrote {path}")
+    out = _output_dir(args.tum)
+    existed = {p.name for p in out.iterdir()}
+    for path in export_tum(Path(args.dir), out):
+        print(_wrote(path, path.name in existed))
     return 0
 
 

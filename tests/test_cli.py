@@ -89,6 +89,11 @@ def test_run_report_export_and_resume(capsys, tmp_path):
     code, stdout, _ = run_cli(capsys, "export", out, "--tum", tmp_path / "tum")
     assert code == 0 and (tmp_path / "tum" / "truth.tum").is_file()
     assert (tmp_path / "tum" / "odometry.tum").is_file()
+    code, stdout, _ = run_cli(capsys, "export", out, "--tum", tmp_path / "tum")
+    assert (
+        code == 0
+        and f"wrote {tmp_path / 'tum' / 'truth.tum'} (replaced the earlier file)" in stdout
+    )
 
 
 def test_report_on_a_folder_without_results(capsys, tmp_path):
