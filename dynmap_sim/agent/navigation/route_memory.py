@@ -503,6 +503,12 @@ class RouteMemory:
             self._enter(r, pos, t_s)
         else:
             s0, s1 = tr.s_prev_m, pos.along_m
+            # a jump along the route much longer than the robot moved is no drive past the
+            # waypoints between: a loop route's end meets its start (H&W's), or a pose jumped
+            last = self._last_inside
+            moved = math.hypot(*(xy - last[3])) if last is not None else math.inf
+            if s1 - s0 > moved + self.params.join_distance_m:
+                s0 = s1
             if s1 > s0:
                 cum = r.cumulative_m()
                 # the route's end counts as passed pass_tolerance_m before it (a robot stops

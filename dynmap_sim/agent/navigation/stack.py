@@ -1,0 +1,677 @@
+"""The navigation stack: route memory, planning, control and safety composed (H&W 2011 §5-6).
+
+:class:`NavigationStack` turns the agent's pose estimate, scans and odometry into a velocity
+command, every scan, the way Hentschel & Wagner's robot drove its apartment (§6-7) and the way
+nav2 composes its servers:
+
+1. **Costmap** (:class:`~dynmap_sim.agent.planning.costmap.Costmap`): the static layer from
+   the prior's walls (or a localizer's own map, :meth:`NavigationStack.set_static_map`), the
+   obstacle layer marked and cleared by each scan at the *estimated* pose, inflated to a
+   clearance grid.
+2. **Route memory** (:class:`~.route_memory.RouteMemory`, H&W §5): built from the prior's
+   route on the first run and kept across runs; every step it learns from the estimate
+   (travel times, coordinates, a **new route** when the robot drives outside every corridor,
+   e.g. around a block), and :meth:`NavigationStack.end_run` forgets what was not used.
+3. **Route planning** (:func:`~dynmap_sim.agent.planning.route_astar.plan_route`, §6.2): A* on
+   the route graph by travel time from the estimate to the goal (the end of the prior's route),
+   at most every ``replan_period_s`` (nav2's behaviour tree replans at 1 Hz). The corridor of
+   the route (the half-width ``l`` of each segment) is what the follower may use to avoid
+   obstacles reactively.
+4. **Control** (:class:`~dynmap_sim.agent.control.corridor_follower.CorridorFollower`, §6.3):
+   pure-pursuit tracking with a lateral offset inside the corridor, a clearance speed law.
+5. **Global replanning** (§6.3): when the follower reports ``blocked`` (no offset inside the
+   corridor is free) or the corridor is cut on the costmap within ``cut_check_m`` ahead (at a
+   replan), the route edges of the cut stretch are **blocked** in the route memory (infinite
+   cost), route A* is asked again (another route may exist, e.g. the detour recorded on an
+   earlier day), and failing that a **detour** is planned with grid A* on the costmap's
+   clearance around the block back onto the path
+   (:func:`~dynmap_sim.agent.planning.grid_astar.plan_around`). The robot drives it; the route
+   memory records it as a new route joined to the graph; once the robot is back on the path,
+   route planning takes over again. A blocked edge is **unblocked** when the scan sees its
+   centre line free (every point of it in view, a beam passing beyond it, and the costmap
+   clear there), or when the robot drives it (the route memory does that).
+6. **Recovery** (:class:`~dynmap_sim.agent.control.recovery.Recovery`): stuck detection on the
+   odometry pose, then wait, back up, replan (with the costmap's obstacle layer cleared, nav2's
+   first recovery), and a recorded give-up (:attr:`NavigationStack.gave_up`).
+7. **Collision monitor** (:class:`~dynmap_sim.agent.control.collision_monitor.
+   CollisionMonitor`): every command, the recovery's included, is filtered by the raw scan in
+   the robot frame, so a wrong estimate or a controller bug cannot drive into an obstacle.
+
+The run ends for the stack when the estimate is within ``goal_tolerance_m`` of the goal
+(:attr:`NavigationStack.done`); a route that ends where it starts (a loop, like H&W's) counts
+only once the robot has been ``goal_arm_m`` away from it. Everything here sees only what the
+agent sees: estimate, scan, odometry, the prior.
+
+Time: ``t_s`` of :meth:`NavigationStack.step` is the time within the run's day [s] (seconds
+since midnight, or since the run started: anything below a day); the route memory's clock is
+``prior.day * 86400 + t_s``, so its forgetting ages count in days as the calendar does.
+
+The stack pickles (the experiment runner checkpoints it after every run): plain data, no
+lambdas; the cached route graph is dropped.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from dynmap_sim import se2
+from dynmap_sim.agent.control.collision_monitor import CollisionMonitor, CollisionMonitorParams
+from dynmap_sim.agent.control.corridor_follower import CorridorFollower, CorridorFollowerParams
+from dynmap_sim.agent.control.recovery import Recovery, RecoveryParams
+from dynmap_sim.agent.grid import OccupancyGrid
+from dynmap_sim.agent.navigation.route_memory import (
+    JOIN,
+    RouteGraph,
+    RouteMemory,
+    RouteMemoryParams,
+)
+from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
+from dynmap_sim.agent.planning.costmap import Costmap, CostmapParams, samples_along
+from dynmap_sim.agent.planning.grid_astar import GridAStar, plan_around
+from dynmap_sim.agent.planning.route_astar import PlannedPath, plan_route
+from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Prior, Scan
+
+FloatArray = NDArray[np.float64]
+
+#: Seconds per day: the route memory's clock is ``prior.day * DAY_S + t_s``.
+DAY_S = 86_400.0
+
+#: What the stack is following: a route A* path, a grid detour back onto it, or a grid path
+#: to the goal when the route graph has none.
+ROUTE, DETOUR, GRID = "route", "detour", "grid"
+
+
+@dataclass(frozen=True)
+class StackParams:
+    """Every choice of :class:`NavigationStack`, with the reason for its default (SI units)."""
+
+    #: Cruise speed [m/s]: the corridor follower's and the prior route's ``v_max``. 0.35 m/s is
+    #: the follower's (and the tour operator's) pace; H&W's Roomba drove ≈ 0.2-0.3 m/s.
+    speed_mps: float = 0.35
+    #: Corridor half-width ``l`` of the prior's route [m]: the route memory's width for
+    #: recorded routes (a ≈ 1.2 m doorway minus a 0.4 m robot leaves ± 0.35 m, issue 15 L10).
+    route_half_width_m: float = 0.35
+    #: Hard clearance = robot radius + this [m], for the follower and grid A*: 5 cm covers
+    #: the costmap's cell size, so no plan or offset touches an inflated obstacle cell.
+    safety_margin_m: float = 0.05
+    #: Grid A* prefers clearance robot radius + this [m] (the tour's 0.12 m plus a little):
+    #: detours keep off furniture where there is room.
+    preferred_margin_m: float = 0.15
+    #: Planning period [s] (nav2's behaviour tree replans at 1 Hz): route A*, the cut check,
+    #: the unblock check. Also the least time between two global replans on ``blocked``.
+    replan_period_s: float = 1.0
+    #: The goal is reached when the estimate is this close [m]: above the follower's vertex
+    #: tolerance (0.12 m) so its stop at the path's end counts, below the env's 0.3 m so the
+    #: true pose is within the env's tolerance with a 0.1 m localization error.
+    goal_tolerance_m: float = 0.2
+    #: A loop route ends at its start: the goal counts only after the robot has been this far
+    #: from it [m] (also while it is nearer, planning leaves the goal: no zero-length plan).
+    goal_arm_m: float = 1.0
+    #: How far along the path ahead the corridor is checked for a cut at each replan [m]: the
+    #: costmap marks obstacles up to 2.5 m, so a block is planned around before the follower
+    #: (which probes 1 m) has to stop in front of it.
+    cut_check_m: float = 2.0
+    #: Lateral samples across the corridor of the cut check (odd: the centre line is one).
+    cut_offsets: int = 9
+    #: Corridor half-width of a grid detour's own vertices [m]: grid A* already keeps the
+    #: hard clearance, so a little room suffices for reactive avoidance (a person) while the
+    #: robot stays on the planned way through a gap.
+    detour_half_width_m: float = 0.2
+    #: A blocked edge is seen free only within this range [m] (the costmap's obstacle range:
+    #: farther readings are too noisy to vouch for a free corridor).
+    unblock_view_m: float = 2.5
+    #: Spacing of the points checked on a blocked edge [m]: less than an obstacle's size.
+    unblock_step_m: float = 0.1
+    #: A point counts as seen free when a beam passes it by at least this [m] (range noise).
+    unblock_margin_m: float = 0.1
+    #: Clear the costmap's obstacle layer before the recovery's replan (nav2's
+    #: ``ClearEntireCostmap``): stale marks, e.g. of a person gone, may be what blocks.
+    clear_costmap_on_replan: bool = True
+    #: Tunables of the parts; the stack sets the robot radius, speed and hard clearance.
+    route_memory: RouteMemoryParams = field(default_factory=RouteMemoryParams)
+    costmap: CostmapParams = field(default_factory=CostmapParams)
+    follower: CorridorFollowerParams = field(default_factory=CorridorFollowerParams)
+    monitor: CollisionMonitorParams = field(default_factory=CollisionMonitorParams)
+    recovery: RecoveryParams = field(default_factory=RecoveryParams)
+
+    def __post_init__(self) -> None:
+        for name in ("speed_mps", "route_half_width_m", "replan_period_s", "goal_tolerance_m"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0.0):
+                raise ValueError(f"StackParams.{name} must be finite and > 0, got {v!r}")
+        if self.cut_offsets < 1 or self.cut_offsets % 2 == 0:
+            raise ValueError(
+                f"StackParams.cut_offsets must be odd and >= 1, got {self.cut_offsets}"
+            )
+
+
+def _params_except(params: object, *names: str) -> dict[str, Any]:
+    """A params dataclass as keywords without ``names`` (set by the stack)."""
+    return {k: v for k, v in asdict(params).items() if k not in names}  # type: ignore[call-overload]
+
+
+def _distance_to_polyline(pts: FloatArray, poly: FloatArray) -> FloatArray:
+    """Distance [m] of each point ``(N, 2)`` to the polyline ``(K, 2)``."""
+    a, b = poly[:-1], poly[1:]
+    d = b - a
+    len2 = np.maximum(np.einsum("ij,ij->i", d, d), 1e-18)
+    rel = pts[:, None, :] - a[None, :, :]
+    u = np.clip(np.einsum("nki,ki->nk", rel, d) / len2, 0.0, 1.0)
+    gap = rel - u[..., None] * d[None]
+    return np.hypot(gap[..., 0], gap[..., 1]).min(axis=1)
+
+
+class NavigationStack:
+    """H&W §5-6 composed with nav2-style safety (module doc).
+
+    ``laser``: the scanner (for the costmap, the collision monitor and the back-up check);
+    ``robot_radius_m``: the robot's radius [m]; ``params``: :class:`StackParams`.
+
+    Per experiment: :meth:`begin_run` with each run's prior, :meth:`step` every scan,
+    :meth:`end_run` after it. After a run: :attr:`done`, :attr:`gave_up`, the counters
+    (:attr:`replans`, :attr:`recoveries`, :attr:`stuck_s`, :attr:`monitor_stops`,
+    :attr:`monitor_slowdowns`), :attr:`events`, :meth:`planned_path`, :attr:`route_memory`.
+    """
+
+    def __init__(
+        self, laser: LaserSpec, robot_radius_m: float, params: StackParams | None = None
+    ) -> None:
+        if not (math.isfinite(robot_radius_m) and robot_radius_m > 0.0):
+            raise ValueError(f"robot_radius_m must be finite and > 0, got {robot_radius_m!r}")
+        self.laser = laser
+        self.robot_radius_m = float(robot_radius_m)
+        self.params = params or StackParams()
+        p = self.params
+        self.min_clearance_m = self.robot_radius_m + p.safety_margin_m
+        self.planner = GridAStar(self.min_clearance_m, self.robot_radius_m + p.preferred_margin_m)
+        #: the long-term route memory (None until the first :meth:`begin_run`)
+        self.route_memory: RouteMemory | None = None
+        #: the costmap of the run in progress (None before the first :meth:`begin_run`)
+        self.costmap: Costmap | None = None
+        self.goal_xy: FloatArray | None = None
+        self._goal_id: int | None = None
+        self._pending_grid: OccupancyGrid | None = None
+        self._graph: RouteGraph | None = None
+        self._new_run_state()
+
+    # ------------------------------------------------------------------ run lifecycle
+    def _new_run_state(self) -> None:
+        p = self.params
+        r = self.robot_radius_m
+        self.follower = CorridorFollower(
+            p.speed_mps,
+            self.min_clearance_m,
+            **_params_except(p.follower, "speed_mps", "min_clearance_m"),
+        )
+        self.monitor = CollisionMonitor(
+            self.laser, r, **_params_except(p.monitor, "robot_radius_m")
+        )
+        self.recovery = Recovery(self.laser, r, **_params_except(p.recovery, "robot_radius_m"))
+        #: True once the goal is reached (the stack then commands zero)
+        self.done = False
+        #: True once the recovery gave up (the stack then commands zero)
+        self.gave_up = False
+        #: global replans: paths replaced because the old one was blocked or cut (H&W §6.3)
+        self.replans = 0
+        #: plans computed (route A* at ``replan_period_s`` and every detour)
+        self.plans = 0
+        #: control steps of the run
+        self.steps = 0
+        #: what is being followed: :data:`ROUTE`, :data:`DETOUR` or :data:`GRID`
+        self.mode = ROUTE
+        self._events: list[tuple[float, str, str]] = []
+        self._plan: PlannedPath | None = None  # the route plan (route mode; base of a detour)
+        self._path: FloatArray | None = None  # what the follower follows
+        self._rejoin_seg = 0  # detour: follower segment from which the robot is back on the path
+        self._last_plan_t: float | None = None
+        self._force_plan = False
+        self._armed = False
+        self._day_s = 0.0
+        self._last_t = 0.0
+
+    def begin_run(self, prior: Prior) -> None:
+        """Start a run: the route memory from ``prior.route`` on the first run (kept and
+        learning across runs), a fresh costmap from the prior's walls (and the map given to
+        :meth:`set_static_map` before this call, if any), the goal = the route's end."""
+        if prior.route is None and self.route_memory is None:
+            raise ValueError("the navigation stack needs prior.route (the desired route)")
+        if prior.route is not None:
+            route = np.asarray(prior.route, dtype=np.float64)
+            if route.ndim != 2 or route.shape[1] != 2 or len(route) < 2:
+                raise ValueError(f"prior.route must be (K >= 2, 2) [m], got shape {route.shape}")
+            if not np.all(np.isfinite(route)):
+                raise ValueError("prior.route holds non-finite coordinates")
+        else:
+            route = None
+        self._new_run_state()
+        self._day_s = float(prior.day) * DAY_S
+        p = self.params
+        if self.route_memory is None:
+            assert route is not None
+            self.route_memory = RouteMemory.from_prior(
+                route, p.speed_mps, p.route_half_width_m, self._day_s, p.route_memory
+            )
+            prior_route = next(iter(self.route_memory.routes.values()))
+            self._goal_id = int(prior_route.ids[-1])
+            self.goal_xy = route[-1].copy()
+        else:
+            self.route_memory.reset_run()
+            if route is not None and not np.allclose(route[-1], self.goal_xy):
+                self.goal_xy = route[-1].copy()
+                self._goal_id = None  # resolved on the graph
+        costmap_params = self.params.costmap
+        if costmap_params.footprint_clear_radius_m != self.robot_radius_m:
+            costmap_params = replace(costmap_params, footprint_clear_radius_m=self.robot_radius_m)
+        self.costmap = Costmap.for_prior(prior, costmap_params)
+        if self._pending_grid is not None:
+            self.costmap.set_static_grid(self._pending_grid)
+            self._pending_grid = None
+        self._graph = None
+        self._event(0.0, "begin_run", f"day {prior.day} run {prior.run}")
+
+    def set_static_map(self, grid: OccupancyGrid) -> None:
+        """The costmap's static layer := a localizer's own map (e.g. its first-run SLAM map)
+        for the run in progress; called before :meth:`begin_run` it serves the next run."""
+        if self.costmap is None:
+            self._pending_grid = grid
+            return
+        self.costmap.set_static_grid(grid)
+
+    def end_run(self) -> int:
+        """The run is over: the route memory forgets what it has not used for longer than
+        its ``forget_age_s`` (H&W §5.2); returns the number of segments forgotten."""
+        if self.route_memory is None:
+            return 0
+        n = self.route_memory.forget(self._day_s + self._last_t)
+        if n:
+            self._event(self._last_t, "forget", f"{n} route segments")
+        self._graph = None
+        return n
+
+    # ------------------------------------------------------------------ results
+    @property
+    def recoveries(self) -> int:
+        """Recovery behaviours run in this run (waits, back-ups, replans)."""
+        return self.recovery.recoveries
+
+    @property
+    def stuck_s(self) -> float:
+        """Time this run spent stuck or recovering [s]."""
+        return self.recovery.stuck_s
+
+    @property
+    def monitor_stops(self) -> int:
+        """Steps at which the collision monitor stopped the robot."""
+        return self.monitor.stop_count
+
+    @property
+    def monitor_slowdowns(self) -> int:
+        """Steps at which the collision monitor slowed the robot down."""
+        return self.monitor.slowdown_count
+
+    @property
+    def events(self) -> list[tuple[float, str, str]]:
+        """``(t_s, kind, detail)`` of the run in time order: the stack's (plans, blocks,
+        detours, goal), the recovery's and the collision monitor's."""
+        merged = self._events + self.recovery.events + self.monitor.events
+        return sorted(merged, key=lambda e: e[0])
+
+    def planned_path(self) -> FloatArray | None:
+        """The path being followed ``(K, 2)`` [m] (a copy), None when there is none."""
+        return None if self._path is None else self._path.copy()
+
+    def counters(self) -> dict[str, float]:
+        """The run's counters by name (for a results store)."""
+        return {
+            "done": float(self.done),
+            "gave_up": float(self.gave_up),
+            "replans": float(self.replans),
+            "plans": float(self.plans),
+            "recoveries": float(self.recoveries),
+            "stuck_s": float(self.stuck_s),
+            "monitor_stops": float(self.monitor_stops),
+            "monitor_slowdowns": float(self.monitor_slowdowns),
+        }
+
+    # ------------------------------------------------------------------ the control step
+    def step(
+        self, t_s: float, odom: Odometry, scan: Scan, estimate: PoseEstimate
+    ) -> NDArray[np.float32]:
+        """One control step at time ``t_s`` [s] (module doc) with the odometry, the scan and
+        the localizer's estimate of this scan: the command ``[v_mps, omega_radps]`` (float32),
+        always filtered by the collision monitor."""
+        if self.costmap is None or self.route_memory is None:
+            raise RuntimeError("call begin_run(prior) before step()")
+        t_s = float(t_s)
+        self._last_t = t_s
+        self.steps += 1
+        pose = np.asarray(estimate.mean, dtype=np.float64).reshape(3)
+        stop = np.zeros(2, dtype=np.float32)
+        if not np.all(np.isfinite(pose)):
+            self._event(t_s, "bad_estimate", "non-finite pose estimate: stop")
+            return self.monitor.filter(stop, scan, t_s)
+        self.costmap.update(pose, scan, self.laser)
+        self.route_memory.observe(pose, self._day_s + t_s)
+        assert self.goal_xy is not None
+        to_goal = float(np.hypot(*(pose[:2] - self.goal_xy)))
+        if not self._armed and to_goal > self.params.goal_arm_m:
+            self._armed = True
+        if not self.done and self._armed and to_goal <= self.params.goal_tolerance_m:
+            self.done = True
+            self._event(t_s, "goal", f"{to_goal:.2f} m from the goal")
+        if self.done or self.gave_up:
+            return self.monitor.filter(stop, scan, t_s)
+        grid = self.costmap.clearance()
+        due = self._last_plan_t is None or t_s - self._last_plan_t >= self.params.replan_period_s
+        if self._force_plan or due:
+            self._plan_step(t_s, pose, grid, scan)
+        cmd = self.follower.command(pose, grid)
+        if self.follower.blocked and self._may_replan(t_s):
+            self._event(t_s, "blocked", "no free offset inside the corridor")
+            if self._go_around(t_s, pose, grid):
+                cmd = self.follower.command(pose, grid)
+        act = self.recovery.step(t_s, odom.pose, cmd, self.follower.blocked, scan)
+        if act is not None:
+            if act.kind == "give_up":
+                self.gave_up = True
+                self._event(t_s, "gave_up", act.detail)
+                cmd = stop
+            elif act.kind == "replan":
+                if self.params.clear_costmap_on_replan:
+                    self.costmap.clear_obstacles()
+                self._force_plan = True
+            elif act.command is not None:
+                cmd = act.command
+        return self.monitor.filter(cmd, scan, t_s)
+
+    # ------------------------------------------------------------------ planning
+    def _may_replan(self, t_s: float) -> bool:
+        return (
+            self._last_plan_t is None
+            or self._force_plan
+            or t_s - self._last_plan_t >= self.params.replan_period_s
+        )
+
+    def _event(self, t_s: float, kind: str, detail: str = "") -> None:
+        self._events.append((float(t_s), kind, detail))
+
+    def graph(self) -> RouteGraph:
+        """The route memory's graph (rebuilt at every plan)."""
+        assert self.route_memory is not None
+        if self._graph is None:
+            self._graph = self.route_memory.graph()
+        return self._graph
+
+    def _route_plan(self, pose: FloatArray, ignore_blocks: bool = False) -> PlannedPath | None:
+        """Route A* from the estimate to the goal node (H&W §6.2); with ``ignore_blocks`` on
+        the graph without its blocks."""
+        assert self.route_memory is not None and self.goal_xy is not None
+        self._graph = None
+        if ignore_blocks:
+            blocked, self.route_memory.blocked = self.route_memory.blocked, set()
+            try:
+                g = self.route_memory.graph()
+            finally:
+                self.route_memory.blocked = blocked
+        else:
+            g = self.graph()
+        if g.node_ids.size == 0:
+            return None
+        goal = self._goal_id
+        if goal is None or goal not in g.index:
+            goal = g.nearest_node(self.goal_xy)
+        self.plans += 1
+        return plan_route(
+            g,
+            pose[:2],
+            self.goal_xy,
+            self.params.speed_mps,
+            goal_id=goal,
+            leave_goal=not self._armed,
+        )
+
+    def _plan_step(self, t_s: float, pose: FloatArray, grid: ClearanceGrid, scan: Scan) -> None:
+        """The periodic planning step: unblock what is seen free, then keep, refresh or
+        replace the path (module doc)."""
+        forced = self._force_plan
+        self._force_plan = False
+        self._last_plan_t = t_s
+        self._unblock_seen_free(t_s, pose, scan, grid)
+        if self.mode == DETOUR and not forced and self._path is not None:
+            if self.follower.segment < self._rejoin_seg and not self.follower.done:
+                if self._cut_ahead(self._path, self._path_hw, grid, pose) is not None:
+                    self._event(t_s, "cut", "the detour ahead is cut")
+                    self._go_around(t_s, pose, grid)
+                return
+            self._event(t_s, "rejoined", "back on the route")
+        plan = self._route_plan(pose)
+        if plan is None and self.route_memory is not None and self.route_memory.blocked:
+            # every route is blocked: drive the route up to the block and go around it there
+            # (H&W §6.3); the blocks stay, so a detour driven now becomes a route
+            plan = self._route_plan(pose, ignore_blocks=True)
+            if plan is not None and self.mode != ROUTE:
+                self._event(t_s, "through_block", "no unblocked route: the route up to the block")
+        if plan is None:
+            self._grid_to_goal(t_s, pose, grid)
+            return
+        if self.mode != ROUTE or not self._same_plan(plan) or self.follower.done or forced:
+            self._set_route_path(plan)
+        if self._cut_ahead(self._path, self._path_hw, grid, pose) is not None:
+            self._event(t_s, "cut", "the corridor ahead is cut on the costmap")
+            self._go_around(t_s, pose, grid)
+
+    def _same_plan(self, plan: PlannedPath) -> bool:
+        """Whether ``plan`` goes on through the same nodes as the path being followed."""
+        if self._plan is None:
+            return False
+        new = plan.node_ids[1:]
+        old = self._plan.node_ids
+        return 0 < len(new) <= len(old) and tuple(old[len(old) - len(new) :]) == tuple(new)
+
+    def _set_route_path(self, plan: PlannedPath) -> None:
+        self.mode = ROUTE
+        self._plan = plan
+        self._follow(plan.xy, plan.half_width_m)
+
+    def _follow(self, path: FloatArray, half_widths: FloatArray) -> None:
+        self._path = np.asarray(path, dtype=np.float64)
+        self._path_hw = np.asarray(half_widths, dtype=np.float64)
+        self.follower.set_path(self._path, self._path_hw)
+
+    def _cut_ahead(
+        self,
+        path: FloatArray | None,
+        hw: FloatArray,
+        grid: ClearanceGrid,
+        pose: FloatArray,
+        seg0: int | None = None,
+    ) -> FloatArray | None:
+        """The first cut stretch of the corridor within ``cut_check_m`` ahead of the robot:
+        its centre-line points ``(M, 2)``, None when none is cut. A station is cut when no
+        lateral offset across ``[-l, l]`` keeps the hard clearance (H&W §6.3: no offset inside
+        the corridor avoids the obstacle). ``seg0``: the segment the robot is on (default: the
+        follower's)."""
+        if path is None or len(path) < 2:
+            return None
+        p = self.params
+        seg0 = min(self.follower.segment if seg0 is None else seg0, len(path) - 2)
+        verts = path[seg0:]
+        a = verts[0] + _clamped_projection(verts[0], verts[1], pose[:2])
+        verts = np.concatenate([a[None], verts[1:]])
+        hw_seg = np.minimum(hw[seg0:-1], hw[seg0 + 1 :])
+        pts, seg = samples_along(verts[:-1], verts[1:], grid.resolution_m, False)
+        if len(pts) == 0:
+            return None
+        step = np.hypot(*np.diff(pts, axis=0).T)
+        along = np.concatenate([[0.0], np.cumsum(step)])
+        keep = along <= p.cut_check_m
+        pts, seg = pts[keep], seg[keep]
+        d = verts[1:] - verts[:-1]
+        t = d / np.maximum(np.hypot(*d.T), 1e-12)[:, None]
+        normal = np.stack([-t[:, 1], t[:, 0]], axis=1)[seg]
+        offsets = np.linspace(-1.0, 1.0, p.cut_offsets)[None, :] * hw_seg[seg][:, None]
+        probe = pts[:, None, :] + offsets[..., None] * normal[:, None, :]
+        cut = np.all(grid.clearance_at(probe) < self.min_clearance_m, axis=1)
+        idx = np.flatnonzero(cut)
+        if idx.size == 0:
+            return None
+        gaps = np.flatnonzero(np.diff(idx) > 1)
+        end = idx[gaps[0]] if gaps.size else idx[-1]
+        return pts[idx[0] : end + 1]
+
+    def _go_around(self, t_s: float, pose: FloatArray, grid: ClearanceGrid) -> bool:
+        """H&W §6.3 global replanning; True when a new path is being followed."""
+        self._last_plan_t = t_s
+        self._force_plan = False
+        if self.mode == ROUTE and self._plan is not None:
+            cut = self._cut_ahead(self._path, self._path_hw, grid, pose)
+            if cut is None:  # blocked within the follower's probe, not as a whole corridor:
+                cut = self._follower_block_points(pose)
+            self._block_edges(t_s, cut)
+            plan = self._route_plan(pose)
+            if (
+                plan is not None
+                and not (set(plan.edges) & self._blocked_now())
+                and self._cut_ahead(plan.xy, plan.half_width_m, grid, pose, seg0=0) is None
+            ):
+                self._set_route_path(plan)
+                self.replans += 1
+                self._event(t_s, "replan", f"another route, {plan.travel_time_s:.0f} s")
+                return True
+        base = self._plan.xy if self._plan is not None else self._path
+        if base is None:
+            return False
+        self.plans += 1
+        det = plan_around(base, pose[:2], grid, self.planner)
+        if det is None:
+            self._event(t_s, "replan_failed", "no way around the block on the costmap")
+            return False
+        off = _distance_to_polyline(det, base) > 0.01
+        rejoin = int(np.flatnonzero(off)[-1]) + 1 if off.any() else 0
+        base_hw = self._plan.half_width_m if self._plan is not None else self._path_hw
+        near = np.argmin(np.hypot(*(det[:, None, :] - base[None, :, :]).transpose(2, 0, 1)), 1)
+        hw = np.where(off, self.params.detour_half_width_m, base_hw[near])
+        hw[: rejoin + 1] = np.minimum(hw[: rejoin + 1], self.params.detour_half_width_m)
+        self.mode = DETOUR
+        self._rejoin_seg = rejoin
+        self._follow(det, hw)
+        self.replans += 1
+        length = float(np.sum(np.hypot(*np.diff(det[: rejoin + 1], axis=0).T)))
+        self._event(t_s, "detour", f"grid A* around the block, {length:.1f} m to rejoin")
+        return True
+
+    def _follower_block_points(self, pose: FloatArray) -> FloatArray:
+        """Where the follower saw its block: the path's centre line from the robot's
+        projection up to its probe distance ahead."""
+        assert self._path is not None
+        seg0 = min(self.follower.segment, len(self._path) - 2)
+        verts = self._path[seg0:]
+        a = verts[0] + _clamped_projection(verts[0], verts[1], pose[:2])
+        verts = np.concatenate([a[None], verts[1:]])
+        pts, _ = samples_along(verts[:-1], verts[1:], 0.05, True)
+        along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T))])
+        return pts[along <= self.params.follower.probe_ahead_m]
+
+    def _blocked_now(self) -> set[tuple[int, int]]:
+        assert self.route_memory is not None
+        return set(self.route_memory.blocked)
+
+    def _block_edges(self, t_s: float, cut: FloatArray) -> None:
+        """Block the route edges (not joins) whose segment passes through the cut points."""
+        assert self.route_memory is not None
+        if cut is None or len(cut) == 0:
+            return
+        g = self.graph()
+        segs = [e for e in g.edges if e.route_id != JOIN and math.isfinite(e.travel_time_s)]
+        if not segs:
+            return
+        a = g.xy[[g.index[e.u] for e in segs]]
+        b = g.xy[[g.index[e.v] for e in segs]]
+        tol = 0.5 * (self.costmap.resolution_m if self.costmap is not None else 0.05)
+        hit = []
+        for k, e in enumerate(segs):
+            if _distance_to_polyline(cut, np.stack([a[k], b[k]])).min() <= tol:
+                hit.append((e.u, e.v))
+        for edge in hit:
+            self.route_memory.block(edge)
+        if hit:
+            self._event(t_s, "block", f"route edges {hit}")
+        self._graph = None
+
+    def _unblock_seen_free(
+        self, t_s: float, pose: FloatArray, scan: Scan, grid: ClearanceGrid
+    ) -> None:
+        """Unblock every blocked edge whose centre line the scan sees free (module doc)."""
+        assert self.route_memory is not None
+        if not self.route_memory.blocked:
+            return
+        p = self.params
+        g = self.graph()
+        lp = se2.compose(pose, np.asarray(self.laser.mount_pose, dtype=np.float64))
+        ranges = np.asarray(scan.ranges_m, dtype=np.float64)
+        freed = []
+        for u, v in sorted(self.route_memory.blocked):
+            if u not in g.index or v not in g.index:
+                continue
+            a, b = g.position(u), g.position(v)
+            pts, _ = samples_along(a[None], b[None], p.unblock_step_m, True)
+            rel = pts - lp[:2]
+            dist = np.hypot(*rel.T)
+            if dist.max() > p.unblock_view_m:
+                continue
+            bearing = np.arctan2(rel[:, 1], rel[:, 0]) - lp[2]
+            bearing = (bearing + math.pi) % (2.0 * math.pi) - math.pi
+            beam = np.rint((bearing - self.laser.angle_min_rad) / self.laser.angle_increment_rad)
+            if np.any(beam < 0) or np.any(beam >= self.laser.n_beams):
+                continue
+            r = ranges[beam.astype(np.int64)]
+            with np.errstate(invalid="ignore"):
+                seen = (r == np.inf) | (r >= dist + p.unblock_margin_m)
+            if np.all(seen) and np.all(grid.clearance_at(pts) >= self.min_clearance_m):
+                freed.append((u, v))
+        for edge in freed:
+            self.route_memory.unblock(edge)
+        if freed:
+            self._event(t_s, "unblock", f"seen free: {freed}")
+            self._graph = None
+
+    def _grid_to_goal(self, t_s: float, pose: FloatArray, grid: ClearanceGrid) -> None:
+        """No route to the goal: grid A* on the costmap straight to it (keep the current path
+        while one is followed)."""
+        if self.mode in (DETOUR, GRID) and self._path is not None and not self.follower.done:
+            return
+        assert self.goal_xy is not None
+        self.plans += 1
+        start = grid.nearest_free(pose[:2], self.min_clearance_m, 0.5)
+        path = None if start is None else self.planner.plan(start, self.goal_xy, grid)
+        if path is not None and not self._armed:  # at the start of a loop: nowhere to go
+            path = None
+        if path is None:
+            if self.mode != GRID or self._path is not None:
+                self._event(t_s, "no_path", "neither a route nor a grid path to the goal")
+            self.mode = GRID
+            self._plan = None
+            self._path = None
+            self.follower.set_path(None)
+            return
+        self.mode = GRID
+        self._plan = None
+        self._follow(path, np.full(len(path), self.params.detour_half_width_m))
+        self._event(t_s, "grid_path", "no route to the goal: grid A* on the costmap")
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_graph"] = None  # a cache
+        return state
+
+
+def _clamped_projection(a: FloatArray, b: FloatArray, xy: ArrayLike) -> FloatArray:
+    """The offset from ``a`` of the projection of ``xy`` onto segment ``a -> b``."""
+    d = b - a
+    u = float(np.clip(np.dot(np.asarray(xy, float)[:2] - a, d) / max(float(d @ d), 1e-18), 0, 1))
+    return u * d

@@ -1,0 +1,143 @@
+"""The navigation stack driving the real env (the apartment of H&W 2011): the goal reached
+without a collision, the day-22 block passed by replanning with a new route learned, and a
+wrong estimate stopped by the collision monitor. Dead reckoning steers (``static-mcl`` on the
+walls-only prior loses the apartment within seconds, see the stack's closing note)."""
+
+import pickle
+
+import numpy as np
+import pytest
+
+from dynmap_sim.agent.localizer import make_localizer
+from dynmap_sim.agent.navigation.policy import NavigationPolicy
+from dynmap_sim.agent.navigation.route_memory import RouteMemory
+from dynmap_sim.agent.navigation.stack import NavigationStack, StackParams
+from dynmap_sim.env import DynMapEnv
+from dynmap_sim.types import Odometry, PoseEstimate, Prior, Scan
+
+
+def prior_of(env, day: int) -> Prior:
+    """What a scenario grants: start pose, walls, bounds, the route (H&W Fig. 4)."""
+    f = env.unwrapped.world_facts()
+    return Prior(
+        initial_pose=np.array(f.start_pose),
+        initial_pose_cov=np.diag([0.05**2, 0.05**2, 0.05**2]),
+        walls=np.array(f.wall_segments),
+        bounds=f.bounds,
+        day=day,
+        run=1,
+        first_run=day == 1,
+        route=np.array(f.route),
+    )
+
+
+def drive(env, policy, day: int):
+    """One run with ``policy``; returns (collision steps, last info, steps)."""
+    obs, info = env.reset(seed=0, options={"day": day})
+    policy.reset(prior_of(env, day))
+    collisions = steps = 0
+    terminated = truncated = False
+    while not (terminated or truncated or policy.done):
+        obs, _, terminated, truncated, info = env.step(policy.act(obs))
+        collisions += int(info["collision"])
+        steps += 1
+    policy.end_run()
+    return collisions, info, steps
+
+
+def odometry_policy(env) -> NavigationPolicy:
+    u = env.unwrapped
+    loc = make_localizer("odometry", laser=u.laser_spec, rng=np.random.default_rng(0))
+    return NavigationPolicy(loc, NavigationStack(u.laser_spec, u.robot_radius_m))
+
+
+def test_day_1_reaches_the_routes_end_without_a_collision():
+    env = DynMapEnv("apartment", people=False, max_episode_steps=1500)
+    policy = odometry_policy(env)
+    collisions, info, steps = drive(env, policy, 1)
+    stack = policy.stack
+    route_end = env.unwrapped.world_facts().route[-1]
+    assert stack.done and not stack.gave_up
+    assert collisions == 0
+    assert info["route_progress"] > 0.95
+    # dead reckoning drifts: the true pose is near the end, not on it
+    assert np.hypot(*(info["truth"]["pose"][:2] - route_end)) < 0.6
+    assert stack.replans == 0 and stack.recoveries == 0
+    assert [k for _, k, _ in stack.events if k == "goal"] == ["goal"]
+    # the route memory learned the travel times of the route (none learned at the start)
+    prior_route = next(r for r in stack.route_memory.routes.values() if r.prior)
+    assert np.isfinite(prior_route.wp[1:, 5]).mean() > 0.9
+    again = pickle.loads(pickle.dumps(stack))  # checkpointed after every run
+    np.testing.assert_equal(again.route_memory.to_dict(), stack.route_memory.to_dict())
+
+
+def test_day_22_the_blocked_route_is_passed_by_replanning_and_learned():
+    env = DynMapEnv("apartment", people=False, max_episode_steps=2500)
+    policy = odometry_policy(env)
+    collisions, info, _ = drive(env, policy, 22)
+    stack = policy.stack
+    kinds = [k for _, k, _ in stack.events]
+    assert stack.done and not stack.gave_up
+    assert collisions == 0
+    assert info["route_progress"] > 0.95
+    assert "block" in kinds and "detour" in kinds and stack.replans >= 1
+    mem = stack.route_memory
+    new = [r for r in mem.routes.values() if not r.prior]
+    assert len(new) == 1 and len(new[0].ids) >= 4  # the detour, recorded as a route
+    assert mem.blocked  # the blocked stretch stays blocked until seen free
+    # x of the block's centre (route_blocker at 5.9, 4.6): the new route passes it west
+    near = np.abs(new[0].xy[:, 1] - 4.6) < 0.4
+    assert near.any() and np.all(new[0].xy[near, 0] < 5.9 - 0.65)
+
+
+def test_a_wrong_estimate_is_stopped_by_the_collision_monitor():
+    """The estimate 0.3 m off (to the robot's left): the stack steers the true robot toward
+    the things on its right; the monitor, from the raw scan, stops it before contact."""
+    env = DynMapEnv("apartment", people=False, max_episode_steps=900)
+    u = env.unwrapped
+    stack = NavigationStack(u.laser_spec, u.robot_radius_m)
+    obs, info = env.reset(seed=0, options={"day": 1})
+    stack.begin_run(prior_of(env, 1))
+    collisions = 0
+    for k in range(900):
+        truth = info["truth"]["pose"]
+        est = truth + np.array([-0.3 * np.sin(truth[2]), 0.3 * np.cos(truth[2]), 0.0])
+        t = k * 0.1
+        cmd = stack.step(
+            t,
+            Odometry(obs["odom"].copy(), t),
+            Scan(obs["scan"].copy(), t),
+            PoseEstimate(est, np.eye(3) * 0.01),
+        )
+        obs, _, terminated, truncated, info = env.step(cmd)
+        collisions += int(info["collision"])
+        if terminated or truncated or stack.done or stack.gave_up:
+            break
+    assert collisions == 0
+    assert stack.monitor_stops + stack.monitor_slowdowns > 0
+
+
+def test_a_loop_route_start_is_no_pass_of_every_waypoint():
+    """H&W's route ends where it starts: a pose that locates on the last segment right after
+    the first must not count as driving the whole route (no travel times, no unblocking)."""
+    route = np.array([[0.0, 0.0], [0.0, 4.0], [4.0, 4.0], [4.0, 0.0], [0.0, 0.0]])
+    mem = RouteMemory.from_prior(route, 0.35, 0.35, 0.0)
+    r = next(iter(mem.routes.values()))
+    mem.block((int(r.ids[5]), int(r.ids[6])))
+    mem.observe([0.0, 0.02, 1.57], 0.1)  # on the first segment
+    mem.observe([0.01, 0.0, 1.57], 0.2)  # a hair nearer the last one
+    assert mem.blocked
+    assert not np.isfinite(r.wp[1:-1, 5]).any()
+
+
+def test_bad_input_is_a_clear_error():
+    u = DynMapEnv("apartment", people=False).unwrapped
+    stack = NavigationStack(u.laser_spec, u.robot_radius_m)
+    with pytest.raises(RuntimeError, match="begin_run"):
+        stack.step(0.0, Odometry(np.zeros(3)), Scan(np.zeros(683, np.float32)), None)
+    with pytest.raises(ValueError, match="prior.route"):
+        stack.begin_run(Prior(initial_pose=np.zeros(3), bounds=(0, 0, 5, 5)))
+    with pytest.raises(ValueError, match="prior.route"):
+        stack.begin_run(Prior(np.zeros(3), bounds=(0, 0, 5, 5), route=np.zeros((1, 2))))
+    with pytest.raises(ValueError, match="cut_offsets"):
+        StackParams(cut_offsets=4)
