@@ -231,6 +231,8 @@ def test_bad_invocations_of_every_command(capsys, tmp_path):
         (["schema", "-o", "/nonexistent/x.json"], "folder /nonexistent does not exist"),
         (["schema", "-o", tmp_path / "dir"], "is a folder; give a file name"),
         (["export", tmp_path, "--tum", "/dev/null/x"], "cannot create folder /dev/null/x"),
+        (["report", tmp_path / "nope"], "no results database here"),
+        (["report", "/dev/zero"], "no results database here"),
         (["run", CI, "--out", "/dev/null/x", "-q"], "/dev/null/x: Not a directory"),
         (["replay", tmp_path / "x.log", "--localizer", "", "--out", tmp_path / "r"], "NAME"),
         (
