@@ -1,0 +1,98 @@
+"""Cost of the navigation stack per scan: ``python benchmarks/bench_navigation.py [--steps N]``.
+
+The apartment (people off), the stack steering on a lock-stepped ``dynamic-map`` localizer
+(Biber & Duckett) through :class:`~dynmap_sim.agent.navigation.policy.NavigationPolicy`: day 1
+is the localizer's first run (it maps with its static SLAM front end), day 2 localizes on the
+dynamic map learned from it. Per run it prints the mean time per scan of the localizer's
+update (the reference, measured in the same run on the same scans) and of the stack's
+``step`` (costmap update, route memory, planning, control, recovery, collision monitor), and
+their ratio; issue 15's target is stack <= 20 % of the lock-stepped dynamic-map.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from dynmap_sim.agent.localizer import make_localizer
+from dynmap_sim.agent.navigation.policy import NavigationPolicy
+from dynmap_sim.agent.navigation.stack import NavigationStack
+from dynmap_sim.env import DynMapEnv
+from dynmap_sim.types import Prior
+
+
+class _Timed:
+    """A localizer or a stack whose ``method`` calls are timed."""
+
+    def __init__(self, inner, method: str) -> None:
+        self.inner = inner
+        self.method = method
+        self.times: list[float] = []
+
+    def __getattr__(self, name):
+        attr = getattr(self.inner, name)
+        if name != self.method:
+            return attr
+
+        def timed(*args, **kwargs):
+            t0 = time.perf_counter()
+            out = attr(*args, **kwargs)
+            self.times.append(time.perf_counter() - t0)
+            return out
+
+        return timed
+
+
+def prior_of(env: DynMapEnv, day: int) -> Prior:
+    f = env.world_facts()
+    return Prior(
+        initial_pose=np.array(f.start_pose),
+        initial_pose_cov=np.diag([0.05**2, 0.05**2, 0.05**2]),
+        walls=np.array(f.wall_segments),
+        bounds=f.bounds,
+        day=day,
+        run=1,
+        first_run=day == 1,
+        route=np.array(f.route),
+    )
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=int, default=2000, help="scans per run at most")
+    ap.add_argument("--days", type=int, default=2, help="runs (days 1..N)")
+    args = ap.parse_args()
+    env = DynMapEnv("apartment", people=False)
+    u = env.unwrapped
+    loc = make_localizer("dynamic-map", laser=u.laser_spec, rng=np.random.default_rng(0))
+    stack = NavigationStack(u.laser_spec, u.robot_radius_m)
+    policy = NavigationPolicy(loc, stack, use_localizer_map=False)
+    t_loc, t_stack = _Timed(loc, "update"), _Timed(stack, "step")
+    policy.localizer, policy.stack = t_loc, t_stack  # type: ignore[assignment]
+    print("navigation stack vs lock-stepped dynamic-map, apartment, per scan (mean)")
+    for day in range(1, args.days + 1):
+        obs, info = env.reset(seed=0, options={"day": day})
+        policy.reset(prior_of(u, day))
+        t_loc.times.clear()
+        t_stack.times.clear()
+        err, n, done = [], 0, False
+        while n < args.steps and not done:
+            obs, _, term, trunc, info = env.step(policy.act(obs))
+            err.append(np.hypot(*(policy.estimate.mean[:2] - info["truth"]["pose"][:2])))
+            n += 1
+            done = term or trunc or policy.done
+        policy.end_run()
+        loc.end_day()
+        a, b = 1e3 * np.mean(t_loc.times), 1e3 * np.mean(t_stack.times)
+        print(
+            f"day {day}: {n} scans, dynamic-map {a:.2f} ms, stack {b:.2f} ms "
+            f"(p95 {1e3 * np.percentile(t_stack.times, 95):.2f} ms), stack/dynamic-map "
+            f"{b / a:.1%} (target <= 20 %); goal {stack.done}, replans {stack.replans}, "
+            f"mean error {np.mean(err):.3f} m"
+        )
+
+
+if __name__ == "__main__":
+    main()
