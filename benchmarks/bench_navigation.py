@@ -12,7 +12,9 @@ their ratio; issue 15's target is stack <= 20 % of the lock-stepped dynamic-map.
 from __future__ import annotations
 
 import argparse
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -20,7 +22,10 @@ from dynmap_sim.agent.localizer import make_localizer
 from dynmap_sim.agent.navigation.policy import NavigationPolicy
 from dynmap_sim.agent.navigation.stack import NavigationStack
 from dynmap_sim.env import DynMapEnv
-from dynmap_sim.types import Prior
+
+# the prior a scenario grants, as the stack's tests build it
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "agent" / "navigation"))
+from test_stack import prior_of  # noqa: E402
 
 
 class _Timed:
@@ -45,20 +50,6 @@ class _Timed:
         return timed
 
 
-def prior_of(env: DynMapEnv, day: int) -> Prior:
-    f = env.world_facts()
-    return Prior(
-        initial_pose=np.array(f.start_pose),
-        initial_pose_cov=np.diag([0.05**2, 0.05**2, 0.05**2]),
-        walls=np.array(f.wall_segments),
-        bounds=f.bounds,
-        day=day,
-        run=1,
-        first_run=day == 1,
-        route=np.array(f.route),
-    )
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=2000, help="scans per run at most")
@@ -74,7 +65,7 @@ def main() -> None:
     print("navigation stack vs lock-stepped dynamic-map, apartment, per scan (mean)")
     for day in range(1, args.days + 1):
         obs, info = env.reset(seed=0, options={"day": day})
-        policy.reset(prior_of(u, day))
+        policy.reset(prior_of(env, day))
         t_loc.times.clear()
         t_stack.times.clear()
         err, n, done = [], 0, False
