@@ -12,10 +12,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from dynmap_sim.analysis.report import overall_of
+from dynmap_sim.analysis.scenarios import load_scenario
 from dynmap_sim.experiments.results import ResultsDB
 from dynmap_sim.experiments.runner import run_experiment
-from dynmap_sim.experiments.scenario import Scenario, load_scenario
-from dynmap_sim.studies.biber_duckett.findings import measure_findings
+from dynmap_sim.experiments.scenario import Scenario
+from dynmap_sim.studies.study import Study, study_of_finding
 
 
 @dataclass(frozen=True)
@@ -155,18 +156,24 @@ def evaluate(scenario: Scenario, out_dir: Path, seed: int) -> list[CheckRow]:
 
 
 def _finding_rows(db: ResultsDB, keys: list[str], seed: int) -> list[CheckRow]:
-    """One row per required B&D finding: measured 0 when it holds, 1 when it does not or
-    cannot be measured (limit 0)."""
-    findings, _, _ = measure_findings(db)
-    by_key = {f.key: f for f in findings or []}
+    """One row per required finding, asked of the study that defines it: measured 0 when it
+    holds, 1 when it does not or cannot be measured (limit 0)."""
+    by_study: dict[str, tuple[Study, list[str]]] = {}
+    for key in keys:
+        study = study_of_finding(key)
+        if study is None:  # validated when the scenario was loaded
+            raise ValueError(f"no study defines the finding {key!r}")
+        by_study.setdefault(study.name, (study, []))[1].append(key)
+    checks = {}
+    for study, mine in by_study.values():
+        checks.update({c.key: (study.name, c) for c in study.check(db, mine)})
     rows = []
     for key in keys:
-        f = by_key.get(key)
-        holds = f is not None and f.holds is True
-        where = "" if f is not None and f.holds is not None else "not measurable"
-        criterion = f"finding {key} fails"
+        name, c = checks[key]
+        holds = c.holds is True
+        where = "" if c.holds is not None else "not measurable"
         rows.append(
-            CheckRow(seed, "dynamic-map", criterion, 0, 0.0 if holds else 1.0, holds, where)
+            CheckRow(seed, name, f"finding {key} fails", 0, 0.0 if holds else 1.0, holds, where)
         )
     return rows
 

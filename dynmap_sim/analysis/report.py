@@ -25,18 +25,7 @@ from dynmap_sim.metrics import (
     overall_summary,
     rpe_label,
 )
-from dynmap_sim.studies.biber_duckett.exhibition import plot_exhibition
-from dynmap_sim.studies.biber_duckett.figures import write_dynamic_figures
-from dynmap_sim.studies.biber_duckett.findings import (
-    Finding,
-    findings_table,
-    measure_findings,
-    write_findings,
-)
-from dynmap_sim.studies.biber_duckett.map_structure import (
-    plot_map_structure,
-    write_map_structure_csv,
-)
+from dynmap_sim.studies.study import StudyReport, all_studies
 from dynmap_sim.types import BeamClass
 
 #: Columns of ``per_day.csv``, in order.
@@ -120,9 +109,7 @@ def overall_of(db: ResultsDB, loc: int) -> OverallSummary:
     return overall_summary(d["truth"], d["estimate"], d["t_s"], runs)
 
 
-def _summary_md(
-    db: ResultsDB, path: Path, figures: list[Path], findings: list[Finding] | None = None
-) -> Path:
+def _summary_md(db: ResultsDB, path: Path, figures: list[Path], studies: list[StudyReport]) -> Path:
     meta = db.meta()
     labels = db.labels()
     runs = db.query(
@@ -191,13 +178,9 @@ def _summary_md(
                     f"| {label} | {name} | {_fmt(sc.precision[j])} | {_fmt(sc.recall[j])} "
                     f"| {sc.support[j]} |"
                 )
-    if findings:
-        lines += [
-            "",
-            "## Biber & Duckett §5 findings (also in findings.md / findings.json)",
-            "",
-            *findings_table(findings, paper=False),
-        ]
+    for rep in studies:
+        if rep.summary_lines:
+            lines += ["", *rep.summary_lines]
     events = db.query("SELECT kind, count(*) FROM events GROUP BY kind ORDER BY kind")
     if events:
         lines += ["", "## Events", ""]
@@ -359,18 +342,11 @@ def write_report(out_dir: str | Path) -> list[Path]:
         lik = _fig_likelihood(db, out / "likelihood_certainty.png")
         if lik is not None:
             figs.append(lik)
-        # B&D Figs. 10-13 per day and overall, for localizers that report those values
-        figs += write_dynamic_figures(out)
-        # B&D §5 claims, Fig. 9 and §5.2 against the truth, when a dynamic-map ran
-        findings, exhibition, structure = measure_findings(db)
-        if exhibition is not None:
-            mem, snaps, geom, ex_days = exhibition
-            figs.append(plot_exhibition(mem, snaps, geom, ex_days, out / "exhibition.png"))
-        if structure is not None:
-            figs.append(plot_map_structure(structure, out / "map_structure.png"))
-            written.append(write_map_structure_csv(structure, out / "map_structure.csv"))
-        if findings is not None:
-            written += write_findings(findings, out)
-        written.append(_summary_md(db, out / "summary.md", figs, findings))
+        # each paper study that applies adds its figures, files and a summary section
+        studies = [st.write(db, out) for st in all_studies() if st.applies(db)]
+        for rep in studies:
+            figs += rep.figures
+            written += rep.files
+        written.append(_summary_md(db, out / "summary.md", figs, studies))
         written += figs
     return written

@@ -28,7 +28,8 @@ import signal
 import threading
 import time
 import traceback
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from typing import Any
@@ -40,7 +41,7 @@ from dynmap_sim.agent.localizer import Localizer
 from dynmap_sim.errors import InputError
 from dynmap_sim.experiments.results import LocalizerDiagnostics
 from dynmap_sim.metrics import confusion_matrix
-from dynmap_sim.types import Diagnostic, Odometry, Prior, Scan
+from dynmap_sim.types import Diagnostic, Odometry, PoseEstimate, Prior, Scan
 
 #: A rebalanced assignment must shorten the slowest worker's busy time by this fraction.
 REBALANCE_GAIN = 0.15
@@ -129,6 +130,15 @@ class DiagnosticsRecorder:
             {d.name: np.zeros(d.shape, dtype=d.dtype) for d in self._counted},
         )
 
+    def resize(self, n: int) -> None:
+        """Make room for ``n`` scans (new rows NaN; rows beyond ``n`` dropped)."""
+        for d in self._scan:
+            old = self.out.per_scan[d.name]
+            new = np.full((n, *d.shape), math.nan)
+            k = min(n, len(old))
+            new[:k] = old[:k]
+            self.out.per_scan[d.name] = new
+
     def scan(self, step: int, extras: dict[str, Any]) -> None:
         """Record the declared values among a scan's ``extras``."""
         for d in self._scan:
@@ -176,58 +186,110 @@ def pickle_localizer(label: str, loc: Localizer) -> bytes:
         raise unpicklable_error(label, loc, err) from err
 
 
-def localize_run(label: str, loc: Localizer, stream: RunStream) -> LocalizerOutput:
-    """Feed one run's stream to one localizer (the hooks in order) and pickle it afterwards.
+class LocalizerRun:
+    """One localizer through one run, scan by scan: ``begin_run(prior)`` when made,
+    :meth:`update` per scan, :meth:`finish` at the end (``end_run``, ``end_day`` after the
+    day's last run, then the localizer is pickled).
 
-    Each call gets fresh copies of the step's odometry pose and scan, as the simulation
-    produced them. A failing localizer raises :class:`LocalizerError` naming it.
+    :func:`localize_run` is this over a recorded stream; a driver that steers on a localizer's
+    estimate runs it in lock-step with the simulation, and the output is the same either way.
+    ``capacity`` is a first guess of the run's scans (the arrays grow as needed). A failing
+    localizer raises :class:`LocalizerError` naming it, the run and the scan.
     """
-    busy0 = time.perf_counter()
-    n = len(stream.stamps_s)
-    est = np.empty((n, 3))
-    cov_diag = np.empty((n, 3))
-    diagnostics = DiagnosticsRecorder(loc, n)
-    confusion = np.zeros((4, 4), dtype=np.int64)
-    update_s = 0.0
-    step = -1
-    try:
-        loc.begin_run(stream.prior)
-        for step in range(n):
-            t_s = float(stream.stamps_s[step])
-            odom = Odometry(pose=stream.odom[step].copy(), stamp_s=t_s)
-            scan = Scan(ranges_m=stream.scans[step].copy(), stamp_s=t_s)
+
+    def __init__(self, label: str, loc: Localizer, prior: Prior, capacity: int = 1024) -> None:
+        self.busy0 = time.perf_counter()
+        self.label = label
+        self.loc = loc
+        self.prior = prior
+        cap = max(1, int(capacity))
+        self.est = np.empty((cap, 3))
+        self.cov_diag = np.empty((cap, 3))
+        self.diagnostics = DiagnosticsRecorder(loc, cap)
+        self.confusion = np.zeros((4, 4), dtype=np.int64)
+        self.update_s = 0.0
+        self.n = 0
+        with self._blame(None):
+            loc.begin_run(prior)
+
+    @contextmanager
+    def _blame(self, step: int | None) -> Iterator[None]:
+        try:
+            yield
+        except Exception as exc:
+            where = f"at scan {step}" if step is not None else "in a run/day hook"
+            raise LocalizerError(
+                f"localizer {self.label!r} failed on day {self.prior.day} run {self.prior.run} "
+                f"{where}: {type(exc).__name__}: {exc}"
+            ) from exc
+
+    def update(
+        self,
+        t_s: float,
+        odom_pose: NDArray[np.float64],
+        ranges_m: NDArray[np.float32],
+        beam_class: NDArray[np.int8],
+    ) -> PoseEstimate:
+        """Feed one scan (fresh copies of the odometry pose and ranges go to the localizer);
+        ``beam_class`` (the truth) only scores reported point classes."""
+        step = self.n
+        if step == len(self.est):
+            grown = 2 * len(self.est)
+            self.est = np.concatenate([self.est, np.empty_like(self.est)])
+            self.cov_diag = np.concatenate([self.cov_diag, np.empty_like(self.cov_diag)])
+            self.diagnostics.resize(grown)
+        odom = Odometry(pose=np.array(odom_pose, dtype=np.float64), stamp_s=t_s)
+        scan = Scan(ranges_m=np.array(ranges_m, dtype=np.float32), stamp_s=t_s)
+        with self._blame(step):
             t_up = time.perf_counter()
-            e = loc.update(odom, scan)
-            update_s += time.perf_counter() - t_up
-            est[step] = np.asarray(e.mean, dtype=np.float64)
-            cov_diag[step] = np.diagonal(np.asarray(e.cov, dtype=np.float64))
+            e = self.loc.update(odom, scan)
+            self.update_s += time.perf_counter() - t_up
+            self.est[step] = np.asarray(e.mean, dtype=np.float64)
+            self.cov_diag[step] = np.diagonal(np.asarray(e.cov, dtype=np.float64))
             ex = e.extras
             if ex:
-                diagnostics.scan(step, ex)
+                self.diagnostics.scan(step, ex)
                 pc = ex.get("point_classes")
                 if pc is not None:
-                    confusion += confusion_matrix(stream.beam_class[step], pc)
-        step = -1
-        loc.end_run()
-        diagnostics.end_run(loc)
-        if stream.last_of_day:
-            loc.end_day()
-            diagnostics.end_day(loc)
-    except Exception as exc:
-        where = f"at scan {step}" if step >= 0 else "in a run/day hook"
-        raise LocalizerError(
-            f"localizer {label!r} failed on {_day_run(stream)} {where}: {type(exc).__name__}: {exc}"
-        ) from exc
-    state = pickle_localizer(label, loc)
-    return LocalizerOutput(
-        est,
-        cov_diag,
-        confusion,
-        update_s,
-        time.perf_counter() - busy0,
-        state,
-        diagnostics=diagnostics.out,
-    )
+                    self.confusion += confusion_matrix(beam_class, pc)
+        self.n += 1
+        return e
+
+    def finish(self, last_of_day: bool) -> LocalizerOutput:
+        """End the run (and the day), pickle the localizer; the run's output."""
+        n = self.n
+        if n != len(self.est):
+            self.diagnostics.resize(n)
+        with self._blame(None):
+            self.loc.end_run()
+            self.diagnostics.end_run(self.loc)
+            if last_of_day:
+                self.loc.end_day()
+                self.diagnostics.end_day(self.loc)
+        state = pickle_localizer(self.label, self.loc)
+        return LocalizerOutput(
+            self.est[:n].copy(),
+            self.cov_diag[:n].copy(),
+            self.confusion,
+            self.update_s,
+            time.perf_counter() - self.busy0,
+            state,
+            diagnostics=self.diagnostics.out,
+        )
+
+
+def localize_run(label: str, loc: Localizer, stream: RunStream) -> LocalizerOutput:
+    """Feed one run's recorded stream to one localizer (:class:`LocalizerRun`)."""
+    n = len(stream.stamps_s)
+    run = LocalizerRun(label, loc, stream.prior, capacity=n)
+    for step in range(n):
+        run.update(
+            float(stream.stamps_s[step]),
+            stream.odom[step],
+            stream.scans[step],
+            stream.beam_class[step],
+        )
+    return run.finish(stream.last_of_day)
 
 
 class InProcessLocalizers:

@@ -11,6 +11,11 @@ views (:mod:`dynmap_sim.truth`: ``world_facts()``, ``obstacles()``); the loop ac
 world only through ``env.step`` and ``env.teleport`` (a kidnapping). The driver sees the truth
 only when it declares ``sees_truth``.
 
+A driver that steers on a localizer's estimate gets it in lock-step: the loop feeds that
+localizer each scan as it is recorded (:class:`~dynmap_sim.experiments.bench.LocalizerRun`,
+the same calls the localizer bench makes on a recorded stream) and hands the estimate to the
+driver before it acts.
+
 What carries over between runs besides the localizers — the driver and the engine's random
 generator (kidnapping times and places) — is the :class:`EngineState`, which the runner
 checkpoints after every run.
@@ -25,8 +30,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from dynmap_sim.agent.localizer import Localizer
 from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
-from dynmap_sim.experiments.bench import RunStream
+from dynmap_sim.experiments.bench import LocalizerOutput, LocalizerRun, RunStream
 from dynmap_sim.experiments.drivers import Driver, RunStart, StepInput
 from dynmap_sim.experiments.drivers.tour import static_clearance_grid
 from dynmap_sim.experiments.scenario import Kidnapping, PriorConfig
@@ -45,8 +51,13 @@ KIDNAP_SEARCH_M = 1.0
 
 @dataclass
 class EngineState:
-    """What carries over between runs besides the localizers (checkpointed after each run):
-    the ``driver`` and the engine's ``rng`` (kidnapping times and places)."""
+    """A driver that steers on a localizer's estimate gets it in lock-step: the loop feeds that
+    localizer each scan as it is recorded (:class:`~dynmap_sim.experiments.bench.LocalizerRun`,
+    the same calls the localizer bench makes on a recorded stream) and hands the estimate to the
+    driver before it acts.
+
+    What carries over between runs besides the localizers (checkpointed after each run):
+        the ``driver`` and the engine's ``rng`` (kidnapping times and places)."""
 
     driver: Driver
     rng: np.random.Generator
@@ -78,6 +89,8 @@ class Episode:
     skipped_waypoints: int
     segments: FloatArray
     segment_class: NDArray[np.int8]
+    #: the output of the localizer the driver steered on, run in lock-step (None: none)
+    steered: LocalizerOutput | None = None
 
 
 @dataclass(frozen=True)
@@ -143,8 +156,12 @@ class EpisodeLoop:
         xy = route[k] + u * (route[k + 1] - route[k])
         return np.array([xy[0], xy[1], rng.uniform(-math.pi, math.pi)])
 
-    def run(self, i: int, state: EngineState) -> Episode:
-        """Drive run ``i`` of :attr:`slots` and record it; ``state`` carries on."""
+    def run(
+        self, i: int, state: EngineState, steer: tuple[str, Localizer] | None = None
+    ) -> Episode:
+        """Drive run ``i`` of :attr:`slots` and record it; ``state`` carries on. ``steer``:
+        the (label, localizer) the driver steers on, updated here scan by scan in lock-step
+        (its estimate goes to the driver; its output to :attr:`Episode.steered`)."""
         slot = self.slots[i]
         cfg = self.config
         driver, rng = state.driver, state.rng
@@ -162,6 +179,11 @@ class EpisodeLoop:
         free_clearance_m = float(self.u.robot_radius_m) + KIDNAP_MARGIN_M
         events: list[tuple[int, float, str, str]] = []
         max_steps = int(round(cfg.max_run_s / self.dt_s)) if cfg.max_run_s is not None else None
+        lockstep = None
+        if steer is not None:
+            limit = max_steps if max_steps is not None else getattr(self.u, "max_episode_steps", 0)
+            lockstep = LocalizerRun(steer[0], steer[1], prior, capacity=int(limit) + 1)
+        estimate = None
         t_l: list[float] = []
         odom_l: list[FloatArray] = []
         scan_l: list[NDArray[np.float32]] = []
@@ -182,6 +204,8 @@ class EpisodeLoop:
             class_l.append(np.array(truth["beam_class"], dtype=np.int8))
             truth_l.append(pose)
             coll_l.append(collision)
+            if lockstep is not None:
+                estimate = lockstep.update(t_s, odom_l[-1], scan_l[-1], class_l[-1])
             progress_frac = float(info.get("route_progress", progress_frac))
             if terminated or truncated or driver.done:
                 break
@@ -208,6 +232,7 @@ class EpisodeLoop:
                     odom=Odometry(pose=odom_l[-1].copy(), stamp_s=t_s),
                     scan=Scan(ranges_m=scan_l[-1].copy(), stamp_s=t_s),
                     bumped=collision,
+                    estimate=estimate,
                     pose=pose if sees else None,
                     people=truth["people"] if sees else None,
                 )
@@ -222,6 +247,7 @@ class EpisodeLoop:
         finished = driver.done
         driver.end_run()
         last_of_day = i + 1 == len(self.slots) or self.slots[i + 1].day != slot.day
+        steered = lockstep.finish(last_of_day) if lockstep is not None else None
         stream = RunStream(
             index=i,
             prior=prior,
@@ -242,4 +268,5 @@ class EpisodeLoop:
             skipped_waypoints=skipped,
             segments=np.array(obstacles.segments, dtype=np.float64),
             segment_class=np.array(obstacles.segment_class, dtype=np.int8),
+            steered=steered,
         )

@@ -147,6 +147,10 @@ class ExperimentRunner:
         self._loc_states: list[bytes] | None = None
         self._fresh_locs: list[Localizer] = []
         self._live_locs: list[Localizer] | None = None  # the in-process engine's objects
+        #: the driver's localizer, run in lock-step by the episode loop: (label, object)
+        self._steer: tuple[str, Localizer] | None = None
+        steer = scenario.driver.localizer
+        self.steer_index = scenario.labels.index(steer) if steer is not None else None
         db_file = out_dir / "results.db"
         if resume and db_file.exists():
             self.db = ResultsDB.open(out_dir)
@@ -238,7 +242,11 @@ class ExperimentRunner:
         return [pickle.loads(b) for b in self._loc_states]  # noqa: S301 - our own state
 
     def _start_localizers(self) -> InProcessLocalizers | LocalizerPool:
+        """The localizer bench for every localizer but the one the driver steers on, which
+        stays in this process and runs in lock-step with the simulation (:attr:`_steer`)."""
         labels = self.scenario.labels
+        k = self.steer_index
+        rest = [j for j in range(len(labels)) if j != k]
         if self.workers == 1:
             locs = (
                 self._fresh_locs
@@ -246,7 +254,8 @@ class ExperimentRunner:
                 else [pickle.loads(b) for b in self._loc_states]  # noqa: S301
             )
             self._live_locs = locs
-            return InProcessLocalizers(labels, locs)
+            self._steer = None if k is None else (labels[k], locs[k])
+            return InProcessLocalizers([labels[j] for j in rest], [locs[j] for j in rest])
         states = self._loc_states
         if states is None:
             states = [
@@ -254,7 +263,15 @@ class ExperimentRunner:
                 for lab, loc in zip(labels, self._fresh_locs, strict=True)
             ]
         self._live_locs = None
-        return LocalizerPool(labels, states, self.workers)
+        self._steer = None if k is None else (labels[k], pickle.loads(states[k]))  # noqa: S301
+        return LocalizerPool([labels[j] for j in rest], [states[j] for j in rest], self.workers)
+
+    def _with_steered(self, episode: Episode, outs: list[LocalizerOutput]) -> list[LocalizerOutput]:
+        """All localizers' outputs in scenario order: the bench's and the lock-stepped one's."""
+        if self.steer_index is None:
+            return outs
+        assert episode.steered is not None
+        return [*outs[: self.steer_index], episode.steered, *outs[self.steer_index :]]
 
     def run(self, progress: bool = True, stop_after: int | None = None) -> Path:
         """Run the remaining slots; return the results folder.
@@ -287,15 +304,18 @@ class ExperimentRunner:
                 outs = engine.result() if pending is not None else None
                 engine.submit(sim[0].stream)
                 if pending is not None and outs is not None:
+                    outs = self._with_steered(pending[0], outs)
                     done_at = self._write(*pending, outs, done_at)
                     bar.update(1)
                 pending = sim
                 if not engine.pipelined:
-                    done_at = self._write(*pending, engine.result(), done_at)
+                    outs = self._with_steered(pending[0], engine.result())
+                    done_at = self._write(*pending, outs, done_at)
                     bar.update(1)
                     pending = None
             if pending is not None:
-                self._write(*pending, engine.result(), done_at)
+                outs = self._with_steered(pending[0], engine.result())
+                self._write(*pending, outs, done_at)
                 bar.update(1)
         finally:
             if engine is not None:
@@ -310,7 +330,7 @@ class ExperimentRunner:
     def _simulate(self, i: int) -> tuple[Episode, EngineState]:
         """Drive run ``i`` through the episode loop; the state to checkpoint after it (copied
         now: the next run is simulated before this one is written)."""
-        episode = self.loop.run(i, self.state)
+        episode = self.loop.run(i, self.state, self._steer)
         return episode, pickle.loads(pickle.dumps(self.state, pickle.HIGHEST_PROTOCOL))
 
     def _write(

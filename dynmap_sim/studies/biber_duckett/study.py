@@ -39,8 +39,9 @@ class BiberDuckett(Study):
 
     def applies(self, db: ResultsDB) -> bool:
         names = {r[0] for r in db.query("SELECT name FROM localizers")}
+        # or any localizer that selects timescales (Figs. 10-13 apply to it)
         return bool(names & set(SAMPLE_BASED)) or bool(
-            db.query("SELECT 1 FROM timescale_counts LIMIT 1")
+            db.query("SELECT 1 FROM estimates WHERE timescale >= 0 LIMIT 1")
         )
 
     def write(self, db: ResultsDB, out: Path) -> StudyReport:
