@@ -6,6 +6,7 @@ problems of one file so a user fixes them in one go.
 
 from __future__ import annotations
 
+import os
 import stat
 import tomllib
 from collections.abc import Iterable
@@ -91,8 +92,11 @@ def read_input_text(path: str | Path, error_cls: type[FileError]) -> str:
         raise error_cls(
             p, [("", f"file too large: {size} bytes (the limit is {limit // 2**20} MiB)")]
         )
-    try:
-        with p.open("rb") as f:
+    try:  # non-blocking open and fstat: swapped for a FIFO since the stat, it is still refused
+        with os.fdopen(os.open(p, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0)), "rb") as f:
+            mode = os.fstat(f.fileno()).st_mode
+            if not stat.S_ISREG(mode):
+                raise error_cls(p, [("", f"not a regular file but {_kind(mode)}")])
             data = f.read(limit + 1)
     except OSError as exc:
         raise error_cls(p, [("", f"cannot read file: {exc}")]) from None

@@ -217,3 +217,16 @@ def test_a_calendar_running_past_year_9999_is_a_field_error(tmp_path, start):
         load_world(bad)
     loc, msg = ei.value.errors[0]
     assert loc == "calendar" and f"from {start} may run past 9999-12-31" in msg
+
+
+def test_a_file_swapped_for_a_fifo_after_the_check_is_still_refused(tmp_path, monkeypatch):
+    import os
+
+    from dynmap_sim import errors
+
+    fifo = tmp_path / "world.toml"
+    os.mkfifo(fifo)
+    monkeypatch.setattr(errors, "regular_file_size", lambda path, error_cls: 0)  # "was regular"
+    with pytest.raises(WorldFileError) as ei:
+        load_world(fifo)
+    assert _only(ei.value) == "not a regular file but a FIFO"
