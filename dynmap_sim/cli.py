@@ -293,10 +293,22 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 def _cmd_check(args: argparse.Namespace) -> int:
     from dynmap_sim.analysis.check import check_scenario
+    from dynmap_sim.analysis.scenarios import load_scenario
+    from dynmap_sim.errors import InputError
 
     _refuse_world_file(args.scenario)
+    scenario = load_scenario(args.scenario)
+    exp = scenario.expectations
+    limits = [v for le in exp.localizers.values() for v in le.model_dump().values()]
+    if not (exp.no_collisions or exp.max_skipped_waypoints is not None or exp.findings) and all(
+        v is None for v in limits
+    ):
+        raise InputError(
+            f"{args.scenario}: nothing to check: [expectations] is missing or sets no limit "
+            "(a check of nothing would pass); add some (README: Regression checks) or use `run`"
+        )
     _refuse_results(args.out, args.force, "check")
-    result = check_scenario(args.scenario, out_dir=args.out, progress=not args.quiet)
+    result = check_scenario(scenario, out_dir=args.out, progress=not args.quiet)
     print(result.table())
     return 0 if result.passed else 1
 

@@ -364,3 +364,22 @@ def test_check_and_replay_do_not_overwrite_results_without_force(capsys, tmp_pat
         capsys, "replay", tmp_path / "x.log", "--localizer", "odometry", "--out", out
     )
     assert "already holds results; replay would replace them: pass --force" in line
+
+
+def test_check_without_expectations_is_refused_before_running(capsys, tmp_path):
+    text = CI.read_text().replace('world = "apartment"', f'world = "{WORLD}"')
+    bare = tmp_path / "bare.toml"
+    bare.write_text(text[: text.index("[expectations]")])
+    line = _one_line_error(capsys, "check", bare, "-q", "--out", tmp_path / "o")
+    assert line == (
+        f"error: {bare}: nothing to check: [expectations] is missing or sets no limit (a check "
+        "of nothing would pass); add some (README: Regression checks) or use `run`"
+    )
+    assert not (tmp_path / "o").exists()
+    empty = tmp_path / "empty.toml"
+    empty.write_text(
+        text.replace("mean_error_m = 0.25\nmax_error_m = 0.5\nlost_fraction = 0.0", "").replace(
+            "no_collisions = true\nmax_skipped_waypoints = 0", ""
+        )
+    )
+    assert "nothing to check" in _one_line_error(capsys, "check", empty, "-q")
