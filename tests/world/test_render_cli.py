@@ -97,12 +97,14 @@ def _err_line(res):
 
 def test_render_world_validates_every_argument(tmp_path):
     (tmp_path / "somedir").mkdir()
+    shipped = sorted(p.stem for p in WORLDS.glob("*.toml"))
+    assert {"apartment", "lab"} <= set(shipped)
     cases = [
         (["apartment", "--day", "99"], "apartment: day 99 outside the calendar (1..28)"),
         (["lab", "--run", "5"], "lab: run 5 outside 1..3"),
         (["apartment", "--day", "0"], "argument --day: must be at least 1, not 0"),
         (["apartment", "--seed", "-1"], "argument --seed: seed must be in 0..2**63-1, not -1"),
-        (["labb"], "labb: no such file or shipped world; shipped: apartment, lab"),
+        (["labb"], f"labb: no such file or shipped world; shipped: {', '.join(shipped)}"),
         (["apartment", "--sheet", "--day", "2"], "drop --day and --run"),
     ]
     for args, msg in cases:
