@@ -15,7 +15,7 @@ from dynmap_sim.analysis.report import overall_of
 from dynmap_sim.analysis.scenarios import load_scenario
 from dynmap_sim.experiments.results import ResultsDB
 from dynmap_sim.experiments.runner import run_experiment
-from dynmap_sim.experiments.scenario import Scenario
+from dynmap_sim.experiments.scenario import NavigationExpectation, Scenario
 from dynmap_sim.studies.study import Study, study_of_finding
 
 
@@ -30,6 +30,7 @@ class CheckRow:
     measured: float
     passed: bool
     where: str = ""  # e.g. the failing day
+    at_least: bool = False  # the limit is a minimum (else a maximum)
 
 
 @dataclass
@@ -52,7 +53,7 @@ class CheckResult:
                 str(r.seed),
                 r.subject,
                 r.criterion,
-                f"<= {r.limit:g}",
+                f"{'>=' if r.at_least else '<='} {r.limit:g}",
                 "nan" if math.isnan(r.measured) else f"{r.measured:.4g}",
                 r.where,
                 "PASS" if r.passed else "FAIL",
@@ -89,6 +90,8 @@ def evaluate(scenario: Scenario, out_dir: Path, seed: int) -> list[CheckRow]:
             rows.append(CheckRow(seed, "robot", "skipped waypoints", lim, float(n), n <= lim))
         if exp.findings:
             rows += _finding_rows(db, exp.findings, seed)
+        if exp.navigation is not None:
+            rows += _navigation_rows(db, exp.navigation, seed)
         for label, e in exp.localizers.items():
             k = labels.index(label)
             overall = overall_of(db, k) if _needs_scans(e) else None
@@ -152,6 +155,57 @@ def evaluate(scenario: Scenario, out_dir: Path, seed: int) -> list[CheckRow]:
                         seed, label, "lost fraction", e.lost_fraction, v, _le(v, e.lost_fraction)
                     )
                 )
+    return rows
+
+
+def _navigation_rows(db: ResultsDB, e: NavigationExpectation, seed: int) -> list[CheckRow]:
+    """Rows for the navigation expectations, over every stored run (measured against the
+    truth by :func:`dynmap_sim.metrics.nav_run_summary`)."""
+    runs = db.nav_runs()
+    if not runs:
+        return [CheckRow(seed, "robot", "navigation measures", 0, math.nan, False, "none stored")]
+    nav = [s for _, _, s in runs]
+    rows = []
+    if e.goal_reached_fraction is not None:
+        v = sum(s.goal_reached for s in nav) / len(nav)
+        lim = e.goal_reached_fraction
+        missed = [f"day {d} run {r}" for d, r, s in runs if not s.goal_reached]
+        rows.append(
+            CheckRow(
+                seed,
+                "robot",
+                "goal reached (share of runs)",
+                lim,
+                v,
+                v >= lim,
+                ", ".join(missed[:3]),
+                at_least=True,
+            )
+        )
+    for key, field_name, name in (
+        ("max_collisions", "collisions", "collisions (navigation)"),
+        ("max_near_misses", "near_misses", "near misses with people"),
+        ("max_gave_up", "gave_up", "runs given up"),
+    ):
+        lim = getattr(e, key)
+        if lim is not None:
+            v = float(sum(getattr(s, field_name) for s in nav))
+            rows.append(CheckRow(seed, "robot", name, lim, v, v <= lim))
+    if e.min_clearance_m is not None:
+        d, r, worst = min(runs, key=lambda x: x[2].min_clearance_m)
+        v = worst.min_clearance_m
+        rows.append(
+            CheckRow(
+                seed,
+                "robot",
+                "smallest clearance [m]",
+                e.min_clearance_m,
+                v,
+                v >= e.min_clearance_m,
+                f"day {d} run {r}",
+                at_least=True,
+            )
+        )
     return rows
 
 

@@ -14,6 +14,13 @@ from typing import Any
 
 import numpy as np
 
+from dynmap_sim.analysis.navigation import (
+    nav_per_day,
+    nav_summary_lines,
+    plot_nav_per_day,
+    plot_route_memory,
+    write_nav_per_day_csv,
+)
 from dynmap_sim.experiments.results import ResultsDB
 from dynmap_sim.metrics import (
     LOST_THRESHOLD_M,
@@ -276,6 +283,11 @@ def _fig_trajectories(db: ResultsDB, path: Path) -> Path:
         route = np.asarray(db.meta().get("route") or np.zeros((0, 2)), float).reshape(-1, 2)
         if len(route):
             ax.plot(route[:, 0], route[:, 1], ":", color="gray", lw=1, label="route")
+        for _, _, blob in (
+            a for a in db.driver_artifacts("planned_path.f8") if a[:2] == (day, run)
+        ):
+            pp = np.frombuffer(blob, dtype="<f8").reshape(-1, 2)
+            ax.plot(pp[:, 0], pp[:, 1], "--", color="tab:green", lw=1, label="last planned path")
         for k, label in enumerate(db.labels()):
             d = db.per_scan(k, day, run)
             if k == 0:
@@ -322,6 +334,21 @@ def _fig_likelihood(db: ResultsDB, path: Path) -> Path | None:
     return path
 
 
+def _navigation(db: ResultsDB, out: Path) -> StudyReport | None:
+    """``nav_per_day.csv``, the per-day figure, the route memory and a summary section, when
+    the results hold navigation measures."""
+    rows = nav_per_day(db)
+    if not rows:
+        return None
+    rep = StudyReport(summary_lines=nav_summary_lines(db, rows))
+    rep.files.append(write_nav_per_day_csv(rows, out / "nav_per_day.csv"))
+    rep.figures.append(plot_nav_per_day(rows, out / "navigation_per_day.png"))
+    mem = plot_route_memory(db, out / "route_memory.png")
+    if mem is not None:
+        rep.figures.append(mem)
+    return rep
+
+
 def write_report(out_dir: str | Path) -> list[Path]:
     """Write figures, ``summary.md`` and ``per_day.csv`` into a results folder."""
     import matplotlib
@@ -344,6 +371,9 @@ def write_report(out_dir: str | Path) -> list[Path]:
             figs.append(lik)
         # each paper study that applies adds its figures, files and a summary section
         studies = [st.write(db, out) for st in all_studies() if st.applies(db)]
+        nav = _navigation(db, out)
+        if nav is not None:
+            studies.insert(0, nav)
         for rep in studies:
             figs += rep.figures
             written += rep.files

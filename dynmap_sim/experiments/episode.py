@@ -32,21 +32,28 @@ from numpy.typing import NDArray
 
 from dynmap_sim.agent.localizer import Localizer
 from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
+from dynmap_sim.agent.planning.grid_dijkstra import GridDijkstra
 from dynmap_sim.experiments.bench import LocalizerOutput, LocalizerRun, RunStream
 from dynmap_sim.experiments.drivers import Driver, RunStart, StepInput
-from dynmap_sim.experiments.drivers.tour import static_clearance_grid
+from dynmap_sim.experiments.drivers.tour import plan_through_waypoints, static_clearance_grid
 from dynmap_sim.experiments.scenario import Kidnapping, PriorConfig
+from dynmap_sim.metrics import clearances, goal_reached, path_length_m
 from dynmap_sim.truth import RunSlot, WorldFacts
-from dynmap_sim.types import Odometry, Prior, Scan
+from dynmap_sim.types import BeamClass, Odometry, Prior, Scan
 
 FloatArray = NDArray[np.float64]
 
-#: A kidnapped robot is put where it fits: its radius plus this margin free [m] ...
-KIDNAP_MARGIN_M = 0.05
-#: ... on a clearance grid of this resolution [m] ...
-KIDNAP_GRID_RESOLUTION_M = 0.05
-#: ... within this distance of the target [m] (else the kidnapping is skipped).
+#: A kidnapped robot is put where it fits, and the shortest path keeps, the robot's radius
+#: plus this margin free [m] (the tour operator's hard clearance) ...
+FREE_MARGIN_M = 0.05
+#: ... on a clearance grid of the run's true static obstacles of this resolution [m].
+GRID_RESOLUTION_M = 0.05
+#: A kidnapping target is moved to free space within this distance [m] (else skipped).
 KIDNAP_SEARCH_M = 1.0
+#: The shortest path prefers this much more clearance [m], like the tour operator's plan.
+PREFERRED_EXTRA_M = 0.07
+#: A route waypoint inside an obstacle counts if free space is this near [m] (the tour's).
+SNAP_WAYPOINT_M = 0.4
 
 
 @dataclass
@@ -91,6 +98,16 @@ class Episode:
     segment_class: NDArray[np.int8]
     #: the output of the localizer the driver steered on, run in lock-step (None: none)
     steered: LocalizerOutput | None = None
+    #: true clearance of the robot's disc [m] per scan: to any obstacle, and to people
+    clearance_m: FloatArray | None = None
+    person_clearance_m: FloatArray | None = None
+    #: the goal (the route's end) reached, by the truth (:func:`metrics.goal_reached`)
+    goal_reached: bool = False
+    #: the shortest path through the route's waypoints around the true obstacles [m]
+    shortest_path_m: float = math.nan
+    #: the driver's counts (:meth:`Driver.stats`) and what it handed over after the run
+    driver_stats: dict[str, float] | None = None
+    driver_artifacts: dict[str, bytes] | None = None
 
 
 @dataclass(frozen=True)
@@ -127,6 +144,7 @@ class EpisodeLoop:
             initial_pose_cov=np.diag([sxy**2, sxy**2, sth**2]) if known else None,
             walls=np.array(facts.wall_segments, dtype=float) if pc.map == "walls" else None,
             bounds=facts.bounds,
+            route=np.array(self.config.route, dtype=float),
             day=slot.day,
             run=slot.run,
             first_run=i == 0,
@@ -173,10 +191,11 @@ class EpisodeLoop:
         sees = driver.sees_truth
         driver.begin_run(RunStart(prior, start if sees else None, obstacles if sees else None))
         kidnaps = self._kidnaps(slot, rng)
-        kidnap_grid: ClearanceGrid | None = None
-        if kidnaps:
-            kidnap_grid = static_clearance_grid(obstacles, KIDNAP_GRID_RESOLUTION_M)
-        free_clearance_m = float(self.u.robot_radius_m) + KIDNAP_MARGIN_M
+        static_grid = static_clearance_grid(obstacles, GRID_RESOLUTION_M)
+        radius_m = float(self.u.robot_radius_m)
+        free_clearance_m = radius_m + FREE_MARGIN_M
+        shortest_m = self._shortest_path_m(start, static_grid, free_clearance_m)
+        person_l: list[float] = []
         events: list[tuple[int, float, str, str]] = []
         max_steps = int(round(cfg.max_run_s / self.dt_s)) if cfg.max_run_s is not None else None
         lockstep = None
@@ -204,6 +223,7 @@ class EpisodeLoop:
             class_l.append(np.array(truth["beam_class"], dtype=np.int8))
             truth_l.append(pose)
             coll_l.append(collision)
+            person_l.append(self._person_clearance_m(pose, radius_m))
             if lockstep is not None:
                 estimate = lockstep.update(t_s, odom_l[-1], scan_l[-1], class_l[-1])
             progress_frac = float(info.get("route_progress", progress_frac))
@@ -215,8 +235,7 @@ class EpisodeLoop:
             if kidnaps and kidnaps[0].step <= step:
                 kp = kidnaps.pop(0)
                 target = kp.pose if kp.pose is not None else self._random_route_pose(rng)
-                assert kidnap_grid is not None
-                free = kidnap_grid.nearest_free(target[:2], free_clearance_m, KIDNAP_SEARCH_M)
+                free = static_grid.nearest_free(target[:2], free_clearance_m, KIDNAP_SEARCH_M)
                 if free is None:
                     events.append((step, t_s, "kidnap_skipped", "no free place near the target"))
                 else:
@@ -245,7 +264,19 @@ class EpisodeLoop:
         ]
         driver_events, skipped = list(driver.events), driver.skipped_waypoints
         finished = driver.done
+        driver_stats = dict(driver.stats())
         driver.end_run()
+        truth_arr = np.asarray(truth_l, dtype=np.float64).reshape(-1, 3)
+        static_circles = obstacles.circles[obstacles.circle_class != BeamClass.PERSON]
+        clearance = np.minimum(
+            clearances(truth_arr[:, :2], radius_m, obstacles.segments, static_circles),
+            np.asarray(person_l),
+        )
+        end_m = float(np.hypot(*(truth_arr[-1, :2] - cfg.route[-1])))
+        # the env measures progress along the world's whole route; the driven route may be
+        # its leading part (route_fraction)
+        share = path_length_m(cfg.route) / max(path_length_m(facts.route), 1e-12)
+        progress_on_route = min(1.0, progress_frac / max(share, 1e-12))
         last_of_day = i + 1 == len(self.slots) or self.slots[i + 1].day != slot.day
         steered = lockstep.finish(last_of_day) if lockstep is not None else None
         stream = RunStream(
@@ -260,7 +291,7 @@ class EpisodeLoop:
         return Episode(
             index=i,
             stream=stream,
-            truth=np.asarray(truth_l, dtype=np.float64).reshape(-1, 3),
+            truth=truth_arr,
             collision=np.asarray(coll_l, dtype=bool),
             events=sorted(events + driver_events, key=lambda e: e[0]),
             terminated=bool(terminated or finished),
@@ -269,4 +300,30 @@ class EpisodeLoop:
             segments=np.array(obstacles.segments, dtype=np.float64),
             segment_class=np.array(obstacles.segment_class, dtype=np.int8),
             steered=steered,
+            clearance_m=clearance,
+            person_clearance_m=np.asarray(person_l, dtype=np.float64),
+            goal_reached=goal_reached(bool(terminated), progress_on_route, end_m),
+            shortest_path_m=shortest_m,
+            driver_stats=driver_stats,
+            driver_artifacts=dict(driver.run_artifacts()),
         )
+
+    def _shortest_path_m(self, start: FloatArray, grid: ClearanceGrid, clearance_m: float) -> float:
+        """Length [m] of the shortest collision-free path from the true start through the
+        route's waypoints on the run's true obstacles (the SPL reference; NaN when a
+        waypoint cannot be reached)."""
+        planner = GridDijkstra(clearance_m, clearance_m + PREFERRED_EXTRA_M)
+        plan = plan_through_waypoints(
+            self.config.route, 0, start[:2], grid, planner, clearance_m, SNAP_WAYPOINT_M
+        )
+        return (
+            math.nan
+            if plan.notes and any(k == "skip_waypoint" for k, _ in plan.notes)
+            else plan.length_m
+        )
+
+    def _person_clearance_m(self, pose: FloatArray, radius_m: float) -> float:
+        """True clearance [m] of the robot's disc to the nearest person's legs now."""
+        obs = self.u.obstacles()
+        legs = obs.circles[obs.circle_class == BeamClass.PERSON]
+        return float(clearances(pose[:2], radius_m, np.zeros((0, 4)), legs)[0])

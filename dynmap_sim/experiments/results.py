@@ -41,9 +41,11 @@ it is read (report, export, check) but not continued.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import io
 import json
+import math
 import os
 import pickle
 import sqlite3
@@ -56,7 +58,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynmap_sim.errors import InputError
-from dynmap_sim.metrics import RunSummary, day_summary, n_onsets, scan_errors
+from dynmap_sim.metrics import NavRunSummary, RunSummary, day_summary, n_onsets, scan_errors
 from dynmap_sim.types import Diagnostic
 
 DB_NAME = "results.db"
@@ -105,6 +107,13 @@ CREATE TABLE IF NOT EXISTS run_diagnostics (
     PRIMARY KEY (loc, day, run, name));
 CREATE TABLE IF NOT EXISTS artifacts (
     loc INTEGER, day INTEGER, name TEXT, kind TEXT, data BLOB, PRIMARY KEY (loc, day, name));
+CREATE TABLE IF NOT EXISTS nav_runs (
+    day INTEGER, run INTEGER, goal_reached INTEGER, time_s REAL, path_length_m REAL,
+    shortest_path_m REAL, spl REAL, collisions INTEGER, near_misses INTEGER,
+    min_clearance_m REAL, replans INTEGER, recoveries INTEGER, stuck_s REAL, gave_up INTEGER,
+    PRIMARY KEY (day, run));
+CREATE TABLE IF NOT EXISTS driver_artifacts (
+    day INTEGER, run INTEGER, name TEXT, data BLOB, PRIMARY KEY (day, run, name));
 CREATE TABLE IF NOT EXISTS checkpoint (
     id INTEGER PRIMARY KEY CHECK (id = 1), next_index INTEGER, next_day INTEGER,
     next_run INTEGER, scenario_hash TEXT, seed INTEGER, sha256 TEXT, blob BLOB, created TEXT);
@@ -186,6 +195,10 @@ class RunRecord:
     segment_class: NDArray[np.int8] | None = None
     update_s: NDArray[np.float64] | None = None  # (L,) wall time spent in each update()
     diagnostics: list[LocalizerDiagnostics] = field(default_factory=list)
+    #: the run's navigation measures (None: not measured)
+    nav: NavRunSummary | None = None
+    #: what the driver handed over after the run (name -> bytes)
+    driver_artifacts: dict[str, bytes] = field(default_factory=dict)
 
     def scan_diagnostic(self, loc: int, name: str) -> NDArray[np.float64] | None:
         """Per-scan values ``(T, ...)`` of diagnostic ``name`` of localizer ``loc`` (None
@@ -359,6 +372,8 @@ class ResultsDB:
                 "timescale_counts",
                 "run_diagnostics",
                 "geometry",
+                "nav_runs",
+                "driver_artifacts",
             ):
                 self.con.execute(f"DELETE FROM {table} WHERE day=? AND run=?", (d, r))
             self.con.execute("DELETE FROM runs WHERE day=? AND run=?", (d, r))
@@ -443,6 +458,16 @@ class ResultsDB:
                         np.ascontiguousarray(rec.segment_class, dtype="i1").tobytes(),
                     ),
                 )
+            if rec.nav is not None:
+                nav = rec.nav.to_dict()
+                self.con.execute(
+                    f"INSERT INTO nav_runs VALUES (?,?,{','.join('?' * len(nav))})",
+                    (d, r, *(_none_if_nan(v) for v in nav.values())),
+                )
+            self.con.executemany(
+                "INSERT INTO driver_artifacts VALUES (?,?,?,?)",
+                [(d, r, name, data) for name, data in rec.driver_artifacts.items()],
+            )
             for k, s in enumerate(run_summaries):
                 self.con.execute(
                     "INSERT INTO run_summaries VALUES (:loc, :day, :run, :n_scans, "
@@ -715,6 +740,38 @@ class ResultsDB:
             (loc, name),
         ).fetchall()
         return [(int(day), _decode_artifact(kind, data)) for day, kind, data in rows]
+
+    def nav_runs(self) -> list[tuple[int, int, NavRunSummary]]:
+        """``(day, run, NavRunSummary)`` of every stored run (empty for results that
+        predate navigation measures)."""
+        if not self._has_table("nav_runs"):
+            return []
+        names = [f.name for f in dataclasses.fields(NavRunSummary)]
+        rows = self.con.execute(
+            f"SELECT day, run, {', '.join(names)} FROM nav_runs ORDER BY day, run"
+        ).fetchall()
+        return [
+            (
+                int(row[0]),
+                int(row[1]),
+                NavRunSummary.from_dict(
+                    {n: math.nan if v is None else v for n, v in zip(names, row[2:], strict=True)}
+                ),
+            )
+            for row in rows
+        ]
+
+    def driver_artifacts(self, name: str) -> list[tuple[int, int, bytes]]:
+        """``(day, run, data)`` of the driver's artifact ``name``, by run."""
+        if not self._has_table("driver_artifacts"):
+            return []
+        return [
+            (int(d), int(r), bytes(b))
+            for d, r, b in self.con.execute(
+                "SELECT day, run, data FROM driver_artifacts WHERE name=? ORDER BY day, run",
+                (name,),
+            )
+        ]
 
     def geometry(self, day: int, run: int) -> tuple[np.ndarray, np.ndarray] | None:
         row = self.con.execute(

@@ -40,7 +40,7 @@ from dynmap_sim.experiments.drivers import DriverContext, clip_route, make_drive
 from dynmap_sim.experiments.episode import EngineState, Episode, EpisodeLoop, LoopConfig
 from dynmap_sim.experiments.results import Checkpoint, ResultsDB, RunRecord
 from dynmap_sim.experiments.scenario import Scenario
-from dynmap_sim.metrics import RunSummary, run_summary
+from dynmap_sim.metrics import NavRunSummary, RunSummary, nav_run_summary, run_summary
 
 #: The layout of what the runner checkpoints (format 1: a dict of the tour driver and the RNG,
 #: before the episode loop; 2: an :class:`EngineState` with a registered Driver). Resuming
@@ -362,6 +362,8 @@ class ExperimentRunner:
             segment_class=sim.segment_class,
             update_s=np.array([o.update_s for o in outs], dtype=np.float64),
             diagnostics=[o.diagnostics for o in outs],
+            nav=self._nav_summary(sim),
+            driver_artifacts=dict(sim.driver_artifacts or {}),
         )
         run_sum = [self._run_summary(k, rec) for k in range(len(outs))]
         self._loc_states = [o.state for o in outs]
@@ -375,6 +377,22 @@ class ExperimentRunner:
         )
         self.db.write_run(rec, run_sum, stream.last_of_day, cp, self.hash, self.seed)
         return now
+
+    @staticmethod
+    def _nav_summary(sim: Episode) -> NavRunSummary | None:
+        """The run's navigation measures (:func:`dynmap_sim.metrics.nav_run_summary`)."""
+        if sim.clearance_m is None or sim.person_clearance_m is None:
+            return None
+        return nav_run_summary(
+            sim.truth,
+            sim.stream.stamps_s,
+            sim.collision,
+            sim.clearance_m,
+            sim.person_clearance_m,
+            sim.goal_reached,
+            sim.shortest_path_m,
+            sim.driver_stats,
+        )
 
     @staticmethod
     def _run_summary(k: int, rec: RunRecord) -> RunSummary:

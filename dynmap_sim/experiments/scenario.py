@@ -221,12 +221,29 @@ class LocalizerExpectation(_Strict):
     )
 
 
+class NavigationExpectation(_Strict):
+    """Navigation thresholds over every run, measured against the truth (all optional)."""
+
+    goal_reached_fraction: float | None = Field(
+        None, ge=0, le=1, description="at least this share of runs reach the route's end"
+    )
+    max_collisions: int | None = Field(None, ge=0, description="bumper onsets in all runs")
+    max_near_misses: int | None = Field(
+        None, ge=0, description="people closer than 0.3 m to the robot, in all runs"
+    )
+    min_clearance_m: float | None = Field(
+        None, description="the robot's disc keeps at least this from every obstacle [m]"
+    )
+    max_gave_up: int | None = Field(None, ge=0, description="runs in which the driver gave up")
+
+
 class Expectations(_Strict):
     """What a regression check asserts (``dynmap-sim check``)."""
 
     no_collisions: bool = False
     max_skipped_waypoints: int | None = Field(None, ge=0)
     localizers: dict[str, LocalizerExpectation] = Field(default_factory=dict)
+    navigation: NavigationExpectation | None = None
     findings: list[str] = Field(
         default_factory=list,
         description="Biber & Duckett findings (findings.md keys) that must hold; needs a "

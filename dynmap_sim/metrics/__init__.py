@@ -13,6 +13,17 @@ from dynmap_sim.metrics.lost import (
     lost_fraction,
     lost_stats,
 )
+from dynmap_sim.metrics.navigation import (
+    NEAR_MISS_M,
+    NavDaySummary,
+    NavRunSummary,
+    clearances,
+    goal_reached,
+    nav_day_summary,
+    nav_run_summary,
+    path_length_m,
+    spl,
+)
 from dynmap_sim.metrics.point_classes import (
     BEAM_TO_POINT_CLASS,
     POINT_CLASSES,
@@ -48,6 +59,15 @@ from dynmap_sim.metrics.summaries import (
 )
 
 __all__ = [
+    "NEAR_MISS_M",
+    "NavDaySummary",
+    "NavRunSummary",
+    "clearances",
+    "goal_reached",
+    "nav_day_summary",
+    "nav_run_summary",
+    "path_length_m",
+    "spl",
     "BEAM_TO_POINT_CLASS",
     "LOST_THRESHOLD_M",
     "POINT_CLASSES",

@@ -75,7 +75,7 @@ def _scenario(tmp_path, driver):
 def test_driver_errors_name_the_field(tmp_path):
     with pytest.raises(ScenarioFileError) as ei:
         _scenario(tmp_path, {"kind": "taxi"})
-    assert "unknown driver 'taxi'; known: tour" in dict(ei.value.errors)["driver.kind"]
+    assert "unknown driver 'taxi'; known: autonomous, tour" in dict(ei.value.errors)["driver.kind"]
     with pytest.raises(ScenarioFileError) as ei:
         _scenario(tmp_path, {"params": {"wait_for_ppl": True}})
     assert "wait_for_ppl" in dict(ei.value.errors)["driver.params"]

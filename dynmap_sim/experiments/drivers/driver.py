@@ -120,10 +120,25 @@ class Driver(ABC):
     def end_run(self) -> None:  # noqa: B027 - optional hook
         """The run is over; drop what need not go into the checkpoint."""
 
+    def stats(self) -> dict[str, float]:
+        """This run's counts for the navigation measures (asked before :meth:`end_run`):
+        ``replans``, ``recoveries``, ``stuck_s``, ``gave_up``; missing keys count 0."""
+        return {}
+
+    def run_artifacts(self) -> dict[str, bytes]:
+        """What the driver hands over after a run for figures (asked after :meth:`end_run`),
+        name -> bytes (e.g. JSON of its route memory); stored with the run."""
+        return {}
+
 
 #: The driver registry.
 DRIVERS: Registry[Driver] = Registry(
-    "driver", Driver, builtin_modules=("dynmap_sim.experiments.drivers.tour",)
+    "driver",
+    Driver,
+    builtin_modules=(
+        "dynmap_sim.experiments.drivers.tour",
+        "dynmap_sim.experiments.drivers.autonomous",
+    ),
 )
 
 #: Class decorator: make a :class:`Driver` available under a name.

@@ -89,9 +89,52 @@ class TourParams:
 
 
 @dataclass
-class _Plan:
-    vertices: FloatArray  # (K, 2) path polyline
-    waypoint_of_vertex: NDArray[np.int64]  # route waypoint index each vertex leads towards
+class WaypointPlan:
+    """A collision-free polyline through a route's waypoints: ``vertices`` ``(K, 2)``, the
+    route waypoint each vertex leads towards, and ``notes`` in route order: ``("skip_waypoint",
+    why)`` for a waypoint given up, ``("detour", how)`` for a leg around an obstacle."""
+
+    vertices: FloatArray
+    waypoint_of_vertex: NDArray[np.int64]
+    notes: list[tuple[str, str]]
+
+    @property
+    def length_m(self) -> float:
+        return float(np.hypot(*np.diff(self.vertices, axis=0).T).sum())
+
+
+def plan_through_waypoints(
+    route: FloatArray,
+    first_wp: int,
+    start_xy: FloatArray,
+    grid: ClearanceGrid,
+    planner: Planner,
+    min_clearance_m: float,
+    snap_m: float,
+) -> WaypointPlan:
+    """Plan from ``start_xy`` through ``route[first_wp:]`` in order: each waypoint moved to
+    free space within ``snap_m`` (else skipped: inside an obstacle), each leg planned by
+    ``planner`` on ``grid`` (else skipped: unreachable)."""
+    here = grid.nearest_free(np.asarray(start_xy, dtype=np.float64), min_clearance_m, 1.0)
+    if here is None:
+        here = np.asarray(start_xy, dtype=np.float64).copy()
+    verts = [here]
+    owner = [first_wp]
+    notes: list[tuple[str, str]] = []
+    for k in range(first_wp, len(route)):
+        goal = grid.nearest_free(route[k], min_clearance_m, snap_m)
+        if goal is None:
+            notes.append(("skip_waypoint", f"waypoint {k}: waypoint inside an obstacle"))
+            continue
+        leg = planner.plan(verts[-1], goal, grid)
+        if leg is None:
+            notes.append(("skip_waypoint", f"waypoint {k}: waypoint unreachable"))
+            continue
+        if len(leg) > 2:
+            notes.append(("detour", f"waypoint {k}: {len(leg) - 2} extra vertices"))
+        verts.extend(leg[1:])
+        owner.extend([k] * (len(leg) - 1))
+    return WaypointPlan(np.array(verts).reshape(-1, 2), np.array(owner, dtype=np.int64), notes)
 
 
 @register_driver("tour")
@@ -117,7 +160,7 @@ class TourDriver(Driver):
             context.speed_mps, self.min_clearance_m, **(p.controller_params or {})
         )
         self._grid: ClearanceGrid | None = None
-        self._plan: _Plan | None = None
+        self._plan: WaypointPlan | None = None
         self._waiting = False
         self._step = 0
         self._backoff = 0
@@ -135,35 +178,21 @@ class TourDriver(Driver):
         self._replan(np.asarray(start.start_pose, dtype=np.float64), 0, t_s=0.0)
 
     def _replan(self, pose: FloatArray, first_wp: int, t_s: float) -> None:
-        grid = self._grid
-        assert grid is not None
-        here = grid.nearest_free(pose[:2], self.min_clearance_m, 1.0)
-        if here is None:
-            here = pose[:2].copy()
-        verts = [here]
-        owner = [first_wp]
-        for k in range(first_wp, len(self.route)):
-            wp = self.route[k]
-            goal = grid.nearest_free(wp, self.min_clearance_m, self.params.snap_waypoint_m)
-            if goal is None:
-                self._skip(k, t_s, "waypoint inside an obstacle")
-                continue
-            leg = self.planner.plan(verts[-1], goal, grid)
-            if leg is None:
-                self._skip(k, t_s, "waypoint unreachable")
-                continue
-            if len(leg) > 2:
-                self.events.append(
-                    (self._step, t_s, "detour", f"waypoint {k}: {len(leg) - 2} extra vertices")
-                )
-            verts.extend(leg[1:])
-            owner.extend([k] * (len(leg) - 1))
-        self._plan = _Plan(np.array(verts).reshape(-1, 2), np.array(owner, dtype=np.int64))
-        self.controller.set_path(self._plan.vertices)
-
-    def _skip(self, k: int, t_s: float, why: str) -> None:
-        self.skipped_waypoints += 1
-        self.events.append((self._step, t_s, "skip_waypoint", f"waypoint {k}: {why}"))
+        assert self._grid is not None
+        plan = plan_through_waypoints(
+            self.route,
+            first_wp,
+            pose[:2],
+            self._grid,
+            self.planner,
+            self.min_clearance_m,
+            self.params.snap_waypoint_m,
+        )
+        for kind, detail in plan.notes:
+            self.skipped_waypoints += kind == "skip_waypoint"
+            self.events.append((self._step, t_s, kind, detail))
+        self._plan = plan
+        self.controller.set_path(plan.vertices)
 
     def end_run(self) -> None:
         """Drop the run's grid and plan (they are rebuilt next run; keeps checkpoints small)."""
