@@ -48,3 +48,12 @@ def test_readme_examples_validate(index, tmp_path, capsys):
     path = tmp_path / f"example{index}.toml"
     path.write_text(_blocks("toml")[index])
     assert main(["validate", str(path)]) == 0, capsys.readouterr().err
+
+
+def test_readme_navigation_policy_example_drives_to_the_goal():
+    section = README.split("## The robot drives itself", 1)[1].split("\n## ", 1)[0]
+    (code,) = _blocks("python", section)
+    scope: dict = {}
+    exec(compile(code, "README.md", "exec"), scope)  # noqa: S102 - our own README
+    assert scope["terminated"] or scope["policy"].done
+    assert not scope["truncated"]

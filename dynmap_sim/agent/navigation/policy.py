@@ -7,7 +7,8 @@ action ``[v_mps, omega_radps]``. The policy stamps the observations itself (one 
 step), so it needs nothing from ``info``: it never sees the truth. It does not import
 Gymnasium either: any loop that hands it the observation dict works.
 
-Example (the apartment, day 1, steering on static MCL localizing on the prior's walls)::
+Example (the apartment, day 1, steering on Biber & Duckett's dynamic map, which maps on
+its first run)::
 
     import numpy as np
     from dynmap_sim.env import DynMapEnv
@@ -28,8 +29,7 @@ Example (the apartment, day 1, steering on static MCL localizing on the prior's 
         day=1, run=1, first_run=True,
         route=np.array(facts.route),
     )
-    loc = make_localizer("static-mcl", laser=u.laser_spec, rng=np.random.default_rng(0),
-                         map_source="prior-walls")
+    loc = make_localizer("dynamic-map", laser=u.laser_spec, rng=np.random.default_rng(0))
     policy = NavigationPolicy(loc, NavigationStack(u.laser_spec, u.robot_radius_m))
     policy.reset(prior)
     terminated = truncated = False
