@@ -125,29 +125,18 @@ def write_dynamic_figures(out_dir: str | Path) -> list[Path]:
     data = [
         (lb, d) for lb, d in data if np.any(np.isfinite(d["timescale"]) & (d["timescale"] >= 0))
     ]
-    lik = [(lb, *daily_means(d["day"], d["scan_loglik"])) for lb, d in data]
-    lik = [s for s in lik if len(s[1])]
-    if lik:
-        written.append(
-            _plot_per_day(
-                lik,
-                "mean log-likelihood per reading",
-                "Average scan likelihood per day (cf. B&D Fig. 10)",
-                out / "dyn_likelihood_per_day.png",
-            )
-        )
-    lam = [(lb, *daily_means(d["day"], d["lambda_min"])) for lb, d in data]
-    lam = [s for s in lam if len(s[1])]
-    if lam:
-        written.append(
-            _plot_per_day(
-                lam,
-                "mean λ_min of the inverse covariance",
-                "Certainty of the localization per day (cf. B&D Fig. 11)",
-                out / "dyn_lambda_min_per_day.png",
-                log=True,
-            )
-        )
+    per_day = (
+        ("scan_loglik", "mean log-likelihood per reading",
+         "Average scan likelihood per day (cf. B&D Fig. 10)", "dyn_likelihood_per_day.png", False),
+        ("lambda_min", "mean λ_min of the inverse covariance",
+         "Certainty of the localization per day (cf. B&D Fig. 11)", "dyn_lambda_min_per_day.png",
+         True),
+    )  # fmt: skip
+    for key, ylabel, title, name, log in per_day:
+        series = [(lb, *daily_means(d["day"], d[key])) for lb, d in data]
+        series = [s for s in series if len(s[1])]
+        if series:
+            written.append(_plot_per_day(series, ylabel, title, out / name, log=log))
     for label, d in data:
         if not np.any(np.isfinite(d["timescale"]) & (d["timescale"] >= 0)):
             continue
