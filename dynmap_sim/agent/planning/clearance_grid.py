@@ -113,3 +113,10 @@ def build_clearance_grid(
     # a cell holding an obstacle point has clearance ~0; others the distance to the nearest
     grid.clearance_m = ndimage.distance_transform_edt(~occ) * resolution_m
     return grid
+
+
+def clearance_penalty(clearance_m: FloatArray, preferred_clearance_m: float) -> FloatArray:
+    """Per-cell cost factor in ``[1, 3]``: 1 at ``preferred_clearance_m`` or more, 3 at an
+    obstacle (the preference of ``grid-dijkstra``)."""
+    pref = max(preferred_clearance_m, 1e-9)
+    return 1.0 + 2.0 * np.clip((preferred_clearance_m - clearance_m) / pref, 0.0, 1.0)

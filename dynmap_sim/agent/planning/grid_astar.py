@@ -34,20 +34,13 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
+from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid, clearance_penalty
 from dynmap_sim.agent.planning.planner import Planner, register_planner
 from dynmap_sim.jit import compiled
 
 FloatArray = NDArray[np.float64]
 
 _SQRT2 = math.sqrt(2.0)
-
-
-def clearance_penalty(clearance_m: FloatArray, preferred_clearance_m: float) -> FloatArray:
-    """Per-cell cost factor in ``[1, 3]``: 1 at ``preferred_clearance_m`` or more, 3 at an
-    obstacle (the preference of ``grid-dijkstra``)."""
-    pref = max(preferred_clearance_m, 1e-9)
-    return 1.0 + 2.0 * np.clip((preferred_clearance_m - clearance_m) / pref, 0.0, 1.0)
 
 
 def _astar_py(free, penalty, h, w, src, dst, step_m, g, parent, closed):  # type: ignore[no-untyped-def]

@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
+from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid, clearance_penalty
 from dynmap_sim.agent.planning.planner import Planner, register_planner
 
 FloatArray = NDArray[np.float64]
@@ -29,9 +29,7 @@ def _grid_graph(
     """8-connected graph over free cells; an edge costs its length, more near obstacles."""
     h, w = grid.shape
     free = grid.clearance_m >= min_clearance_m
-    penalty = 1.0 + 2.0 * np.clip(
-        (preferred_clearance_m - grid.clearance_m) / max(preferred_clearance_m, 1e-9), 0.0, 1.0
-    )
+    penalty = clearance_penalty(grid.clearance_m, preferred_clearance_m)
     ids = np.arange(h * w).reshape(h, w)
     rows, cols, costs = [], [], []
     for di, dj in ((0, 1), (1, 0), (1, 1), (1, -1)):

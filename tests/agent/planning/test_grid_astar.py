@@ -13,7 +13,11 @@ from scipy.sparse.csgraph import dijkstra
 from synthetic_scans import box
 
 import dynmap_sim.agent.planning.grid_astar as grid_astar
-from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid, build_clearance_grid
+from dynmap_sim.agent.planning.clearance_grid import (
+    ClearanceGrid,
+    build_clearance_grid,
+    clearance_penalty,
+)
 from dynmap_sim.agent.planning.grid_astar import GridAStar, astar_cells, plan_around
 from dynmap_sim.agent.planning.grid_dijkstra import GridDijkstra, _grid_graph
 from dynmap_sim.agent.planning.planner import PLANNERS
@@ -64,7 +68,7 @@ def test_astar_cost_equals_dijkstra(case, python_kernel: bool) -> None:
     graph = _grid_graph(grid, min_c, pref_c)
     want = dijkstra(graph, indices=src)[dst]
     free = grid.clearance_m >= min_c
-    pen = grid_astar.clearance_penalty(grid.clearance_m, pref_c)
+    pen = clearance_penalty(grid.clearance_m, pref_c)
     nb = grid_astar._astar_nb
     if python_kernel:
         grid_astar._astar_nb = None
