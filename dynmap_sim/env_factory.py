@@ -14,7 +14,7 @@ the file and field: :func:`sim_spec_errors` collects them all at once.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -144,6 +144,43 @@ def make_env(spec: SimSpec) -> DynMapEnv:
     """The env ``spec`` describes; :class:`SimSpecError` naming the field on bad values."""
     kwargs = {**_robot_kwargs(spec), **_sensor_kwargs(spec)}
     return DynMapEnv(world=str(spec.world), people=spec.people, **kwargs)
+
+
+def kidnapping_errors(
+    spec: SimSpec, kidnappings: Sequence[tuple[int, int, Any]]
+) -> list[tuple[str, str]]:
+    """Problems of kidnappings ``(day, run, pose or "random")`` in ``spec``'s world, as
+    ``("kidnappings.<i>.<field>", message)``: a run the calendar does not have, a pose outside
+    the world's bounds. (A pose inside furniture, which depends on the day and the seed, is
+    moved to free space within 1 m when the kidnapping happens, else recorded as skipped.)
+    Nothing when the world file itself is invalid (:func:`sim_spec_errors` says so)."""
+    try:
+        world = load_world(spec.world)
+        cal = Calendar(world.calendar)
+    except (WorldFileError, ValueError):
+        return []
+    x0, y0, x1, y1 = (float(b) for b in world.bounds)
+    errors: list[tuple[str, str]] = []
+    for i, (day, run, pose) in enumerate(kidnappings):
+        if 1 <= day <= cal.n_days and not 1 <= run <= cal.runs_per_day:
+            errors.append(
+                (
+                    f"kidnappings.{i}.run",
+                    f"day {day} has runs 1-{cal.runs_per_day} in the world's calendar, not {run}",
+                )
+            )
+        if isinstance(pose, str):
+            continue
+        x, y = float(pose[0]), float(pose[1])
+        if not (x0 <= x <= x1 and y0 <= y <= y1):
+            errors.append(
+                (
+                    f"kidnappings.{i}.pose",
+                    f"({x:g}, {y:g}) is outside the world's bounds [{x0:g}, {y0:g}, {x1:g}, "
+                    f"{y1:g}] (x_min, y_min, x_max, y_max)",
+                )
+            )
+    return errors
 
 
 def sim_spec_errors(spec: SimSpec, days: tuple[int, int] | None = None) -> list[tuple[str, str]]:

@@ -57,7 +57,7 @@ from pydantic import (
 )
 
 from dynmap_sim.agent.localizer import LOCALIZERS, make_localizer
-from dynmap_sim.env_factory import SimSpec, resolve_world, sim_spec_errors
+from dynmap_sim.env_factory import SimSpec, kidnapping_errors, resolve_world, sim_spec_errors
 from dynmap_sim.errors import FileError, pydantic_errors, read_toml
 from dynmap_sim.experiments.drivers import DRIVERS, DriverContext, make_driver
 from dynmap_sim.types import LaserSpec
@@ -85,6 +85,15 @@ class PresetConfig(_Strict):
     overrides: dict[str, ParamValue] = Field(default_factory=dict)
 
 
+#: Longest run a scenario may ask for [s] (a day; a robot-time limit, not a wall-time one).
+MAX_RUN_S = 86400.0
+#: Largest initial pose uncertainty [m], [rad] (beyond: ``initial_pose = "unknown"``).
+MAX_SIGMA_XY_M = 100.0
+MAX_SIGMA_THETA_RAD = 2.0 * math.pi
+#: Seeds are numpy SeedSequence entropy and SQLite integers: 0 .. 2**63 - 1.
+MAX_SEED = 2**63 - 1
+
+
 class DriverConfig(_Strict):
     """Who drives the robot: a driver by registry name (``tour``: a scripted operator
     steering along the world's route) or ``"package.module:ClassName"``, with its ``params``.
@@ -93,7 +102,11 @@ class DriverConfig(_Strict):
     kind: str = Field("tour", description="driver registry name or 'package.module:Class'")
     speed_mps: float = Field(0.35, gt=0.0, le=2.0, description="cruise speed [m/s]")
     max_run_s: float | None = Field(
-        None, gt=0.0, description="robot-time limit per run [s] (None: until the route ends)"
+        None,
+        gt=0.0,
+        le=MAX_RUN_S,
+        allow_inf_nan=False,
+        description="robot-time limit per run [s] (None: until the route ends)",
     )
     route_fraction: float = Field(
         1.0, gt=0.0, le=1.0, description="drive only this leading fraction of the route"
@@ -135,8 +148,12 @@ class PriorConfig(_Strict):
 
     map: Literal["none", "walls"] = "none"
     initial_pose: Literal["known", "unknown"] = "known"
-    initial_pose_sigma_xy_m: float = Field(0.05, ge=0.0)
-    initial_pose_sigma_theta_rad: float = Field(0.05, ge=0.0)
+    initial_pose_sigma_xy_m: float = Field(
+        0.05, ge=0.0, le=MAX_SIGMA_XY_M, allow_inf_nan=False, description="[m]"
+    )
+    initial_pose_sigma_theta_rad: float = Field(
+        0.05, ge=0.0, le=MAX_SIGMA_THETA_RAD, allow_inf_nan=False, description="[rad]"
+    )
 
 
 class LocalizerConfig(_Strict):
@@ -201,8 +218,19 @@ class Kidnapping(_Strict):
     @field_validator("time_s")
     @classmethod
     def _nonneg(cls, v: float | str) -> float | str:
-        if not isinstance(v, str) and v < 0:
-            raise ValueError("time_s must be >= 0")
+        if not isinstance(v, str) and not (math.isfinite(v) and 0 <= v <= MAX_RUN_S):
+            raise ValueError(f"time_s must be 'random' or in 0..{MAX_RUN_S:g} s, not {v!r}")
+        return v
+
+    @field_validator("pose")
+    @classmethod
+    def _finite_pose(cls, v: Any) -> Any:
+        if isinstance(v, str):
+            return v
+        if not all(math.isfinite(c) for c in v):
+            raise ValueError(f"pose must be 3 finite numbers (x_m, y_m, theta_rad), not {v!r}")
+        if abs(v[2]) > 2.0 * math.pi:
+            raise ValueError(f"pose theta_rad must be in [-2π, 2π], not {v[2]!r}")
         return v
 
 
@@ -295,11 +323,25 @@ class Scenario(_Strict):
             raise ValueError(f"days must be 1 <= first <= last, got {list(v)}")
         return v
 
+    @field_validator("name")
+    @classmethod
+    def _name_is_a_file_name(cls, v: str) -> str:
+        """The name is the default results folder's name (``results/<name>``)."""
+        bad = [c for c in ("/", "\\", "\0") if c in v]
+        if bad or v.strip() in (".", "..") or v != v.strip() or any(ord(c) < 32 for c in v):
+            raise ValueError(
+                f"the name is a file name (results go to results/<name>): no path "
+                f"separators, '..', control characters or surrounding spaces, not {v!r}"
+            )
+        return v
+
     @field_validator("seeds")
     @classmethod
     def _seeds_ok(cls, v: list[int]) -> list[int]:
-        if any(s < 0 for s in v):
-            raise ValueError("seeds must be >= 0")
+        if any(s < 0 or s > MAX_SEED for s in v):
+            raise ValueError(
+                f"seeds must be in 0..2**63-1, not {[s for s in v if s < 0 or s > MAX_SEED]}"
+            )
         if len(set(v)) != len(v):
             raise ValueError("seeds must be distinct")
         return v
@@ -376,9 +418,18 @@ def _semantic_errors(scn: Scenario) -> list[tuple[str, str]]:
     for i, loc in enumerate(scn.localizers):
         try:
             rng = np.random.default_rng(0)
-            make_localizer(loc.name, laser=_DUMMY_LASER, rng=rng, **loc.params)
+            made = make_localizer(loc.name, laser=_DUMMY_LASER, rng=rng, **loc.params)
         except (TypeError, ValueError) as exc:
             errors.append((f"localizers.{i}.params", f"rejected by {loc.name!r}: {exc}"))
+            continue
+        if getattr(made, "needs_prior_walls", False) and scn.prior.map != "walls":
+            errors.append(
+                (
+                    f"localizers.{i}.params",
+                    f"{loc.name!r} makes its map from the prior's walls, but prior.map is "
+                    f'{scn.prior.map!r}: set [prior] map = "walls" (or another map_source)',
+                )
+            )
     try:
         make_driver(scn.driver.kind, _DUMMY_DRIVER_CONTEXT, scn.driver.params)
     except (TypeError, ValueError) as exc:
@@ -406,6 +457,7 @@ def _semantic_errors(scn: Scenario) -> list[tuple[str, str]]:
             ("driver.localizer", f"no localizer has label {steer!r} (labels: {', '.join(labels)})")
         )
     errors += sim_spec_errors(scn.sim_spec(), scn.days)
+    errors += kidnapping_errors(scn.sim_spec(), [(k.day, k.run, k.pose) for k in scn.kidnappings])
     return errors
 
 

@@ -49,9 +49,21 @@ CATEGORY_ROBOT = 0b1000
 _SKIN_M = 1e-4
 
 
+#: Sensible ranges of the robot's parameters: (name, smallest, largest).
+_PARAM_RANGES = (
+    ("radius_m", 0.01, 5.0),
+    ("max_v_mps", 1e-3, 20.0),
+    ("max_omega_radps", 1e-3, 50.0),
+    ("max_accel_mps2", 1e-3, 1000.0),
+    ("max_alpha_radps2", 1e-3, 1000.0),
+    ("max_substep_m", 1e-3, 1.0),
+)
+
+
 @dataclass(frozen=True)
 class RobotParams:
-    """Body, limits and wheel parameters of the robot (SI units)."""
+    """Body, limits and wheel parameters of the robot (SI units; each within
+    :data:`_PARAM_RANGES`: a 1e-9 m substep would simulate for ever)."""
 
     radius_m: float = 0.2
     max_v_mps: float = 1.0
@@ -64,17 +76,12 @@ class RobotParams:
     max_substep_m: float = 0.05
 
     def __post_init__(self) -> None:
-        for name in (
-            "radius_m",
-            "max_v_mps",
-            "max_omega_radps",
-            "max_accel_mps2",
-            "max_alpha_radps2",
-            "max_substep_m",
-        ):
+        for name, low, high in _PARAM_RANGES:
             v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0.0):
+            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0.0):
                 raise ValueError(f"RobotParams.{name} must be finite and > 0, got {v!r}")
+            if not low <= v <= high:
+                raise ValueError(f"RobotParams.{name} must be in {low:g}..{high:g}, got {v!r}")
         if not (math.isfinite(self.slip_sigma) and self.slip_sigma >= 0.0):
             raise ValueError(f"RobotParams.slip_sigma must be >= 0, got {self.slip_sigma!r}")
         if not (math.isfinite(self.slip_mean) and abs(self.slip_mean) < 0.5):

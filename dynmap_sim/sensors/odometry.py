@@ -29,6 +29,16 @@ from numpy.typing import NDArray
 FloatArray = NDArray[np.float64]
 
 
+#: Sensible ranges of the wheel geometry: (name, smallest, largest); UMBmark's ``E_d`` and
+#: ``E_b`` are ratios near 1 (a few per cent off on a real robot).
+_WHEEL_RANGES = (
+    ("wheel_diameter_m", 1e-3, 2.0),
+    ("wheelbase_m", 1e-2, 5.0),
+    ("e_d", 0.5, 2.0),
+    ("e_b", 0.5, 2.0),
+)
+
+
 @dataclass(frozen=True)
 class WheelGeometry:
     """Nominal wheel diameter and wheelbase [m] and the systematic errors ``E_d``, ``E_b``."""
@@ -39,10 +49,12 @@ class WheelGeometry:
     e_b: float = 1.0
 
     def __post_init__(self) -> None:
-        for name in ("wheel_diameter_m", "wheelbase_m", "e_d", "e_b"):
+        for name, low, high in _WHEEL_RANGES:
             v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0.0):
+            if not (isinstance(v, int | float) and math.isfinite(v) and v > 0.0):
                 raise ValueError(f"WheelGeometry.{name} must be finite and > 0, got {v!r}")
+            if not low <= v <= high:
+                raise ValueError(f"WheelGeometry.{name} must be in {low:g}..{high:g}, got {v!r}")
 
     @property
     def diameter_right_m(self) -> float:
@@ -101,10 +113,11 @@ class EncoderNoise:
     sigma_sqrt_m: float = 0.002
 
     def __post_init__(self) -> None:
-        if self.ticks_per_rev < 0:
-            raise ValueError(f"ticks_per_rev must be >= 0, got {self.ticks_per_rev}")
-        if not (math.isfinite(self.sigma_sqrt_m) and self.sigma_sqrt_m >= 0.0):
-            raise ValueError(f"sigma_sqrt_m must be finite and >= 0, got {self.sigma_sqrt_m}")
+        tpr = self.ticks_per_rev
+        if not (isinstance(tpr, int) and not isinstance(tpr, bool) and 0 <= tpr <= 2**31):
+            raise ValueError(f"ticks_per_rev must be an integer in 0..2**31, got {tpr!r}")
+        if not (math.isfinite(self.sigma_sqrt_m) and 0.0 <= self.sigma_sqrt_m <= 1.0):
+            raise ValueError(f"sigma_sqrt_m must be in 0..1, got {self.sigma_sqrt_m}")
 
 
 class WheelOdometry:
