@@ -498,6 +498,8 @@ class RouteMemory:
         r = self.routes[pos.route_id]
         tr = self._track
         if tr is None or tr.route_id != pos.route_id:
+            if tr is not None:
+                self._leave(tr)
             self._pending.clear()
             self._track = _Track(pos.route_id, pos.along_m, t_s)
             self._enter(r, pos, t_s)
@@ -529,6 +531,24 @@ class RouteMemory:
             for wid, w in ((pos.from_id, 1.0 - pos.progress), (pos.to_id, pos.progress)):
                 acc = self._pending.setdefault(wid, np.zeros(3))
                 acc += (w * off[0], w * off[1], w)
+
+    def _leave(self, tr: _Track) -> None:
+        """The robot switched from route ``tr.route_id`` to another one (inside both
+        corridors, e.g. where a recorded route starts at a waypoint of this one): the
+        waypoint it was about to reach counts as passed if it was within
+        ``pass_tolerance_m`` along the route, as at a run's start and a route's end.
+        Otherwise the segment ending there would never be learned nor its update time
+        renewed when the switch happens just before it (a robot cutting the corner onto
+        the other route), and forgetting would drop a stretch driven every day."""
+        r = self.routes.get(tr.route_id)
+        if r is None:
+            return
+        cum = r.cumulative_m()
+        mark = cum.copy()
+        mark[-1] -= min(self.params.pass_tolerance_m, 0.5 * (cum[-1] - cum[-2]))
+        ahead = np.flatnonzero(mark > tr.s_prev_m)
+        if ahead.size and cum[ahead[0]] - tr.s_prev_m <= self.params.pass_tolerance_m:
+            self._pass(r, int(r.ids[ahead[0]]), tr.t_prev_s)
 
     def _enter(self, r: Route, pos: RoutePosition, t_s: float) -> None:
         """Entering route ``r`` on segment ``pos.segment``: its start waypoint counts as passed

@@ -495,7 +495,7 @@ class NavigationStack:
             self.goal_xy,
             self.params.speed_mps,
             goal_id=goal,
-            leave_goal=not self._armed,
+            leave_goal_m=0.0 if self._armed else self.params.goal_arm_m,
         )
 
     def _plan_step(self, t_s: float, pose: FloatArray, grid: ClearanceGrid, scan: Scan) -> None:

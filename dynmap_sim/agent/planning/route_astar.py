@@ -74,46 +74,59 @@ def astar(
     v_max_mps: float | None = None,
     start_edges: list[Edge] | None = None,
     start_xy: ArrayLike | None = None,
+    leave_goal_m: float = 0.0,
 ) -> tuple[float, list[int], list[Edge]] | None:
     """Least-travel-time path from node ``start`` to node ``goal`` (H&W §6.2): ``(cost [s],
     node ids, edges taken)``, or None when the goal is unreachable (blocked edges never are
-    taken). ``start_edges`` / ``start_xy`` add a virtual start node (see :func:`plan_route`)."""
+    taken). ``start_edges`` / ``start_xy`` add a virtual start node (see :func:`plan_route`).
+
+    With ``leave_goal_m > 0`` the path must first reach a node farther than that from the
+    goal (or start there) before it may end at the goal: A* runs on the graph's nodes paired
+    with a flag "has left the goal" (a node is expanded at most once per flag). ``h`` is the
+    same for both, so it stays admissible and consistent."""
     v_h = heuristic_speed_mps(graph, v_max_mps)
     goal_xy = graph.position(goal)
+
+    def xy_of(n: int) -> FloatArray:
+        return np.asarray(start_xy, float)[:2] if n == START else graph.position(n)
 
     def h(n: int) -> float:
         if math.isinf(v_h):
             return 0.0
-        p = np.asarray(start_xy, float)[:2] if n == START else graph.position(n)
-        return float(np.hypot(*(p - goal_xy))) / v_h
+        return float(np.hypot(*(xy_of(n) - goal_xy))) / v_h
 
-    g: dict[int, float] = {start: 0.0}
-    came: dict[int, Edge] = {}
-    done: set[int] = set()
-    heap: list[tuple[float, int, int]] = [(h(start), 0, start)]
+    def away(n: int) -> bool:
+        return leave_goal_m <= 0.0 or float(np.hypot(*(xy_of(n) - goal_xy))) > leave_goal_m
+
+    s0 = (start, away(start))
+    g: dict[tuple[int, bool], float] = {s0: 0.0}
+    came: dict[tuple[int, bool], tuple[Edge, tuple[int, bool]]] = {}
+    done: set[tuple[int, bool]] = set()
+    heap: list[tuple[float, int, tuple[int, bool]]] = [(h(start), 0, s0)]
     tie = 1
     while heap:
-        _, _, n = heapq.heappop(heap)
-        if n in done:
+        _, _, state = heapq.heappop(heap)
+        if state in done:
             continue
-        if n == goal:
+        n, left = state
+        if n == goal and left:
             nodes, edges = [n], []
-            while n != start:
-                e = came[n]
+            while state != s0:
+                e, state = came[state]
                 edges.append(e)
-                n = e.u
-                nodes.append(n)
-            return g[goal], nodes[::-1], edges[::-1]
-        done.add(n)
+                nodes.append(state[0])
+            return g[(goal, True)], nodes[::-1], edges[::-1]
+        done.add(state)
         out = start_edges if (n == START and start_edges is not None) else graph.out.get(n, [])
         for e in out:
-            if not math.isfinite(e.travel_time_s) or e.v in done:
+            nxt = (e.v, left or away(e.v))
+            if not math.isfinite(e.travel_time_s) or nxt in done:
                 continue
-            cand = g[n] + e.travel_time_s
-            if cand < g.get(e.v, math.inf):
-                g[e.v] = cand
-                came[e.v] = e
-                heapq.heappush(heap, (cand + h(e.v), tie, e.v))
+            cand = g[state] + e.travel_time_s
+            if cand < g.get(nxt, math.inf):
+                g[nxt] = cand
+                came[nxt] = (e, state)
+                heapq.heappush(heap, (cand + h(e.v), tie, nxt))
                 tie += 1
     return None
 
@@ -124,7 +137,7 @@ def plan_route(
     goal_xy: ArrayLike,
     v_max_mps: float | None = None,
     goal_id: int | None = None,
-    leave_goal: bool = False,
+    leave_goal_m: float = 0.0,
 ) -> PlannedPath | None:
     """Plan from the robot's position ``start_xy`` to the node nearest ``goal_xy`` [m] (or to
     node ``goal_id`` when given: a loop route's end coincides with its start).
@@ -133,9 +146,12 @@ def plan_route(
     on along the segment's direction, for the remaining fraction of its travel time) or at
     the nearest node (straight-line distance / ``v_h``), whichever A* finds cheaper; so a
     robot in the middle of a segment does not turn back to its start waypoint. Returns None
-    when the graph is empty or the goal unreachable. With ``leave_goal`` (a robot at the
-    start of a loop route, which ends where it starts) no virtual start edge ends at the
-    goal, so the plan drives the loop instead of standing still.
+    when the graph is empty or the goal unreachable. With ``leave_goal_m > 0`` (a robot at
+    the start of a loop route, which ends where it starts) the plan must get farther than
+    that from the goal before it ends there (:func:`astar`), and no virtual start edge ends
+    at the goal: so the plan drives the loop instead of standing still — also when the
+    loop's start and end waypoints belong to two routes (the loop cut by forgetting) and a
+    zero-length join connects them.
     """
     if graph.node_ids.size == 0:
         return None
@@ -143,7 +159,7 @@ def plan_route(
     goal = graph.nearest_node(goal_xy) if goal_id is None else int(goal_id)
     if goal not in graph.index:
         return None
-    avoid = goal if leave_goal else None
+    avoid = goal if leave_goal_m > 0.0 else None
     v_h = heuristic_speed_mps(graph, v_max_mps)
     near = graph.nearest_node(p, exclude=avoid)
     d = float(np.hypot(*(graph.position(near) - p)))
@@ -155,7 +171,9 @@ def plan_route(
         e, u, proj = hit
         rest_m, rest_s = (1.0 - u) * e.length_m, (1.0 - u) * e.travel_time_s
         starts.append(Edge(START, e.v, rest_m, rest_s, e.learned, e.half_width_m, e.route_id))
-    found = astar(graph, START, goal, v_max_mps, start_edges=starts, start_xy=p)
+    found = astar(
+        graph, START, goal, v_max_mps, start_edges=starts, start_xy=p, leave_goal_m=leave_goal_m
+    )
     if found is None:
         return None
     cost, nodes, edges = found

@@ -131,3 +131,23 @@ def test_astar_cost_equals_dijkstra_and_h_never_overestimates(case):
     for k in range(n):
         if math.isfinite(dist[k, t]):
             assert np.hypot(*(g.xy[k] - g.xy[t])) / v_h <= dist[k, t] + 1e-9
+
+
+def test_leaving_a_loops_goal_ignores_a_join_from_the_start_to_it():
+    """A loop route cut in two (forgetting): its start and its end are one spot on two routes,
+    joined at no cost. From the start, with ``leave_goal_m``, the plan drives the loop."""
+    mem = RouteMemory.from_prior([(0.0, 0.0), (0.0, 3.0), (3.0, 3.0)], 0.2, 0.35, 0.0)
+    mem.add_route([(3.0, 3.0), (3.0, 0.0), (0.0, 0.0)], 0.2, 0.35, 0.0)
+    g = mem.graph()
+    goal = int(mem.routes[1].ids[-1])
+    assert any(e.v == goal and e.route_id == -1 for e in g.edges)  # the join start -> goal
+    stay = plan_route(g, (0.0, 0.0), (0.0, 0.0), 0.2, goal_id=goal)
+    assert stay is not None and stay.travel_time_s == 0.0  # already there
+    loop = plan_route(g, (0.0, 0.0), (0.0, 0.0), 0.2, goal_id=goal, leave_goal_m=1.0)
+    assert loop is not None
+    assert np.sum(np.hypot(*np.diff(loop.xy, axis=0).T)) == pytest.approx(12.0, abs=0.05)
+    assert loop.node_ids[-1] == goal and (3.0, 3.0) in map(tuple, loop.xy.round(6))
+    # the goal is still found when the start is farther than leave_goal_m (already left)
+    back = plan_route(g, (3.0, 1.5), (0.0, 0.0), 0.2, goal_id=goal, leave_goal_m=1.0)
+    assert back is not None and back.node_ids[-1] == goal
+    assert np.sum(np.hypot(*np.diff(back.xy, axis=0).T)) == pytest.approx(4.5, abs=0.05)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from dynmap_sim.agent.navigation import RouteMemory, RouteMemoryParams
-from dynmap_sim.agent.navigation.route_memory import JOIN
+from dynmap_sim.agent.navigation.route_memory import DT, JOIN, T
 from dynmap_sim.agent.planning.route_astar import plan_route
 
 DAY_S = 86_400.0
@@ -224,3 +224,31 @@ def test_day_22_block_detour_and_replan(drive_fn):
     path = plan_route(mem.graph(), [0.0, 0.0], [10.0, 0.0])
     assert path.xy[:, 1].max() == pytest.approx(1.2, abs=0.05)
     assert path.xy[-1] == pytest.approx((10.0, 0.0))
+
+
+def test_switching_routes_just_before_a_waypoint_passes_it(drive_fn):
+    """Regression (apartment-28d-autonomous, days 17-20): a recorded route starts at a
+    waypoint of the prior; the robot, cutting the corner onto it, was located on it a few cm
+    before that waypoint, so the waypoint was never passed: the prior's segment ending there
+    was neither learned nor renewed although driven every day, and forgetting dropped it (a
+    join bypasses it), cutting the prior in two. Leaving a route within ``pass_tolerance_m``
+    of its next waypoint passes that waypoint."""
+    mem = RouteMemory.from_prior([(0.0, 0.0), (5.0, 0.0)], 0.35, 0.35, 0.0)
+    prior = mem.routes[0]
+    corner = int(np.flatnonzero(np.isclose(prior.xy[:, 0], 2.0))[0])
+    mem.add_route([(2.0, 0.0), (2.5, -0.5), (3.0, -0.5), (3.5, 0.0)], 0.2, 0.35, 0.0)
+    way = [(0.0, 0.0), (1.96, 0.0), (2.5, -0.54), (3.0, -0.5), (3.5, 0.0), (5.0, 0.0)]
+    for day in range(1, 5):
+        mem.reset_run()
+        t0 = day * 86_400.0
+        drive_fn(mem, way, 0.35, t0)
+        r = mem.routes[0]
+        j = r.index(int(prior.ids[corner]))
+        assert r.wp[j, T] >= t0 and np.isfinite(r.wp[j, DT])
+        # 0.5 m at 0.35 m/s; the pass is taken where the robot left the prior (< 2 cm early)
+        assert r.wp[j, DT] == pytest.approx(0.5 / 0.35, abs=0.15)
+        mem.forget(t0 + 3600.0)
+    # forgotten: the prior's stretch the recorded route replaces, not the segment before it
+    kept = {int(i) for q in mem.routes.values() if q.prior for i in q.ids}
+    assert int(prior.ids[corner]) in kept and int(prior.ids[corner - 1]) in kept
+    assert not {int(i) for i in prior.ids[corner + 1 : corner + 3]} & kept

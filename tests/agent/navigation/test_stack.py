@@ -13,7 +13,7 @@ from dynmap_sim.agent.navigation.policy import NavigationPolicy
 from dynmap_sim.agent.navigation.route_memory import RouteMemory
 from dynmap_sim.agent.navigation.stack import NavigationStack, StackParams
 from dynmap_sim.env import DynMapEnv
-from dynmap_sim.types import Odometry, PoseEstimate, Prior, Scan
+from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Prior, Scan
 
 
 def prior_of(env, day: int) -> Prior:
@@ -141,3 +141,53 @@ def test_bad_input_is_a_clear_error():
         stack.begin_run(Prior(np.zeros(3), bounds=(0, 0, 5, 5), route=np.zeros((1, 2))))
     with pytest.raises(ValueError, match="cut_offsets"):
         StackParams(cut_offsets=4)
+
+
+def test_a_loop_cut_in_two_by_forgetting_is_still_driven():
+    """Regression (apartment-28d-autonomous, day 21 on): once forgetting cut the loop route
+    in two, its start and end waypoints (one spot) belong to two routes and a zero-length
+    join connects them; route A* went start -> join -> goal, a plan of no length, and the
+    robot, not yet armed, stood still until the recovery gave up. The plan must leave."""
+    laser = LaserSpec("test", 241, -2.0944, 2.0944 / 120, 0.02, 5.6, 0.1, 0.0)
+    loop = np.array([[0.0, 0.0], [0.0, 3.0], [3.0, 3.0], [3.0, 0.0], [0.0, 0.0]])
+
+    def prior(day: int) -> Prior:
+        return Prior(
+            initial_pose=np.array([0.0, 0.0, np.pi / 2]),
+            bounds=(-1.0, -1.0, 4.0, 4.0),
+            day=day,
+            run=1,
+            first_run=day == 1,
+            route=loop,
+        )
+
+    stack = NavigationStack(laser, 0.17)
+    stack.begin_run(prior(1))
+    mem = stack.route_memory
+    r = next(iter(mem.routes.values()))
+    # days later: the robot drove the loop daily but a detour instead of its east side
+    day_s = 5 * 86_400.0
+    mem.routes[r.route_id].wp[:, 4] = day_s
+    east = np.flatnonzero((r.xy[:, 0] > 2.9) & (r.xy[:, 1] < 2.9) & (r.xy[:, 1] > 0.1))
+    a, b = int(east[0]) - 1, int(east[-1]) + 1
+    mem.routes[r.route_id].wp[a + 1 : b + 1, 4] = 0.0
+    mem.add_route([r.xy[a], [2.0, 1.5], r.xy[b]], 0.2, 0.35, day_s, travel_time_s=[0, 5, 5])
+    assert mem.forget(day_s) == b - a
+    pieces = [q for q in mem.routes.values() if q.prior]
+    assert len(pieces) == 2  # the loop's start and end now lie on two routes
+
+    stack.begin_run(prior(5))
+    free = Scan(np.full(laser.n_beams, np.inf, dtype=np.float32), 0.0)
+    pose = np.array([0.0, 0.0, np.pi / 2])
+    speeds = []
+    for k in range(20):
+        t = 36_000.0 + 0.1 * k
+        cmd = stack.step(
+            t, Odometry(pose.copy(), t), free, PoseEstimate(pose.copy(), np.eye(3) * 1e-4)
+        )
+        speeds.append(float(cmd[0]))
+        pose = pose + 0.1 * cmd[0] * np.array([np.cos(pose[2]), np.sin(pose[2]), 0.0])
+        pose[2] += 0.1 * cmd[1]
+    path = stack.planned_path()
+    assert path is not None and np.sum(np.hypot(*np.diff(path, axis=0).T)) > 5.0
+    assert max(speeds) > 0.2 and not stack.gave_up
