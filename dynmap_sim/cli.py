@@ -246,11 +246,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
             if field == "days":
                 raise InputError(f"--days: {msg}")
     if args.resume:
-        from dynmap_sim.experiments.results import DB_NAME
+        from dynmap_sim.experiments.results import DB_NAME, orphaned_checkpoint
         from dynmap_sim.experiments.runner import default_out_dir
 
         out_dir = Path(args.out) if args.out is not None else default_out_dir(scenario)
-        if not (out_dir / DB_NAME).exists():
+        if not (out_dir / DB_NAME).exists() and orphaned_checkpoint(out_dir) is None:
             print(
                 f"note: nothing to resume in {out_dir}: starting from the first run",
                 file=sys.stderr,
@@ -265,19 +265,81 @@ def _cmd_run(args: argparse.Namespace) -> int:
         workers=args.workers,
     )
     if args.report:
-        from dynmap_sim.analysis.report import write_report
-
-        for path in write_report(out):
-            print(f"wrote {path}")
+        _write_report(out)
     print(f"results in {out}")
+    for line in _headline(out):
+        print(line)
     return 0
 
 
-def _cmd_report(args: argparse.Namespace) -> int:
+def _write_report(out: Path) -> None:
+    """Write the report of ``out`` and say what it wrote; a full disk is one clear line."""
     from dynmap_sim.analysis.report import write_report
+    from dynmap_sim.errors import InputError
+    from dynmap_sim.experiments.results import is_disk_full
 
-    for path in write_report(Path(args.dir)):
+    try:
+        written = write_report(out)
+    except (OSError, RuntimeError, ValueError) as exc:  # matplotlib wraps some OSErrors
+        if not (is_disk_full(exc) or is_disk_full(exc.__context__ or exc)):
+            raise
+        raise InputError(
+            f"the disk is full (writing the report into {out}); the results are kept: free "
+            f"some space, then `dynmap-sim report {out}` writes the report"
+        ) from None
+    for path in written:
         print(f"wrote {path}")
+
+
+def _headline(out: Path) -> list[str]:
+    """The headline numbers of a results folder: per localizer ATE RMSE, mean and max
+    position error and the lost fraction (:func:`dynmap_sim.analysis.report.overall_stats`);
+    goals reached and collisions when the results hold navigation measures."""
+    import math
+
+    from dynmap_sim.analysis.report import overall_stats
+    from dynmap_sim.experiments.results import ResultsDB
+
+    with ResultsDB.open(out) as db:
+        if not db.query("SELECT 1 FROM runs LIMIT 1"):
+            return []
+        stats = overall_stats(db)
+        nav = db.nav_runs()
+
+    def num(v: float) -> str:
+        return "n/a" if v is None or math.isnan(v) else f"{v:.3f}"
+
+    table = [("localizer", "ATE RMSE [m]", "mean [m]", "max [m]", "lost")]
+    for s in stats:
+        lost = s["lost_fraction"]
+        table.append(
+            (
+                str(s["localizer"]),
+                num(s["ate_rmse_m"]),
+                num(s["mean_error_m"]),
+                num(s["max_error_m"]),
+                "n/a" if math.isnan(lost) else f"{100.0 * lost:.1f} %",
+            )
+        )
+    widths = [max(len(row[j]) for row in table) for j in range(len(table[0]))]
+    lines = [
+        "  ".join(
+            c.ljust(w) if j == 0 else c.rjust(w)
+            for j, (c, w) in enumerate(zip(row, widths, strict=True))
+        )
+        for row in table
+    ]
+    if nav:
+        reached = sum(int(n.goal_reached) for _, _, n in nav)
+        collisions = sum(int(n.collisions) for _, _, n in nav)
+        lines.append(
+            f"navigation: goal reached in {reached} of {len(nav)} runs; {collisions} collisions"
+        )
+    return lines
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    _write_report(Path(args.dir))
     return 0
 
 
@@ -450,14 +512,43 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _disk_full_message(args: argparse.Namespace, exc: BaseException) -> str:
+    """One line for a full disk: what failed, what is kept, how to go on."""
+    from dynmap_sim.experiments.results import DiskFullError
+
+    if isinstance(exc, DiskFullError):
+        what, folder = str(exc), str(exc.folder)
+    else:
+        name = getattr(exc, "filename", None)
+        what = "the disk is full" + (f" (no space left writing {name})" if name else "")
+        folder = str(getattr(args, "out", None) or getattr(args, "dir", None) or "the folder")
+    if args.command == "run":
+        return (
+            f"{what}; the runs finished so far are kept in {folder}: free some space, then the "
+            "same command with --resume continues after them"
+        )
+    if args.command in ("replay", "check"):
+        return (
+            f"{what}; free some space, then {args.command} again (with --force: the "
+            f"incomplete results in {folder} are replaced)"
+        )
+    return f"{what}; nothing that was there before is lost: free some space and try again"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``dynmap-sim``; returns the exit status."""
     args = build_parser().parse_args(argv)
     from dynmap_sim.errors import InputError
     from dynmap_sim.experiments.bench import LocalizerError
+    from dynmap_sim.experiments.results import is_disk_full
 
     try:
-        return int(args.func(args))
+        try:
+            return int(args.func(args))
+        except Exception as exc:  # a full disk anywhere: one line saying what is kept
+            if not is_disk_full(exc):
+                raise
+            raise InputError(_disk_full_message(args, exc)) from None
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1

@@ -186,6 +186,12 @@ def pickle_localizer(label: str, loc: Localizer) -> bytes:
         raise unpicklable_error(label, loc, err) from err
 
 
+class LocalizerContractError(InputError):
+    """A localizer broke the :class:`~dynmap_sim.agent.localizer.Localizer` contract: the
+    message names it, the rule and the run and scan (one line, no traceback: the fault is in
+    what it returned, not in the testbed's frames)."""
+
+
 class LocalizerRun:
     """One localizer through one run, scan by scan: ``begin_run(prior)`` when made,
     :meth:`update` per scan, :meth:`finish` at the end (``end_run``, ``end_day`` after the
@@ -244,8 +250,11 @@ class LocalizerRun:
             t_up = time.perf_counter()
             e = self.loc.update(odom, scan)
             self.update_s += time.perf_counter() - t_up
-            self.est[step] = np.asarray(e.mean, dtype=np.float64)
-            self.cov_diag[step] = np.diagonal(np.asarray(e.cov, dtype=np.float64))
+        where = f"on day {self.prior.day} run {self.prior.run} at scan {step}"
+        mean, cov = self.checked_estimate(self.label, self.loc, e, where)
+        self.est[step] = mean
+        self.cov_diag[step] = np.diagonal(cov)
+        with self._blame(step):
             ex = e.extras
             if ex:
                 self.diagnostics.scan(step, ex)
@@ -254,6 +263,37 @@ class LocalizerRun:
                     self.confusion += confusion_matrix(beam_class, pc)
         self.n += 1
         return e
+
+    @staticmethod
+    def checked_estimate(
+        label: str, loc: Localizer, e: Any, where: str
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The mean ``(3,)`` and covariance ``(3, 3)`` of what ``update()`` returned, as
+        float64; :class:`LocalizerContractError` naming the localizer, the rule it broke and
+        ``where`` (the run and scan) when it is not a PoseEstimate of finite numbers."""
+        who = f"localizer {label!r} ({type(loc).__module__}.{type(loc).__qualname__})"
+
+        def broke(rule: str, got: str) -> LocalizerContractError:
+            return LocalizerContractError(
+                f"{who} broke the Localizer contract {where}: update() must return {rule}, "
+                f"got {got}"
+            )
+
+        if not isinstance(e, PoseEstimate):
+            got = "None" if e is None else f"a {type(e).__name__}"
+            raise broke("a PoseEstimate", got)
+        try:
+            mean = np.asarray(e.mean, dtype=np.float64)
+            cov = np.asarray(e.cov, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise broke("a PoseEstimate of numbers", f"{exc}") from None
+        if mean.shape != (3,) or not np.isfinite(mean).all():
+            got = f"shape {mean.shape}" if mean.shape != (3,) else f"{mean.tolist()}"
+            raise broke("a PoseEstimate with a (3,) mean of finite numbers (x, y, theta)", got)
+        if cov.shape != (3, 3) or not np.isfinite(cov).all():
+            got = f"shape {cov.shape}" if cov.shape != (3, 3) else "non-finite values"
+            raise broke("a PoseEstimate with a finite (3, 3) covariance", got)
+        return mean, cov
 
     def finish(self, last_of_day: bool) -> LocalizerOutput:
         """End the run (and the day), pickle the localizer; the run's output."""

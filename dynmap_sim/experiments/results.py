@@ -34,6 +34,20 @@ churn the database's pages. The files are written before the transaction that na
 commits, and older ones are deleted after it, so a process killed at any moment leaves
 either the whole run with its checkpoint or none of it.
 
+The checkpoint's checksum covers its fields (next run, scenario hash, seed) and its blob, so
+an edited ``next_index`` is refused like a flipped bit. After each run the WAL is checkpointed
+into ``results.db``, so the main file alone holds every committed run (a user may copy it
+alone, also after ``kill -9``). A folder with a checkpoint but no ``results.db`` (deleted or
+moved) is refused, not restarted.
+
+One writer per results folder: :meth:`ResultsDB.create` and ``open(..., lock=True)`` take an
+exclusive OS lock (``flock``) on ``.results.lock`` in the folder, released when the store is
+closed or the process ends (also when killed); a second writer is refused at once.
+
+A full disk (``ENOSPC``, SQLite's "database or disk is full") is a :class:`DiskFullError`:
+the failed run's transaction is rolled back and its files removed (no ``.tmp`` left), so the
+runs finished before are kept and ``--resume`` continues after them once there is space.
+
 Results format 1 (no ``results_format`` in ``meta``: written before localizers declared their
 diagnostics) has the same tables but ``diagnostics``, ``run_diagnostics`` and ``artifacts``;
 it is read (report, export, check) but not continued.
@@ -42,6 +56,7 @@ it is read (report, export, check) but not continued.
 from __future__ import annotations
 
 import dataclasses
+import errno
 import hashlib
 import io
 import json
@@ -49,7 +64,8 @@ import math
 import os
 import pickle
 import sqlite3
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -64,6 +80,8 @@ from dynmap_sim.types import Diagnostic
 DB_NAME = "results.db"
 #: Folder (next to ``results.db``) of the checkpoint's localizer files.
 CHECKPOINT_DIR = "checkpoint"
+#: The lock file of a results folder (held by its one writer).
+LOCK_NAME = ".results.lock"
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -220,12 +238,104 @@ class Checkpoint:
     localizers: tuple[bytes, ...] = ()
 
 
+class DiskFullError(InputError):
+    """The disk filled up while the store wrote ``what`` into results ``folder``; what was
+    committed before is kept (the CLI says how to continue)."""
+
+    def __init__(self, folder: Path, what: str) -> None:
+        super().__init__(f"the disk is full (no space left writing {what})")
+        self.folder = folder
+        self.what = what
+
+
+def is_disk_full(exc: BaseException) -> bool:
+    """True for ``ENOSPC``/``EDQUOT`` and SQLite's "database or disk is full"."""
+    if isinstance(exc, DiskFullError):
+        return True
+    if isinstance(exc, OSError):
+        return exc.errno in (errno.ENOSPC, errno.EDQUOT)
+    if isinstance(exc, sqlite3.Error):
+        code = getattr(exc, "sqlite_errorcode", None)
+        return code == sqlite3.SQLITE_FULL or "disk is full" in str(exc)
+    return False
+
+
+class FolderLock:
+    """An exclusive OS lock (``flock``) on ``<folder>/.results.lock``: one writer per results
+    folder. Released by :meth:`release` or when the process ends, however it ends."""
+
+    def __init__(self, folder: Path) -> None:
+        self.fd: int | None = None
+        try:
+            import fcntl
+        except ImportError:  # pragma: no cover - not POSIX: no lock
+            return
+        fd = os.open(folder / LOCK_NAME, os.O_RDWR | os.O_CREAT, 0o644)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            try:
+                pid = os.read(fd, 32).decode("ascii", "replace").strip()
+            except OSError:
+                pid = ""
+            os.close(fd)
+            who = f" (pid {pid})" if pid.isdigit() else ""
+            raise InputError(
+                f"{folder}: another dynmap-sim process{who} is writing results here; "
+                "one writer per folder: wait until it ends (--resume then continues its "
+                "results) or choose another --out"
+            ) from None
+        try:
+            os.ftruncate(fd, 0)
+            os.write(fd, f"{os.getpid()}\n".encode())
+        except OSError:
+            pass  # the pid is only for the message; the lock holds without it
+        self.fd = fd
+
+    def release(self) -> None:
+        if self.fd is not None:
+            os.close(self.fd)  # closing the descriptor releases the flock
+            self.fd = None
+
+
+def orphaned_checkpoint(folder: str | Path) -> Path | None:
+    """What holds earlier runs in ``folder`` although it has no ``results.db`` (checkpoint
+    files, or a write-ahead log with content), else None."""
+    d = Path(folder)
+    if (d / DB_NAME).exists():
+        return None
+    wal = d / (DB_NAME + "-wal")
+    if wal.is_file() and wal.stat().st_size > 0:
+        return wal
+    cp = d / CHECKPOINT_DIR
+    if cp.is_dir() and any(cp.glob("*.pkl")):
+        return cp
+    return None
+
+
+def _checkpoint_digest(idx: Any, nd: Any, nr: Any, h: Any, seed: Any, blob: bytes) -> str:
+    """The checkpoint's checksum: its fields and its blob (``v2:`` + SHA-256)."""
+    head = json.dumps([int(idx), int(nd), int(nr), str(h), int(seed)]).encode()
+    return "v2:" + hashlib.sha256(head + b"\0" + blob).hexdigest()
+
+
 class ResultsDB:
     """One experiment's SQLite store (open with :meth:`create` or :meth:`open`)."""
 
-    def __init__(self, path: Path, con: sqlite3.Connection) -> None:
+    def __init__(self, path: Path, con: sqlite3.Connection, lock: FolderLock | None = None) -> None:
         self.path = path
         self.con = con
+        self._lock = lock
+
+    @contextmanager
+    def _disk_full_is_clear(self, what: str) -> Iterator[None]:
+        """Turn a full disk into :class:`DiskFullError` (the rest passes through)."""
+        try:
+            yield
+        except (OSError, sqlite3.Error) as exc:
+            if is_disk_full(exc):
+                raise DiskFullError(self.path.parent, what) from None
+            raise
 
     # ------------------------------------------------------------------ opening
     @classmethod
@@ -233,43 +343,59 @@ class ResultsDB:
         """Create a fresh database in ``out_dir``; refuse to clobber results unless asked."""
         d = Path(out_dir)
         d.mkdir(parents=True, exist_ok=True)
-        path = d / DB_NAME
-        if path.exists():
-            if not overwrite:
-                raise InputError(
-                    f"{path} already holds results; pass --resume to continue them or "
-                    "choose another --out"
-                )
-            for suffix in ("", "-wal", "-shm"):
-                Path(str(path) + suffix).unlink(missing_ok=True)
-            for f in (d / CHECKPOINT_DIR).glob("*.pkl*"):
-                f.unlink()
-        con = sqlite3.connect(path)
-        con.execute("PRAGMA journal_mode=WAL")
-        con.execute("PRAGMA synchronous=NORMAL")
-        con.executescript(_SCHEMA)
-        con.commit()
-        db = cls(path, con)
-        db.set_meta(results_format=RESULTS_FORMAT)
+        lock = FolderLock(d)  # refuses a second writer before anything is touched
+        try:
+            path = d / DB_NAME
+            orphan = orphaned_checkpoint(d)
+            if path.exists() or orphan is not None:
+                if not overwrite:
+                    if orphan is not None:
+                        raise InputError(
+                            f"{path} is missing but {orphan} holds earlier runs (results.db "
+                            "was deleted or moved): put it back to --resume, or remove "
+                            f"{orphan} (or pass --force where offered) to start afresh"
+                        )
+                    raise InputError(
+                        f"{path} already holds results; pass --resume to continue them or "
+                        "choose another --out"
+                    )
+                for suffix in ("", "-wal", "-shm"):
+                    Path(str(path) + suffix).unlink(missing_ok=True)
+                for f in (d / CHECKPOINT_DIR).glob("*.pkl*"):
+                    f.unlink()
+            db = cls(path, sqlite3.connect(path), lock)
+            with db._disk_full_is_clear(str(path)):
+                db.con.execute("PRAGMA journal_mode=WAL")
+                db.con.execute("PRAGMA synchronous=NORMAL")
+                db.con.executescript(_SCHEMA)
+                db.con.commit()
+                db.set_meta(results_format=RESULTS_FORMAT)
+        except BaseException:
+            lock.release()
+            raise
         return db
 
     @classmethod
-    def open(cls, out_dir: str | Path) -> ResultsDB:
-        """Open an existing results folder (or ``results.db`` path)."""
+    def open(cls, out_dir: str | Path, lock: bool = False) -> ResultsDB:
+        """Open an existing results folder (or ``results.db`` path); ``lock``: as its one
+        writer (refused while another process writes there)."""
         p = Path(out_dir)
         path = p if p.suffix == ".db" else p / DB_NAME
         if not path.is_file():
             raise InputError(f"{path}: no results database here")
+        held = FolderLock(path.parent) if lock else None
         try:
             con = sqlite3.connect(path)
             con.execute("PRAGMA journal_mode=WAL")
             con.execute("SELECT count(*) FROM meta").fetchone()
         except sqlite3.DatabaseError as exc:
+            if held is not None:
+                held.release()
             raise InputError(f"{path}: not a dynmap_sim results database ({exc})") from None
-        db = cls(path, con)
+        db = cls(path, con, held)
         fmt = db.format
         if fmt > RESULTS_FORMAT:
-            con.close()
+            db.close()
             raise InputError(
                 f"{path}: results format {fmt}, written by a newer dynmap_sim; this version "
                 f"reads results formats 1-{RESULTS_FORMAT}"
@@ -277,7 +403,12 @@ class ResultsDB:
         return db
 
     def close(self) -> None:
-        self.con.close()
+        """Close the database and release the folder's lock (safe to call twice)."""
+        try:
+            self.con.close()
+        finally:
+            if self._lock is not None:
+                self._lock.release()
 
     def __enter__(self) -> ResultsDB:
         return self
@@ -287,7 +418,7 @@ class ResultsDB:
 
     # ------------------------------------------------------------------ meta
     def set_meta(self, **items: Any) -> None:
-        with self.con:
+        with self._disk_full_is_clear(str(self.path)), self.con:
             self.con.executemany(
                 "INSERT OR REPLACE INTO meta VALUES (?, ?)",
                 [(k, json.dumps(v)) for k, v in items.items()],
@@ -297,7 +428,7 @@ class ResultsDB:
         return {k: json.loads(v) for k, v in self.con.execute("SELECT key, value FROM meta")}
 
     def set_localizers(self, rows: list[tuple[str, str, dict[str, Any]]]) -> None:
-        with self.con:
+        with self._disk_full_is_clear(str(self.path)), self.con:
             self.con.execute("DELETE FROM localizers")
             self.con.executemany(
                 "INSERT INTO localizers VALUES (?, ?, ?, ?)",
@@ -354,13 +485,41 @@ class ResultsDB:
     ) -> None:
         """Write one run's rows, its summaries (``run_summaries[k]`` of localizer ``k``), the
         day's summaries (when ``day_done``: after the day's last run) and the checkpoint, in
-        ONE transaction. Every number is computed by :mod:`dynmap_sim.metrics`."""
+        ONE transaction. Every number is computed by :mod:`dynmap_sim.metrics`. On a failure
+        (a full disk: :class:`DiskFullError`) nothing of the run stays, files included."""
+        self._require_current_format()
+        files: list[tuple[str, str]] = []
+        try:
+            with self._disk_full_is_clear(f"the checkpoint into {self.checkpoint_dir}"):
+                files = self._write_localizer_files(checkpoint) if checkpoint is not None else []
+            with self._disk_full_is_clear(f"day {rec.day} run {rec.run} into {self.path}"):
+                self._write_run_rows(
+                    rec, run_summaries, day_done, checkpoint, files, scenario_hash, seed
+                )
+                # the main file alone holds every committed run (a copy of it, also after
+                # kill -9); busy readers only postpone this (SQLite then returns, not raises)
+                self.con.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+        except BaseException:
+            self._remove_uncommitted_files([name for name, _ in files])
+            raise
+        if checkpoint is not None:
+            self._remove_stale_localizer_files({name for name, _ in files})
+
+    def _write_run_rows(
+        self,
+        rec: RunRecord,
+        run_summaries: list[RunSummary],
+        day_done: bool,
+        checkpoint: Checkpoint | None,
+        files: list[tuple[str, str]],
+        scenario_hash: str,
+        seed: int,
+    ) -> None:
+        """The transaction of :meth:`write_run`."""
         d, r = rec.day, rec.run
         n_loc, n = rec.estimates.shape[:2]
         steps = np.arange(n)
         diags = rec.diagnostics or [LocalizerDiagnostics() for _ in range(n_loc)]
-        self._require_current_format()
-        files = self._write_localizer_files(checkpoint) if checkpoint is not None else []
         with self.con:
             # a run that was written before a crash (cannot happen with one transaction, but
             # a resumed experiment may redo a run whose checkpoint was older) is replaced
@@ -487,8 +646,6 @@ class ResultsDB:
                 )
             if checkpoint is not None:
                 self._put_checkpoint(checkpoint, files, scenario_hash, seed)
-        if checkpoint is not None:
-            self._remove_stale_localizer_files({name for name, _ in files})
 
     def _declare(self, diags: list[LocalizerDiagnostics]) -> None:
         """Record each localizer's declarations; add a column to ``estimates`` for each
@@ -565,10 +722,32 @@ class ResultsDB:
             name = f"loc{k}-{cp.next_index}.pkl"
             path = self.checkpoint_dir / name
             tmp = path.with_name(name + ".tmp")
-            tmp.write_bytes(blob)
-            os.replace(tmp, path)
+            try:
+                tmp.write_bytes(blob)
+                os.replace(tmp, path)
+            except BaseException:
+                tmp.unlink(missing_ok=True)
+                self._remove_uncommitted_files([name for name, _ in out])
+                raise
             out.append((name, hashlib.sha256(blob).hexdigest()))
         return out
+
+    def _remove_uncommitted_files(self, names: list[str]) -> None:
+        """Remove localizer files of a write that failed (never those the stored
+        checkpoint names)."""
+        if not names:
+            return
+        keep: set[str] = set()
+        try:
+            row = self.con.execute("SELECT blob FROM checkpoint WHERE id = 1").fetchone()
+            if row is not None and row[0] is not None:
+                content = pickle.loads(bytes(row[0]))  # noqa: S301 - our own checkpoint
+                keep = {name for name, _ in content.get("localizer_files", ())}
+        except Exception:  # noqa: BLE001 - unreadable: keep every file but the new ones
+            pass
+        for name in names:
+            if name not in keep:
+                (self.checkpoint_dir / name).unlink(missing_ok=True)
 
     def _remove_stale_localizer_files(self, keep: set[str]) -> None:
         if self.checkpoint_dir.is_dir():
@@ -581,17 +760,12 @@ class ResultsDB:
     ) -> None:
         content = {"format": 2, "state": cp.state, "localizer_files": files}
         blob = pickle.dumps(content, protocol=pickle.HIGHEST_PROTOCOL)
+        digest = _checkpoint_digest(
+            cp.next_index, cp.next_day, cp.next_run, scenario_hash, seed, blob
+        )
         self.con.execute(
             "INSERT OR REPLACE INTO checkpoint VALUES (1, ?, ?, ?, ?, ?, ?, ?, datetime('now'))",
-            (
-                cp.next_index,
-                cp.next_day,
-                cp.next_run,
-                scenario_hash,
-                seed,
-                hashlib.sha256(blob).hexdigest(),
-                blob,
-            ),
+            (cp.next_index, cp.next_day, cp.next_run, scenario_hash, seed, digest, blob),
         )
 
     # ------------------------------------------------------------------ reading
@@ -622,8 +796,21 @@ class ResultsDB:
             )
         if s != seed:
             raise InputError(f"{self.path}: the checkpoint was made with seed {s}, not {seed}")
-        if blob is None or hashlib.sha256(bytes(blob)).hexdigest() != digest:
-            raise InputError(f"{self.path}: the checkpoint is corrupt (checksum mismatch)")
+        corrupt = InputError(
+            f"{self.path}: the checkpoint is corrupt (checksum mismatch: its fields or its "
+            "state were changed); it cannot be resumed: start a new experiment with another --out"
+        )
+        if blob is None or not isinstance(digest, str):
+            raise corrupt
+        if digest.startswith("v2:"):  # covers the fields too
+            try:
+                expected = _checkpoint_digest(idx, nd, nr, h, s, bytes(blob))
+            except (TypeError, ValueError):
+                raise corrupt from None
+        else:  # written before the checksum covered the fields: the blob alone
+            expected = hashlib.sha256(bytes(blob)).hexdigest()
+        if expected != digest:
+            raise corrupt
         try:
             content = pickle.loads(bytes(blob))  # noqa: S301 - our own checksummed blob
         except Exception as exc:  # noqa: BLE001 - any failure means unusable

@@ -153,42 +153,76 @@ class ExperimentRunner:
         self.steer_index = scenario.labels.index(steer) if steer is not None else None
         db_file = out_dir / "results.db"
         if resume and db_file.exists():
-            self.db = ResultsDB.open(out_dir)
-            meta = self.db.meta()
-            made_with = meta.get("checkpoint_format", 1)
-            if made_with != CHECKPOINT_FORMAT:
+            self.db = ResultsDB.open(out_dir, lock=True)  # one writer per folder
+            try:
+                state = self._resume_state(db_file, days)
+            except BaseException:
                 self.db.close()
-                raise InputError(
-                    f"{db_file}: these results were written by another version of dynmap_sim "
-                    f"(checkpoint format {made_with}, this version writes {CHECKPOINT_FORMAT}"
-                    f"{'' if made_with != 1 else ': before the episode loop and the Driver role'}"
-                    "); --resume needs the version that wrote them. Their finished runs still "
-                    "load in `dynmap-sim report`; to continue, rerun into another --out"
-                )
-            if meta.get("experiment_hash") != self.hash:
-                self.db.close()
-                if meta.get("seed") != self.seed or meta.get("days") != list(days):
-                    why = (
-                        f"seed {meta.get('seed')} and days {meta.get('days')}, not seed "
-                        f"{self.seed} and days {list(days)}"
-                    )
-                else:
-                    why = "another version of the scenario or its world file (they changed)"
-                raise InputError(
-                    f"{db_file}: these results were made with {why}; resume with the same "
-                    "inputs or start a new experiment with another --out"
-                )
-            cp = self.db.load_checkpoint(self.hash, self.seed)
-            if cp is not None:
-                self.start_index = cp.next_index
-                state = cp.state
-                self._loc_states = list(cp.localizers)
-                if len(self._loc_states) != len(scenario.localizers):
-                    raise InputError(f"{db_file}: the checkpoint has no localizer states")
+                raise
         else:
-            self.db = ResultsDB.create(out_dir, overwrite=overwrite)
-            self._write_meta()
-        self.state = state if state is not None else self._fresh_state()
+            self.db = ResultsDB.create(out_dir, overwrite=overwrite)  # locks the folder
+            try:
+                self._write_meta()
+            except BaseException:
+                self.db.close()
+                raise
+        try:
+            self.state = state if state is not None else self._fresh_state()
+        except BaseException:
+            self.db.close()
+            raise
+
+    def _resume_state(self, db_file: Path, days: tuple[int, int]) -> EngineState | None:
+        """Check the stored results are this experiment's and load their checkpoint (sets
+        :attr:`start_index` and the localizer states); the engine state, None when none."""
+        scenario = self.scenario
+        state = None
+        meta = self.db.meta()
+        made_with = meta.get("checkpoint_format", 1)
+        if made_with != CHECKPOINT_FORMAT:
+            raise InputError(
+                f"{db_file}: these results were written by another version of dynmap_sim "
+                f"(checkpoint format {made_with}, this version writes {CHECKPOINT_FORMAT}"
+                f"{'' if made_with != 1 else ': before the episode loop and the Driver role'}"
+                "); --resume needs the version that wrote them. Their finished runs still "
+                "load in `dynmap-sim report`; to continue, rerun into another --out"
+            )
+        if meta.get("experiment_hash") != self.hash:
+            if meta.get("seed") != self.seed or meta.get("days") != list(days):
+                why = (
+                    f"seed {meta.get('seed')} and days {meta.get('days')}, not seed "
+                    f"{self.seed} and days {list(days)}"
+                )
+            else:
+                why = "another version of the scenario or its world file (they changed)"
+            raise InputError(
+                f"{db_file}: these results were made with {why}; resume with the same "
+                "inputs or start a new experiment with another --out"
+            )
+        cp = self.db.load_checkpoint(self.hash, self.seed)
+        if cp is not None:
+            self._check_position(db_file, cp)
+            self.start_index = cp.next_index
+            state = cp.state
+            self._loc_states = list(cp.localizers)
+            if len(self._loc_states) != len(scenario.localizers):
+                raise InputError(f"{db_file}: the checkpoint has no localizer states")
+        return state
+
+    def _check_position(self, db_file: Path, cp: Checkpoint) -> None:
+        """The checkpoint's next run must be one of this experiment's, after a stored run
+        (an edited or stale checkpoint would rerun or skip runs)."""
+        n = len(self.slots)
+        nxt = self.slots[cp.next_index] if 0 < cp.next_index < n else None
+        want = (nxt.day, nxt.run) if nxt is not None else (-1, -1)
+        done = self.db.query("SELECT count(*) FROM runs")[0][0]
+        if not (0 < cp.next_index <= n and (cp.next_day, cp.next_run) == want and done >= 1):
+            raise InputError(
+                f"{db_file}: the checkpoint is corrupt (next run {cp.next_index} = day "
+                f"{cp.next_day} run {cp.next_run} is not one of this experiment's {n} runs "
+                "after a stored one); it cannot be resumed: start a new experiment with "
+                "another --out"
+            )
 
     # ------------------------------------------------------------------ setup
     def _write_meta(self) -> None:
@@ -317,6 +351,9 @@ class ExperimentRunner:
                 outs = self._with_steered(pending[0], engine.result())
                 self._write(*pending, outs, done_at)
                 bar.update(1)
+        except BaseException:
+            self.db.close()  # releases the folder's lock (the stored runs stay)
+            raise
         finally:
             if engine is not None:
                 engine.close()

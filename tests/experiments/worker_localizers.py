@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 
+import numpy as np
 from fake_env import RecordingLocalizer
 
 
@@ -33,3 +34,29 @@ class PidLocalizer(RecordingLocalizer):
         super().begin_run(prior)
         self.pids = [*getattr(self, "pids", []), os.getpid()]
         self.blas_threads = os.environ.get("OPENBLAS_NUM_THREADS")
+
+
+class NoneLocalizer(RecordingLocalizer):
+    """Breaks the contract: update() returns None."""
+
+    def update(self, odom, scan):
+        super().update(odom, scan)
+
+
+class FlatMeanLocalizer(RecordingLocalizer):
+    """Breaks the contract: a (2,) mean."""
+
+    def update(self, odom, scan):
+        e = super().update(odom, scan)
+        return type(e)(mean=e.mean[:2], cov=e.cov)
+
+
+class InfiniteCovLocalizer(RecordingLocalizer):
+    """Breaks the contract: a non-finite covariance at its third scan."""
+
+    def update(self, odom, scan):
+        e = super().update(odom, scan)
+        self.k = getattr(self, "k", 0) + 1
+        if self.k == 3:
+            return type(e)(mean=e.mean, cov=np.full((3, 3), np.inf))
+        return e
