@@ -386,8 +386,11 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         localizers=args.localizer,
         out_dir=Path(args.out),
         map_from_log_poses=args.map_from_log_poses,
+        note=lambda text: print(text, file=sys.stderr),
     )
     print(f"results in {out}")
+    for line in _headline(out):
+        print(line)
     return 0
 
 

@@ -383,3 +383,44 @@ def test_check_without_expectations_is_refused_before_running(capsys, tmp_path):
         )
     )
     assert "nothing to check" in _one_line_error(capsys, "check", empty, "-q")
+
+
+def test_run_ends_with_the_headline_numbers(tmp_path, capsys):
+    """issue 14: after "results in DIR", per localizer ATE, mean, max and lost fraction (the
+    report's overall numbers), and the navigation measures when the results hold them."""
+    from dynmap_sim.analysis.report import overall_stats
+    from dynmap_sim.experiments.results import ResultsDB
+
+    out = tmp_path / "o"
+    scn = ROOT / "worlds" / "scenarios" / "ci-apartment.toml"
+    assert main(["run", str(scn), "--out", str(out), "-q"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    i = lines.index(f"results in {out}")
+    assert lines[i + 1].split() == [
+        "localizer",
+        "ATE",
+        "RMSE",
+        "[m]",
+        "mean",
+        "[m]",
+        "max",
+        "[m]",
+        "lost",
+    ]
+    with ResultsDB.open(out) as db:
+        stats = overall_stats(db)
+        nav = db.nav_runs()
+    for s, line in zip(stats, lines[i + 2 :], strict=False):
+        assert line.split() == [
+            s["localizer"],
+            f"{s['ate_rmse_m']:.3f}",
+            f"{s['mean_error_m']:.3f}",
+            f"{s['max_error_m']:.3f}",
+            f"{100 * s['lost_fraction']:.1f}",
+            "%",
+        ]
+    reached = sum(n.goal_reached for _, _, n in nav)
+    assert lines[-1] == (
+        f"navigation: goal reached in {reached} of {len(nav)} runs; "
+        f"{sum(n.collisions for _, _, n in nav)} collisions"
+    )

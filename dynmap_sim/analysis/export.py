@@ -3,6 +3,11 @@
 Each line is ``timestamp tx ty tz qx qy qz qw``. The timestamp is seconds since midnight of the
 experiment's first date, so it increases over the whole experiment (day after day); z is 0
 and the quaternion a rotation about z by the heading.
+
+A ``replay`` folder holds two passes over one log: ``<label>.tum`` is the localization pass
+and ``<label>-mapping.tum`` the mapping pass, both stamped with the log's own clock (so they
+line up with anything else made from the log), and ``truth.tum`` the log's reference poses
+when it has them.
 """
 
 from __future__ import annotations
@@ -10,10 +15,12 @@ from __future__ import annotations
 import datetime as dt
 import re
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from dynmap_sim.errors import InputError
 from dynmap_sim.experiments.results import ResultsDB
 
 
@@ -41,7 +48,15 @@ def export_tum(out_dir: str | Path, tum_dir: str | Path) -> list[Path]:
     dst.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
     with ResultsDB.open(out_dir) as db:
-        first = dt.date.fromisoformat(db.meta()["first_date"])
+        meta = db.meta()
+        if not db.query("SELECT 1 FROM runs LIMIT 1"):
+            raise InputError(f"{out_dir}: no finished run to export")
+        if "log_path" in meta:
+            return _export_replay(db, meta, dst)
+        first_date = meta.get("first_date")
+        if first_date is None:  # not written by run: the first run's date
+            first_date = db.query("SELECT min(date) FROM runs")[0][0]
+        first = dt.date.fromisoformat(first_date)
         dates = {
             (int(a), int(b)): dt.date.fromisoformat(c)
             for a, b, c in db.query("SELECT day, run, date FROM runs")
@@ -61,4 +76,24 @@ def export_tum(out_dir: str | Path, tum_dir: str | Path) -> list[Path]:
             if name == "truth" or any(p.stem == name for p in written):
                 name = f"{name}-{k}"  # two labels that sanitize alike keep separate files
             written.append(write_tum(dst / f"{name}.tum", stamps, d["estimate"]))
+    return written
+
+
+def _export_replay(db: ResultsDB, meta: dict[str, Any], dst: Path) -> list[Path]:
+    """The TUM files of a replay folder (see the module doc)."""
+    t0 = float(meta.get("log_start_s") or 0.0)
+    written: list[Path] = []
+    names: set[str] = set()
+    for k, label in enumerate(db.labels()):
+        name = _safe(label)
+        if name == "truth" or name in names:
+            name = f"{name}-{k}"
+        names.add(name)
+        for day, suffix in ((2, ""), (1, "-mapping")):
+            d = db.per_scan(k, day=day)
+            if not len(d["t_s"]):
+                continue
+            if k == 0 and day == 2 and meta.get("has_reference"):
+                written.append(write_tum(dst / "truth.tum", t0 + d["t_s"], d["truth"]))
+            written.append(write_tum(dst / f"{name}{suffix}.tum", t0 + d["t_s"], d["estimate"]))
     return written

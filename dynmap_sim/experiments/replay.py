@@ -10,7 +10,14 @@ store as simulated experiments (:mod:`dynmap_sim.experiments.results`):
 
 With ``map_from_log_poses=True`` and a log whose laser lines carry (corrected) poses, the
 map is instead rendered directly from those poses (keyframes every 0.3 m / 0.3 rad) and
-given to every localizer that accepts a map (``set_map``); the others still map on day 1.
+given to every localizer that accepts a map (:class:`~dynmap_sim.agent.localizer.MapUser`);
+the others still map on day 1 (``note`` says which), and when none accepts one the option is
+refused.
+
+The results folder reads like a simulated experiment's: ``meta`` names the log as the world,
+lists the two runs as ``slots`` (so the report says "2 of 2 runs done") and keeps the log's
+first time stamp (``log_start_s``: the export writes the log's own clock); every
+``update()`` is timed and checked against the localizer contract.
 
 When the log carries poses, they are the reference for all errors (the "truth" columns);
 otherwise errors are NaN and only the estimates, likelihoods and certainties are stored.
@@ -22,8 +29,10 @@ from __future__ import annotations
 
 import dataclasses
 import datetime as dt
+import hashlib
 import json
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +42,7 @@ from dynmap_sim import se2
 from dynmap_sim.agent.grid import OccupancyGrid
 from dynmap_sim.agent.localizer import Localizer, MapUser, make_localizer
 from dynmap_sim.errors import InputError
-from dynmap_sim.experiments.bench import DiagnosticsRecorder
+from dynmap_sim.experiments.bench import DiagnosticsRecorder, LocalizerRun
 from dynmap_sim.experiments.results import ResultsDB, RunRecord
 from dynmap_sim.experiments.runner import ExperimentRunner, localizer_seeds
 from dynmap_sim.io.carmen import CarmenLog, read_carmen
@@ -78,19 +87,26 @@ def _run_pass(
     locs: list[Localizer],
     priors: list[Prior],
     day: int,
+    labels: list[str] | None = None,
 ) -> RunRecord:
     n_loc, n = len(locs), len(log)
+    labels = labels or [type(loc).__name__ for loc in locs]
     est = np.full((n_loc, n, 3), np.nan)
     cov = np.full((n_loc, n, 3), np.nan)
+    update_s = np.zeros(n_loc)
     diags = [DiagnosticsRecorder(loc, n) for loc in locs]
     wall0 = time.perf_counter()
     for loc, prior in zip(locs, priors, strict=True):
         loc.begin_run(prior)
     for k, (odom, scan) in enumerate(log.stream()):
         for i, loc in enumerate(locs):
+            t_up = time.perf_counter()
             e = loc.update(odom, scan)
-            est[i, k] = e.mean
-            cov[i, k] = np.diag(e.cov)
+            update_s[i] += time.perf_counter() - t_up
+            where = f"on pass {day} ({'mapping' if day == 1 else 'localization'}) at scan {k}"
+            mean, c = LocalizerRun.checked_estimate(labels[i], loc, e, where)
+            est[i, k] = mean
+            cov[i, k] = np.diag(c)
             if e.extras:
                 diags[i].scan(k, e.extras)
     for loc, diag in zip(locs, diags, strict=True):
@@ -99,13 +115,13 @@ def _run_pass(
         loc.end_day()
         diag.end_day(loc)
     t0 = float(log.stamps_s[0])
-    start = dt.datetime.fromtimestamp(t0, tz=dt.UTC) if t0 > 0 else None
+    date, start_s = _log_date_and_start(log)
     truth = log.reference if log.reference is not None else np.full((n, 3), np.nan)
     return RunRecord(
         day=day,
         run=1,
-        date=(start.date() if start else dt.date(1970, 1, 1)).isoformat(),
-        start_s=(start.hour * 3600 + start.minute * 60 + start.second) if start else 0.0,
+        date=date,
+        start_s=start_s,
         t_s=log.stamps_s - t0,
         truth=np.asarray(truth, dtype=np.float64),
         collision=np.zeros(n, dtype=bool),
@@ -117,12 +133,29 @@ def _run_pass(
         skipped_waypoints=0,
         wall_s=time.perf_counter() - wall0,
         events=[],
+        update_s=update_s,
         diagnostics=[d.out for d in diags],
     )
 
 
-def replay_log(log: Path, localizers: list[str], out_dir: Path, map_from_log_poses: bool) -> Path:
-    """Replay CARMEN ``log`` through ``localizers`` into a results store in ``out_dir``."""
+def _log_date_and_start(log: CarmenLog) -> tuple[str, float]:
+    """The log's first date (UTC; 1970-01-01 without absolute stamps) and time of day [s]."""
+    t0 = float(log.stamps_s[0])
+    if not 0 < t0 < 253402300799:  # before 9999-12-31: a date can be made of it
+        return dt.date(1970, 1, 1).isoformat(), 0.0
+    start = dt.datetime.fromtimestamp(t0, tz=dt.UTC)
+    return start.date().isoformat(), float(start.hour * 3600 + start.minute * 60 + start.second)
+
+
+def replay_log(
+    log: Path,
+    localizers: list[str],
+    out_dir: Path,
+    map_from_log_poses: bool,
+    note: Callable[[str], None] | None = None,
+) -> Path:
+    """Replay CARMEN ``log`` through ``localizers`` into a results store in ``out_dir``;
+    ``note`` gets what the user should know (which localizers took the log's map)."""
     data = read_carmen(log)
     if len(data) < 2:
         raise InputError(f"{log}: the log has fewer than 2 scans")
@@ -137,22 +170,43 @@ def replay_log(log: Path, localizers: list[str], out_dir: Path, map_from_log_pos
         raise InputError(f"--localizer: {exc}") from None
     given_map = [False] * len(locs)
     if map_from_log_poses:
+        takes = [isinstance(loc, MapUser) for loc in locs]
+        if not any(takes):
+            raise InputError(
+                f"--map-from-log-poses: none of the localizers takes a map ({', '.join(localizers)}"
+                "); give one that does (e.g. static-mcl) or drop the option"
+            )
         grid = map_from_poses(data)
         for i, loc in enumerate(locs):
-            if isinstance(loc, MapUser):
+            if takes[i]:
                 loc.set_map(grid)
                 given_map[i] = True
+        others = [a for a, t in zip(localizers, takes, strict=True) if not t]
+        if note is not None and others:
+            takers = ", ".join(a for a, t in zip(localizers, takes, strict=True) if t)
+            note(
+                f"note: --map-from-log-poses: the map from the log's poses goes to {takers}; "
+                f"not to {', '.join(others)}, which take no map (a localizer that maps "
+                "builds its own on the first pass)"
+            )
     start = data.reference[0] if data.reference is not None else np.zeros(3)
+    date, start_s = _log_date_and_start(data)
+    ident = hashlib.sha256(Path(log).read_bytes())
+    ident.update(json.dumps([localizers, bool(map_from_log_poses)]).encode())
     db = ResultsDB.create(out_dir, overwrite=True)
     try:
         db.set_meta(
             scenario=None,
             scenario_name=f"replay:{Path(log).name}",
-            world=None,
+            world=f"CARMEN log {Path(log).name}",
             log_path=str(log),
             log_message=data.message,
+            log_start_s=float(data.stamps_s[0]),
             seed=0,
             days=[1, 2],
+            slots=[[1, 1, date, start_s], [2, 1, date, start_s]],
+            first_date=date,
+            experiment_hash=ident.hexdigest(),
             laser=dataclasses.asdict(data.laser),
             has_reference=data.reference is not None,
             map_from_log_poses=bool(map_from_log_poses),
@@ -166,7 +220,7 @@ def replay_log(log: Path, localizers: list[str], out_dir: Path, map_from_log_pos
                 Prior(initial_pose=start.copy(), day=day, run=1, first_run=day == 1 and not g)
                 for g in given_map
             ]
-            rec = _run_pass(data, locs, priors, day)
+            rec = _run_pass(data, locs, priors, day, labels=list(localizers))
             summaries = [ExperimentRunner._run_summary(k, rec) for k in range(len(locs))]
             db.write_run(rec, summaries, True, None, "replay", 0)
         db.set_meta(complete=True)

@@ -175,3 +175,70 @@ def test_replay_bad_log_is_a_clean_error(tmp_path, capsys):
     p.write_text("FLASER nope\n")
     assert main(["replay", str(p), "--localizer", "static-mcl", "--out", str(tmp_path)]) == 1
     assert "bad.log" in capsys.readouterr().err
+
+
+def test_a_replay_folder_reports_and_exports_like_an_experiment(tmp_path, capsys):
+    """issue 14: report and export of a replay folder work, its summary names the log and both
+    runs, update times are measured; --map-from-log-poses says who takes the map."""
+    p = tmp_path / "loop.log"
+    write_log(p)
+    out = tmp_path / "r"
+    args = ["replay", str(p), "--localizer", "odometry", "--localizer", "static-mcl"]
+    assert main([*args, "--out", str(out)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == f"results in {out}"
+    assert lines[1].split() == [
+        "localizer",
+        "ATE",
+        "RMSE",
+        "[m]",
+        "mean",
+        "[m]",
+        "max",
+        "[m]",
+        "lost",
+    ]
+    assert [ln.split()[0] for ln in lines[2:]] == ["odometry", "static-mcl"]
+    assert main(["report", str(out)]) == 0
+    summary = (out / "summary.md").read_text()
+    assert "world: `CARMEN log loop.log`" in summary and "2 of 2 runs done" in summary
+    assert "(incomplete)" not in summary
+    overall = [ln for ln in summary.splitlines() if ln.startswith(("| odometry", "| static-mcl"))]
+    assert len(overall) >= 2 and not any(ln.endswith("| nan |") for ln in overall[:2])
+    tum = tmp_path / "tum"
+    assert main(["export", str(out), "--tum", str(tum)]) == 0
+    names = sorted(q.name for q in tum.iterdir())
+    assert names == [
+        "odometry-mapping.tum",
+        "odometry.tum",
+        "static-mcl-mapping.tum",
+        "static-mcl.tum",
+        "truth.tum",
+    ]
+    for q in tum.iterdir():
+        t = np.loadtxt(q)[:, 0]
+        assert len(t) == 240 and np.all(np.diff(t) > 0)
+        assert t[0] == pytest.approx(1_000_000.0)  # the log's own clock
+    capsys.readouterr()
+    # the map from the log's poses: refused when no localizer takes one, else said who does
+    only = ["replay", str(p), "--localizer", "odometry", "--map-from-log-poses"]
+    assert main([*only, "--out", str(tmp_path / "m0")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "none of the localizers takes a map (odometry)" in err
+    assert not (tmp_path / "m0" / "results.db").exists()
+    assert main([*args, "--map-from-log-poses", "--out", str(tmp_path / "m1")]) == 0
+    err = capsys.readouterr().err
+    assert "goes to static-mcl; not to odometry, which take no map" in err
+
+
+def test_a_localizer_breaking_its_contract_in_a_replay_is_named(tmp_path, capsys, monkeypatch):
+    from dynmap_sim.agent.dead_reckoning import DeadReckoning
+
+    p = tmp_path / "loop.log"
+    write_log(p)
+    monkeypatch.setattr(DeadReckoning, "update", lambda self, odom, scan: None)
+    assert main(["replay", str(p), "--localizer", "odometry", "--out", str(tmp_path / "r")]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "Traceback" not in err and err.count("\n") == 0
+    assert "localizer 'odometry' (dynmap_sim.agent.dead_reckoning.DeadReckoning) broke" in err
+    assert "on pass 1 (mapping) at scan 0: update() must return a PoseEstimate, got None" in err
