@@ -11,7 +11,7 @@ from dynmap_sim.world.route import (
 )
 
 
-@pytest.mark.parametrize("name,seeds", [("lab", (0,)), ("apartment", (0, 1))])
+@pytest.mark.parametrize("name,seeds", [("lab", (0,)), ("apartment", (0, 1)), ("office", (0, 1))])
 def test_route_clearance_over_the_whole_calendar(name, seeds):
     spec = load_world(name)
     for seed in seeds:
@@ -34,7 +34,19 @@ def test_apartment_route_blocked_from_day_22_on_purpose():
             assert route_clearances(snap, spec.robot.route)["route_blocker"] == 0.0
 
 
+def test_office_corridor_blocked_on_purpose_day_5_run_2_to_6_and_day_9_run_2_to_10():
+    spec = load_world("office")
+    w = World(spec, seed=0)
+    blocked = {(5, 2), (6, 1), (6, 2), (9, 2), (10, 1), (10, 2)}
+    for slot in w.calendar.slots:
+        snap = w.snapshot(slot.day, slot.run)
+        assert route_blocked(snap) == ((slot.day, slot.run) in blocked), (slot.day, slot.run)
+    c = route_clearances(w.snapshot(6, 1), spec.robot.route)
+    assert c["delivery_pallet"] == 0.0
+    assert route_clearances(w.snapshot(10, 1), spec.robot.route)["old_cabinets"] == 0.0
+
+
 def test_start_pose_is_on_the_route():
-    for name in ("lab", "apartment"):
+    for name in ("lab", "apartment", "office"):
         spec = load_world(name)
         assert tuple(spec.robot.route[0]) == pytest.approx(spec.robot.start[:2])

@@ -1,10 +1,16 @@
-"""Both shipped worlds load and keep their promises (calendar, route, API shape)."""
+"""The shipped worlds load and keep their promises (calendar, route, API shape)."""
+
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from dynmap_sim.types import BeamClass
 from dynmap_sim.world import World, load_world, resolve_world_path
+from dynmap_sim.world.render import render_snapshot
+
+WORLDS = Path(__file__).resolve().parents[2] / "worlds"
+SHIPPED = sorted(p.stem for p in WORLDS.glob("*.toml"))
 
 
 def test_lab_calendar_has_23_working_days_and_3_runs():
@@ -26,7 +32,7 @@ def test_apartment_calendar_has_28_days_one_run():
     assert x1 - x0 >= 8.0 and y1 - y0 >= 10.0
 
 
-@pytest.mark.parametrize("name", ["lab", "apartment"])
+@pytest.mark.parametrize("name", ["lab", "apartment", "office"])
 def test_world_api_shapes(name):
     spec = load_world(name)
     w = World(spec, seed=1)
@@ -46,6 +52,28 @@ def test_world_api_shapes(name):
     w.step(0.1, robot_pose=spec.robot.start)
     assert w.people_poses().shape[1] == 3
     assert w.time_s == pytest.approx(w.calendar.slot(w.calendar.n_days, 1).start_s + 0.1)
+
+
+def test_every_shipped_world_is_tested_validates_loads_and_renders(tmp_path):
+    assert SHIPPED == ["apartment", "lab", "office"]  # a new world: add it to the lists here
+    for name in SHIPPED:
+        spec = load_world(name)  # validates: raises on any problem of the file
+        w = World(spec, seed=0)
+        n = w.calendar.n_days
+        png = render_snapshot(spec, seed=0, day=n, run=1, out_path=tmp_path / f"{name}.png")
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_office_calendar_has_10_days_two_runs_and_a_long_corridor_route():
+    spec = load_world("office")
+    w = World(spec, seed=0)
+    assert w.calendar.n_days == 10
+    assert w.calendar.runs_per_day == 2
+    assert all(s.date.weekday() < 5 for s in w.calendar.slots)
+    x0, y0, x1, y1 = spec.bounds
+    assert 19.0 <= x1 - x0 <= 22.0 and 11.0 <= y1 - y0 <= 14.0
+    assert 40.0 <= spec.robot.route_length_m <= 70.0
+    assert spec.people and max(p.count for p in spec.people) >= 5
 
 
 def test_static_version_changes_only_when_the_geometry_does():
