@@ -8,6 +8,7 @@ Fig. 7), the error over time within runs, scan likelihood and certainty (λ_min)
 from __future__ import annotations
 
 import csv
+import json
 import math
 from pathlib import Path
 from typing import Any
@@ -167,6 +168,14 @@ def _summary_md(db: ResultsDB, path: Path, figures: list[Path], studies: list[St
             f"| {100.0 * r['lost_fraction']:.1f} % | {_fmt(r['mean_scan_loglik'])} "
             f"| {_fmt(r['mean_lambda_min'], 1)} |"
         )
+    mapping = _mapping_run_labels(db)
+    if mapping:
+        lines += [
+            "",
+            f"Day 1, run 1 is the mapping run of {', '.join(mapping)}: their estimates there "
+            "are the first-run SLAM's, made while the map is built (so their day-1 rows are "
+            "identical when day 1 has only that run).",
+        ]
     conf = _confusions(db, len(labels))
     if any(c.sum() for c in conf):
         lines += [
@@ -199,6 +208,24 @@ def _summary_md(db: ResultsDB, path: Path, figures: list[Path], studies: list[St
     return path
 
 
+#: Localizers (registry names) that map the experiment's first run with the first-run SLAM
+#: (B&D §4); ``static-mcl`` does too with its default ``map_source = "first-run"``.
+_FIRST_RUN_MAPPERS = ("dynamic-map", "static-map", "static-map+stm")
+
+
+def _mapping_run_labels(db: ResultsDB) -> list[str]:
+    """Labels (as code spans) of the localizers whose first run is a mapping run, as the
+    localizers table names them (none when a replay handed them the log's map)."""
+    if db.meta().get("map_from_log_poses"):
+        return []
+    out = []
+    for label, name, params in db.query("SELECT label, name, params FROM localizers ORDER BY idx"):
+        source = json.loads(params or "{}").get("map_source", "first-run")
+        if name in _FIRST_RUN_MAPPERS or (name == "static-mcl" and source == "first-run"):
+            out.append(f"`{label}`")
+    return out
+
+
 def _confusions(db: ResultsDB, n_loc: int) -> list[np.ndarray]:
     out = [np.zeros((4, 4), dtype=np.int64) for _ in range(n_loc)]
     for loc, blob in db.query("SELECT loc, confusion FROM point_classes"):
@@ -209,6 +236,7 @@ def _confusions(db: ResultsDB, n_loc: int) -> list[np.ndarray]:
 # ---------------------------------------------------------------------- figures
 def _fig_error_per_day(db: ResultsDB, path: Path) -> Path:
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     rows = per_day_rows(db)
     fig, ax = plt.subplots(figsize=(8, 4))
@@ -223,14 +251,38 @@ def _fig_error_per_day(db: ResultsDB, path: Path) -> Path:
         ax.bar(days + off, mean, width=0.8 / max(n, 1), label=f"{label} (mean)")
         ax.plot(days + off, mx, "_", ms=10, color=ax.patches[-1].get_facecolor())
     ax.set_xlabel("day")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_ylabel("position error [m]")
     ax.set_title("Localization error per day (bars: mean, ticks: max)")
-    ax.legend(fontsize="small")
+    _legend_below(fig, [ax])
     ax.grid(axis="y", alpha=0.3)
-    fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def _legend_below(fig: Any, axes: list[Any]) -> None:
+    """One legend of the entries of ``axes`` (each label once) below them, outside the data,
+    and the layout made around it (replaces ``fig.tight_layout()``)."""
+    entries: dict[str, Any] = {}
+    for ax in axes:
+        for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
+            entries.setdefault(label, handle)
+    ncol = max(1, min(len(entries), 4))
+    rows = -(-len(entries) // ncol)
+    height = fig.get_figheight()
+    fig.set_figheight(height + 0.25 * rows)  # room for the legend, the axes keep their size
+    bottom = 0.25 * rows / fig.get_figheight() + 0.02
+    fig.tight_layout(rect=(0, bottom, 1, 1))
+    if entries:
+        fig.legend(
+            list(entries.values()),
+            list(entries),
+            loc="lower center",
+            ncol=ncol,
+            fontsize="small",
+            frameon=False,
+        )
 
 
 def _pick_runs(db: ResultsDB) -> list[tuple[int, int]]:
@@ -299,8 +351,7 @@ def _fig_trajectories(db: ResultsDB, path: Path) -> Path:
         ax.set_title(f"day {day}, run {run}", fontsize="small")
         ax.set_xlabel("x [m]")
         ax.set_ylabel("y [m]")
-    axes[0, 0].legend(fontsize="small")
-    fig.tight_layout()
+    _legend_below(fig, list(axes[0]))
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path

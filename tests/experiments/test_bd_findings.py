@@ -9,10 +9,13 @@ import numpy as np
 
 from dynmap_sim.studies.biber_duckett.findings import (
     FINDING_KEYS,
+    MIN_TREND_DAYS,
     evaluate_findings,
+    structure_finding,
     weeks_of_days,
     write_findings,
 )
+from dynmap_sim.studies.biber_duckett.map_structure import MapStructure
 
 N_DAYS, PER_DAY = 15, 200
 
@@ -140,3 +143,103 @@ def test_a_flat_usage_is_no_trend():
         f.key: f for f in evaluate_findings(dyn, statics, base, WEEKS, selections=(days, flat))
     }
     assert not found["ltm_usage_rises"].holds and not found["stm_usage_falls"].holds
+
+
+TRENDS = ("static_degrades_dynamic_does_not", "stm_usage_falls", "ltm_usage_rises")
+
+
+def _first_days(series, last_day):
+    return {k: v[series["day"] <= last_day] for k, v in series.items()}
+
+
+def _structure(on_walls_l5):
+    n = len(on_walls_l5)
+    walls = np.column_stack([np.full(n, 0.5), np.asarray(on_walls_l5, float)])
+    return MapStructure(
+        days=tuple(range(1, n + 1)),
+        levels=(1, 4),
+        n_points=np.full((n, 2), 100),
+        on_walls=walls,
+        on_world=walls,
+        median_dist_m=np.full((n, 2), 0.02),
+        tol_m=0.05,
+    )
+
+
+def test_trends_are_not_measurable_below_their_minimum_of_days():
+    """A 3-day run once said "λ1 usage falls" from two days and showed ``+nan/day``: each
+    trend needs MIN_TREND_DAYS days of data, else it says "not measurable" (never nan)."""
+    dyn, statics, base = paper_like()
+    for last_day in (2, 3, 6):  # usage counts from day 2, the likelihood slopes from day 3
+        short = [
+            _first_days(dyn, last_day),
+            {k: _first_days(v, last_day) for k, v in statics.items()},
+            {k: _first_days(v, last_day) for k, v in base.items()},
+        ]
+        found = {f.key: f for f in evaluate_findings(*short, WEEKS)}
+        assert all("nan" not in f.measured for f in found.values()), found
+        slopes = found["static_degrades_dynamic_does_not"]
+        assert slopes.holds is None
+        n_from_3 = {2: "0 days", 3: "1 day", 6: "4 days"}[last_day]
+        assert f"dynamic-map not measurable: only {n_from_3} from day 3 " in slopes.measured
+        for key in ("stm_usage_falls", "ltm_usage_rises"):
+            if last_day - 1 < MIN_TREND_DAYS:
+                assert found[key].holds is None
+                assert found[key].measured.endswith(
+                    f"; not measurable: only {last_day - 1} day"
+                    f"{'s' if last_day > 2 else ''} (a trend needs >= 5)"
+                )
+            else:  # days 2-6: enough to judge
+                assert found[key].holds is not None and "not measurable" not in found[key].measured
+    # days 3-7 for the slopes, 2-7 for the usage: every trend is judged, and holds
+    days = np.arange(1, 8)
+    counts = np.array([[40 - 2 * d, 25, 15, 10, 10 + 2 * d] for d in days])
+    found = {
+        f.key: f
+        for f in evaluate_findings(
+            _first_days(dyn, 7),
+            {k: _first_days(v, 7) for k, v in statics.items()},
+            {k: _first_days(v, 7) for k, v in base.items()},
+            WEEKS,
+            selections=(days, counts),
+        )
+    }
+    assert all(found[k].holds is True for k in TRENDS), [found[k] for k in TRENDS]
+    # §5.2's walls: daily maps, from day 1
+    few = structure_finding(_structure([0.50, 0.60]))
+    assert few.holds is None and few.measured.endswith(
+        "; not measurable: only 2 daily maps (a trend needs >= 5)"
+    )
+    assert "fitted" not in few.measured
+    enough = structure_finding(_structure([0.50, 0.52, 0.55, 0.57, 0.60]))
+    assert enough.holds is True
+    assert enough.measured.endswith("; λ5 change +10.0 points, fitted +10.0 points")
+
+
+def test_a_trend_agrees_with_its_own_first_and_last_day():
+    """The 28-day apartment said "λ1 usage falls" while its own text showed λ1 at 31.0 % on
+    day 2 and 34.5 % on day 28: a trend holds only when the fitted line and the last day
+    against the first both go the claimed way by >= 1 percentage point."""
+    dyn, statics, base = paper_like()
+    days = np.arange(1, N_DAYS + 1)
+    # λ1 high in the middle days, low after, back up on the last day: the fitted line falls,
+    # the last day is above the first
+    l1 = np.array([40, 31, 45, 45, 45, 40, 30, 25, 25, 25, 20, 20, 20, 20, 35])
+    ten = np.full(N_DAYS, 10)
+    counts = np.column_stack([l1, 100 - l1 - 30, ten, ten, ten])
+    found = {
+        f.key: f for f in evaluate_findings(dyn, statics, base, WEEKS, selections=(days, counts))
+    }
+    stm = found["stm_usage_falls"]
+    assert stm.holds is False
+    assert stm.measured.startswith("λ1 share 31.0 % on day 2, 35.0 % on day 15: change +4.0 points")
+    assert "(the fitted line and the first-vs-last comparison disagree)" in stm.measured
+    # the same with the last day below the first by at least one point holds
+    counts[-1] = [20, 40, 10, 10, 20]
+    stm = {
+        f.key: f for f in evaluate_findings(dyn, statics, base, WEEKS, selections=(days, counts))
+    }["stm_usage_falls"]
+    assert stm.holds is True and "disagree" not in stm.measured
+    # a rise of the end points by less than one point is no rise, whatever the fit says
+    walls = structure_finding(_structure([0.50, 0.58, 0.60, 0.60, 0.505]))
+    assert walls.holds is False and "change +0.5 points, fitted +1.2 points" in walls.measured

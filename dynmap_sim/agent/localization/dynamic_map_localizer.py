@@ -66,7 +66,7 @@ from dynmap_sim.agent.maps.current_map import CurrentMap, SynthesisParams, synth
 from dynmap_sim.agent.maps.dynamic_map import DynamicMap, MapSnapshot
 from dynmap_sim.agent.maps.local_map import TABLE1
 from dynmap_sim.agent.maps.sample_set import to_mm
-from dynmap_sim.agent.params import coerce_fields, config_from_params
+from dynmap_sim.agent.params import check_fields, coerce_fields, config_from_params
 from dynmap_sim.types import (
     Diagnostic,
     FloatArray,
@@ -176,7 +176,22 @@ class DynamicMapConfig:
     first_step_fills: bool = False
 
     def __post_init__(self) -> None:
-        coerce_fields(self)
+        coerce_fields(self, "dynamic-map")
+        check_fields(
+            self,
+            "dynamic-map",
+            positive=(
+                "freeze_after_day", "select_radius_m", "update_radius_m", "local_map_spacing_m",
+                "sigma_max_m", "sigma_min_m", "odom_sigma_xy0_m", "odom_sigma_th0_rad", "kappa0",
+                "max_match_points", "max_correspondence_m", "max_iterations",
+            ),
+            non_negative=(
+                "min_readings", "max_select_readings", "explained_density", "odom_k_xy",
+                "odom_k_th", "max_kappa_doublings", "min_matched", "map_voxel_m",
+                "ltm_scans_per_run", "min_update_dist_m", "min_update_angle_rad",
+                "ltm_day_scans_per_run",
+            ),
+        )  # fmt: skip
 
     @property
     def synthesis(self) -> SynthesisParams:

@@ -70,10 +70,18 @@ from dynmap_sim.agent.localization.likelihood_field import (
 from dynmap_sim.agent.localization.motion_model import sample_odometry_motion
 from dynmap_sim.agent.localization.resampling import low_variance_resample
 from dynmap_sim.agent.localizer import Localizer, MapUser, register_localizer
-from dynmap_sim.agent.maps.map_source import MapSource, make_map_source
+from dynmap_sim.agent.maps.map_source import MapSource, PriorWallsMap, make_map_source
+from dynmap_sim.agent.params import check_fields, coerce_fields
 from dynmap_sim.types import Diagnostic, LaserSpec, Odometry, PoseEstimate, Prior, Scan
 
 FloatArray = NDArray[np.float64]
+
+
+#: The laser models of :class:`MCLConfig` (nav2's names).
+LASER_MODELS = ("likelihood_field", "likelihood_field_prob")
+#: At most this many particles: every update holds a few arrays of ``max_particles x
+#: max_beams`` floats (60 beams: ~0.5 GB at this bound); the tuned config uses 8000.
+MAX_PARTICLES = 1_000_000
 
 
 @dataclass(frozen=True)
@@ -144,6 +152,40 @@ class MCLConfig:
     update_min_a: float = 0.2
     init_sigma_xy: float = 0.5
     init_sigma_theta: float = float(np.pi / 12.0)
+
+    def __post_init__(self) -> None:
+        coerce_fields(self, "static-mcl")
+        check_fields(
+            self,
+            "static-mcl",
+            positive=(
+                "min_particles", "max_particles", "sigma_hit", "beam_skip_distance",
+                "laser_likelihood_max_dist", "pf_err", "pf_z", "kld_cell_m", "kld_angle_rad",
+                "recovery_min_updates", "resample_interval",
+            ),
+            non_negative=(
+                "max_beams", "alpha1", "alpha2", "alpha3", "alpha4", "z_hit", "z_rand",
+                "recovery_ratio_threshold", "recovery_distance_filter_m", "update_min_d",
+                "update_min_a", "init_sigma_xy", "init_sigma_theta",
+            ),
+            fraction=(
+                "beam_skip_threshold", "beam_skip_error_threshold", "recovery_alpha_slow",
+                "recovery_alpha_fast", "recovery_max_fraction",
+            ),
+            finite=("laser_max_range", "laser_min_range"),
+            not_nan=("recovery_floor_loglik",),
+            at_most={"max_particles": MAX_PARTICLES, "pf_err": 1.0},
+        )  # fmt: skip
+        if self.min_particles > self.max_particles:
+            raise ValueError(
+                f"static-mcl: min_particles ({self.min_particles}) must be <= max_particles "
+                f"({self.max_particles})"
+            )
+        if self.laser_model_type not in LASER_MODELS:
+            raise ValueError(
+                f"static-mcl: laser_model_type must be one of {LASER_MODELS}, "
+                f"got {self.laser_model_type!r}"
+            )
 
 
 #: nav2's defaults (``nav2_params.yaml`` / ``amcl_node.cpp``): recovery off, no beam skipping.
@@ -532,7 +574,12 @@ class StaticMCL(Localizer, MapUser):
                 self.map_source = make_map_source(map_source, laser, mapper_params)
             except ValueError as exc:
                 raise ValueError(f"static-mcl: {exc}") from None
-        self.global_localization = bool(global_localization)
+        if not isinstance(global_localization, bool):
+            raise TypeError(
+                "static-mcl: global_localization must be true or false, "
+                f"got {global_localization!r}"
+            )
+        self.global_localization = global_localization
         self.filter: AMCLFilter | None = None
         self._odom_at_update: FloatArray | None = None
         self._est_at_update = np.zeros(3)
@@ -540,6 +587,13 @@ class StaticMCL(Localizer, MapUser):
         self._n_updates = 0
 
     # -- map -----------------------------------------------------------------------------
+    @property
+    def needs_prior_walls(self) -> bool:
+        """Its map is still to be made from the prior's walls (``map_source =
+        "prior-walls"``): every run's prior must grant them (a scenario checks this when it
+        is loaded, before anything runs)."""
+        return isinstance(self.map_source, PriorWallsMap) and not self.map_source.ready
+
     @property
     def grid(self) -> OccupancyGrid | None:
         """The (fixed) map, once the map source has it."""

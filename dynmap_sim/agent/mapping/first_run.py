@@ -26,7 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 from dynmap_sim.agent.grid import OccupancyGrid
 from dynmap_sim.agent.mapping.keyframe_slam import Keyframe, KeyframeSLAM, KeyframeSLAMConfig
 from dynmap_sim.agent.mapping.loop_closure import LoopClosure, LoopClosureConfig
-from dynmap_sim.agent.params import coerce_fields
+from dynmap_sim.agent.params import check_fields, coerce_fields
 from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Scan
 
 FloatArray = NDArray[np.float64]
@@ -48,7 +48,8 @@ class FirstRunConfig:
     map_max_hit_range_m: float = 3.0
 
     def __post_init__(self) -> None:
-        coerce_fields(self)
+        coerce_fields(self, "mapper_params")
+        check_fields(self, "mapper_params", positive=("resolution_m", "map_max_hit_range_m"))
 
     @classmethod
     def from_params(cls, **params: Any) -> FirstRunConfig:

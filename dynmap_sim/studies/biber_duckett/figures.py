@@ -54,11 +54,13 @@ def selection_counts_per_day(
 
 def _plot_per_day(series, ylabel: str, title: str, path: Path, log: bool = False) -> Path:
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     fig, ax = plt.subplots(figsize=(7, 3.6))
     for label, days, means in series:
         ax.plot(days, means, marker="o", ms=3, label=label)
     ax.set_xlabel("day")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_ylabel(ylabel)
     if log:
         ax.set_yscale("log")
@@ -89,11 +91,13 @@ def plot_timescale_usage(label: str, usage: np.ndarray, path: Path) -> Path:
 def plot_timescale_trend(label: str, days: np.ndarray, usage: np.ndarray, path: Path) -> Path:
     """Fig. 13: usage of λ1 and λ5 per day."""
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     fig, ax = plt.subplots(figsize=(7, 3.4))
     ax.plot(days, usage[:, 0], marker="o", ms=3, label="λ1 (short-term memory)")
     ax.plot(days, usage[:, -1], marker="s", ms=3, label=f"λ{usage.shape[1]} (most long-term)")
     ax.set_xlabel("day")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_ylabel("usage frequency")
     ax.set_title(f"{label}: usage of λ1 and λ5 over time (cf. B&D Fig. 13)", fontsize="medium")
     ax.legend(fontsize="small")

@@ -19,7 +19,8 @@ points on walls over the days (§5.2, :mod:`.map_structure`).
 :func:`evaluate_findings` is a pure function of per-scan arrays; :func:`findings_from_db`
 picks the localizers of a results database by their registry names (``dynamic-map``,
 ``static-map``, ``static-map+stm``, ``static-mcl``). Each :class:`Finding` says what the
-paper reports, what was measured, and whether it holds here; the report writes them to
+paper reports, what was measured, and whether it holds here (None: not measurable, e.g. a
+trend on fewer than :data:`MIN_TREND_DAYS` days); the report writes them to
 ``findings.md`` and ``findings.json`` so that runs can be compared and kept in CI.
 """
 
@@ -47,9 +48,17 @@ DAY_SHARE = 0.8
 SAFE_MODE_MAX = 0.02
 #: A timescale chosen for less than this share of scans counts as unused (Fig. 12).
 MIN_TIMESCALE_SHARE = 0.01
-#: A usage trend (Fig. 13) counts when its fitted line changes the share by at least this
-#: much over the days compared (one percentage point), not for any sign of the slope.
+#: A trend of a share (Fig. 13's usage, §5.2's walls) counts when its fitted line and its
+#: last day against its first both change it by at least this much the claimed way (one
+#: percentage point), not for any sign of the slope (:func:`_trend_holds`).
 MIN_TREND = 0.01
+#: A trend over the days (the slopes of Figs. 10-11, the usage of Fig. 13, the walls of
+#: §5.2) is judged only on at least this many days of data; with fewer its finding is not
+#: measurable (``holds`` None). A line through two or three daily values follows one day's
+#: noise: a 3-day lab run "found" λ1 usage falling at -39.9 %/day from its days 2 and 3, a
+#: 2-day run λ5's walls emerging. Five days are one working week of the replica's calendar;
+#: B&D read their trends off five weeks (Figs. 10-13, §5.4).
+MIN_TREND_DAYS = 5
 
 
 #: Keys of every finding, in the order a report lists them (scenario files name them in
@@ -83,6 +92,41 @@ def _slope_per_day(days: NDArray[np.integer], values: NDArray[np.floating]) -> f
     if len(days) < 2:
         return float("nan")
     return float(np.polyfit(days.astype(float), values.astype(float), 1)[0])
+
+
+def _num(value: float, spec: str) -> str:
+    """``value`` formatted with ``spec``; "not measurable" when it is not finite (a verdict's
+    text never shows ``nan``)."""
+    return format(value, spec) if np.isfinite(value) else "not measurable"
+
+
+def _too_few_days(n_days: int, what: str = "days") -> str:
+    """The text of a trend that cannot be judged on ``n_days`` (< :data:`MIN_TREND_DAYS`)."""
+    if n_days == 1:  # "1 day from day 3", "1 daily map"
+        what = what.replace("days", "day", 1).replace("maps", "map", 1)
+    return f"not measurable: only {n_days} {what} (a trend needs >= {MIN_TREND_DAYS})"
+
+
+def _trend_holds(
+    days: NDArray[np.integer], values: NDArray[np.floating], sign: int
+) -> tuple[bool, str]:
+    """Whether ``values`` (shares, on at least :data:`MIN_TREND_DAYS` days) rise (``sign``
+    +1) or fall (-1), and the numbers that say so.
+
+    Both the fitted line's change over the days and the change from the first day to the last
+    must go the claimed way by at least :data:`MIN_TREND`. B&D §5.4 read the trends of
+    Fig. 13 off the plot, from its beginning to its end ("decreased with time"): the fit alone
+    can come from a bump in between while the last day is back above the first (the 28-day
+    apartment: λ1 31.0 % on day 2, 34.5 % on day 28, fitted down), the two end points alone
+    are two noisy days. When they disagree the claim is not borne out (``False``), and the
+    text says why."""
+    fitted = _slope_per_day(days, values) * float(days[-1] - days[0])
+    change = float(values[-1] - values[0])
+    text = f"change {100 * change:+.1f} points, fitted {100 * fitted:+.1f} points"
+    ok_fit, ok_ends = sign * fitted >= MIN_TREND, sign * change >= MIN_TREND
+    if np.sign(fitted) != np.sign(change):
+        text += " (the fitted line and the first-vs-last comparison disagree)"
+    return bool(ok_fit and ok_ends), text
 
 
 def _compare_daily(
@@ -147,17 +191,20 @@ def evaluate_findings(
     for label, s in {"dynamic-map": dynamic, **statics}.items():
         days, means = daily_means(s["day"], s["scan_loglik"])
         later = days >= first_day
+        if later.sum() < MIN_TREND_DAYS:
+            trend.append(f"{label} {_too_few_days(int(later.sum()), f'days from day {first_day}')}")
+            ok_trend = None
+            continue
         slope = _slope_per_day(days[later], means[later])
         trend.append(f"{label} {slope:+.4f}/day")
-        if not np.isfinite(slope):
-            ok_trend = None
-        elif ok_trend is not None:
+        if ok_trend is not None:
             ok_trend &= bool(slope >= 0) if s is dynamic else bool(slope < 0)
     out.append(
         Finding(
             "static_degrades_dynamic_does_not",
             "the static map performs better at the beginning than at the end, the dynamic map "
-            "improves with time (slope of the daily mean likelihood)",
+            "improves with time (slope of the daily mean likelihood from day "
+            f"{first_day}, on >= {MIN_TREND_DAYS} days)",
             ", ".join(trend),
             ok_trend,
         )
@@ -179,33 +226,27 @@ def evaluate_findings(
     # Fig. 13's trends from day 2: day 1 maps the building, so its choices are special.
     usage = day_counts / np.maximum(day_counts.sum(axis=1, keepdims=True), 1)
     usage, days = usage[days >= 2], days[days >= 2]
-    span = float(days[-1] - days[0]) if len(days) else 0.0
-    s1 = _slope_per_day(days, usage[:, 0]) if len(days) else float("nan")
-    s5 = _slope_per_day(days, usage[:, 4]) if len(days) else float("nan")
-    out.append(
-        Finding(
-            "stm_usage_falls",
-            "the usage of the short-term memory map (λ1) decreased with time (Fig. 13; "
-            "fitted daily share from day 2 falls by >= 1 percentage point)",
-            f"λ1 share {100 * usage[0, 0]:.1f} % on day {days[0]}, "
-            f"{100 * usage[-1, 0]:.1f} % on day {days[-1]}; slope {100 * s1:+.3f} %/day"
-            if len(days)
-            else "no timescale choices",
-            bool(s1 * span <= -MIN_TREND) if np.isfinite(s1) else None,
+    for key, level, sign, claim in (
+        ("stm_usage_falls", 0, -1, "the usage of the short-term memory map (λ1) decreased"),
+        ("ltm_usage_rises", 4, +1, "the usage of the most long-term map (λ5) increased"),
+    ):
+        paper = (
+            f"{claim} with time (Fig. 13, §5.4); here its daily share from day 2, on >= "
+            f"{MIN_TREND_DAYS} days: the fitted line and the last day against the first both "
+            f"{'fall' if sign < 0 else 'rise'} by >= 1 percentage point"
         )
-    )
-    out.append(
-        Finding(
-            "ltm_usage_rises",
-            "the usage of the most long-term map (λ5) increased with time (Fig. 13; "
-            "fitted daily share from day 2 rises by >= 1 percentage point)",
-            f"λ5 share {100 * usage[0, 4]:.1f} % on day {days[0]}, "
-            f"{100 * usage[-1, 4]:.1f} % on day {days[-1]}; slope {100 * s5:+.3f} %/day"
-            if len(days)
-            else "no timescale choices",
-            bool(s5 * span >= MIN_TREND) if np.isfinite(s5) else None,
+        if not len(days):
+            out.append(Finding(key, paper, "no timescale choices", None))
+            continue
+        measured = f"λ{level + 1} share {100 * usage[0, level]:.1f} % on day {days[0]}" + (
+            f", {100 * usage[-1, level]:.1f} % on day {days[-1]}" if len(days) > 1 else ""
         )
-    )
+        if len(days) < MIN_TREND_DAYS:
+            out.append(Finding(key, paper, f"{measured}; {_too_few_days(len(days))}", None))
+            continue
+        holds, numbers = _trend_holds(days, usage[:, level], sign)
+        slope = 100 * _slope_per_day(days, usage[:, level])
+        out.append(Finding(key, paper, f"{measured}: {numbers} ({slope:+.3f} %/day)", holds))
     sm = dynamic["safe_mode"]
     later = (dynamic["day"] > 1) & np.isfinite(sm)
     frac = float(np.mean(sm[later] > 0.5)) if later.any() else float("nan")
@@ -213,7 +254,9 @@ def evaluate_findings(
         Finding(
             "safe_mode_rare",
             f"safe mode in approximately 0.5 % of the cases (§4.3), here <= {SAFE_MODE_MAX:.0%}",
-            f"{100 * frac:.3f} % of the scans after day 1",
+            f"{100 * frac:.3f} % of the scans after day 1"
+            if np.isfinite(frac)
+            else "not measurable: no scans after day 1",
             bool(frac <= SAFE_MODE_MAX) if np.isfinite(frac) else None,
         )
     )
@@ -223,13 +266,17 @@ def evaluate_findings(
         )
         return out
     weeks = sorted({week_of_day[int(d)] for d in np.unique(dynamic["day"])})
-    parts, ok = [], True
+    parts, ok, measurable = [], True, len(weeks) > 1
     for b_label, base in baselines.items():
         cells = []
         for w in weeks:
             days_w = [d for d, k in week_of_day.items() if k == w]
             e_d = np.nanmean(dynamic["err_m"][np.isin(dynamic["day"], days_w)])
             e_b = np.nanmean(base["err_m"][np.isin(base["day"], days_w)])
+            if not (np.isfinite(e_d) and np.isfinite(e_b)):
+                cells.append(f"week {w}: not measurable")
+                measurable &= w == weeks[0]
+                continue
             if w > weeks[0]:
                 ok &= bool(e_d < e_b)
             cells.append(f"week {w}: {e_d:.3f} vs {e_b:.3f} m")
@@ -240,7 +287,7 @@ def evaluate_findings(
             "(new, from ground truth) the dynamic map's mean position error below static "
             "MCL's (every configuration that ran) in every week after the first",
             "; ".join(parts),
-            ok if len(weeks) > 1 else None,
+            ok if measurable or not ok else None,
         )
     )
     return out
@@ -269,42 +316,54 @@ def exhibition_finding(mem: Any, exhibition_days: list[int]) -> Finding:
     off = np.nanmax(sh[d_off, [lv.index(1), lv.index(2)]])
     l5 = np.nanmax(sh[:, lv.index(4)])
     measured = (
-        f"day {during[-1]}: λ2 {100 * sh[d_on, lv.index(1)]:.0f} %, "
-        f"λ3 {100 * sh[d_on, lv.index(2)]:.0f} %; day {after[0]}: "
-        f"λ2 {100 * sh[d_off, lv.index(1)]:.0f} %, λ3 {100 * sh[d_off, lv.index(2)]:.0f} %; "
-        f"λ5 at most {100 * l5:.0f} % (local map at {np.round(mem.centre, 1).tolist()}, "
-        f"{mem.n_exhibit_rays[4]} exhibit rays of 1440)"
+        f"day {during[-1]}: λ2 {_num(100 * sh[d_on, lv.index(1)], '.0f')} %, "
+        f"λ3 {_num(100 * sh[d_on, lv.index(2)], '.0f')} %; day {after[0]}: "
+        f"λ2 {_num(100 * sh[d_off, lv.index(1)], '.0f')} %, "
+        f"λ3 {_num(100 * sh[d_off, lv.index(2)], '.0f')} %; "
+        f"λ5 at most {_num(100 * l5, '.0f')} % (local map at "
+        f"{np.round(mem.centre, 1).tolist()}, {mem.n_exhibit_rays[4]} exhibit rays of 1440)"
     )
+    holds = bool(on >= 0.5 and off <= 0.2 and l5 <= 0.3)
     return Finding(
-        "exhibition_fades", paper, measured, bool(on >= 0.5 and off <= 0.2 and l5 <= 0.3)
+        "exhibition_fades", paper, measured, holds if np.isfinite([on, off, l5]).all() else None
     )
 
 
 def structure_finding(ms: Any) -> Finding:
     """§5.2 (ground truth): the share of λ5's points on walls rises by at least
-    :data:`MIN_TREND` over the days (fitted line); ``ms`` is a
+    :data:`MIN_TREND` over at least :data:`MIN_TREND_DAYS` daily maps (fitted line and last
+    day against the first, :func:`_trend_holds`); ``ms`` is a
     :class:`~dynmap_sim.studies.biber_duckett.map_structure.MapStructure`."""
     paper = (
         "the accuracy of the local maps increased over time: static parts like walls emerge "
         "while moving objects like chairs disappear (§5.2, seen in the maps; measured here "
         f"from ground truth: the share of λ5's points within {100 * ms.tol_m:.0f} cm of a "
-        "wall, fitted over the days, rises by >= 1 percentage point)"
+        f"wall, on >= {MIN_TREND_DAYS} days: the fitted line and the last day against the "
+        "first both rise by >= 1 percentage point)"
     )
     days = np.asarray(ms.days)
-    if 4 not in ms.levels or len(days) < 2:
-        return Finding("static_structure_emerges", paper, "fewer than two daily maps", None)
+    if 4 not in ms.levels or not len(days):
+        return Finding("static_structure_emerges", paper, "no daily maps of λ5", None)
     b5 = list(ms.levels).index(4)
-    rise = _slope_per_day(days, ms.on_walls[:, b5]) * float(days[-1] - days[0])
     parts = [
-        f"λ{level + 1} {100 * ms.on_walls[0, b]:.1f} % → {100 * ms.on_walls[-1, b]:.1f} %"
+        f"λ{level + 1} {_num(100 * ms.on_walls[0, b], '.1f')} % → "
+        f"{_num(100 * ms.on_walls[-1, b], '.1f')} %"
         for b, level in enumerate(ms.levels)
     ]
     measured = (
         f"points on walls, day {days[0]} → day {days[-1]}: " + ", ".join(parts)
-        + f"; λ5 fitted {100 * rise:+.1f} points; median distance of λ5's points to the true "
-        f"world {1000 * ms.median_dist_m[0, b5]:.0f} → {1000 * ms.median_dist_m[-1, b5]:.0f} mm"
+        + "; median distance of λ5's points to the true world "
+        f"{_num(1000 * ms.median_dist_m[0, b5], '.0f')} → "
+        f"{_num(1000 * ms.median_dist_m[-1, b5], '.0f')} mm"
     )  # fmt: skip
-    return Finding("static_structure_emerges", paper, measured, bool(rise >= MIN_TREND))
+    walls = ms.on_walls[:, b5]
+    if len(days) < MIN_TREND_DAYS or not np.all(np.isfinite(walls)):
+        why = _too_few_days(len(days), "daily maps") if len(days) < MIN_TREND_DAYS else (
+            "not measurable: λ5 holds no points on some days"
+        )  # fmt: skip
+        return Finding("static_structure_emerges", paper, f"{measured}; {why}", None)
+    holds, numbers = _trend_holds(days, walls, +1)
+    return Finding("static_structure_emerges", paper, f"{measured}; λ5 {numbers}", holds)
 
 
 def weeks_of_days(dates: dict[int, dt.date]) -> dict[int, int]:

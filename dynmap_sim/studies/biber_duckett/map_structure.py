@@ -210,6 +210,7 @@ def plot_map_structure(ms: MapStructure, path: Path) -> Path:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.6), sharex=True)
     for b, level in enumerate(ms.levels):
@@ -220,6 +221,7 @@ def plot_map_structure(ms: MapStructure, path: Path) -> Path:
     axes[1].set_title(f"points within {tol} of any true surface that day")
     for ax in axes:
         ax.set_xlabel("day")
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_ylabel("share of the sub-map's points [%]")
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
