@@ -343,13 +343,70 @@ def _cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_export(args: argparse.Namespace) -> int:
-    from dynmap_sim.analysis.export import export_tum
+def _export_parquet(args: argparse.Namespace) -> None:
+    from dynmap_sim.errors import InputError
 
-    out = _output_dir(args.tum)
-    existed = {p.name for p in out.iterdir()}
-    for path in export_tum(Path(args.dir), out):
-        print(_wrote(path, path.name in existed))
+    try:
+        from dynmap_sim.analysis.export_parquet import export_parquet, parquet_paths
+    except ImportError as exc:  # the extra is not installed: say how to get it
+        raise InputError(str(exc)) from None
+    existed = {p for p in parquet_paths(args.parquet).values() if p.exists()}
+    for f in export_parquet(Path(args.dir), Path(args.parquet), force=args.force):
+        print(f"{_wrote(f.path, f.path in existed)}: {f.rows} rows, {f.bytes:,} bytes")
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    from dynmap_sim.errors import InputError
+
+    if args.tum is None and args.mcap is None and args.parquet is None:
+        raise InputError("export: give --tum DIR, --mcap OUT, --parquet OUT or several")
+    ros_only = [f"--{k}" for k in ("localizer", "day", "run") if getattr(args, k) is not None]
+    if args.mcap is None and ros_only:
+        raise InputError(f"{', '.join(ros_only)}: only with --mcap")
+    if args.force and args.mcap is None and args.parquet is None:
+        raise InputError("--force: only with --mcap or --parquet")
+    if args.tum is not None:
+        from dynmap_sim.analysis.export import export_tum
+
+        out = _output_dir(args.tum)
+        existed = {p.name for p in out.iterdir()}
+        for path in export_tum(Path(args.dir), out):
+            print(_wrote(path, path.name in existed))
+    if args.mcap is not None:
+        from dynmap_sim.analysis.export_mcap import export_mcap
+
+        existed_bag = Path(args.mcap).exists()
+        bag = export_mcap(
+            Path(args.dir),
+            Path(args.mcap),
+            localizer=args.localizer,
+            days=args.day,
+            run=args.run,
+            force=args.force,
+        )
+        counts = ", ".join(f"{t} {n}" for t, n in bag.counts.items())
+        print(f"{_wrote(bag.path, existed_bag)} (ROS 2 bag, {bag.mcap_file.name}): {counts}")
+        for note in bag.notes:
+            print(f"note: {note}", file=sys.stderr)
+    if args.parquet is not None:
+        _export_parquet(args)
+    return 0
+
+
+def _cmd_video(args: argparse.Namespace) -> int:
+    from dynmap_sim.analysis.video import write_video
+
+    out = _output_file(args.output)
+    existed = out.exists()
+    opts = dict(fps=args.fps, localizers=args.localizer, size_px=args.size, force=args.force)
+    res = write_video(Path(args.dir), args.day, args.run, out, progress=not args.quiet, **opts)
+    w, h = res.size_px
+    print(
+        f"{_wrote(res.path, existed)}: {res.n_frames} frames, {w}x{h} px, "
+        f"{res.duration_s:.1f} s at {res.fps} fps (encoded in {res.encode_s:.1f} s)"
+    )
+    for note in res.notes:
+        print(f"note: {note}", file=sys.stderr)
     return 0
 
 
@@ -392,6 +449,111 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     for line in _headline(out):
         print(line)
     return 0
+
+
+def _sweep_seeds(text: str) -> tuple[int, ...]:
+    """``--seeds 0-3``, ``0,2,5`` or ``7``."""
+    from dynmap_sim.errors import InputError
+    from dynmap_sim.experiments.sweep import parse_seeds
+
+    try:
+        return parse_seeds(text, "seeds")
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("seeds: ")) from None
+
+
+def _sweep_set(text: str):  # -> Setting
+    """``--set LABEL.KEY=V1,V2``."""
+    from dynmap_sim.errors import InputError
+    from dynmap_sim.experiments.sweep import parse_set
+
+    try:
+        return parse_set(text)
+    except InputError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix(f"--set {text}: ")) from None
+
+
+def _cluster_address(text: str) -> str:
+    """A Dask scheduler's address: ``tcp://HOST:PORT`` (or ``tls://``, ``ws://``...)."""
+    import re
+
+    if not re.fullmatch(r"[a-z][a-z0-9+]*://[^\s/:]+(:\d{1,5})?/?", text):
+        raise argparse.ArgumentTypeError(f"expected tcp://HOST:PORT, not {text!r}")
+    return text
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    import time
+
+    from dynmap_sim.analysis.scenarios import load_scenario
+    from dynmap_sim.analysis.sweep_report import headline, write_sweep_report
+    from dynmap_sim.errors import InputError
+    from dynmap_sim.experiments.sweep import SweepSpec, load_sweep_file, run_sweep
+
+    if args.file is not None:
+        extra = [
+            opt
+            for opt, v in (
+                ("SCENARIO", args.scenarios),
+                ("--seeds", args.seeds),
+                ("--set", args.set),
+                ("--days", args.days),
+                ("--only", args.only),
+            )
+            if v
+        ]
+        if extra:
+            raise InputError(f"--file {args.file} says what to sweep: drop {', '.join(extra)}")
+        spec = load_sweep_file(args.file, load=load_scenario)
+        out = Path(args.out) if args.out else Path("results") / spec.name
+    else:
+        if not args.scenarios:
+            raise InputError("sweep: give scenario files and --seeds, or --file SWEEP.toml")
+        if args.seeds is None:
+            raise InputError("sweep: --seeds is needed, e.g. --seeds 0-3")
+        if args.out is None:
+            raise InputError("sweep: --out DIR is needed (the sweep's folder)")
+        for path in args.scenarios:
+            _refuse_world_file(path)
+        spec = SweepSpec(
+            scenarios=tuple(load_scenario(p) for p in args.scenarios),
+            seeds=args.seeds,
+            days=args.days,
+            settings=tuple(args.set or ()),
+            only=tuple(args.only) if args.only else None,
+            name=Path(args.out).name,
+        )
+        out = Path(args.out)
+    if args.cluster is not None and args.workers is not None:
+        raise InputError("--workers sets the local pool; a --cluster has its own workers")
+    t0 = time.perf_counter()
+    res = run_sweep(
+        spec,
+        out,
+        workers=args.workers,
+        cluster=args.cluster,
+        progress=not args.quiet,
+        note=lambda text: print(text, file=sys.stderr),
+    )
+    print(
+        f"sweep in {out}: {res.n_cells} cells, {len(res.done)} run now, {len(res.skipped)} "
+        f"done before, {len(res.failed)} failed ({time.perf_counter() - t0:.1f} s)"
+    )
+    if res.done or res.skipped:
+        for path in write_sweep_report(out):
+            print(f"wrote {path}")
+        for line in headline(out):
+            print(line)
+    for key, error in res.failed.items():
+        first = error.splitlines()[0] if error else "unknown error"
+        print(f"failed: cell {key[:16]}: {first}", file=sys.stderr)
+    if res.failed:
+        print(
+            f"{len(res.failed)} cell(s) failed (errors in {out / 'sweep.json'}); the same "
+            "command retries them and skips the finished ones",
+            file=sys.stderr,
+        )
+    return 1 if res.failed else 0
 
 
 def _cmd_toy(args: argparse.Namespace) -> int:
@@ -467,10 +629,94 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("dir", help="a results folder (written by run, check or replay)")
     s.set_defaults(func=_cmd_report)
 
-    s = sub.add_parser("export", help="export trajectories of a results folder")
+    s = sub.add_parser(
+        "export",
+        help="export trajectories (TUM), tables (Parquet) or runs as a ROS 2 bag (MCAP) of a "
+        "results folder",
+        description="Export a results folder: TUM trajectories (--tum), Parquet tables "
+        "(--parquet, extra 'analysis') for pandas and polars, and/or a ROS 2 bag "
+        "(--mcap, extra 'ros') for Foxglove, RViz and `ros2 bag play`. The bag holds /tf, "
+        "/tf_static, /odom, /truth/pose, /<localizer>/pose, /world/obstacles and /plan; it has "
+        "no /scan, because the results store keeps no laser ranges, and no OccupancyGrid, "
+        "because no localizer's map is stored as a grid.",
+    )
     s.add_argument("dir", help="a results folder (written by run, check or replay)")
-    s.add_argument("--tum", required=True, help="output folder for TUM trajectory files")
+    s.add_argument("--tum", help="output folder for TUM trajectory files")
+    s.add_argument(
+        "--mcap",
+        metavar="OUT",
+        help="write a ROS 2 bag folder OUT (metadata.yaml + OUT.mcap; zstd chunks, ros2 "
+        'profile) of the chosen runs; needs pip install "dynmap-sim[ros]". No /scan: the '
+        "results store keeps no laser ranges",
+    )
+    s.add_argument(
+        "--parquet",
+        metavar="OUT",
+        help="write scans.parquet (per scan and localizer), runs.parquet, days.parquet and "
+        "localizers.parquet into folder OUT, for pandas and polars; needs pip install "
+        '"dynmap-sim[analysis]"',
+    )
+    s.add_argument(
+        "--localizer",
+        metavar="LABEL",
+        help="with --mcap: the localizer whose estimate gives map->odom on /tf "
+        "(default: the first)",
+    )
+    s.add_argument(
+        "--day", type=_days, help="with --mcap: day or day range, e.g. 2 or 1-3 (default: all)"
+    )
+    s.add_argument("--run", type=_positive, help="with --mcap: run of each day (default: all)")
+    s.add_argument(
+        "--force",
+        action="store_true",
+        help="replace an existing bag OUT (--mcap) or Parquet files in OUT (--parquet); "
+        "else refused",
+    )
     s.set_defaults(func=_cmd_export)
+
+    s = sub.add_parser(
+        "video",
+        help="a video of one stored run (extra 'video')",
+        description="A video of one stored run, one frame per scan: the run's obstacles, the "
+        "route, the planned path and a dynamic-map's long-term map when stored, the true pose "
+        "and each localizer's estimate with trails, errors, bumper and events. The results "
+        "store keeps no laser scans and no people, so neither is drawn (watch those live with "
+        "the env's render()).",
+    )
+    s.add_argument("dir", help="a results folder (written by run, check or replay)")
+    s.add_argument("--day", type=_positive, required=True, help="day of the run to show")
+    s.add_argument("--run", type=_positive, required=True, help="run of that day")
+    s.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        metavar="FILE",
+        help="video file: .mp4 (H.264 by imageio-ffmpeg's ffmpeg) or .gif (short runs: its "
+        "frames are held in memory); its folder must exist",
+    )
+    s.add_argument(
+        "--fps",
+        type=_positive,
+        help="frames (scans) per second of video (default: the scan rate, i.e. real time; "
+        "twice that plays at double speed)",
+    )
+    s.add_argument(
+        "--localizer",
+        action="append",
+        metavar="LABEL",
+        help="draw only this localizer, by label; repeat for several (default: all of the "
+        "folder's)",
+    )
+    s.add_argument(
+        "--size",
+        type=_positive,
+        default=640,
+        metavar="PX",
+        help="pixels along the map's longer side, 64..4096 (default: 640)",
+    )
+    s.add_argument("--force", action="store_true", help="replace an existing FILE (else refused)")
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    s.set_defaults(func=_cmd_video)
 
     s = sub.add_parser("check", help="run a scenario and check its expectations (exit 1 on fail)")
     s.add_argument("scenario", help="scenario TOML file with [expectations]")
@@ -507,6 +753,50 @@ def build_parser() -> argparse.ArgumentParser:
         "--force", action="store_true", help="replace earlier results in --out (else refused)"
     )
     s.set_defaults(func=_cmd_replay)
+
+    s = sub.add_parser(
+        "sweep",
+        help="run scenarios over seeds and parameter values; report means with 95 % CIs",
+        description="Every cell (scenario x seed x parameter values) is one experiment in "
+        "DIR/cells/<hash>/, indexed in DIR/sweep.json; the same command resumes a sweep, "
+        "skipping finished cells. The report (sweep_summary.csv/.md, sweep_paired.csv, "
+        "sweep_error_per_day.png) is written into DIR at the end.",
+    )
+    s.add_argument("scenarios", nargs="*", metavar="SCENARIO", help="scenario TOML files")
+    s.add_argument("--file", help="a sweep TOML file (instead of SCENARIO, --seeds, --set, ...)")
+    s.add_argument("--seeds", type=_sweep_seeds, help="seeds: 0-3, 0,2,5 or 7")
+    s.add_argument(
+        "--set",
+        action="append",
+        type=_sweep_set,
+        metavar="LABEL.KEY=V1,V2",
+        help="values of a localizer parameter to sweep, by the localizer's label "
+        "(mcl-tuned.config=tuned,nav2-default); repeat for several parameters",
+    )
+    s.add_argument(
+        "--only",
+        action="append",
+        metavar="LABEL",
+        help="keep only the localizer with this label; repeat for several (default: all)",
+    )
+    s.add_argument("--days", type=_days, help="day range, e.g. 1-7 (default: each scenario's)")
+    s.add_argument(
+        "--out", help="the sweep's folder (needed with SCENARIO; --file: results/<its name>)"
+    )
+    s.add_argument(
+        "--cluster",
+        type=_cluster_address,
+        metavar="tcp://HOST:PORT",
+        help="run the cells on this Dask scheduler (extra 'cluster'; its workers need "
+        "dynmap_sim and the same files); default: a local process pool",
+    )
+    s.add_argument(
+        "--workers",
+        type=_positive,
+        help="local processes running cells at once (default: one per core; not with --cluster)",
+    )
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    s.set_defaults(func=_cmd_sweep)
 
     s = sub.add_parser("toy", help="Biber & Duckett §3.5 toy example (Fig. 2)")
     s.add_argument("--out", required=True, help="output folder (created) for toy.csv, toy.png")

@@ -1,0 +1,517 @@
+"""Export runs of a results folder as a ROS 2 bag for Foxglove, RViz and ``ros2 bag play``.
+
+The bag is a folder with ``metadata.yaml`` (rosbag2 metadata version 8) and one ``.mcap``
+file: MCAP profile ``ros2``, CDR messages typed as in ROS 2 Jazzy, schemas ``ros2msg``, and
+zstd-compressed chunks (the chunk compression Foxglove reads; rosbag2's FILE or MESSAGE
+compression would make the file unreadable there). It is written with ``rosbags`` (extra
+``ros``).
+
+Topics, from what the results store holds:
+
+* ``/odom`` ``nav_msgs/msg/Odometry`` (``odom`` -> ``base_link``): the dead-reckoning
+  localizer's pose (class ``odometry``) and its covariance diagonal; the twist is its pose
+  difference between scans, in ``base_link``. Absent when no such localizer was run.
+* ``/tf`` ``tf2_msgs/msg/TFMessage``: ``map`` -> ``odom`` (chosen localizer's estimate ⊖
+  odometry; identity without odometry) and ``odom`` -> ``base_link`` (odometry; without it
+  the chosen localizer's estimate), one message per scan.
+* ``/tf_static``: ``base_link`` -> ``laser`` from the laser's mount pose, once per run,
+  offered with transient-local durability.
+* ``/truth/pose`` and ``/<label>/pose`` (each localizer; its label made a ROS name)
+  ``geometry_msgs/msg/PoseStamped`` in ``map``.
+* ``/world/obstacles`` ``visualization_msgs/msg/MarkerArray``: the run's static segments as
+  one ``LINE_LIST`` per class (walls, furniture, ...), after a ``DELETEALL``; transient local.
+* ``/plan`` ``nav_msgs/msg/Path``: the driver's last planned path of a run, stamped at the
+  run's last scan, where the driver stored one; transient local.
+
+Not exported, because the store does not hold it: ``/scan`` (the laser ranges are not
+stored, only poses), the people (their tracks are not stored), and an
+``nav_msgs/msg/OccupancyGrid`` of a localizer's map (no localizer stores a grid; the dynamic
+map's ``map_snapshot`` holds per-local-map range medians). :attr:`McapExport.notes` says so.
+
+Stamps are nanoseconds since the Unix epoch of the run's calendar date plus its clock time:
+the TUM export's timestamp plus the first date's epoch seconds. A ``replay`` folder uses the
+log's own clock (as its TUM export does) and exports the localization pass (day 2) unless
+days are chosen.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import os
+import re
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dynmap_sim import se2
+from dynmap_sim.errors import InputError
+from dynmap_sim.experiments.results import ResultsDB
+from dynmap_sim.types import BeamClass
+
+#: How to install what this module needs.
+ROS_EXTRA = 'pip install "dynmap-sim[ros]"'
+#: The class name of the dead-reckoning localizer (the source of ``odom``).
+ODOMETRY_CLASS = "odometry"
+#: rosbag2 metadata version written (ROS 2 Humble to Jazzy read it).
+BAG_VERSION = 8
+
+_EPOCH = dt.date(1970, 1, 1)
+_NS = 1_000_000_000
+#: Line colours of the obstacle markers per segment class (RGB, 0-1).
+_MARKER_RGB = {
+    BeamClass.NONE: (0.5, 0.5, 0.5),
+    BeamClass.WALL: (0.15, 0.15, 0.15),
+    BeamClass.FURNITURE: (0.6, 0.35, 0.15),
+    BeamClass.EXHIBIT: (0.9, 0.55, 0.0),
+    BeamClass.DOOR: (0.15, 0.6, 0.25),
+    BeamClass.PERSON: (0.8, 0.1, 0.1),
+    BeamClass.ROBOT: (0.25, 0.25, 0.8),
+}
+
+
+@dataclass
+class McapExport:
+    """What :func:`export_mcap` wrote: the bag folder, the ``.mcap`` file, messages per
+    topic, and notes on what could not be exported (and why)."""
+
+    path: Path
+    mcap_file: Path
+    counts: dict[str, int] = field(default_factory=dict)
+    notes: list[str] = field(default_factory=list)
+
+
+def ros_name(label: str) -> str:
+    """A localizer label as one token of a ROS topic name (letters, digits, ``_``; not
+    starting with a digit)."""
+    name = re.sub(r"[^A-Za-z0-9_]+", "_", label).strip("_")
+    name = re.sub(r"_+", "_", name)
+    if not name or name[0].isdigit():
+        name = f"loc_{name}"
+    return name
+
+
+def pose_topics(labels: list[str]) -> list[str]:
+    """The pose topic of each localizer, ``/<ros_name(label)>/pose``, unique and never
+    ``/truth/pose`` (a clash gets ``_<index>``)."""
+    out: list[str] = []
+    for k, label in enumerate(labels):
+        name = ros_name(label)
+        topic = f"/{name}/pose"
+        if name == "truth" or topic in out:
+            topic = f"/{name}_{k}/pose"
+        out.append(topic)
+    return out
+
+
+def stamp_ns(date: str, t_s: np.ndarray) -> np.ndarray:
+    """Nanoseconds since the epoch of ``date`` (ISO) at clock times ``t_s`` [s]."""
+    days = (dt.date.fromisoformat(date) - _EPOCH).days
+    return days * 86_400 * _NS + np.rint(np.asarray(t_s, dtype=np.float64) * _NS).astype(np.int64)
+
+
+def _import_rosbags() -> Any:
+    try:
+        import rosbags.rosbag2 as rosbag2
+    except ImportError:
+        raise InputError(
+            f"--mcap needs the optional packages of the 'ros' extra: {ROS_EXTRA}"
+        ) from None
+    return rosbag2
+
+
+class _Msgs:
+    """Message builders over a rosbags typestore (ROS 2 Jazzy types)."""
+
+    def __init__(self) -> None:
+        from rosbags.typesys import Stores, get_typestore
+
+        self.store = get_typestore(Stores.ROS2_JAZZY)
+        self.t = self.store.types
+
+    def time(self, ns: int) -> Any:
+        return self.t["builtin_interfaces/msg/Time"](sec=int(ns // _NS), nanosec=int(ns % _NS))
+
+    def header(self, ns: int, frame: str) -> Any:
+        return self.t["std_msgs/msg/Header"](stamp=self.time(ns), frame_id=frame)
+
+    def pose(self, p: np.ndarray) -> Any:
+        point = self.t["geometry_msgs/msg/Point"](x=float(p[0]), y=float(p[1]), z=0.0)
+        return self.t["geometry_msgs/msg/Pose"](position=point, orientation=self.quat(p[2]))
+
+    def quat(self, yaw: float) -> Any:
+        h = 0.5 * float(yaw)
+        return self.t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=np.sin(h), w=np.cos(h))
+
+    def pose_stamped(self, ns: int, frame: str, p: np.ndarray) -> Any:
+        return self.t["geometry_msgs/msg/PoseStamped"](
+            header=self.header(ns, frame), pose=self.pose(p)
+        )
+
+    def transform(self, ns: int, parent: str, child: str, p: np.ndarray) -> Any:
+        t = self.t
+        tf = t["geometry_msgs/msg/Transform"](
+            translation=t["geometry_msgs/msg/Vector3"](x=float(p[0]), y=float(p[1]), z=0.0),
+            rotation=self.quat(p[2]),
+        )
+        return t["geometry_msgs/msg/TransformStamped"](
+            header=self.header(ns, parent), child_frame_id=child, transform=tf
+        )
+
+    def tf(self, transforms: list[Any]) -> Any:
+        return self.t["tf2_msgs/msg/TFMessage"](transforms=transforms)
+
+    def odometry(self, ns: int, p: np.ndarray, var: np.ndarray, twist: np.ndarray) -> Any:
+        t = self.t
+        cov = np.zeros(36)
+        cov[[0, 7, 35]] = np.nan_to_num(var, nan=0.0)
+        vec = t["geometry_msgs/msg/Vector3"]
+        tw = t["geometry_msgs/msg/Twist"](
+            linear=vec(x=float(twist[0]), y=float(twist[1]), z=0.0),
+            angular=vec(x=0.0, y=0.0, z=float(twist[2])),
+        )
+        return t["nav_msgs/msg/Odometry"](
+            header=self.header(ns, "odom"),
+            child_frame_id="base_link",
+            pose=t["geometry_msgs/msg/PoseWithCovariance"](pose=self.pose(p), covariance=cov),
+            twist=t["geometry_msgs/msg/TwistWithCovariance"](twist=tw, covariance=np.zeros(36)),
+        )
+
+    def marker(self, ns: int, name: str, ident: int, kind: int, **kw: Any) -> Any:
+        t = self.t
+        u8 = np.zeros(0, dtype=np.uint8)
+        fields: dict[str, Any] = {
+            "pose": self.pose(np.zeros(3)),
+            "scale": t["geometry_msgs/msg/Vector3"](x=0.03, y=0.0, z=0.0),
+            "color": t["std_msgs/msg/ColorRGBA"](r=0.0, g=0.0, b=0.0, a=1.0),
+            "points": [],
+        } | kw
+        return t["visualization_msgs/msg/Marker"](
+            header=self.header(ns, "map"),
+            ns=name,
+            id=ident,
+            type=t["visualization_msgs/msg/Marker"].LINE_LIST,
+            action=kind,
+            lifetime=t["builtin_interfaces/msg/Duration"](sec=0, nanosec=0),
+            frame_locked=False,
+            colors=[],
+            texture_resource="",
+            texture=t["sensor_msgs/msg/CompressedImage"](
+                header=self.header(0, ""), format="", data=u8
+            ),
+            uv_coordinates=[],
+            text="",
+            mesh_resource="",
+            mesh_file=t["visualization_msgs/msg/MeshFile"](filename="", data=u8),
+            mesh_use_embedded_materials=False,
+            **fields,
+        )
+
+    def obstacles(self, ns: int, segments: np.ndarray, classes: np.ndarray) -> Any:
+        t = self.t
+        marker_t = t["visualization_msgs/msg/Marker"]
+        point = t["geometry_msgs/msg/Point"]
+        markers = [self.marker(ns, "", 0, marker_t.DELETEALL)]
+        for c in np.unique(classes):
+            seg = segments[classes == c]
+            ends = seg.reshape(-1, 2)  # (x1, y1), (x2, y2) per segment: a LINE_LIST
+            r, g, b = _MARKER_RGB.get(BeamClass(int(c)), (0.0, 0.0, 0.0))
+            markers.append(
+                self.marker(
+                    ns,
+                    BeamClass(int(c)).name.lower(),
+                    int(c),
+                    marker_t.ADD,
+                    points=[point(x=float(x), y=float(y), z=0.0) for x, y in ends],
+                    color=t["std_msgs/msg/ColorRGBA"](r=r, g=g, b=b, a=1.0),
+                )
+            )
+        return t["visualization_msgs/msg/MarkerArray"](markers=markers)
+
+    def path(self, ns: int, xy: np.ndarray) -> Any:
+        heading = np.zeros(len(xy))
+        if len(xy) > 1:  # each pose faces the next point
+            d = np.diff(xy, axis=0)
+            heading[:-1] = np.arctan2(d[:, 1], d[:, 0])
+            heading[-1] = heading[-2]
+        poses = [
+            self.pose_stamped(ns, "map", np.array([x, y, h]))
+            for (x, y), h in zip(xy, heading, strict=True)
+        ]
+        return self.t["nav_msgs/msg/Path"](header=self.header(ns, "map"), poses=poses)
+
+
+def _qos(transient_local: bool) -> list[Any]:
+    """The offered QoS of a topic: reliable, keep last 1 (transient local) or 10."""
+    from rosbags.interfaces import (
+        Qos,
+        QosDurability,
+        QosHistory,
+        QosLiveliness,
+        QosReliability,
+        QosTime,
+    )
+
+    zero = QosTime(0, 0)  # the RMW default: no deadline, lifespan or lease
+    return [
+        Qos(
+            QosHistory.KEEP_LAST,
+            1 if transient_local else 10,
+            QosReliability.RELIABLE,
+            QosDurability.TRANSIENT_LOCAL if transient_local else QosDurability.VOLATILE,
+            zero,
+            zero,
+            QosLiveliness.AUTOMATIC,
+            zero,
+            False,
+        )
+    ]
+
+
+def _selected_runs(
+    db: ResultsDB, replay: bool, days: tuple[int, int] | None, run: int | None
+) -> list[tuple[int, int, str]]:
+    """``(day, run, date)`` of the chosen finished runs, in order."""
+    rows = [
+        (int(d), int(r), str(date))
+        for d, r, date in db.query("SELECT day, run, date FROM runs ORDER BY day, run")
+    ]
+    if not rows:
+        raise InputError(f"{db.path.parent}: no finished run to export")
+    if days is None and replay:
+        days = (2, 2)  # the two passes share the log's clock: the localization pass
+    chosen = [
+        x
+        for x in rows
+        if (days is None or days[0] <= x[0] <= days[1]) and (run is None or x[1] == run)
+    ]
+    if not chosen:
+        have = ", ".join(f"day {d} run {r}" for d, r, _ in rows[:8])
+        more = " ..." if len(rows) > 8 else ""
+        raise InputError(
+            f"{db.path.parent}: no finished run matches the chosen day/run; it has {have}{more}"
+        )
+    return chosen
+
+
+def _poses(db: ResultsDB, loc: int, day: int, run: int, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Estimates ``(n, 3)`` and covariance diagonals ``(n, 3)`` of localizer ``loc``."""
+    rows = db.query(
+        "SELECT x, y, theta, var_x, var_y, var_theta FROM estimates "
+        "WHERE loc=? AND day=? AND run=? ORDER BY step",
+        (loc, day, run),
+    )
+    a = np.array(rows, dtype=np.float64).reshape(-1, 6)
+    if len(a) != n:
+        raise InputError(
+            f"{db.path}: day {day} run {run}: localizer {loc} has {len(a)} estimates for {n} scans"
+        )
+    return a[:, :3], a[:, 3:]
+
+
+def _body_twist(poses: np.ndarray, t_s: np.ndarray) -> np.ndarray:
+    """``(n, 3)`` velocities (vx, vy, wz) in the body frame from consecutive poses (the
+    first scan: at rest)."""
+    out = np.zeros_like(poses)
+    if len(poses) > 1:
+        dt_s = np.diff(t_s)
+        step = se2.between(poses[:-1], poses[1:])
+        ok = dt_s > 0
+        out[1:][ok] = step[ok] / dt_s[ok, None]
+    return out
+
+
+def _refuse_or_clear(out: Path, force: bool) -> None:
+    """Refuse an existing ``out`` unless ``force``; with it, remove a bag folder (only
+    ``metadata.yaml`` and ``.mcap`` files) but nothing else."""
+    if not out.exists() and not out.is_symlink():
+        return
+    if not force:
+        raise InputError(
+            f"--mcap {out}: already exists; pass --force to replace it or choose another name"
+        )
+    if not out.is_dir() or out.is_symlink():
+        raise InputError(f"--mcap {out}: is not a bag folder; remove it yourself")
+    names = [p.name for p in out.iterdir()]
+    if any(not (n == "metadata.yaml" or n.endswith(".mcap")) for n in names):
+        raise InputError(
+            f"--mcap {out}: holds files that are not part of a bag; not replaced (remove it "
+            "yourself or choose another name)"
+        )
+
+
+def export_mcap(
+    results_dir: str | Path,
+    out: str | Path,
+    *,
+    localizer: str | None = None,
+    days: tuple[int, int] | None = None,
+    run: int | None = None,
+    force: bool = False,
+) -> McapExport:
+    """Write the chosen runs of ``results_dir`` as a ROS 2 bag folder ``out`` (see the
+    module doc). ``localizer``: the label whose estimate gives ``map`` -> ``odom``
+    (default: the first); ``days`` ``(first, last)`` and ``run``: which runs (default:
+    all). An existing ``out`` is refused unless ``force``. The bag is written next to
+    ``out`` and moved there when complete, so a failure leaves no half bag."""
+    rosbag2 = _import_rosbags()
+    dst = Path(out)
+    if not dst.parent.is_dir():
+        raise InputError(f"--mcap {out}: folder {dst.parent} does not exist; create it first")
+    _refuse_or_clear(dst, force)
+    msgs = _Msgs()
+    with ResultsDB.open(results_dir) as db:
+        meta = db.meta()
+        labels = db.labels()
+        classes = [str(r[0]) for r in db.query("SELECT name FROM localizers ORDER BY idx")]
+        if not labels:
+            raise InputError(f"{results_dir}: no localizers in the results")
+        if localizer is None:
+            chosen = 0
+        elif localizer in labels:
+            chosen = labels.index(localizer)
+        else:
+            raise InputError(
+                f"--localizer {localizer!r}: not in the results; they have {', '.join(labels)}"
+            )
+        replay = "log_path" in meta
+        runs = _selected_runs(db, replay, days, run)
+        odo_loc = classes.index(ODOMETRY_CLASS) if ODOMETRY_CLASS in classes else None
+        mount = np.asarray((meta.get("laser") or {}).get("mount_pose", [0.0, 0.0, 0.0]), float)
+        result = McapExport(dst, dst / f"{dst.name}.mcap")
+        result.notes += [
+            "/scan not exported: the results store keeps no laser ranges (only poses)",
+            "people not exported: the results store keeps no tracks of people",
+        ]
+        if odo_loc is None:
+            result.notes.append(
+                "/odom not exported: no dead-reckoning localizer ('odometry') in the results; "
+                f"/tf has map->odom identity and odom->base_link from {labels[chosen]!r}"
+            )
+        result.notes.append(
+            "no OccupancyGrid: no localizer's map is stored as a grid in the results (the "
+            "artifacts hold at most the dynamic map's range medians per local map)"
+        )
+        plans = {(d, r): blob for d, r, blob in db.driver_artifacts("planned_path.f8")}
+        staging = dst.parent / f".{dst.name}.partial-{os.getpid()}"
+        shutil.rmtree(staging, ignore_errors=True)
+        staging.mkdir()
+        try:
+            bag = staging / dst.name
+            writer = rosbag2.Writer(
+                bag, version=BAG_VERSION, storage_plugin=rosbag2.StoragePlugin.MCAP
+            )
+            # STORAGE: zstd-compressed MCAP chunks (FILE/MESSAGE would hide them from Foxglove)
+            writer.set_compression(rosbag2.CompressionMode.STORAGE, rosbag2.CompressionFormat.ZSTD)
+            with writer:
+                _write_runs(
+                    db,
+                    writer,
+                    msgs,
+                    result,
+                    runs,
+                    labels,
+                    chosen,
+                    odo_loc,
+                    mount,
+                    plans,
+                    meta if replay else None,
+                )
+            if dst.exists():
+                shutil.rmtree(dst)
+            os.replace(bag, dst)
+        finally:
+            shutil.rmtree(staging, ignore_errors=True)
+    return result
+
+
+def _write_runs(
+    db: ResultsDB,
+    writer: Any,
+    msgs: _Msgs,
+    result: McapExport,
+    runs: list[tuple[int, int, str]],
+    labels: list[str],
+    chosen: int,
+    odo_loc: int | None,
+    mount: np.ndarray,
+    plans: dict[tuple[int, int], bytes],
+    replay_meta: dict[str, Any] | None,
+) -> None:
+    """Every message of the chosen runs, in time order per run."""
+    conns: dict[str, Any] = {}
+    types = {
+        "/tf_static": "tf2_msgs/msg/TFMessage",
+        "/world/obstacles": "visualization_msgs/msg/MarkerArray",
+        "/tf": "tf2_msgs/msg/TFMessage",
+        "/odom": "nav_msgs/msg/Odometry",
+        "/truth/pose": "geometry_msgs/msg/PoseStamped",
+        "/plan": "nav_msgs/msg/Path",
+    }
+    latched = {"/tf_static", "/world/obstacles", "/plan"}
+    topics = pose_topics(labels)
+    for topic in topics:
+        types[topic] = "geometry_msgs/msg/PoseStamped"
+
+    def put(topic: str, ns: int, msg: Any) -> None:
+        if topic not in conns:
+            conns[topic] = writer.add_connection(
+                topic,
+                types[topic],
+                typestore=msgs.store,
+                offered_qos_profiles=_qos(topic in latched),
+            )
+            result.counts[topic] = 0
+        writer.write(conns[topic], int(ns), msgs.store.serialize_cdr(msg, types[topic]))
+        result.counts[topic] += 1
+
+    for day, run_, date in runs:
+        rows = db.query(
+            "SELECT t_s, x, y, theta FROM scans WHERE day=? AND run=? ORDER BY step", (day, run_)
+        )
+        scans = np.array(rows, dtype=np.float64).reshape(-1, 4)
+        n = len(scans)
+        if n == 0:
+            continue
+        t_s, truth = scans[:, 0], scans[:, 1:]
+        if replay_meta is not None:  # the log's own clock, as the TUM export
+            t0 = float(replay_meta.get("log_start_s") or 0.0)
+            ns = np.rint((t0 + t_s) * _NS).astype(np.int64)
+        else:
+            ns = stamp_ns(date, t_s)
+        est = [_poses(db, k, day, run_, n) for k in range(len(labels))]
+        if odo_loc is not None:
+            odom, odom_var = est[odo_loc]
+            map_odom = se2.compose(est[chosen][0], se2.inverse(odom))
+            twist = _body_twist(odom, t_s)
+        else:
+            odom, odom_var, twist = est[chosen][0], est[chosen][1], None
+            map_odom = np.zeros((n, 3))
+        t0_ns = int(ns[0])
+        put("/tf_static", t0_ns, msgs.tf([msgs.transform(t0_ns, "base_link", "laser", mount)]))
+        geom = db.geometry(day, run_)
+        if geom is not None:
+            put("/world/obstacles", t0_ns, msgs.obstacles(t0_ns, *geom))
+        for i in range(n):
+            s = int(ns[i])
+            put(
+                "/tf",
+                s,
+                msgs.tf(
+                    [
+                        msgs.transform(s, "map", "odom", map_odom[i]),
+                        msgs.transform(s, "odom", "base_link", odom[i]),
+                    ]
+                ),
+            )
+            if twist is not None:
+                put("/odom", s, msgs.odometry(s, odom[i], odom_var[i], twist[i]))
+            put("/truth/pose", s, msgs.pose_stamped(s, "map", truth[i]))
+            for topic, (poses, _) in zip(topics, est, strict=True):
+                put(topic, s, msgs.pose_stamped(s, "map", poses[i]))
+        blob = plans.get((day, run_))
+        if blob is not None:
+            s = int(ns[-1])
+            put("/plan", s, msgs.path(s, np.frombuffer(blob, dtype="<f8").reshape(-1, 2)))

@@ -1,0 +1,183 @@
+"""`dynmap-sim export --mcap`: a ROS 2 bag of a CI run, read back with rosbags and mcap."""
+
+from __future__ import annotations
+
+import datetime as dt
+import sys
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rosbags")
+pytest.importorskip("mcap")
+
+from mcap.reader import make_reader  # noqa: E402
+from rosbags.interfaces import QosDurability  # noqa: E402
+from rosbags.rosbag2 import Reader  # noqa: E402
+from rosbags.typesys import Stores, get_typestore  # noqa: E402
+
+from dynmap_sim.analysis.export import export_tum  # noqa: E402
+from dynmap_sim.analysis.export_mcap import export_mcap, pose_topics, ros_name  # noqa: E402
+from dynmap_sim.analysis.scenarios import load_scenario  # noqa: E402
+from dynmap_sim.cli import main  # noqa: E402
+from dynmap_sim.experiments.results import ResultsDB  # noqa: E402
+from dynmap_sim.experiments.runner import run_experiment  # noqa: E402
+
+SCENARIO = Path(__file__).resolve().parents[2] / "worlds/scenarios/ci-apartment-mcl.toml"
+STORE = get_typestore(Stores.ROS2_JAZZY)
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("ci") / "results"
+    return run_experiment(load_scenario(SCENARIO), out_dir=out, progress=False, workers=1)
+
+
+@pytest.fixture(scope="module")
+def bag(results: Path, tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("bag") / "run"
+    export_mcap(results, out, localizer="mcl-tuned")
+    return out
+
+
+def _read_all(bag: Path) -> dict[str, list[tuple[int, object]]]:
+    out: dict[str, list[tuple[int, object]]] = {}
+    with Reader(bag) as reader:
+        for conn, stamp, raw in reader.messages():
+            out.setdefault(conn.topic, []).append((stamp, STORE.deserialize_cdr(raw, conn.msgtype)))
+    return out
+
+
+def _yaw(q: object) -> float:
+    return 2.0 * np.arctan2(q.z, q.w)  # type: ignore[attr-defined]
+
+
+def _xyyaw(pose: object) -> np.ndarray:
+    p = pose.position  # type: ignore[attr-defined]
+    return np.array([p.x, p.y, _yaw(pose.orientation)])  # type: ignore[attr-defined]
+
+
+def test_counts_per_topic_match_the_store(results: Path, bag: Path) -> None:
+    with ResultsDB.open(results) as db:
+        n_scans = db.query("SELECT count(*) FROM scans")[0][0]
+        n_runs = db.query("SELECT count(*) FROM runs")[0][0]
+        labels = db.labels()
+    expected = {
+        "/tf": n_scans,
+        "/odom": n_scans,
+        "/truth/pose": n_scans,
+        "/tf_static": n_runs,
+        "/world/obstacles": n_runs,
+    } | {topic: n_scans for topic in pose_topics(labels)}
+    assert set(pose_topics(labels)) == {"/odometry/pose", "/mcl_tuned/pose", "/mcl_nav2/pose"}
+    with Reader(bag) as reader:
+        got = {topic: info.msgcount for topic, info in reader.topics.items()}
+        assert reader.duration > 0
+    assert got == expected  # no /scan (ranges are not stored), no /plan (tour driver)
+    with (bag / f"{bag.name}.mcap").open("rb") as f:
+        counted = Counter(ch.topic for _, ch, _ in make_reader(f).iter_messages())
+    assert dict(counted) == expected
+
+
+def test_mcap_file_is_what_foxglove_reads(bag: Path) -> None:
+    with (bag / f"{bag.name}.mcap").open("rb") as f:
+        reader = make_reader(f)
+        assert reader.get_header().profile == "ros2"
+        summary = reader.get_summary()
+        assert summary is not None and summary.chunk_indexes
+        assert {c.compression for c in summary.chunk_indexes} == {"zstd"}
+        assert {s.encoding for s in summary.schemas.values()} == {"ros2msg"}
+        assert {c.message_encoding for c in summary.channels.values()} == {"cdr"}
+        tf = next(s for s in summary.schemas.values() if s.name == "tf2_msgs/msg/TFMessage")
+        assert b"MSG: geometry_msgs/TransformStamped" in tf.data  # dependencies embedded
+        statics = [c for c in summary.channels.values() if c.topic == "/tf_static"]
+        assert "offered_qos_profiles" in statics[0].metadata
+    meta = (bag / "metadata.yaml").read_text()
+    assert "storage_identifier: mcap" in meta
+    assert "compression_mode: ''" in meta  # no FILE/MESSAGE compression
+    with Reader(bag) as reader:
+        qos = {c.topic: c.ext.offered_qos_profiles for c in reader.connections}
+    assert qos["/tf_static"][0].durability == QosDurability.TRANSIENT_LOCAL
+    assert qos["/tf"][0].durability == QosDurability.VOLATILE
+
+
+def test_frames_values_and_stamps(results: Path, bag: Path, tmp_path: Path) -> None:
+    msgs = _read_all(bag)
+    with ResultsDB.open(results) as db:
+        labels = db.labels()
+        truth = db.per_scan(0)["truth"]
+        est = db.per_scan(labels.index("mcl-tuned"))["estimate"]
+        odo = db.per_scan(labels.index("odometry"))["estimate"]
+        first_date = db.meta()["first_date"]
+        n_seg = len(db.geometry(1, 1)[0])
+    # a pose equals the store's truth, and stamps are the TUM export's + the first date
+    i = 57
+    stamp, pose = msgs["/truth/pose"][i]
+    assert pose.header.frame_id == "map"
+    np.testing.assert_allclose(_xyyaw(pose.pose), truth[i], atol=1e-9)
+    tum = np.loadtxt(export_tum(results, tmp_path)[0])
+    epoch_s = (dt.date.fromisoformat(first_date) - dt.date(1970, 1, 1)).days * 86400
+    stamps = np.array([s for s, _ in msgs["/truth/pose"]])
+    np.testing.assert_array_equal(stamps - epoch_s * 10**9, np.rint(tum[:, 0] * 1e9))
+    assert pose.header.stamp.sec * 10**9 + pose.header.stamp.nanosec == stamp
+    # /tf: map->odom from the chosen localizer, odom->base_link from the odometry
+    _, tf = msgs["/tf"][i]
+    assert [(t.header.frame_id, t.child_frame_id) for t in tf.transforms] == [
+        ("map", "odom"),
+        ("odom", "base_link"),
+    ]
+    t_odom = tf.transforms[1].transform
+    np.testing.assert_allclose(
+        [t_odom.translation.x, t_odom.translation.y, _yaw(t_odom.rotation)], odo[i], atol=1e-9
+    )
+    from dynmap_sim.se2 import compose
+
+    t_map = tf.transforms[0].transform
+    map_odom = [t_map.translation.x, t_map.translation.y, _yaw(t_map.rotation)]
+    np.testing.assert_allclose(compose(map_odom, odo[i]), est[i], atol=1e-9)
+    _, odom = msgs["/odom"][i]
+    assert (odom.header.frame_id, odom.child_frame_id) == ("odom", "base_link")
+    np.testing.assert_allclose(_xyyaw(odom.pose.pose), odo[i], atol=1e-9)
+    _, static = msgs["/tf_static"][0]
+    assert [(t.header.frame_id, t.child_frame_id) for t in static.transforms] == [
+        ("base_link", "laser")
+    ]
+    _, pose = msgs["/mcl_tuned/pose"][i]
+    np.testing.assert_allclose(_xyyaw(pose.pose), est[i], atol=1e-9)
+    # the obstacles: DELETEALL, then a LINE_LIST per class with both ends of every segment
+    _, arr = msgs["/world/obstacles"][0]
+    assert arr.markers[0].action == 3
+    lines = arr.markers[1:]
+    assert {m.type for m in lines} == {5} and {m.header.frame_id for m in lines} == {"map"}
+    assert sum(len(m.points) for m in lines) == 2 * n_seg
+
+
+def test_day_and_run_choose_runs(results: Path, tmp_path: Path) -> None:
+    res = export_mcap(results, tmp_path / "day2", days=(2, 2), run=1)
+    assert res.counts["/tf_static"] == 1 and res.counts["/tf"] == 201
+    assert any("/scan" in note for note in res.notes)
+
+
+def test_ros_names() -> None:
+    assert ros_name("mcl-tuned") == "mcl_tuned"
+    assert ros_name("2nd try") == "loc_2nd_try"
+    assert pose_topics(["a-b", "a_b", "truth"]) == ["/a_b/pose", "/a_b_1/pose", "/truth_2/pose"]
+
+
+def test_cli_refuses_to_overwrite_and_names_the_extra(
+    results: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch
+) -> None:
+    out = tmp_path / "bag"
+    assert main(["export", str(results), "--mcap", str(out), "--day", "1"]) == 0
+    assert "/truth/pose 201" in capsys.readouterr().out
+    assert main(["export", str(results), "--mcap", str(out)]) == 1
+    assert "--force" in capsys.readouterr().err
+    assert main(["export", str(results), "--mcap", str(out), "--force"]) == 0
+    assert "/truth/pose 402" in capsys.readouterr().out
+    assert main(["export", str(results), "--day", "1"]) == 1
+    monkeypatch.setitem(sys.modules, "rosbags.rosbag2", None)  # the extra is not installed
+    assert main(["export", str(results), "--mcap", str(tmp_path / "other")]) == 1
+    assert 'pip install "dynmap-sim[ros]"' in capsys.readouterr().err
+    assert not (tmp_path / "other").exists()
