@@ -11,6 +11,7 @@ import numpy as np
 from gymnasium import spaces
 from numpy.typing import NDArray
 
+from dynmap_sim.raster import CLASS_RGB, Canvas, polyline
 from dynmap_sim.robot.diff_drive import DiffDriveRobot, RobotParams
 from dynmap_sim.robot.route import RouteProgress
 from dynmap_sim.sensors.lidar import LidarNoise, make_lidar
@@ -434,61 +435,16 @@ class DynMapEnv(gymnasium.Env):
         return _render(self)
 
 
-# -- rendering: a tiny numpy rasterizer (no matplotlib state, ~ms per frame) -------------------
-_CLASS_RGB = np.array(
-    [
-        [120, 120, 120],  # none
-        [20, 20, 20],  # wall
-        [150, 90, 40],  # furniture
-        [230, 140, 0],  # exhibit
-        [40, 150, 60],  # door
-        [210, 30, 30],  # person
-        [60, 60, 200],  # robot
-    ],
-    dtype=np.uint8,
-)
-
-
+# -- rendering: the numpy rasterizer of dynmap_sim.raster (no matplotlib state, ~ms per frame) --
 def _render(env: DynMapEnv) -> np.ndarray:
-    xmin, ymin, xmax, ymax = env.spec_world.bounds
-    size = env.render_size_px
-    scale = size / max(xmax - xmin, ymax - ymin)
-    w = max(1, int(math.ceil((xmax - xmin) * scale)))
-    h = max(1, int(math.ceil((ymax - ymin) * scale)))
-    img = np.full((h, w, 3), 255, dtype=np.uint8)
-
-    def px(xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        c = np.floor((xy[..., 0] - xmin) * scale).astype(np.int64)
-        r = np.floor((ymax - xy[..., 1]) * scale).astype(np.int64)
-        return r, c
-
-    def put(r: np.ndarray, c: np.ndarray, rgb: np.ndarray) -> None:
-        ok = (r >= 0) & (r < h) & (c >= 0) & (c < w)
-        img[r[ok], c[ok]] = rgb if rgb.ndim == 1 else rgb[ok]
-
-    def lines(seg: np.ndarray, rgb: np.ndarray) -> None:
-        if seg.shape[0] == 0:
-            return
-        n = np.ceil(np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]) * scale).astype(int) + 2
-        k = np.repeat(np.arange(seg.shape[0]), n)
-        t = (np.arange(k.shape[0]) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n - 1, n)
-        xy = seg[k, :2] + t[:, None] * (seg[k, 2:] - seg[k, :2])
-        put(*px(xy), rgb if rgb.ndim == 1 else rgb[k])
-
-    def discs(circ: np.ndarray, rgb: np.ndarray) -> None:
-        for i in range(circ.shape[0]):
-            x, y, rad = circ[i]
-            rr = max(rad * scale, 1.0)
-            r0, c0 = px(np.array([x, y]))
-            ys, xs = np.mgrid[-int(rr) : int(rr) + 1, -int(rr) : int(rr) + 1]
-            m = ys * ys + xs * xs <= rr * rr
-            put(r0 + ys[m], c0 + xs[m], rgb if rgb.ndim == 1 else rgb[i])
+    canvas = Canvas(env.spec_world.bounds, env.render_size_px)
+    lines, discs = canvas.lines, canvas.discs
 
     route = env.spec_world.robot.route
-    lines(np.hstack([route[:-1], route[1:]]), np.array([200, 200, 235], np.uint8))
+    lines(polyline(route), np.array([200, 200, 235], np.uint8))
     g = env.world.geometry
-    lines(g.segments, _CLASS_RGB[g.segment_class])
-    discs(g.circles, _CLASS_RGB[g.circle_class])
+    lines(g.segments, CLASS_RGB[g.segment_class])
+    discs(g.circles, CLASS_RGB[g.circle_class])
     if env._last is not None:
         pose = env._last["pose"]
         reading = env._last["reading"]
@@ -512,5 +468,5 @@ def _render(env: DynMapEnv) -> np.ndarray:
         ok = np.isfinite(r)
         ang = lp[2] + env.laser_spec.angles()[ok]
         pts = np.stack([lp[0] + r[ok] * np.cos(ang), lp[1] + r[ok] * np.sin(ang)], axis=-1)
-        put(*px(pts), np.array([0, 170, 255], np.uint8))
-    return img
+        canvas.points(pts, np.array([0, 170, 255], np.uint8))
+    return canvas.img
