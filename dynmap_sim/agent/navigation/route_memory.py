@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
 from typing import Any, NamedTuple
 
@@ -733,9 +734,10 @@ class RouteMemory:
         return new_id
 
     # ------------------------------------------------------------------ forgetting
-    def forget(self, now_s: float) -> int:
+    def forget(self, now_s: float, keep: Iterable[int] = ()) -> int:
         """Forget stretches not updated for longer than ``forget_age_s`` (§5.2); returns the
-        number of segments forgotten.
+        number of segments forgotten. ``keep``: waypoint ids that must survive and stay
+        reachable (the navigator's goal).
 
         Granularity: a maximal run of stale consecutive segments of a route, not always the
         whole route — a recorded route is driven (and so updated) as a whole, so for it this
@@ -744,8 +746,13 @@ class RouteMemory:
         only if it is **bypassed** — without it, its end is still reachable from its start
         over passable edges — so forgetting never cuts the goal off (e.g. after days
         without runs, when everything is stale). A route cut in the middle becomes two
-        routes; a piece of one waypoint is dropped.
+        routes; a piece of one waypoint is dropped. Dropping the end waypoints of a piece
+        also drops the joins through them: so a stretch is also kept when forgetting it would
+        remove a ``keep`` waypoint or leave a waypoint that reached one unable to reach it
+        (a loop's goal reached only over a recorded route's end, which is joined to both the
+        loop's end and its start: forgetting that route cut the goal off).
         """
+        keep = {int(k) for k in keep}
         forgotten = 0
         changed = True
         while changed:
@@ -753,7 +760,7 @@ class RouteMemory:
             for r in list(self.routes.values()):
                 stale = now_s - r.wp[1:, T] > self.params.forget_age_s
                 for a, b in _runs(stale):
-                    if self._bypassed(r, a, b):
+                    if self._bypassed(r, a, b) and self._keeps_reach(r, a, b, keep):
                         self._cut(r, a, b)
                         forgotten += b - a
                         changed = True
@@ -784,6 +791,40 @@ class RouteMemory:
                 seen.add(e.v)
                 todo.append(e.v)
         return False
+
+    def _removed_by_cut(self, r: Route, a: int, b: int) -> set[int]:
+        """Waypoint ids :meth:`_cut` of segments ``a+1..b`` removes (a one-waypoint end
+        piece goes with them)."""
+        removed = {int(i) for i in r.ids[a + 1 : b]}
+        if a < 1:
+            removed.add(int(r.ids[0]))
+        if b > len(r.ids) - 2:
+            removed.add(int(r.ids[-1]))
+        return removed
+
+    def _keeps_reach(self, r: Route, a: int, b: int, keep: set[int]) -> bool:
+        """Would cutting segments ``a+1..b`` of ``r`` keep every ``keep`` waypoint, and every
+        remaining waypoint that reaches one (over passable edges) still reaching it?"""
+        if not keep:
+            return True
+        removed = self._removed_by_cut(r, a, b)
+        if removed & keep:
+            return False
+        before = self.graph()
+        targets = [k for k in keep if k in before.index]
+        if not targets:
+            return True
+        trial = RouteMemory(self.params)
+        trial.routes = {
+            q.route_id: Route(q.route_id, q.ids.copy(), q.wp.copy(), q.prior)
+            for q in self.routes.values()
+        }
+        trial.blocked = set(self.blocked)
+        trial._next_route_id = self._next_route_id
+        trial._next_waypoint_id = self._next_waypoint_id
+        trial._cut(trial.routes[r.route_id], a, b)
+        after = trial.graph()
+        return all(_reaching(before, k) - removed <= _reaching(after, k) for k in targets)
 
     def _cut(self, r: Route, a: int, b: int) -> None:
         """Remove segments ``a+1..b`` of ``r``: keep ``[0..a]`` (as ``r``) and ``[b..]``."""
@@ -891,6 +932,21 @@ class RouteMemory:
         state = self.__dict__.copy()
         state["_segs"] = None  # a cache
         return state
+
+
+def _reaching(g: RouteGraph, target: int) -> set[int]:
+    """Nodes of ``g`` from which ``target`` is reachable over passable edges (itself too)."""
+    back: dict[int, list[int]] = {}
+    for e in g.edges:
+        if np.isfinite(e.travel_time_s):
+            back.setdefault(e.v, []).append(e.u)
+    seen, todo = {target}, deque([target])
+    while todo:
+        for u in back.get(todo.popleft(), []):
+            if u not in seen:
+                seen.add(u)
+                todo.append(u)
+    return seen
 
 
 def _runs(mask: NDArray[np.bool_]) -> list[tuple[int, int]]:

@@ -67,6 +67,7 @@ from dynmap_sim.agent.control.recovery import Recovery, RecoveryParams
 from dynmap_sim.agent.grid import OccupancyGrid
 from dynmap_sim.agent.navigation.route_memory import (
     JOIN,
+    Edge,
     RouteGraph,
     RouteMemory,
     RouteMemoryParams,
@@ -85,6 +86,10 @@ DAY_S = 86_400.0
 #: What the stack is following: a route A* path, a grid detour back onto it, or a grid path
 #: to the goal when the route graph has none.
 ROUTE, DETOUR, GRID = "route", "detour", "grid"
+
+#: Route id of a bridge edge (:meth:`NavigationStack._bridged_plan`): grid A* on the costmap
+#: from a dead end of the route graph to the goal; also the node id of its interior points.
+BRIDGE = -2
 
 
 @dataclass(frozen=True)
@@ -302,7 +307,10 @@ class NavigationStack:
         its ``forget_age_s`` (H&W §5.2); returns the number of segments forgotten."""
         if self.route_memory is None:
             return 0
-        n = self.route_memory.forget(self._day_s + self._last_t)
+        g = self.route_memory.graph()
+        goal = self._goal_node(g) if g.node_ids.size else None
+        keep = () if goal is None else (goal,)
+        n = self.route_memory.forget(self._day_s + self._last_t, keep=keep)
         if n:
             self._event(self._last_t, "forget", f"{n} route segments")
         self._graph = None
@@ -485,17 +493,90 @@ class NavigationStack:
             g = self.graph()
         if g.node_ids.size == 0:
             return None
-        goal = self._goal_id
-        if goal is None or goal not in g.index:
-            goal = g.nearest_node(self.goal_xy)
         self.plans += 1
         return plan_route(
             g,
             pose[:2],
             self.goal_xy,
             self.params.speed_mps,
-            goal_id=goal,
+            goal_id=self._goal_node(g),
             leave_goal_m=0.0 if self._armed else self.params.goal_arm_m,
+        )
+
+    def _goal_node(self, g: RouteGraph) -> int:
+        """The goal's node on ``g``: the prior route's end, else the node nearest the goal."""
+        assert self.goal_xy is not None
+        goal = self._goal_id
+        return goal if goal is not None and goal in g.index else g.nearest_node(self.goal_xy)
+
+    def _bridged_plan(self, pose: FloatArray, grid: ClearanceGrid) -> PlannedPath | None:
+        """Route A* when the route graph cannot reach the goal (e.g. forgetting dropped the
+        stretch or the join that led to it): the graph plus a **bridge** from each dead end
+        (a node without a passable way on) to the goal node, grid A* on the costmap's
+        clearance, costed at ``speed_mps``. So the robot drives what is left of its routes
+        and crosses the gap on the costmap, and a loop's start still leaves the goal
+        (``leave_goal_m`` as for any route plan). The bridges' grid paths are in the plan's
+        ``xy`` (their interior points have node id :data:`BRIDGE`); None when no dead end
+        has a grid path to the goal or the graph none to a dead end."""
+        g = self.graph()
+        if g.node_ids.size == 0:
+            return None
+        p = self.params
+        goal = self._goal_node(g)
+        goal_xy = g.position(goal)
+        end = grid.nearest_free(goal_xy, self.min_clearance_m, 0.5)
+        if end is None:
+            return None
+        legs: dict[tuple[int, int], FloatArray] = {}
+        bridges = []
+        for n in g.node_ids.tolist():
+            if n == goal or any(math.isfinite(e.travel_time_s) for e in g.out[n]):
+                continue
+            xy = g.position(n)
+            start = grid.nearest_free(xy, self.min_clearance_m, 0.5)
+            path = None if start is None else self.planner.plan(start, end, grid)
+            if path is None:
+                continue
+            leg = np.concatenate([xy[None], path, goal_xy[None]])
+            leg = leg[np.r_[True, np.hypot(*np.diff(leg, axis=0).T) > 1e-9]]
+            length = float(np.sum(np.hypot(*np.diff(leg, axis=0).T)))
+            legs[(n, goal)] = leg
+            bridges.append(
+                Edge(n, goal, length, length / p.speed_mps, False, p.detour_half_width_m, BRIDGE)
+            )
+        if not bridges:
+            return None
+        self.plans += 1
+        plan = plan_route(
+            RouteGraph(g.node_ids, g.xy, g.v_max_mps, g.half_width_m, [*g.edges, *bridges]),
+            pose[:2],
+            self.goal_xy,
+            p.speed_mps,
+            goal_id=goal,
+            leave_goal_m=0.0 if self._armed else p.goal_arm_m,
+        )
+        if plan is None or not any(e in legs for e in plan.edges):
+            return plan
+        ids, xy, hw, v = (
+            [plan.node_ids[0]],
+            [plan.xy[0]],
+            [plan.half_width_m[0]],
+            [plan.v_max_mps[0]],
+        )
+        for k in range(1, len(plan.node_ids)):
+            leg = legs.get((plan.node_ids[k - 1], plan.node_ids[k]))
+            if leg is not None:
+                inner = leg[1:-1]
+                ids += [BRIDGE] * len(inner)
+                xy += list(inner)
+                hw += [p.detour_half_width_m] * len(inner)
+                v += [p.speed_mps] * len(inner)
+            ids.append(plan.node_ids[k])
+            xy.append(plan.xy[k])
+            hw.append(plan.half_width_m[k])
+            v.append(plan.v_max_mps[k])
+        return PlannedPath(
+            tuple(ids), np.array(xy), np.array(hw), np.array(v), plan.travel_time_s, plan.edges
         )
 
     def _plan_step(self, t_s: float, pose: FloatArray, grid: ClearanceGrid, scan: Scan) -> None:
@@ -519,11 +600,20 @@ class NavigationStack:
             plan = self._route_plan(pose, ignore_blocks=True)
             if plan is not None and self.mode != ROUTE:
                 self._event(t_s, "through_block", "no unblocked route: the route up to the block")
+        bridged = False
+        if plan is None:
+            # the route graph cannot reach the goal: bridge its dead ends on the costmap
+            plan = self._bridged_plan(pose, grid)
+            bridged = plan is not None
         if plan is None:
             self._grid_to_goal(t_s, pose, grid)
             return
         if self.mode != ROUTE or not self._same_plan(plan) or self.follower.done or forced:
             self._set_route_path(plan)
+            if bridged:
+                self._event(
+                    t_s, "bridge", "no route to the goal: routes and grid A* across the gap"
+                )
         if self._cut_ahead(self._path, self._path_hw, grid, pose) is not None:
             self._event(t_s, "cut", "the corridor ahead is cut on the costmap")
             self._go_around(t_s, pose, grid)
@@ -712,7 +802,9 @@ class NavigationStack:
         self.plans += 1
         start = grid.nearest_free(pose[:2], self.min_clearance_m, 0.5)
         path = None if start is None else self.planner.plan(start, self.goal_xy, grid)
-        if path is not None and not self._armed:  # at the start of a loop: nowhere to go
+        if path is not None and not self._armed:
+            # at a loop's start the goal is here: a grid path alone has nowhere to go (route
+            # A* and the bridged plan, which drive the route, found nothing)
             path = None
         if path is None:
             if self.mode != GRID or self._path is not None:

@@ -173,6 +173,35 @@ def test_a_stale_learned_route_is_forgotten_when_bypassed():
     assert len(mem.routes) == 1 and len(mem.routes[0].ids) == 21
 
 
+def test_forgetting_never_cuts_a_kept_goal_off():
+    """Regression (apartment-28d-autonomous-mcl, day 21): a loop whose end waypoint was
+    forgotten ends 0.4 m before its start (the goal); the only edge into the start was the
+    join from a recorded route's end. That route was stale and bypassed (its end is joined
+    to the loop's end), so it was forgotten with its end waypoint, and the join with it:
+    the goal was cut off. With ``keep`` it stays."""
+
+    def memory() -> tuple[RouteMemory, int, int]:
+        mem = RouteMemory.from_prior(
+            [(0.0, 0.0), (0.0, 2.0), (2.0, 2.0), (2.0, 0.0), (0.4, 0.0)], 0.35, 0.35, 5 * DAY_S
+        )
+        rid = mem.add_route([(0.8, 0.3), (0.4, 0.0)], 0.2, 0.35, 0.0)
+        return mem, rid, int(mem.routes[0].ids[0])
+
+    mem, rid, goal = memory()
+    assert mem.forget(5 * DAY_S) == 1 and rid not in mem.routes  # the goal is cut off
+    assert plan_route(mem.graph(), (0.0, 0.1), (0.0, 0.0), goal_id=goal, leave_goal_m=1.0) is None
+    mem, rid, goal = memory()
+    assert mem.forget(5 * DAY_S, keep={goal}) == 0 and rid in mem.routes
+    plan = plan_route(mem.graph(), (0.0, 0.1), (0.0, 0.0), goal_id=goal, leave_goal_m=1.0)
+    assert plan is not None and plan.xy[-1] == pytest.approx((0.0, 0.0))
+    # a kept waypoint itself is never forgotten, even if stale and bypassed
+    mem, rid, goal = memory()
+    end = int(mem.routes[0].ids[-1])
+    mem.routes[0].wp[-1, T] = 0.0
+    mem.routes[rid].wp[:, T] = 5 * DAY_S
+    assert mem.forget(5 * DAY_S, keep={end}) == 0 and int(mem.routes[0].ids[-1]) == end
+
+
 def test_nothing_that_the_graph_needs_is_forgotten():
     mem = straight()
     assert mem.forget(100 * DAY_S) == 0  # everything is stale, nothing is bypassed

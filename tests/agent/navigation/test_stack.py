@@ -191,3 +191,59 @@ def test_a_loop_cut_in_two_by_forgetting_is_still_driven():
     path = stack.planned_path()
     assert path is not None and np.sum(np.hypot(*np.diff(path, axis=0).T)) > 5.0
     assert max(speeds) > 0.2 and not stack.gave_up
+
+
+def _loop_stack_without_its_end():
+    """A stack on a 3 m x 3 m loop whose last stretch (and the goal waypoint, the loop's
+    end) was forgotten: the route now ends 0.5 m before its start, and no other route
+    joins the two. Returns the stack, the laser and the loop's prior for a day."""
+    laser = LaserSpec("test", 241, -2.0944, 2.0944 / 120, 0.02, 5.6, 0.1, 0.0)
+    loop = np.array([[0.0, 0.0], [0.0, 3.0], [3.0, 3.0], [3.0, 0.0], [0.0, 0.0]])
+
+    def prior(day: int) -> Prior:
+        return Prior(
+            initial_pose=np.array([0.0, 0.0, np.pi / 2]),
+            bounds=(-1.0, -1.0, 4.0, 4.0),
+            day=day,
+            run=1,
+            first_run=day == 1,
+            route=loop,
+        )
+
+    stack = NavigationStack(laser, 0.17)
+    stack.begin_run(prior(1))
+    mem = stack.route_memory
+    r = next(iter(mem.routes.values()))
+    r.ids, r.wp = r.ids[:-1], r.wp[:-1]  # the goal waypoint (0, 0) is gone
+    mem._segs = None
+    return stack, laser, prior
+
+
+def test_a_loop_whose_end_was_forgotten_is_still_driven():
+    """Regression (apartment-28d-autonomous-mcl, days 22-28 stood still): forgetting had
+    dropped the loop's goal waypoint and then the recorded route whose end joined both the
+    loop's end and its start, so no route edge led back to the start (the goal). Route A*
+    found nothing and the grid fallback, from the loop's start (= its goal), had nowhere to
+    go: a zero command until the recovery gave up. The stack bridges the route graph's dead
+    end to the goal with grid A* and drives the loop."""
+    stack, laser, prior = _loop_stack_without_its_end()
+    day_s = 5 * 86_400.0
+    assert stack.route_memory.forget(day_s) == 0
+    stack.begin_run(prior(5))
+    free = Scan(np.full(laser.n_beams, np.inf, dtype=np.float32), 0.0)
+    pose = np.array([0.0, 0.0, np.pi / 2])
+    speeds = []
+    for k in range(20):
+        t = 36_000.0 + 0.1 * k
+        cmd = stack.step(
+            t, Odometry(pose.copy(), t), free, PoseEstimate(pose.copy(), np.eye(3) * 1e-4)
+        )
+        speeds.append(float(cmd[0]))
+        pose = pose + 0.1 * cmd[0] * np.array([np.cos(pose[2]), np.sin(pose[2]), 0.0])
+        pose[2] += 0.1 * cmd[1]
+    path = stack.planned_path()
+    assert path is not None and np.sum(np.hypot(*np.diff(path, axis=0).T)) > 10.0
+    assert np.hypot(*(path[-1] - [0.0, 0.0])) < 0.05  # over the gap to the goal
+    assert max(speeds) > 0.2 and not stack.gave_up
+    assert any(kind == "bridge" for _, kind, _ in stack.events)
+    assert not any(kind == "no_path" for _, kind, _ in stack.events)
