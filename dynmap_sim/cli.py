@@ -477,7 +477,7 @@ def _cluster_address(text: str) -> str:
     """A Dask scheduler's address: ``tcp://HOST:PORT`` (or ``tls://``, ``ws://``...)."""
     import re
 
-    if not re.fullmatch(r"[a-z][a-z0-9+]*://[^\s/:]+(:\d{1,5})?/?", text):
+    if not re.fullmatch(r"[a-z][a-z0-9+]*://[^\s/]+/?", text):
         raise argparse.ArgumentTypeError(f"expected tcp://HOST:PORT, not {text!r}")
     return text
 

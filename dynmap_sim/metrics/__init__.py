@@ -6,6 +6,13 @@ load back equal (:class:`~.result.Result`). Every summary the experiments store 
 """
 
 from dynmap_sim.metrics.daily import GroupSummary, summarize, summarize_groups
+from dynmap_sim.metrics.intervals import (
+    CI_LEVEL,
+    MeanInterval,
+    mean_interval,
+    paired_difference,
+    t_quantile,
+)
 from dynmap_sim.metrics.lost import (
     LOST_THRESHOLD_M,
     LostStats,
@@ -59,6 +66,11 @@ from dynmap_sim.metrics.summaries import (
 )
 
 __all__ = [
+    "CI_LEVEL",
+    "MeanInterval",
+    "mean_interval",
+    "paired_difference",
+    "t_quantile",
     "NEAR_MISS_M",
     "NavDaySummary",
     "NavRunSummary",
