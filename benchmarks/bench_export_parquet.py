@@ -67,14 +67,7 @@ def replicate(src: Path, dst: Path, scans: int) -> Path:
     try:
         n, last = con.execute("SELECT count(*), max(day) FROM scans").fetchone()
         for k in range(1, -(-scans // n)):
-            for table in (
-                "scans",
-                "estimates",
-                "runs",
-                "run_summaries",
-                "day_summaries",
-                "nav_runs",
-            ):
+            for table in TABLES[:-1]:  # every table with a day (not localizers)
                 cols = [r[1] for r in con.execute(f"PRAGMA table_info({table})")]
                 sel = ", ".join(f"day + {k * last}" if c == "day" else f'"{c}"' for c in cols)
                 con.execute(f"INSERT INTO {table} SELECT {sel} FROM {table} WHERE day <= {last}")
