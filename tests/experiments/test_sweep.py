@@ -326,7 +326,7 @@ def test_a_sweep_runs_on_a_dask_cluster(tmp_path, capsys):
     from dynmap_sim.experiments.sweep import make_executor
 
     with distributed.LocalCluster(
-        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0"
     ) as cluster:
         address = cluster.scheduler_address
         with make_executor(2, cluster=address) as ex:  # pure=False: equal calls both run
