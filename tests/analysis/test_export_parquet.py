@@ -309,3 +309,15 @@ def test_declared_diagnostics_become_typed_columns(tmp_path: Path) -> None:
         b = scans.filter(pa.compute.equal(scans.column("localizer"), "b"))
         assert b.column("point_class_counts").null_count == b.num_rows
         assert set(b.column("scan_loglik").to_pylist()) == {-2.0}
+
+
+def test_results_format_1_export(tmp_path: Path) -> None:
+    """A folder written before declared diagnostics and navigation measures."""
+    src = ROOT / "tests" / "data" / "pre-round-2" / "ci-apartment"
+    written = {f.table: f for f in export_parquet(src, tmp_path / "pq")}
+    (n,) = _store(src, "SELECT count(*) FROM estimates")[0]
+    assert written["scans"].rows == n
+    runs = pq.read_table(written["runs"].path)
+    assert runs.column("nav_spl").null_count == runs.num_rows > 0
+    meta = pq.read_schema(written["scans"].path).metadata[b"dynmap_sim"]
+    assert b'"results_format": 1' in meta
