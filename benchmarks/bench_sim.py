@@ -9,7 +9,7 @@ Measured in the same run:
 * ``naive`` — the reference: one pymunk ``segment_query_first`` per beam on the *same*
   geometry (a pymunk space built from the ``GeometryView`` segments and circles).
 
-Targets (DESIGN.md §7, issue 3): env step >= 10x the naive scan rate (about >= 2,500
+Targets (docs/architecture.md §7, issue 3): env step >= 10x the naive scan rate (about >= 2,500
 steps/s), lidar <= 1 us/ray with numpy and <= 0.3 us/ray with numba. Prints a table and
 writes JSON (package version, platform, figures).
 

@@ -1,4 +1,4 @@
-"""The Gymnasium env: a thin shell over world, robot and sensors (DESIGN.md §1)."""
+"""The Gymnasium env: a thin shell over world, robot and sensors (docs/architecture.md §1)."""
 
 from __future__ import annotations
 

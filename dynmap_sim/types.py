@@ -5,7 +5,7 @@ This module is the *only* place where the simulator side (``world/``, ``sensors/
 also have: a description of its laser scanner, the readings it delivers, odometry, and the
 prior knowledge a scenario grants. Ground truth never appears in these types.
 
-Conventions (DESIGN.md §4):
+Conventions (docs/architecture.md §4):
 
 * poses are ``(x_m, y_m, theta_rad)`` float64 arrays, angles counter-clockwise from +x;
 * frames follow REP-105: ``map -> odom -> base_link -> laser``;

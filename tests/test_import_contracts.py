@@ -1,4 +1,4 @@
-"""The architecture's boundaries (DESIGN.md §1) hold: import-linter contracts in pyproject.toml."""
+"""The boundaries of docs/architecture.md §1 hold: import-linter contracts in pyproject.toml."""
 
 import shutil
 import subprocess

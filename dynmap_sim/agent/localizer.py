@@ -1,4 +1,4 @@
-"""The Localizer role (DESIGN.md §5) and its registry.
+"""The Localizer role (docs/architecture.md §5) and its registry.
 
 A localizer is built once per experiment with the laser description and its own random
 generator, then driven by the experiment runner::

@@ -1,4 +1,4 @@
-"""Regression checks: run a scenario and test its ``[expectations]`` (DESIGN.md §6).
+"""Regression checks: run a scenario and test its ``[expectations]`` (docs/architecture.md §6).
 
 ``dynmap-sim check SCENARIO`` prints the table of :meth:`CheckResult.table` and exits 1 when
 any expectation fails; :func:`dynmap_sim.testing.run_scenario` does the same for pytest.

@@ -1,4 +1,4 @@
-"""Reports of a results folder: figures, ``summary.md`` and ``per_day.csv`` (DESIGN.md §6).
+"""A results folder's report: figures, ``summary.md`` and ``per_day.csv`` (docs/architecture.md §6).
 
 Figures mirror the papers: the mean localization error per day for each localizer (H&W §7,
 Fig. 7), the error over time within runs, scan likelihood and certainty (λ_min) over time

@@ -1,4 +1,4 @@
-"""Localizers in worker processes, pipelined with the simulation (DESIGN.md §6).
+"""Localizers in worker processes, pipelined with the simulation (docs/architecture.md §6).
 
 A run's sensor stream does not depend on the localizers: the tour driver follows the *true*
 pose and kidnappings come from the runner's RNG. So the runner records a run's whole stream

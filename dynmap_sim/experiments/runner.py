@@ -1,4 +1,4 @@
-"""The calendar loop: run a scenario's days and runs, localizers side by side (DESIGN.md §6).
+"""The calendar loop: a scenario's days and runs, localizers side by side (docs/architecture.md §6).
 
 For every run of the chosen days: ``env.reset(seed, day, run)``, build the :class:`Prior`, let
 the driver drive (it follows the true pose) and record the run's (odometry, scan) stream; then

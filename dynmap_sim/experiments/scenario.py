@@ -1,5 +1,5 @@
 """Scenario files: what to run (world, days, seeds, robot, sensor, driver, localizers, prior,
-kidnappings) and what to expect (DESIGN.md §6).
+kidnappings) and what to expect (docs/architecture.md §6).
 
 A scenario is TOML validated by pydantic v2 with ``extra="forbid"``. Problems are reported as
 :class:`ScenarioFileError`, each with the file and the dotted field path: all field errors at

@@ -1,4 +1,4 @@
-"""Lost and recovered: episodes where the position error exceeds a threshold (DESIGN.md §6).
+"""Lost and recovered: episodes of position error above a threshold (docs/architecture.md §6).
 
 A localizer is *lost* at a scan when its position error exceeds ``threshold_m`` (0.5 m by
 default). A lost episode is a maximal stretch of consecutive lost scans; it is *recovered*

@@ -1,4 +1,4 @@
-"""Pose errors in the map frame with **no alignment**, ATE and RPE (DESIGN.md §6).
+"""Pose errors in the map frame with **no alignment**, ATE and RPE (docs/architecture.md §6).
 
 The simulator knows the true map frame, so an estimate is judged exactly where it claims the
 robot is: no Umeyama/Horn alignment is applied (unlike a SLAM benchmark on real data). ATE

@@ -1,4 +1,4 @@
-"""A differential-drive robot body in the world's pymunk space (DESIGN.md §4).
+"""A differential-drive robot body in the world's pymunk space (docs/architecture.md §4).
 
 The chain from command to motion is the one a real robot has:
 

@@ -1,4 +1,4 @@
-"""Simulated sensors: laser scanners and wheel odometry (DESIGN.md §4).
+"""Simulated sensors: laser scanners and wheel odometry (docs/architecture.md §4).
 
 * :mod:`~dynmap_sim.sensors.raycast` — exact batched ray casting (numpy), and
   :mod:`~dynmap_sim.sensors.raycast_numba` its optional compiled twin (extra ``fast``);

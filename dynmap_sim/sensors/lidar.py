@@ -1,4 +1,4 @@
-"""Simulated 2-D laser scanners: Hokuyo URG-04LX and SICK LMS200 (DESIGN.md §4).
+"""Simulated 2-D laser scanners: Hokuyo URG-04LX and SICK LMS200 (docs/architecture.md §4).
 
 A :class:`Lidar` casts every beam of a scan exactly against the world's geometry
 (:mod:`dynmap_sim.sensors.raycast`) and then applies a seeded noise model. The presets follow

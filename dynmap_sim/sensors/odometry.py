@@ -1,4 +1,4 @@
-"""Wheel odometry with UMBmark systematic errors and random encoder noise (DESIGN.md §4).
+"""Wheel odometry with UMBmark systematic errors and random encoder noise (docs/architecture.md §4).
 
 Odometry is a sensor, not noisy truth. The robot's motor controller turns a commanded twist
 ``(v, omega)`` into wheel rotation rates using the *nominal* wheel diameter ``D`` and

@@ -1,4 +1,4 @@
-"""The simulated world: world files, calendar and schedule, people (DESIGN.md §2-3).
+"""The simulated world: world files, calendar and schedule, people (docs/architecture.md §2-3).
 
 ```python
 from dynmap_sim.world import load_world, resolve_world_path, World

@@ -1,4 +1,4 @@
-"""The experiment calendar: working days and the runs of each day (DESIGN.md §2).
+"""The experiment calendar: working days and the runs of each day (docs/architecture.md §2).
 
 Days and runs are 1-based. A run's *slot index* ``(day - 1) * runs_per_day + (run - 1)``
 orders all runs of the experiment; the schedule is evaluated on slot indices.

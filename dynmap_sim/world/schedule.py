@@ -1,4 +1,4 @@
-"""The schedule: what stands where at the start of any run (DESIGN.md §2).
+"""The schedule: what stands where at the start of any run (docs/architecture.md §2).
 
 The state at slot ``t`` is a pure function of (world file, seed, t): start from the objects'
 initial state, collect every event *occurrence* at or before ``t`` (a ``present`` window

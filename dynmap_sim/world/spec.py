@@ -1,4 +1,4 @@
-"""Typed, frozen models of a world file (DESIGN.md §3), validated by pydantic v2.
+"""Typed, frozen models of a world file (docs/architecture.md §3), validated by pydantic v2.
 
 A world file is TOML with these sections: ``name``, ``bounds``, ``[calendar]``, ``[robot]``,
 ``[[walls]]``, ``[[objects]]``, ``[[schedule]]`` and ``[[people]]``. Units are SI (metres,
@@ -118,7 +118,7 @@ def _check_box(v: Box) -> Box:
 
 
 class CalendarSpec(_Model):
-    """Start date, working days and run times (DESIGN.md §2)."""
+    """Start date, working days and run times (docs/architecture.md §2)."""
 
     start: dt.date = Field(description="date of the first working day (or earlier)")
     n_days: int = Field(gt=0, le=1000, description="number of working days in the experiment")

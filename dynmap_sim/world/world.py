@@ -39,7 +39,7 @@ SYNC_SPEED_MPS = 4.0
 
 
 class World:
-    """A world file brought to life for one ``seed`` (DESIGN.md §2).
+    """A world file brought to life for one ``seed`` (docs/architecture.md §2).
 
     * ``calendar`` (:class:`Calendar`: ``slots``, ``n_days``, ``runs_per_day``), ``slot``
       (the current :class:`RunSlot`), ``day``, ``run``;
