@@ -756,7 +756,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser(
         "sweep",
-        help="run scenarios over seeds and parameter values; report means with 95 % CIs",
+        help="run scenarios over seeds and parameter values; report means with 95 %% CIs",
         description="Every cell (scenario x seed x parameter values) is one experiment in "
         "DIR/cells/<hash>/, indexed in DIR/sweep.json; the same command resumes a sweep, "
         "skipping finished cells. The report (sweep_summary.csv/.md, sweep_paired.csv, "

@@ -277,6 +277,8 @@ def test_every_option_of_every_command_has_help():
     ]
     assert missing == []
     assert set(sub.choices) >= {"run", "check", "replay", "toy", "render-world", "validate"}
+    for parser in (build_parser(), *sub.choices.values()):  # formatting the help must not fail
+        assert parser.format_help()
 
 
 @pytest.mark.parametrize(
