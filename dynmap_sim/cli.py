@@ -297,6 +297,7 @@ def _headline(out: Path) -> list[str]:
     goals reached and collisions when the results hold navigation measures."""
     import math
 
+    from dynmap_sim.analysis.navigation import goals_reached_line
     from dynmap_sim.analysis.report import overall_stats
     from dynmap_sim.experiments.results import ResultsDB
 
@@ -305,6 +306,7 @@ def _headline(out: Path) -> list[str]:
             return []
         stats = overall_stats(db)
         nav = db.nav_runs()
+        goals = goals_reached_line(db)
 
     def num(v: float) -> str:
         return "n/a" if v is None or math.isnan(v) else f"{v:.3f}"
@@ -330,11 +332,8 @@ def _headline(out: Path) -> list[str]:
         for row in table
     ]
     if nav:
-        reached = sum(int(n.goal_reached) for _, _, n in nav)
         collisions = sum(int(n.collisions) for _, _, n in nav)
-        lines.append(
-            f"navigation: goal reached in {reached} of {len(nav)} runs; {collisions} collisions"
-        )
+        lines.append(f"navigation: {goals}; {collisions} collisions")
     return lines
 
 

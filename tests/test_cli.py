@@ -422,7 +422,10 @@ def test_run_ends_with_the_headline_numbers(tmp_path, capsys):
             "%",
         ]
     reached = sum(n.goal_reached for _, _, n in nav)
+    stopped = sum(not n.goal_reached and n.time_s >= 20.0 for _, _, n in nav)
+    assert reached + stopped == len(nav)  # the tour ends at the goal or at max_run_s = 20 s
+    limit = f" ({stopped} stopped by the scenario's max_run_s = 20 s)" if stopped else ""
     assert lines[-1] == (
-        f"navigation: goal reached in {reached} of {len(nav)} runs; "
+        f"navigation: goal reached in {reached} of {len(nav)} runs{limit}; "
         f"{sum(n.collisions for _, _, n in nav)} collisions"
     )

@@ -61,19 +61,29 @@ def write_nav_per_day_csv(rows: list[tuple[int, NavDaySummary]], path: Path) -> 
     return path
 
 
+def goals_reached_line(db: ResultsDB) -> str:
+    """``goal reached in R of N runs``, and how many runs the scenario's ``driver.max_run_s``
+    stopped short of the goal (a time-limited smoke test is not a navigation failure)."""
+    runs = [s for _, _, s in db.nav_runs()]
+    reached = sum(s.goal_reached for s in runs)
+    line = f"goal reached in {reached} of {len(runs)} runs"
+    max_run_s = (db.meta().get("scenario") or {}).get("driver", {}).get("max_run_s")
+    if max_run_s is not None:
+        stopped = sum(not s.goal_reached and s.time_s >= max_run_s - 1e-9 for s in runs)
+        if stopped:
+            line += f" ({stopped} stopped by the scenario's max_run_s = {max_run_s:g} s)"
+    return line
+
+
 def nav_summary_lines(db: ResultsDB, rows: list[tuple[int, NavDaySummary]]) -> list[str]:
     """The ``summary.md`` section: totals over the experiment."""
     runs = [s for _, _, s in db.nav_runs()]
-    n = len(runs)
-    reached = sum(s.goal_reached for s in runs)
     spl = [s.spl for s in runs if math.isfinite(s.spl)]
     clear = [s.min_clearance_m for s in runs if math.isfinite(s.min_clearance_m)]
     return [
         "## Navigation (measured against the truth; per day in nav_per_day.csv)",
         "",
-        f"- goal reached in {reached} of {n} runs; SPL {np.mean(spl):.3f}"
-        if spl
-        else f"- goal reached in {reached} of {n} runs",
+        f"- {goals_reached_line(db)}" + (f"; SPL {np.mean(spl):.3f}" if spl else ""),
         f"- collisions {sum(s.collisions for s in runs)}, near misses with people "
         f"{sum(s.near_misses for s in runs)}, smallest clearance "
         + (f"{min(clear):.3f} m" if clear else "n/a"),
