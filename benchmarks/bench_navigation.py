@@ -68,7 +68,7 @@ def main() -> None:
         policy.reset(prior_of(env, day))
         t_loc.times.clear()
         t_stack.times.clear()
-        err, n, done = [], 0, False
+        err, n, done, term = [], 0, False, False
         while n < args.steps and not done:
             obs, _, term, trunc, info = env.step(policy.act(obs))
             err.append(np.hypot(*(policy.estimate.mean[:2] - info["truth"]["pose"][:2])))
@@ -80,7 +80,7 @@ def main() -> None:
         print(
             f"day {day}: {n} scans, dynamic-map {a:.2f} ms, stack {b:.2f} ms "
             f"(p95 {1e3 * np.percentile(t_stack.times, 95):.2f} ms), stack/dynamic-map "
-            f"{b / a:.1%} (target <= 20 %); goal {stack.done}, replans {stack.replans}, "
+            f"{b / a:.1%} (target <= 20 %); goal reached {term}, replans {stack.replans}, "
             f"mean error {np.mean(err):.3f} m"
         )
 
