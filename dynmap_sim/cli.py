@@ -63,12 +63,14 @@ def _localizer_arg(text: str) -> str:
 
 def _output_file(path: str) -> Path:
     """An output file named by ``-o``: its folder must exist (a typo does not create folders)
-    and it must not be a folder itself."""
+    and it must not be a folder, a device or a pipe (writing to a FIFO would block)."""
     from dynmap_sim.errors import InputError
 
     p = Path(path)
     if p.is_dir():
         raise InputError(f"-o {path}: is a folder; give a file name, e.g. {p / 'out'}")
+    if p.exists() and not p.is_file():
+        raise InputError(f"-o {path}: not a regular file; give a file name")
     if not p.parent.is_dir():
         raise InputError(f"-o {path}: folder {p.parent} does not exist; create it first")
     return p

@@ -230,6 +230,7 @@ def test_bad_invocations_of_every_command(capsys, tmp_path):
         ),
         (["schema", "-o", "/nonexistent/x.json"], "folder /nonexistent does not exist"),
         (["schema", "-o", tmp_path / "dir"], "is a folder; give a file name"),
+        (["schema", "-o", fifo], "not a regular file"),  # writing would block on the pipe
         (["export", tmp_path, "--tum", "/dev/null/x"], "cannot create folder /dev/null/x"),
         (["report", tmp_path / "nope"], "no results database here"),
         (["report", "/dev/zero"], "no results database here"),

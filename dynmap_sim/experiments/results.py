@@ -363,13 +363,18 @@ class ResultsDB:
                     Path(str(path) + suffix).unlink(missing_ok=True)
                 for f in (d / CHECKPOINT_DIR).glob("*.pkl*"):
                     f.unlink()
-            db = cls(path, sqlite3.connect(path), lock)
-            with db._disk_full_is_clear(str(path)):
-                db.con.execute("PRAGMA journal_mode=WAL")
-                db.con.execute("PRAGMA synchronous=NORMAL")
-                db.con.executescript(_SCHEMA)
-                db.con.commit()
-                db.set_meta(results_format=RESULTS_FORMAT)
+            try:
+                db = cls(path, sqlite3.connect(path), lock)
+                with db._disk_full_is_clear(str(path)):
+                    db.con.execute("PRAGMA journal_mode=WAL")
+                    db.con.execute("PRAGMA synchronous=NORMAL")
+                    db.con.executescript(_SCHEMA)
+                    db.con.commit()
+                    db.set_meta(results_format=RESULTS_FORMAT)
+            except sqlite3.OperationalError as exc:  # e.g. a folder SQLite cannot write in
+                raise InputError(
+                    f"{path}: cannot create a results database there ({exc})"
+                ) from None
         except BaseException:
             lock.release()
             raise
