@@ -421,6 +421,9 @@ class DynMapEnv(gymnasium.Env):
             segment_class=read_only(np.asarray(g.segment_class, dtype=np.int8)),
             circles=read_only(np.asarray(g.circles, dtype=np.float64).reshape(-1, 3)),
             circle_class=read_only(np.asarray(g.circle_class, dtype=np.int8).ravel()),
+            segment_object=read_only(np.asarray(g.segment_object, dtype=np.int32).ravel()),
+            circle_object=read_only(np.asarray(g.circle_object, dtype=np.int32).ravel()),
+            object_ids=tuple(g.object_ids),
         )
 
     @property

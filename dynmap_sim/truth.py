@@ -11,7 +11,7 @@ simulation through them. The agent never imports this module (an import contract
 from __future__ import annotations
 
 import datetime as dt
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -51,13 +51,22 @@ class WorldFacts:
     slots: tuple[RunSlot, ...]
 
 
+def _no_index() -> NDArray[np.int32]:
+    return read_only(np.zeros(0, dtype=np.int32))  # type: ignore[return-value]
+
+
 @dataclass(frozen=True)
 class ObstacleSnapshot:
     """The obstacles now [m]: ``segments`` ``(N, 4)`` with their ``segment_class`` (int8
     :class:`dynmap_sim.types.BeamClass`), ``circles`` ``(M, 3)`` ``x, y, r`` with their
-    ``circle_class`` (people's legs included, class PERSON)."""
+    ``circle_class`` (people's legs included, class PERSON). ``segment_object`` /
+    ``circle_object`` index ``object_ids``, the objects' ids (the indices of
+    ``info["truth"]["beam_object"]``; empty when the producer does not say)."""
 
     segments: FloatArray
     segment_class: NDArray[np.int8]
     circles: FloatArray
     circle_class: NDArray[np.int8]
+    segment_object: NDArray[np.int32] = field(default_factory=_no_index)
+    circle_object: NDArray[np.int32] = field(default_factory=_no_index)
+    object_ids: tuple[str, ...] = ()

@@ -48,6 +48,21 @@ PER_DAY_COLUMNS = (
     "mean_lambda_min",
 )
 
+#: Columns of ``point_classes_per_day.csv``, in order: each reported class's share of a scan's
+#: valid readings averaged over the day's scans (H&W Fig. 6), and precision / recall against
+#: the seen-before truth (:mod:`dynmap_sim.metrics.point_classes`).
+POINT_CLASS_COLUMNS = (
+    "day",
+    "localizer",
+    "dynamic_fraction",
+    "semistatic_fraction",
+    "static_fraction",
+    "dynamic_precision",
+    "dynamic_recall",
+    "semistatic_precision",
+    "semistatic_recall",
+)
+
 _CLASS_COLORS = {
     int(BeamClass.WALL): "black",
     int(BeamClass.FURNITURE): "tab:brown",
@@ -93,6 +108,47 @@ def write_per_day_csv(db: ResultsDB, path: Path) -> Path:
         for row in per_day_rows(db):
             w.writerow(
                 [row["day"], row["localizer"]] + [_fmt(row[c], 6) for c in PER_DAY_COLUMNS[2:]]
+            )
+    return path
+
+
+def point_class_rows(db: ResultsDB) -> list[dict[str, Any]]:
+    """Rows of ``point_classes_per_day.csv`` (day-major, localizers in scenario order), for
+    the localizers that reported point classes (none before results format 3)."""
+    per_loc = [(label, db.point_class_truth_per_day(k)) for k, label in enumerate(db.labels())]
+    days = sorted({d for _, t in per_loc for d in t})
+    rows = []
+    for day in days:
+        for label, tallies in per_loc:
+            t = tallies.get(day)
+            if t is None:
+                continue
+            f = t.fractions()
+            sc = class_scores(t.confusion)
+            rows.append(
+                {
+                    "day": day,
+                    "localizer": label,
+                    "dynamic_fraction": float(f[1]),
+                    "semistatic_fraction": float(f[2]),
+                    "static_fraction": float(f[3]),
+                    "dynamic_precision": sc.precision[0],
+                    "dynamic_recall": sc.recall[0],
+                    "semistatic_precision": sc.precision[1],
+                    "semistatic_recall": sc.recall[1],
+                }
+            )
+    return rows
+
+
+def write_point_classes_csv(rows: list[dict[str, Any]], path: Path) -> Path:
+    """``point_classes_per_day.csv`` from :func:`point_class_rows`."""
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(POINT_CLASS_COLUMNS)
+        for row in rows:
+            w.writerow(
+                [row["day"], row["localizer"]] + [_fmt(row[c], 6) for c in POINT_CLASS_COLUMNS[2:]]
             )
     return path
 
@@ -401,7 +457,8 @@ def _navigation(db: ResultsDB, out: Path) -> StudyReport | None:
 
 
 def write_report(out_dir: str | Path) -> list[Path]:
-    """Write figures, ``summary.md`` and ``per_day.csv`` into a results folder."""
+    """Write figures, ``summary.md`` and ``per_day.csv`` (and ``point_classes_per_day.csv``
+    when a localizer reported point classes) into a results folder."""
     import matplotlib
 
     matplotlib.use("Agg", force=True)
@@ -412,6 +469,9 @@ def write_report(out_dir: str | Path) -> list[Path]:
 
             raise InputError(f"{out}: no finished run to report on")
         written = [write_per_day_csv(db, out / "per_day.csv")]
+        pc_rows = point_class_rows(db)
+        if pc_rows:
+            written.append(write_point_classes_csv(pc_rows, out / "point_classes_per_day.csv"))
         figs = [
             _fig_error_per_day(db, out / "error_per_day.png"),
             _fig_error_over_time(db, out / "error_over_time.png"),

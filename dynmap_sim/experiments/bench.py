@@ -40,7 +40,7 @@ from numpy.typing import NDArray
 from dynmap_sim.agent.localizer import Localizer
 from dynmap_sim.errors import InputError
 from dynmap_sim.experiments.results import LocalizerDiagnostics
-from dynmap_sim.metrics import confusion_matrix
+from dynmap_sim.metrics import PointClassTally, confusion_matrix
 from dynmap_sim.types import Diagnostic, Odometry, PoseEstimate, Prior, Scan
 
 #: A rebalanced assignment must shorten the slowest worker's busy time by this fraction.
@@ -68,7 +68,10 @@ class RunStream:
     ``stamps_s`` ``(T,)`` seconds since midnight; ``odom`` ``(T, 3)`` odometry poses;
     ``scans`` ``(T, n_beams)`` float32 ranges [m] (REP-117 encoded); ``beam_class``
     ``(T, n_beams)`` int8 true beam classes (only for scoring ``point_classes``, never shown
-    to a localizer); ``last_of_day``: ``end_day()`` follows ``end_run()``.
+    to a localizer); ``last_of_day``: ``end_day()`` follows ``end_run()``; ``point_truth``
+    ``(T, n_beams)`` int8 true point classes seen-before (H&W §4.4,
+    :func:`dynmap_sim.metrics.seen_before_point_classes`; None: not known), also only for
+    scoring.
     """
 
     index: int
@@ -78,6 +81,7 @@ class RunStream:
     scans: NDArray[np.float32]
     beam_class: NDArray[np.int8]
     last_of_day: bool
+    point_truth: NDArray[np.int8] | None = None
 
 
 @dataclass
@@ -88,7 +92,9 @@ class LocalizerOutput:
     counts; ``update_s`` wall time in ``update()`` [s]; ``busy_s`` wall time of the whole run
     including the hooks and pickling [s]; ``state`` the pickled localizer after ``end_run``
     (and ``end_day``); ``diagnostics`` what it declared and reported
-    (:class:`DiagnosticsRecorder`).
+    (:class:`DiagnosticsRecorder`); ``point_tally`` its reported point classes against the
+    seen-before truth and their shares of the valid readings
+    (:class:`~dynmap_sim.metrics.PointClassTally`).
     """
 
     estimates: NDArray[np.float64]
@@ -98,6 +104,7 @@ class LocalizerOutput:
     busy_s: float
     state: bytes
     diagnostics: LocalizerDiagnostics = field(default_factory=LocalizerDiagnostics)
+    point_tally: PointClassTally = field(default_factory=PointClassTally)
 
 
 def declared_diagnostics(loc: Localizer) -> tuple[Diagnostic, ...]:
@@ -213,6 +220,7 @@ class LocalizerRun:
         self.cov_diag = np.empty((cap, 3))
         self.diagnostics = DiagnosticsRecorder(loc, cap)
         self.confusion = np.zeros((4, 4), dtype=np.int64)
+        self.point_tally = PointClassTally()
         self.update_s = 0.0
         self.n = 0
         with self._blame(None):
@@ -235,9 +243,11 @@ class LocalizerRun:
         odom_pose: NDArray[np.float64],
         ranges_m: NDArray[np.float32],
         beam_class: NDArray[np.int8],
+        point_truth: NDArray[np.int8] | None = None,
     ) -> PoseEstimate:
         """Feed one scan (fresh copies of the odometry pose and ranges go to the localizer);
-        ``beam_class`` (the truth) only scores reported point classes."""
+        ``beam_class`` and ``point_truth`` (the truth: beam labels, seen-before point
+        classes) only score reported point classes."""
         step = self.n
         if step == len(self.est):
             grown = 2 * len(self.est)
@@ -261,6 +271,7 @@ class LocalizerRun:
                 pc = ex.get("point_classes")
                 if pc is not None:
                     self.confusion += confusion_matrix(beam_class, pc)
+                    self.point_tally.add(pc, ranges_m, point_truth)
         self.n += 1
         return e
 
@@ -315,6 +326,7 @@ class LocalizerRun:
             time.perf_counter() - self.busy0,
             state,
             diagnostics=self.diagnostics.out,
+            point_tally=self.point_tally,
         )
 
 
@@ -322,12 +334,14 @@ def localize_run(label: str, loc: Localizer, stream: RunStream) -> LocalizerOutp
     """Feed one run's recorded stream to one localizer (:class:`LocalizerRun`)."""
     n = len(stream.stamps_s)
     run = LocalizerRun(label, loc, stream.prior, capacity=n)
+    truth = stream.point_truth
     for step in range(n):
         run.update(
             float(stream.stamps_s[step]),
             stream.odom[step],
             stream.scans[step],
             stream.beam_class[step],
+            None if truth is None else truth[step],
         )
     return run.finish(stream.last_of_day)
 

@@ -16,15 +16,16 @@ localizer each scan as it is recorded (:class:`~dynmap_sim.experiments.bench.Loc
 the same calls the localizer bench makes on a recorded stream) and hands the estimate to the
 driver before it acts.
 
-What carries over between runs besides the localizers — the driver and the engine's random
-generator (kidnapping times and places) — is the :class:`EngineState`, which the runner
-checkpoints after every run.
+What carries over between runs besides the localizers — the driver, the engine's random
+generator (kidnapping times and places) and where the robot has seen each object (the
+seen-before point-class truth, :class:`~dynmap_sim.metrics.SeenPlaces`) — is the
+:class:`EngineState`, which the runner checkpoints after every run.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -37,7 +38,14 @@ from dynmap_sim.experiments.bench import LocalizerOutput, LocalizerRun, RunStrea
 from dynmap_sim.experiments.drivers import Driver, RunStart, StepInput
 from dynmap_sim.experiments.drivers.tour import plan_through_waypoints, static_clearance_grid
 from dynmap_sim.experiments.scenario import Kidnapping, PriorConfig
-from dynmap_sim.metrics import clearances, goal_reached, path_length_m
+from dynmap_sim.metrics import (
+    SeenPlaces,
+    clearances,
+    goal_reached,
+    object_places,
+    path_length_m,
+    seen_before_point_classes,
+)
 from dynmap_sim.truth import RunSlot, WorldFacts
 from dynmap_sim.types import BeamClass, Odometry, Prior, Scan
 
@@ -64,10 +72,13 @@ class EngineState:
     driver before it acts.
 
     What carries over between runs besides the localizers (checkpointed after each run):
-        the ``driver`` and the engine's ``rng`` (kidnapping times and places)."""
+        the ``driver``, the engine's ``rng`` (kidnapping times and places) and ``seen``, the
+        places at which the robot has seen each object in the runs so far (the truth of
+        H&W's point classes: an object not seen at its place before is semi-static)."""
 
     driver: Driver
     rng: np.random.Generator
+    seen: SeenPlaces = field(default_factory=SeenPlaces)
 
 
 @dataclass(frozen=True)
@@ -192,6 +203,18 @@ class EpisodeLoop:
         driver.begin_run(RunStart(prior, start if sees else None, obstacles if sees else None))
         kidnaps = self._kidnaps(slot, rng)
         static_grid = static_clearance_grid(obstacles, GRID_RESOLUTION_M)
+        # the seen-before truth of H&W's point classes: each object's place now, and whether
+        # the robot saw it there in an earlier run
+        n_obj = len(obstacles.object_ids)
+        places = object_places(
+            n_obj,
+            obstacles.segments,
+            obstacles.segment_object,
+            obstacles.circles,
+            obstacles.circle_object,
+        )
+        seen_mask = state.seen.seen_before(obstacles.object_ids, places)
+        hit_objects = np.zeros(n_obj, dtype=bool)
         radius_m = float(self.u.robot_radius_m)
         free_clearance_m = radius_m + FREE_MARGIN_M
         shortest_m = self._shortest_path_m(start, static_grid, free_clearance_m)
@@ -207,6 +230,7 @@ class EpisodeLoop:
         odom_l: list[FloatArray] = []
         scan_l: list[NDArray[np.float32]] = []
         class_l: list[NDArray[np.int8]] = []
+        point_l: list[NDArray[np.int8]] = []
         truth_l: list[FloatArray] = []
         coll_l: list[bool] = []
         terminated = truncated = False
@@ -221,11 +245,17 @@ class EpisodeLoop:
             odom_l.append(np.array(obs["odom"], dtype=np.float64))
             scan_l.append(np.array(obs["scan"], dtype=np.float32))
             class_l.append(np.array(truth["beam_class"], dtype=np.int8))
+            beam_object = np.asarray(truth.get("beam_object", ()), dtype=np.int64)
+            if beam_object.shape != class_l[-1].shape:
+                beam_object = np.full(class_l[-1].shape, -1, dtype=np.int64)
+            point_l.append(seen_before_point_classes(class_l[-1], beam_object, seen_mask))
+            hit = beam_object[(beam_object >= 0) & (beam_object < n_obj)]
+            hit_objects[hit] = True
             truth_l.append(pose)
             coll_l.append(collision)
             person_l.append(self._person_clearance_m(pose, radius_m))
             if lockstep is not None:
-                estimate = lockstep.update(t_s, odom_l[-1], scan_l[-1], class_l[-1])
+                estimate = lockstep.update(t_s, odom_l[-1], scan_l[-1], class_l[-1], point_l[-1])
             progress_frac = float(info.get("route_progress", progress_frac))
             if terminated or truncated or driver.done:
                 break
@@ -266,6 +296,7 @@ class EpisodeLoop:
         finished = driver.done
         driver_stats = dict(driver.stats())
         driver.end_run()
+        state.seen.remember(obstacles.object_ids, places, hit_objects & ~_people(obstacles))
         truth_arr = np.asarray(truth_l, dtype=np.float64).reshape(-1, 3)
         static_circles = obstacles.circles[obstacles.circle_class != BeamClass.PERSON]
         clearance = np.minimum(
@@ -287,6 +318,7 @@ class EpisodeLoop:
             scans=np.asarray(scan_l, dtype=np.float32).reshape(len(t_l), -1),
             beam_class=np.asarray(class_l, dtype=np.int8).reshape(len(t_l), -1),
             last_of_day=last_of_day,
+            point_truth=np.asarray(point_l, dtype=np.int8).reshape(len(t_l), -1),
         )
         return Episode(
             index=i,
@@ -327,3 +359,15 @@ class EpisodeLoop:
         obs = self.u.obstacles()
         legs = obs.circles[obs.circle_class == BeamClass.PERSON]
         return float(clearances(pose[:2], radius_m, np.zeros((0, 4)), legs)[0])
+
+
+def _people(obstacles: Any) -> NDArray[np.bool_]:
+    """Per object index of ``obstacles``: a person (people are never remembered as seen)."""
+    n = len(obstacles.object_ids)
+    out = np.zeros(n, dtype=bool)
+    obj = np.asarray(obstacles.circle_object, dtype=np.int64)
+    cls = np.asarray(obstacles.circle_class)
+    if obj.shape == cls.shape:
+        legs = obj[cls == BeamClass.PERSON]
+        out[legs[(legs >= 0) & (legs < n)]] = True
+    return out

@@ -1,7 +1,7 @@
 """The results store: one SQLite database per experiment.
 
 ``results.db`` in the results folder holds, in WAL mode with one transaction per run (results
-format 2, ``results_format`` in ``meta``):
+format 3, ``results_format`` in ``meta``):
 
 * ``meta`` — scenario (JSON), its content hash, seed, day range, laser spec, results format;
 * ``localizers`` — index, label, class name, parameters;
@@ -15,7 +15,14 @@ format 2, ``results_format`` in ``meta``):
   or INTEGER for a scalar, else a BLOB of the value's little-endian bytes);
 * ``runs``, ``run_summaries``, ``day_summaries`` — per-run and per-day summaries;
 * ``events`` — driver and experiment events (skipped waypoints, detours, kidnappings);
-* ``point_classes`` — per run and localizer, the 4x4 point-class confusion matrix;
+* ``point_classes`` — per run and localizer, the 4x4 point-class confusion matrix against the
+  beam classes (:data:`~dynmap_sim.metrics.BEAM_TO_POINT_CLASS`: furniture always
+  semi-static);
+* ``point_class_truth`` — per run and localizer that reported point classes, the 4x4
+  confusion against the seen-before truth (H&W §4.4: semi-static = an object not seen at its
+  place in an earlier run, :mod:`dynmap_sim.metrics.point_classes`), the sum over scans of
+  each reported class's share of the scan's valid readings, and the number of those scans
+  (format 3);
 * ``timescale_counts`` — the per-run diagnostic of that name: per run and localizer, how often
   each timescale λ1–λ5 was selected (every selection of every scan, B&D Fig. 12);
 * ``run_diagnostics`` — every other declared per-run diagnostic, per run and localizer (the
@@ -50,7 +57,9 @@ runs finished before are kept and ``--resume`` continues after them once there i
 
 Results format 1 (no ``results_format`` in ``meta``: written before localizers declared their
 diagnostics) has the same tables but ``diagnostics``, ``run_diagnostics`` and ``artifacts``;
-it is read (report, export, check) but not continued.
+format 2 has all but ``point_class_truth`` (written before the seen-before truth). Both are
+read (report, export, check; what they lack is left out) but not continued: the
+seen-before truth of a run depends on every run before it.
 """
 
 from __future__ import annotations
@@ -74,7 +83,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynmap_sim.errors import InputError
-from dynmap_sim.metrics import NavRunSummary, RunSummary, day_summary, n_onsets, scan_errors
+from dynmap_sim.metrics import (
+    NavRunSummary,
+    PointClassTally,
+    RunSummary,
+    day_summary,
+    n_onsets,
+    scan_errors,
+)
 from dynmap_sim.types import Diagnostic
 
 DB_NAME = "results.db"
@@ -113,6 +129,9 @@ CREATE TABLE IF NOT EXISTS events (
     day INTEGER, run INTEGER, step INTEGER, t_s REAL, kind TEXT, detail TEXT);
 CREATE TABLE IF NOT EXISTS point_classes (
     loc INTEGER, day INTEGER, run INTEGER, confusion BLOB, PRIMARY KEY (loc, day, run));
+CREATE TABLE IF NOT EXISTS point_class_truth (
+    loc INTEGER, day INTEGER, run INTEGER, confusion BLOB, fraction_sum BLOB, n_scans INTEGER,
+    PRIMARY KEY (loc, day, run));
 CREATE TABLE IF NOT EXISTS timescale_counts (
     loc INTEGER, day INTEGER, run INTEGER, counts BLOB, PRIMARY KEY (loc, day, run));
 CREATE TABLE IF NOT EXISTS geometry (
@@ -138,7 +157,7 @@ CREATE TABLE IF NOT EXISTS checkpoint (
 """
 
 #: The layout this version writes (``results_format`` in ``meta``; none: format 1).
-RESULTS_FORMAT = 2
+RESULTS_FORMAT = 3
 
 #: Per-scan diagnostics with a column of ``estimates`` in every results format (NULL where a
 #: localizer does not declare or report them), and the column's type.
@@ -217,6 +236,8 @@ class RunRecord:
     nav: NavRunSummary | None = None
     #: what the driver handed over after the run (name -> bytes)
     driver_artifacts: dict[str, bytes] = field(default_factory=dict)
+    #: per localizer, its point classes against the seen-before truth (empty: none)
+    point_tallies: list[PointClassTally] = field(default_factory=list)
 
     def scan_diagnostic(self, loc: int, name: str) -> NDArray[np.float64] | None:
         """Per-scan values ``(T, ...)`` of diagnostic ``name`` of localizer ``loc`` (None
@@ -453,7 +474,12 @@ class ResultsDB:
         if self.format != RESULTS_FORMAT:
             raise InputError(
                 f"{self.path}: results format {self.format} (written by an earlier dynmap_sim, "
-                "before localizers declared their diagnostics) can be reported, exported and "
+                + (
+                    "before localizers declared their diagnostics"
+                    if self.format == 1
+                    else "before the seen-before point-class truth"
+                )
+                + ") can be reported, exported and "
                 f"checked but not continued by this version (format {RESULTS_FORMAT}); start a "
                 "new experiment with another --out"
             )
@@ -533,6 +559,7 @@ class ResultsDB:
                 "estimates",
                 "run_summaries",
                 "point_classes",
+                "point_class_truth",
                 "timescale_counts",
                 "run_diagnostics",
                 "geometry",
@@ -586,6 +613,19 @@ class ResultsDB:
                     "INSERT INTO point_classes VALUES (?,?,?,?)",
                     (k, d, r, np.ascontiguousarray(rec.confusion[k], dtype="<i8").tobytes()),
                 )
+                tally = rec.point_tallies[k] if k < len(rec.point_tallies) else None
+                if tally is not None and (tally.n_scans or tally.confusion.any()):
+                    self.con.execute(
+                        "INSERT INTO point_class_truth VALUES (?,?,?,?,?,?)",
+                        (
+                            k,
+                            d,
+                            r,
+                            np.ascontiguousarray(tally.confusion, dtype="<i8").tobytes(),
+                            np.ascontiguousarray(tally.fraction_sum, dtype="<f8").tobytes(),
+                            int(tally.n_scans),
+                        ),
+                    )
                 self._write_run_diagnostics(k, d, r, g)
                 for name, value in g.artifacts.items():
                     self.con.execute(
@@ -916,6 +956,29 @@ class ResultsDB:
         uniq = np.unique(days)
         sums = [values[days == day].sum(axis=0) for day in uniq]
         return uniq, np.array(sums, dtype=values.dtype).reshape(len(uniq), *values.shape[1:])
+
+    def point_class_truth_per_day(self, loc: int) -> dict[int, PointClassTally]:
+        """Localizer ``loc``'s point classes against the seen-before truth, summed per day
+        (day -> :class:`~dynmap_sim.metrics.PointClassTally`; empty before results format 3
+        or when it reported none)."""
+        out: dict[int, PointClassTally] = {}
+        if not self._has_table("point_class_truth"):
+            return out
+        rows = self.con.execute(
+            "SELECT day, confusion, fraction_sum, n_scans FROM point_class_truth WHERE loc = ? "
+            "ORDER BY day, run",
+            (loc,),
+        ).fetchall()
+        for day, conf, frac, n in rows:
+            t = out.setdefault(int(day), PointClassTally())
+            t.merge(
+                PointClassTally(
+                    np.frombuffer(conf, dtype="<i8").reshape(4, 4).astype(np.int64),
+                    np.frombuffer(frac, dtype="<f8").astype(np.float64),
+                    int(n),
+                )
+            )
+        return out
 
     def timescale_counts_per_day(self, loc: int) -> tuple[np.ndarray, np.ndarray]:
         """Days and ``(n_days, n_timescales)`` counts of every timescale selection of

@@ -43,9 +43,10 @@ from dynmap_sim.experiments.scenario import Scenario
 from dynmap_sim.metrics import NavRunSummary, RunSummary, nav_run_summary, run_summary
 
 #: The layout of what the runner checkpoints (format 1: a dict of the tour driver and the RNG,
-#: before the episode loop; 2: an :class:`EngineState` with a registered Driver). Resuming
-#: needs the same format; it is stored in the results' ``meta``.
-CHECKPOINT_FORMAT = 2
+#: before the episode loop; 2: an :class:`EngineState` with a registered Driver; 3: and the
+#: places each object was seen at, the truth of H&W's point classes). Resuming needs the same
+#: format; it is stored in the results' ``meta``.
+CHECKPOINT_FORMAT = 3
 
 
 def default_out_dir(scenario: Scenario) -> Path:
@@ -399,6 +400,7 @@ class ExperimentRunner:
             segment_class=sim.segment_class,
             update_s=np.array([o.update_s for o in outs], dtype=np.float64),
             diagnostics=[o.diagnostics for o in outs],
+            point_tallies=[o.point_tally for o in outs],
             nav=self._nav_summary(sim),
             driver_artifacts=dict(sim.driver_artifacts or {}),
         )

@@ -33,10 +33,16 @@ from dynmap_sim.metrics.navigation import (
 )
 from dynmap_sim.metrics.point_classes import (
     BEAM_TO_POINT_CLASS,
+    PLACE_TOL_M,
     POINT_CLASSES,
     ClassScores,
+    PointClassTally,
+    SeenPlaces,
     class_scores,
     confusion_matrix,
+    object_places,
+    point_confusion,
+    seen_before_point_classes,
 )
 from dynmap_sim.metrics.pose_error import (
     RPE_UNITS,
@@ -98,6 +104,12 @@ __all__ = [
     "ate",
     "class_scores",
     "confusion_matrix",
+    "PLACE_TOL_M",
+    "PointClassTally",
+    "SeenPlaces",
+    "object_places",
+    "point_confusion",
+    "seen_before_point_classes",
     "day_summary",
     "error_stats",
     "heading_errors",
