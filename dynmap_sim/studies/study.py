@@ -69,7 +69,12 @@ class Study(ABC):
 
 #: The study registry.
 STUDIES: Registry[Study] = Registry(
-    "study", Study, builtin_modules=("dynmap_sim.studies.biber_duckett.study",)
+    "study",
+    Study,
+    builtin_modules=(
+        "dynmap_sim.studies.biber_duckett.study",
+        "dynmap_sim.studies.hentschel_wagner.study",
+    ),
 )
 
 #: Class decorator: make a :class:`Study` available under a name.

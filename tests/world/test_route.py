@@ -11,7 +11,10 @@ from dynmap_sim.world.route import (
 )
 
 
-@pytest.mark.parametrize("name,seeds", [("lab", (0,)), ("apartment", (0, 1)), ("office", (0, 1))])
+@pytest.mark.parametrize(
+    "name,seeds",
+    [("lab", (0,)), ("apartment", (0, 1)), ("apartment-hw", (0, 1)), ("office", (0, 1))],
+)
 def test_route_clearance_over_the_whole_calendar(name, seeds):
     spec = load_world(name)
     for seed in seeds:
@@ -22,8 +25,9 @@ def test_route_clearance_over_the_whole_calendar(name, seeds):
             assert c >= ROUTE_CLEARANCE_M, (name, seed, slot.day, slot.run, c)
 
 
-def test_apartment_route_blocked_from_day_22_on_purpose():
-    spec = load_world("apartment")
+@pytest.mark.parametrize("name", ["apartment", "apartment-hw"])
+def test_apartment_route_blocked_from_day_22_on_purpose(name):
+    spec = load_world(name)
     w = World(spec, seed=0)
     for day in range(1, 29):
         snap = w.snapshot(day, 1)
@@ -50,3 +54,23 @@ def test_start_pose_is_on_the_route():
     for name in ("lab", "apartment", "office"):
         spec = load_world(name)
         assert tuple(spec.robot.route[0]) == pytest.approx(spec.robot.start[:2])
+
+
+def test_apartment_hw_hides_the_walls_near_the_route_on_days_8_to_11_only():
+    """H&W §7.3: static MCL got no pose on days 8-11, the obstacles hid most known walls."""
+    w = World(load_world("apartment-hw"), seed=0)
+    panels = {"large_board", "panel_south", "panel_east"}
+    poses = set()
+    for day in range(1, 29):
+        present = {o.id for o in w.snapshot(day, 1).objects} & panels
+        assert present == (panels if 8 <= day <= 11 else set()), day
+        if present:
+            poses.add(
+                tuple(
+                    round(float(v), 2)
+                    for o in w.snapshot(day, 1).objects
+                    if o.id in panels
+                    for v in o.polygon.ravel()
+                )
+            )
+    assert len(poses) == 4  # another configuration each day

@@ -1,0 +1,174 @@
+"""The Hentschel & Wagner study: registered, applies to results with point classes, writes
+its figures and findings on a small results folder."""
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parents[1] / "experiments"))
+
+from dynmap_sim.analysis.report import write_report  # noqa: E402
+from dynmap_sim.experiments.results import ResultsDB  # noqa: E402
+from dynmap_sim.experiments.runner import ExperimentRunner  # noqa: E402
+from dynmap_sim.experiments.scenario import load_scenario, parse_scenario  # noqa: E402
+from dynmap_sim.studies.hentschel_wagner import data as hw_data  # noqa: E402
+from dynmap_sim.studies.hentschel_wagner.figures import plot_ltm  # noqa: E402
+from dynmap_sim.studies.hentschel_wagner.findings import FINDING_KEYS, evaluate  # noqa: E402
+from dynmap_sim.studies.study import STUDIES, study_of_finding  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory):
+    """Days 1-2 of the H&W apartment, 8 s a run: a localizer with point classes and a
+    long-term map, and static MCL on the prior's walls."""
+    tmp = tmp_path_factory.mktemp("hw")
+    scn = parse_scenario(
+        {
+            "name": "hw-small",
+            "world": str(ROOT / "worlds" / "apartment-hw.toml"),
+            "days": [1, 2],
+            "driver": {"max_run_s": 8.0},
+            "prior": {"map": "walls", "initial_pose": "known"},
+            "sensor": {"preset": "urg-04lx", "overrides": {"range_max_m": 4.0}},
+            "localizers": [
+                {"name": "point_class_localizers:WithLongTermMap", "label": "hw"},
+                {
+                    "name": "static-mcl",
+                    "label": "static-mcl walls",
+                    "params": {"config": "tuned", "map_source": "prior-walls"},
+                },
+            ],
+        },
+        tmp / "s.toml",
+    )
+    out = tmp / "o"
+    ExperimentRunner(scn, out, scn.days, 0, resume=False, overwrite=True, workers=1).run(
+        progress=False
+    )
+    return out
+
+
+def test_registered_and_applies_only_with_point_classes(small, tmp_path):
+    assert "hentschel-wagner" in STUDIES.names()
+    study = STUDIES.get("hentschel-wagner")()
+    assert study_of_finding("hw_static_mcl_fails_days_8_11").name == "hentschel-wagner"
+    with ResultsDB.open(small) as db:
+        assert study.applies(db)
+        assert hw_data.find_subject(db) == (0, "hw")
+        data = hw_data.load(db)
+    assert [b[1:] for b in data.baselines] == [("static-mcl walls", True)]
+    assert data.shares is not None and data.shares.days.tolist() == [1, 2]
+    # day 1 nothing was seen before: the truth's semistatic share is the furniture's; day 2 none
+    assert data.shares.truth[0, 2] > 0.1 and data.shares.truth[1, 2] == 0.0
+
+
+def test_report_writes_the_study_figures_and_findings(small):
+    names = {p.name for p in write_report(small)}
+    assert {
+        "hw_point_shares_per_day.png",
+        "hw_error_per_day.png",
+        "hw_ltm_day7.png",  # the latest map before day 7: day 2's
+        "hw_findings.md",
+        "hw_findings.json",
+        "point_classes_per_day.csv",
+    } <= names
+    assert "hw_ltm_day22.png" not in names  # no map after day 22 in a 2-day experiment
+    for n in ("hw_point_shares_per_day.png", "hw_ltm_day7.png"):
+        assert (small / n).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    found = {f["key"]: f for f in json.loads((small / "hw_findings.json").read_text())}
+    assert list(found) == list(FINDING_KEYS)
+    # two days: trends are not measurable, never a verdict
+    assert found["hw_semistatic_falls_week1"]["holds"] is None
+    assert "not measurable: only 2 days" in found["hw_semistatic_falls_week1"]["measured"]
+    assert found["hw_static_mcl_fails_days_8_11"]["holds"] is None
+    assert "## Hentschel & Wagner" in (small / "summary.md").read_text()
+
+
+def test_long_term_map_read_from_the_day_artifacts(small):
+    with ResultsDB.open(small) as db:
+        g = hw_data.ltm_grid(db, 0, 7)
+        assert hw_data.ltm_day(db, 0, 7) == 2 and hw_data.ltm_day(db, 0, 0) is None
+    assert g is not None and g.prob.shape == (40, 30) and g.resolution_m == 0.05
+    assert g.origin_m == (0.5, 1.0) and g.extent == pytest.approx((0.5, 2.0, 1.0, 3.0))
+    # day 2's slot (2) holds the wall, as log-odds 3 -> p 0.95
+    assert g.prob[5:35, 10] == pytest.approx(1 / (1 + np.exp(-3.0)))
+    assert g.prob[0, 0] == pytest.approx(1 / (1 + np.exp(2.0)))
+
+
+def test_ltm_figure_with_route_memory(tmp_path):
+    grid = hw_data.LTMGrid(np.random.default_rng(0).random((20, 20)), (0.0, 0.0), 0.05, "t")
+    mem = {
+        "routes": [
+            {
+                "prior": True,
+                "ids": [0, 1, 2],
+                "waypoints": [{"x_m": x, "y_m": 0.5} for x in (0.1, 0.5, 0.9)],
+            },
+            {
+                "prior": False,
+                "ids": [3, 4],
+                "waypoints": [{"x_m": 0.5, "y_m": y} for y in (0.2, 0.8)],
+            },
+        ],
+        "blocked": [[1, 2]],
+    }
+    p = plot_ltm(grid, tmp_path / "m.png", "t", walls=np.array([[0, 0, 1, 0.0]]), route_memory=mem)
+    assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_findings_on_a_constructed_28_day_experiment():
+    """The verdicts on made-up per-day figures shaped like the paper's."""
+    days = np.arange(1, 29)
+    semi = np.where(days <= 7, 0.23 - 0.033 * (days - 1), np.where(days <= 14, 0.095, 0.035))
+    dyn = np.where((days >= 15) & (days <= 21), 0.092, 0.005)
+    fr = np.column_stack([np.zeros(28), dyn, semi, 1 - dyn - semi])
+    conf = np.zeros((4, 4), np.int64)
+    conf[1, 1], conf[1, 3], conf[3, 1] = 95, 5, 2
+    tallies = [hw_data.PointClassTally(conf.copy(), f.copy(), 1) for f in fr]
+    shares = hw_data.PointShares(days, fr, fr.copy(), tallies)
+    err = np.where(days <= 7, 0.14 - 0.007 * (days - 1), 0.09)
+    mx = err * 2
+    mx[8] = 0.48
+    subj = hw_data.DaySeries("am", days, err, mx, np.zeros(28))
+    lost = np.where((days >= 8) & (days <= 11), 0.9, 0.0)
+    walls = hw_data.DaySeries("mcl", days, err + 0.05, mx + 0.1, lost)
+    data = hw_data.HWData(
+        subject=(0, "am"),
+        baselines=[(1, "mcl", True)],
+        series={"am": subj, "mcl": walls},
+        shares=shares,
+        nav=[],
+        n_days=28,
+        bounds=None,
+    )
+    got = {f.key: f.holds for f in evaluate(data)}
+    assert got == {
+        "hw_semistatic_falls_week1": True,
+        "hw_semistatic_higher_week2": True,
+        "hw_dynamic_rises_week3": True,
+        "hw_week4_like_end_of_week1": True,
+        "hw_error_falls_week1": True,
+        "hw_worst_day_in_week2": True,
+        "hw_never_lost": True,
+        "hw_static_mcl_tracks_week1": True,
+        "hw_static_mcl_fails_days_8_11": True,
+        "hw_goal_every_day": None,  # no navigation measures
+        "hw_dynamic_points_scored": True,  # precision 95/97, recall 95/100
+    }
+    # the walls baseline tracking on day 9 breaks its finding
+    walls.lost_fraction[8] = 0.1
+    assert {f.key: f.holds for f in evaluate(data)}["hw_static_mcl_fails_days_8_11"] is False
+
+
+def test_the_shipped_scenario_validates():
+    scn = load_scenario(ROOT / "worlds" / "scenarios" / "apartment-28d-hw.toml")
+    assert scn.world_path.name == "apartment-hw.toml"
+    labels = scn.labels
+    assert {"static-mcl walls", "static-mcl tuned", "dynamic-map"} <= set(labels)
+    assert scn.driver.kind == "autonomous" and scn.driver.speed_mps <= 0.2
+    assert scn.sensor.overrides["range_max_m"] == 4.0
