@@ -38,9 +38,10 @@ nav2 composes its servers:
    the robot frame, so a wrong estimate or a controller bug cannot drive into an obstacle.
 
 The run ends for the stack when the estimate is within ``goal_tolerance_m`` of the goal
-(:attr:`NavigationStack.done`); a route that ends where it starts (a loop, like H&W's) counts
-only once the robot has been ``goal_arm_m`` away from it. Everything here sees only what the
-agent sees: estimate, scan, odometry, the prior.
+(:attr:`NavigationStack.done`); a route that ends where it starts (a loop) is driven through
+via points (``loop_via_fractions`` of its length, each passed within ``via_tolerance_m``)
+before its end counts, and the end only once the robot has been ``goal_arm_m`` away from it.
+Everything here sees only what the agent sees: estimate, scan, odometry, the prior.
 
 Time: ``t_s`` of :meth:`NavigationStack.step` is the time within the run's day [s] (seconds
 since midnight, or since the run started: anything below a day); the route memory's clock is
@@ -68,6 +69,7 @@ from dynmap_sim.agent.grid import OccupancyGrid
 from dynmap_sim.agent.navigation.route_memory import (
     JOIN,
     Edge,
+    Route,
     RouteGraph,
     RouteMemory,
     RouteMemoryParams,
@@ -118,6 +120,16 @@ class StackParams:
     #: A loop route ends at its start: the goal counts only after the robot has been this far
     #: from it [m] (also while it is nearer, planning leaves the goal: no zero-length plan).
     goal_arm_m: float = 1.0
+    #: A loop (a prior route whose end is within ``goal_arm_m`` of its start) is driven
+    #: through via points at these fractions of its length, in order, then to its end (nav2's
+    #: NavigateThroughPoses). Without them the run's task is "reach the start again": once
+    #: the route memory joins a recorded route near the start to one near the end, route A*
+    #: takes that shortcut (office floor: 0 of 20 runs went round, each "reached" its goal
+    #: after 2-6 m). The paper's routes had a start and an end (§7.1); empty: goal only.
+    loop_via_fractions: tuple[float, ...] = (1.0 / 3.0, 2.0 / 3.0)
+    #: A via point is passed when the estimate comes this close [m]: wider than the goal's
+    #: tolerance, as a via point only fixes the way round, and a detour may pass it aside.
+    via_tolerance_m: float = 0.5
     #: How far along the path ahead the corridor is checked for a cut at each replan [m]: the
     #: costmap marks obstacles up to 2.5 m, so a block is planned around before the follower
     #: (which probes 1 m) has to stop in front of it.
@@ -161,6 +173,13 @@ class StackParams:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0.0):
                 raise ValueError(f"StackParams.{name} must be finite and > 0, got {v!r}")
+        if not all(0.0 < f < 1.0 for f in self.loop_via_fractions) or list(
+            self.loop_via_fractions
+        ) != sorted(self.loop_via_fractions):
+            raise ValueError(
+                "StackParams.loop_via_fractions must be increasing fractions in (0, 1), got "
+                f"{self.loop_via_fractions!r}"
+            )
         if self.cut_offsets < 1 or self.cut_offsets % 2 == 0:
             raise ValueError(
                 f"StackParams.cut_offsets must be odd and >= 1, got {self.cut_offsets}"
@@ -212,6 +231,8 @@ class NavigationStack:
         self.costmap: Costmap | None = None
         self.goal_xy: FloatArray | None = None
         self._goal_id: int | None = None
+        #: a loop's via points ``[xy, waypoint id or None]``, in order (kept across runs)
+        self._vias: list[tuple[FloatArray, int | None]] = []
         self._pending_grid: OccupancyGrid | None = None
         self._graph: RouteGraph | None = None
         self._new_run_state()
@@ -248,6 +269,7 @@ class NavigationStack:
         self._last_plan_t: float | None = None
         self._force_plan = False
         self._armed = False
+        self._via_k = 0  # via points passed in this run
         self._day_s = 0.0
         self._costmap_t: float | None = None
         self._global: ClearanceGrid | None = None  # the costmap's clearance at the last plan
@@ -279,6 +301,7 @@ class NavigationStack:
             prior_route = next(iter(self.route_memory.routes.values()))
             self._goal_id = int(prior_route.ids[-1])
             self.goal_xy = route[-1].copy()
+            self._vias = self._loop_vias(prior_route)
         else:
             self.route_memory.reset_run()
             if route is not None and not np.allclose(route[-1], self.goal_xy):
@@ -294,6 +317,35 @@ class NavigationStack:
         self._graph = None
         self._event(0.0, "begin_run", f"day {prior.day} run {prior.run}")
 
+    def _loop_vias(self, prior_route: Route) -> list[tuple[FloatArray, int | None]]:
+        """The via points of a loop: the prior route's waypoints nearest the fractions
+        ``loop_via_fractions`` of its length; none for a route that is no loop."""
+        xy = prior_route.xy
+        if np.hypot(*(xy[-1] - xy[0])) > self.params.goal_arm_m:
+            return []
+        cum = prior_route.cumulative_m()
+        vias = []
+        for f in self.params.loop_via_fractions:
+            k = int(np.argmin(np.abs(cum - f * cum[-1])))
+            vias.append((xy[k].copy(), int(prior_route.ids[k])))
+        return vias
+
+    def _target(self) -> tuple[FloatArray, int | None, bool]:
+        """What the robot heads for now: ``(xy, waypoint id, is_via)``; the next via point
+        of a loop, else the goal."""
+        if self._via_k < len(self._vias):
+            xy, wid = self._vias[self._via_k]
+            return xy, wid, True
+        assert self.goal_xy is not None
+        return self.goal_xy, self._goal_id, False
+
+    def _leave_target_m(self) -> float:
+        """``leave_goal_m`` of the planners: a loop's start must be left before it can end the
+        run (not for a via point, which lies away from the start)."""
+        if self._target()[2] or self._armed:
+            return 0.0
+        return self.params.goal_arm_m
+
     def set_static_map(self, grid: OccupancyGrid) -> None:
         """The costmap's static layer := a localizer's own map (e.g. its first-run SLAM map)
         for the run in progress; called before :meth:`begin_run` it serves the next run."""
@@ -308,8 +360,10 @@ class NavigationStack:
         if self.route_memory is None:
             return 0
         g = self.route_memory.graph()
-        goal = self._goal_node(g) if g.node_ids.size else None
-        keep = () if goal is None else (goal,)
+        keep = []
+        if g.node_ids.size:  # the goal and the via points must stay reachable
+            keep = [self._node_of(g, self.goal_xy, self._goal_id)]
+            keep += [self._node_of(g, xy, wid) for xy, wid in self._vias]
         n = self.route_memory.forget(self._day_s + self._last_t, keep=keep)
         if n:
             self._event(self._last_t, "forget", f"{n} route segments")
@@ -385,10 +439,22 @@ class NavigationStack:
             self._local = None
         self.route_memory.observe(pose, self._day_s + t_s)
         assert self.goal_xy is not None
+        while self._via_k < len(self._vias):
+            via_xy = self._vias[self._via_k][0]
+            if np.hypot(*(pose[:2] - via_xy)) > p.via_tolerance_m:
+                break
+            self._via_k += 1
+            self._force_plan = True
+            self._event(t_s, "via", f"via point {self._via_k} of {len(self._vias)} passed")
         to_goal = float(np.hypot(*(pose[:2] - self.goal_xy)))
         if not self._armed and to_goal > self.params.goal_arm_m:
             self._armed = True
-        if not self.done and self._armed and to_goal <= self.params.goal_tolerance_m:
+        if (
+            not self.done
+            and self._armed
+            and self._via_k == len(self._vias)
+            and to_goal <= self.params.goal_tolerance_m
+        ):
             self.done = True
             self._event(t_s, "goal", f"{to_goal:.2f} m from the goal")
         if self.done or self.gave_up:
@@ -479,8 +545,8 @@ class NavigationStack:
         return self._graph
 
     def _route_plan(self, pose: FloatArray, ignore_blocks: bool = False) -> PlannedPath | None:
-        """Route A* from the estimate to the goal node (H&W §6.2); with ``ignore_blocks`` on
-        the graph without its blocks."""
+        """Route A* from the estimate to the target's node (the goal or a loop's next via
+        point; H&W §6.2); with ``ignore_blocks`` on the graph without its blocks."""
         assert self.route_memory is not None and self.goal_xy is not None
         self._graph = None
         if ignore_blocks:
@@ -494,20 +560,29 @@ class NavigationStack:
         if g.node_ids.size == 0:
             return None
         self.plans += 1
+        target_xy = self._target()[0]
         return plan_route(
             g,
             pose[:2],
-            self.goal_xy,
+            target_xy,
             self.params.speed_mps,
             goal_id=self._goal_node(g),
-            leave_goal_m=0.0 if self._armed else self.params.goal_arm_m,
+            leave_goal_m=self._leave_target_m(),
         )
 
+    @staticmethod
+    def _node_of(g: RouteGraph, xy: FloatArray | None, waypoint_id: int | None) -> int:
+        """A target's node on ``g``: its waypoint while the graph has it, else the node
+        nearest its position."""
+        if waypoint_id is not None and waypoint_id in g.index:
+            return waypoint_id
+        return g.nearest_node(xy)
+
     def _goal_node(self, g: RouteGraph) -> int:
-        """The goal's node on ``g``: the prior route's end, else the node nearest the goal."""
-        assert self.goal_xy is not None
-        goal = self._goal_id
-        return goal if goal is not None and goal in g.index else g.nearest_node(self.goal_xy)
+        """The current target's node on ``g`` (:meth:`_target`): the prior route's end or a
+        via point, else the node nearest it."""
+        xy, waypoint_id, _ = self._target()
+        return self._node_of(g, xy, waypoint_id)
 
     def _bridged_plan(self, pose: FloatArray, grid: ClearanceGrid) -> PlannedPath | None:
         """Route A* when the route graph cannot reach the goal (e.g. forgetting dropped the
@@ -550,10 +625,10 @@ class NavigationStack:
         plan = plan_route(
             RouteGraph(g.node_ids, g.xy, g.v_max_mps, g.half_width_m, [*g.edges, *bridges]),
             pose[:2],
-            self.goal_xy,
+            goal_xy,
             p.speed_mps,
             goal_id=goal,
-            leave_goal_m=0.0 if self._armed else p.goal_arm_m,
+            leave_goal_m=self._leave_target_m(),
         )
         if plan is None or not any(e in legs for e in plan.edges):
             return plan
@@ -798,11 +873,11 @@ class NavigationStack:
         while one is followed)."""
         if self.mode in (DETOUR, GRID) and self._path is not None and not self.follower.done:
             return
-        assert self.goal_xy is not None
+        target_xy = self._target()[0]
         self.plans += 1
         start = grid.nearest_free(pose[:2], self.min_clearance_m, 0.5)
-        path = None if start is None else self.planner.plan(start, self.goal_xy, grid)
-        if path is not None and not self._armed:
+        path = None if start is None else self.planner.plan(start, target_xy, grid)
+        if path is not None and self._leave_target_m() > 0.0:
             # at a loop's start the goal is here: a grid path alone has nowhere to go (route
             # A* and the bridged plan, which drive the route, found nothing)
             path = None
