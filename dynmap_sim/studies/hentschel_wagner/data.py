@@ -77,6 +77,8 @@ class HWData:
     nav: list[tuple[int, int, Any]]
     n_days: int
     bounds: tuple[float, float, float, float] | None
+    #: the scenario's driver (``autonomous``: the robot drove itself, as H&W's did)
+    driver_kind: str | None = None
 
 
 def localizer_rows(db: Any) -> list[tuple[int, str, str, dict[str, Any]]]:
@@ -144,6 +146,7 @@ def load(db: Any) -> HWData:
         nav=db.nav_runs(),
         n_days=len({int(d) for (d,) in db.query("SELECT DISTINCT day FROM runs")}),
         bounds=tuple(bounds) if bounds else None,
+        driver_kind=((meta.get("scenario") or {}).get("driver") or {}).get("kind"),
     )
 
 

@@ -256,7 +256,8 @@ def _error_findings(data: HWData) -> list[Finding]:
                 Finding(
                     FINDING_KEYS[7],
                     paper,
-                    f"`{base.label}` lost on {_pct(lost)} of week 1 (mean of days), mean error "
+                    f"`{base.label}` lost on {_pct(lost)} of week 1 (mean of days "
+                    f"{int(base.days[mb][0])}-{int(base.days[mb][-1])}), mean error "
                     f"{eb:.3f} m vs {es:.3f} m",
                     bool(lost <= TRACKS_LOST_MAX and eb > es),
                 )
@@ -297,6 +298,9 @@ def _nav_finding(data: HWData) -> Finding:
     )
     if not data.nav:
         return Finding(FINDING_KEYS[9], paper, "no navigation measures", None)
+    if data.driver_kind != "autonomous":
+        why = f"not measurable: the robot was driven by `{data.driver_kind}`, not by itself"
+        return Finding(FINDING_KEYS[9], paper, why, None)
     reached = sum(bool(n.goal_reached) for _, _, n in data.nav)
     coll = sum(int(n.collisions) for _, _, n in data.nav)
     d22 = [n for d, _, n in data.nav if d == 22]
