@@ -265,6 +265,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         resume=args.resume,
         progress=not args.quiet,
         workers=args.workers,
+        keep_scans=args.keep_scans,
     )
     if args.report:
         _write_report(out)
@@ -624,6 +625,13 @@ def build_parser() -> argparse.ArgumentParser:
         type=_positive,
         help="localizer worker processes (1: sequential in-process; default: up to 2)",
     )
+    s.add_argument(
+        "--keep-scans",
+        action="store_true",
+        help="also store every scan's ranges (about 2.3 kB a scan of 683 beams), so that "
+        "export --mcap writes /scan and video draws the scan; a resumed experiment keeps what "
+        "it began with",
+    )
     s.set_defaults(func=_cmd_run)
 
     s = sub.add_parser("report", help="figures, summary.md and per_day.csv of a results folder")
@@ -637,9 +645,9 @@ def build_parser() -> argparse.ArgumentParser:
         description="Export a results folder: TUM trajectories (--tum), Parquet tables "
         "(--parquet, extra 'analysis') for pandas and polars, and/or a ROS 2 bag "
         "(--mcap, extra 'ros') for Foxglove, RViz and `ros2 bag play`. The bag holds /tf, "
-        "/tf_static, /odom, /truth/pose, /<localizer>/pose, /world/obstacles and /plan; it has "
-        "no /scan, because the results store keeps no laser ranges, and no OccupancyGrid, "
-        "because no localizer's map is stored as a grid.",
+        "/tf_static, /odom, /truth/pose, /<localizer>/pose, /world/obstacles, /plan, and /scan "
+        "when the experiment was run with --keep-scans; no OccupancyGrid, because no "
+        "localizer's map is stored as a grid.",
     )
     s.add_argument("dir", help="a results folder (written by run, check or replay)")
     s.add_argument("--tum", help="output folder for TUM trajectory files")
@@ -647,8 +655,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--mcap",
         metavar="OUT",
         help="write a ROS 2 bag folder OUT (metadata.yaml + OUT.mcap; zstd chunks, ros2 "
-        'profile) of the chosen runs; needs pip install "dynmap-sim[ros]". No /scan: the '
-        "results store keeps no laser ranges",
+        'profile) of the chosen runs; needs pip install "dynmap-sim[ros]". /scan only when '
+        "the experiment was run with --keep-scans",
     )
     s.add_argument(
         "--parquet",
@@ -680,9 +688,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="a video of one stored run (extra 'video')",
         description="A video of one stored run, one frame per scan: the run's obstacles, the "
         "route, the planned path and a dynamic-map's long-term map when stored, the true pose "
-        "and each localizer's estimate with trails, errors, bumper and events. The results "
-        "store keeps no laser scans and no people, so neither is drawn (watch those live with "
-        "the env's render()).",
+        "and each localizer's estimate with trails, errors, bumper and events, and the scan "
+        "when the experiment was run with --keep-scans. The results store keeps no people, so "
+        "none is drawn (watch them live with the env's render()).",
     )
     s.add_argument("dir", help="a results folder (written by run, check or replay)")
     s.add_argument("--day", type=_positive, required=True, help="day of the run to show")

@@ -45,7 +45,7 @@ SCENARIO = ROOT / "worlds" / "scenarios" / "ci-apartment-mcl.toml"
 #: filled in (an existing folder, a named pipe).
 HOSTILE_ARGS = (
     "", "-1", "0", "99", "2-1", "1-999", "x", "1e308", "nan", "-inf", "18446744073709551616",
-    "/dev/zero", "/dev/null/x", "/nonexistent/folder/f.png", "{tmp}", "{fifo}", "../../..",
+    "/dev/zero", "/dev/null/x", "{tmp}/missing/folder/f.png", "{tmp}", "{fifo}", "../../..",
     "f.xyz", "a" * 5000, "tcp://256.0.0.1:0", "x.y=1,2",
 )  # fmt: skip
 #: Values put in place of one assignment of a TOML file.

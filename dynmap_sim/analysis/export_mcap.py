@@ -22,9 +22,11 @@ Topics, from what the results store holds:
   one ``LINE_LIST`` per class (walls, furniture, ...), after a ``DELETEALL``; transient local.
 * ``/plan`` ``nav_msgs/msg/Path``: the driver's last planned path of a run, stamped at the
   run's last scan, where the driver stored one; transient local.
+* ``/scan`` ``sensor_msgs/msg/LaserScan`` in ``laser`` (REP-117 ranges: +inf no return,
+  -inf too close), one per scan, when the experiment kept its ranges (``run --keep-scans``).
 
-Not exported, because the store does not hold it: ``/scan`` (the laser ranges are not
-stored, only poses), the people (their tracks are not stored), and an
+Not exported, because the store does not hold it: ``/scan`` of an experiment run without
+``--keep-scans``, the people (their tracks are not stored), and an
 ``nav_msgs/msg/OccupancyGrid`` of a localizer's map (no localizer stores a grid; the dynamic
 map's ``map_snapshot`` holds per-local-map range medians). :attr:`McapExport.notes` says so.
 
@@ -158,6 +160,22 @@ class _Msgs:
         )
         return t["geometry_msgs/msg/TransformStamped"](
             header=self.header(ns, parent), child_frame_id=child, transform=tf
+        )
+
+    def laser_scan(self, ns: int, laser: dict[str, Any], ranges: np.ndarray) -> Any:
+        n = int(laser["n_beams"])
+        inc = float(laser["angle_increment_rad"])
+        return self.t["sensor_msgs/msg/LaserScan"](
+            header=self.header(ns, "laser"),
+            angle_min=float(laser["angle_min_rad"]),
+            angle_max=float(laser["angle_min_rad"]) + (n - 1) * inc,
+            angle_increment=inc,
+            time_increment=float(laser["time_increment_s"]),
+            scan_time=float(laser["scan_period_s"]),
+            range_min=float(laser["range_min_m"]),
+            range_max=float(laser["range_max_m"]),
+            ranges=np.asarray(ranges, dtype=np.float32),
+            intensities=np.zeros(0, dtype=np.float32),
         )
 
     def tf(self, transforms: list[Any]) -> Any:
@@ -381,10 +399,12 @@ def export_mcap(
         odo_loc = classes.index(ODOMETRY_CLASS) if ODOMETRY_CLASS in classes else None
         mount = np.asarray((meta.get("laser") or {}).get("mount_pose", [0.0, 0.0, 0.0]), float)
         result = McapExport(dst, dst / f"{dst.name}.mcap")
-        result.notes += [
-            "/scan not exported: the results store keeps no laser ranges (only poses)",
-            "people not exported: the results store keeps no tracks of people",
-        ]
+        if not meta.get("keep_scans"):
+            result.notes.append(
+                "/scan not exported: the experiment kept no laser ranges (run it with "
+                "--keep-scans to store them)"
+            )
+        result.notes.append("people not exported: the results store keeps no tracks of people")
         if odo_loc is None:
             result.notes.append(
                 "/odom not exported: no dead-reckoning localizer ('odometry') in the results; "
@@ -418,6 +438,7 @@ def export_mcap(
                     mount,
                     plans,
                     meta if replay else None,
+                    meta.get("laser"),
                 )
             if dst.exists():
                 shutil.rmtree(dst)
@@ -439,6 +460,7 @@ def _write_runs(
     mount: np.ndarray,
     plans: dict[tuple[int, int], bytes],
     replay_meta: dict[str, Any] | None,
+    laser: dict[str, Any] | None,
 ) -> None:
     """Every message of the chosen runs, in time order per run."""
     conns: dict[str, Any] = {}
@@ -449,6 +471,7 @@ def _write_runs(
         "/odom": "nav_msgs/msg/Odometry",
         "/truth/pose": "geometry_msgs/msg/PoseStamped",
         "/plan": "nav_msgs/msg/Path",
+        "/scan": "sensor_msgs/msg/LaserScan",
     }
     latched = {"/tf_static", "/world/obstacles", "/plan"}
     topics = pose_topics(labels)
@@ -494,6 +517,7 @@ def _write_runs(
         geom = db.geometry(day, run_)
         if geom is not None:
             put("/world/obstacles", t0_ns, msgs.obstacles(t0_ns, *geom))
+        ranges = db.scan_ranges(day, run_) if laser is not None else None
         for i in range(n):
             s = int(ns[i])
             put(
@@ -509,6 +533,8 @@ def _write_runs(
             if twist is not None:
                 put("/odom", s, msgs.odometry(s, odom[i], odom_var[i], twist[i]))
             put("/truth/pose", s, msgs.pose_stamped(s, "map", truth[i]))
+            if ranges is not None:
+                put("/scan", s, msgs.laser_scan(s, laser, ranges[i]))
             for topic, (poses, _) in zip(topics, est, strict=True):
                 put(topic, s, msgs.pose_stamped(s, "map", poses[i]))
         blob = plans.get((day, run_))

@@ -10,10 +10,12 @@ again) with the numpy rasterizer the env renders with (:mod:`dynmap_sim.raster`)
   daily snapshot before the run's day, the map it localized on (when stored);
 * the true pose (blue disc, heading, trail) and each chosen localizer's estimate (its colour,
   heading, trail); a header with the day, run, date and clock, the time in the run, each
-  localizer's position error, the bumper and the latest event (kidnapping, detour, ...).
+  localizer's position error, the bumper and the latest event (kidnapping, detour, ...);
+* the scan's returns from the true pose, when the experiment kept its ranges
+  (``run --keep-scans``).
 
-Not drawn: the store keeps no laser scans and no people (per scan it keeps poses, errors and
-diagnostics), so neither can be shown; watch those live with the env's ``render()``.
+Not drawn: the people (the store keeps no tracks of them), nor the scan of an experiment run
+without ``--keep-scans``; watch those live with the env's ``render()``.
 
 MP4 is encoded by the ffmpeg that ships with the ``imageio-ffmpeg`` wheel (H.264, yuv420p),
 GIF by Pillow (for short runs: its frames are held in memory); either is written to a
@@ -40,7 +42,8 @@ from dynmap_sim.raster import CLASS_RGB, Canvas, polyline
 #: Output formats by suffix.
 SUFFIXES = (".mp4", ".gif")
 #: What a video cannot show, and why (the CLI's help and note say it too).
-NOT_STORED = "the results store keeps no laser scans and no people, so neither is drawn"
+NOT_STORED = "the results store keeps no people, so none is drawn"
+NO_SCANS = "the experiment kept no laser ranges (run it with --keep-scans), so no scan is drawn"
 #: Seconds an event stays in the header.
 EVENT_HOLD_S = 3.0
 
@@ -48,6 +51,7 @@ _TRUTH = np.array([60, 60, 200], np.uint8)
 _ROUTE = np.array([200, 200, 235], np.uint8)
 _PLANNED = np.array([20, 170, 190], np.uint8)
 _MAP = np.array([175, 175, 175], np.uint8)
+_SCAN = np.array([230, 40, 160], np.uint8)
 _TEXT = np.array([30, 30, 30], np.uint8)
 _ALERT = np.array([210, 30, 30], np.uint8)
 #: Localizer colours (matplotlib's tab10 without its blue, which is the truth's).
@@ -102,6 +106,9 @@ class _Run:
     planned: NDArray[np.float64] | None
     map_points: NDArray[np.float64] | None
     map_note: str
+    #: returns of each scan in the map frame from the true pose ``(T, n_beams, 2)``, NaN
+    #: where a beam has none; None when the ranges were not kept
+    scan_xy: NDArray[np.float64] | None
     events: list[tuple[float, str]]  # (t_s, text)
     bounds: tuple[float, float, float, float]
     fps: int
@@ -228,6 +235,11 @@ def load_run(db: ResultsDB, day: int, run: int, labels: list[str], fps: int | No
         None,
     )
     map_points, map_note = _dynamic_map(db, day, labels)
+    ranges = db.scan_ranges(day, run)
+    laser = meta.get("laser")
+    scan_xy = None
+    if ranges is not None and laser is not None and len(ranges) == len(a):
+        scan_xy = _returns_xy(a[:, 2:5], ranges, laser)
     events = [
         (float(t), f"{kind}: {detail}" if detail else str(kind))
         for t, kind, detail in db.query(
@@ -256,10 +268,27 @@ def load_run(db: ResultsDB, day: int, run: int, labels: list[str], fps: int | No
         planned=planned,
         map_points=map_points,
         map_note=map_note,
+        scan_xy=scan_xy,
         events=events,
         bounds=tuple(float(b) for b in bounds),  # type: ignore[arg-type]
         fps=fps if fps is not None else _fps(meta, a[:, 1]),
     )
+
+
+def _returns_xy(
+    pose: NDArray[np.float64], ranges: NDArray[np.float32], laser: dict[str, Any]
+) -> NDArray[np.float64]:
+    """Scan returns ``(T, n_beams, 2)`` in the map frame: each beam's end from the laser's
+    pose (``pose`` ∘ mount); NaN for no return (REP-117 ±inf) and invalid readings."""
+    mx, my, mth = (float(v) for v in laser.get("mount_pose", (0.0, 0.0, 0.0)))
+    c, s = np.cos(pose[:, 2]), np.sin(pose[:, 2])
+    lx = pose[:, 0] + c * mx - s * my
+    ly = pose[:, 1] + s * mx + c * my
+    n = ranges.shape[1]
+    angles = float(laser["angle_min_rad"]) + np.arange(n) * float(laser["angle_increment_rad"])
+    th = (pose[:, 2] + mth)[:, None] + angles[None, :]
+    r = np.where(np.isfinite(ranges), ranges, np.nan).astype(np.float64)
+    return np.stack([lx[:, None] + r * np.cos(th), ly[:, None] + r * np.sin(th)], axis=-1)
 
 
 def _extent(parts: list[NDArray[np.float64]], margin_m: float = 0.5) -> list[float]:
@@ -347,7 +376,10 @@ class _Frames:
             ("furniture", CLASS_RGB[2]),
             ("doors", CLASS_RGB[4]),
         ]
-        self.legend.append(("(no scans or people stored)", _MAP))
+        if run.scan_xy is not None:
+            self.legend.append(("scan", _SCAN))
+        self.legend.append(("(no people stored)" if run.scan_xy is not None else
+                            "(no scans or people stored)", _MAP))  # fmt: skip
         chars = [  # the longest text of each line (monospaced: width = chars x advance)
             len(self._title(self.start + 86399.0)),
             sum(len(label) + 9 for label in ["truth", *run.labels]),
@@ -390,6 +422,9 @@ class _Frames:
                     if np.isfinite(seg).all():
                         canvas.lines(seg, _lighter(rgb))
             canvas.img = trail.copy()
+            if run.scan_xy is not None:
+                hits = run.scan_xy[i]
+                canvas.points(hits[np.isfinite(hits[:, 0])], _SCAN)
             pose = run.truth[i]
             canvas.discs(np.array([[pose[0], pose[1], _MARKER_M]]), _TRUTH)
             canvas.lines(_heading(pose, _HEADING_M), np.array([255, 220, 0], np.uint8))
@@ -503,7 +538,7 @@ def write_video(
     if not len(data.t_s):
         raise InputError(f"day {day} run {run}: no scans stored, nothing to show")
     frames = _Frames(data, size_px)
-    notes = [NOT_STORED]
+    notes = [NOT_STORED] + ([] if data.scan_xy is not None else [NO_SCANS])
     if data.planned is None:
         notes.append("the driver stored no planned path for this run")
     if len(data.segments) == 0:

@@ -30,6 +30,8 @@ format 3, ``results_format`` in ``meta``):
 * ``artifacts`` — what a localizer handed over after a day (``Localizer.day_artifacts``, e.g.
   the dynamic map's snapshot): bytes, or named arrays stored as ``.npz`` (read without pickle);
 * ``geometry`` — the static segments of each run's world (for report figures);
+* ``scan_ranges`` — per run, every scan's laser ranges (zlib of float32 rows), only for an
+  experiment run with ``--keep-scans`` (``meta.keep_scans``; absent otherwise);
 * ``checkpoint`` — the pickled driver and RNG states, the next run to do, the scenario hash,
   the names and SHA-256 digests of the localizer files, and a SHA-256 of the blob, so a
   corrupt or mismatched checkpoint is refused.
@@ -73,6 +75,7 @@ import math
 import os
 import pickle
 import sqlite3
+import zlib
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -156,6 +159,12 @@ CREATE TABLE IF NOT EXISTS checkpoint (
     next_run INTEGER, scenario_hash TEXT, seed INTEGER, sha256 TEXT, blob BLOB, created TEXT);
 """
 
+#: Made by the first run written with its ranges kept (an optional table: a store without it
+#: simply has no scans; ``zlib`` level 1 of little-endian float32 rows: 2.7 kB a scan
+#: of 683 beams, 2.3 kB compressed, as the noise fills the mantissas).
+_SCAN_RANGES_TABLE = """CREATE TABLE IF NOT EXISTS scan_ranges (
+    day INTEGER, run INTEGER, n_beams INTEGER, ranges BLOB, PRIMARY KEY (day, run))"""
+
 #: The layout this version writes (``results_format`` in ``meta``; none: format 1).
 RESULTS_FORMAT = 3
 
@@ -238,6 +247,8 @@ class RunRecord:
     driver_artifacts: dict[str, bytes] = field(default_factory=dict)
     #: per localizer, its point classes against the seen-before truth (empty: none)
     point_tallies: list[PointClassTally] = field(default_factory=list)
+    #: the laser ranges ``(T, n_beams)`` [m], REP-117, kept with ``run --keep-scans``
+    ranges: NDArray[np.float32] | None = None
 
     def scan_diagnostic(self, loc: int, name: str) -> NDArray[np.float64] | None:
         """Per-scan values ``(T, ...)`` of diagnostic ``name`` of localizer ``loc`` (None
@@ -672,6 +683,13 @@ class ResultsDB:
                 "INSERT INTO driver_artifacts VALUES (?,?,?,?)",
                 [(d, r, name, data) for name, data in rec.driver_artifacts.items()],
             )
+            if rec.ranges is not None:
+                self.con.execute(_SCAN_RANGES_TABLE)
+                ranges = np.ascontiguousarray(rec.ranges, dtype="<f4")
+                self.con.execute(
+                    "INSERT OR REPLACE INTO scan_ranges VALUES (?,?,?,?)",
+                    (d, r, ranges.shape[1], zlib.compress(ranges.tobytes(), 1)),
+                )
             for k, s in enumerate(run_summaries):
                 self.con.execute(
                     "INSERT INTO run_summaries VALUES (:loc, :day, :run, :n_scans, "
@@ -1015,6 +1033,18 @@ class ResultsDB:
             )
             for row in rows
         ]
+
+    def scan_ranges(self, day: int, run: int) -> NDArray[np.float32] | None:
+        """The run's laser ranges ``(T, n_beams)`` [m] (REP-117: +inf no return, -inf too
+        close), or None when the experiment did not keep them (``run --keep-scans``)."""
+        if not self._has_table("scan_ranges"):
+            return None
+        row = self.con.execute(
+            "SELECT n_beams, ranges FROM scan_ranges WHERE day=? AND run=?", (day, run)
+        ).fetchone()
+        if row is None:
+            return None
+        return np.frombuffer(zlib.decompress(row[1]), dtype="<f4").reshape(-1, int(row[0]))
 
     def driver_artifacts(self, name: str) -> list[tuple[int, int, bytes]]:
         """``(day, run, data)`` of the driver's artifact ``name``, by run."""

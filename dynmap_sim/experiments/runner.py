@@ -105,10 +105,14 @@ class ExperimentRunner:
         overwrite: bool = False,
         env: Any = None,
         workers: int | None = 1,
+        keep_scans: bool = False,
     ) -> None:
         if workers is not None and workers < 1:
             raise InputError(f"workers must be at least 1, not {workers}")
         self.scenario = scenario
+        #: store every scan's ranges (``run --keep-scans``; a resumed experiment keeps on
+        #: doing what it began with)
+        self.keep_scans = bool(keep_scans)
         self.out_dir = out_dir
         self.seed = int(seed)
         self.days = days
@@ -156,6 +160,7 @@ class ExperimentRunner:
         if resume and db_file.exists():
             self.db = ResultsDB.open(out_dir, lock=True)  # one writer per folder
             try:
+                self.keep_scans |= bool(self.db.meta().get("keep_scans", False))
                 state = self._resume_state(db_file, days)
             except BaseException:
                 self.db.close()
@@ -243,6 +248,7 @@ class ExperimentRunner:
             bounds=list(self.facts.bounds),
             slots=[[s.day, s.run, s.date.isoformat(), s.start_s] for s in self.slots],
             first_date=self.slots[0].date.isoformat(),
+            keep_scans=self.keep_scans,
             complete=False,
         )
         self.db.set_localizers([(loc.display, loc.name, dict(loc.params)) for loc in sc.localizers])
@@ -403,6 +409,7 @@ class ExperimentRunner:
             point_tallies=[o.point_tally for o in outs],
             nav=self._nav_summary(sim),
             driver_artifacts=dict(sim.driver_artifacts or {}),
+            ranges=stream.scans if self.keep_scans else None,
         )
         run_sum = [self._run_summary(k, rec) for k in range(len(outs))]
         self._loc_states = [o.state for o in outs]
@@ -455,6 +462,7 @@ def run_experiment(
     progress: bool = True,
     overwrite: bool = False,
     workers: int | None = None,
+    keep_scans: bool = False,
 ) -> Path:
     """Run ``scenario`` (optionally only ``days``, with ``seed``) into ``out_dir``; return it.
 
@@ -462,7 +470,8 @@ def run_experiment(
     none). ``overwrite=True`` replaces earlier results in ``out_dir``. ``workers``: localizer
     worker processes (1: all in this process, sequentially; None: :func:`default_workers`
     for the experiment's localizers and robot time);
-    the results are the same whatever the number.
+    the results are the same whatever the number. ``keep_scans``: store every scan's ranges
+    too (for ``export --mcap``'s ``/scan`` and the video; ≈ 2.3 kB a scan of 683 beams).
     """
     out = Path(out_dir) if out_dir is not None else default_out_dir(scenario)
     days = tuple(days) if days is not None else scenario.days  # type: ignore[assignment]
@@ -472,6 +481,13 @@ def run_experiment(
     if workers is not None and workers < 1:
         raise InputError(f"--workers must be at least 1, not {workers}")
     runner = ExperimentRunner(
-        scenario, out, days, seed, resume=resume, overwrite=overwrite, workers=workers
+        scenario,
+        out,
+        days,
+        seed,
+        resume=resume,
+        overwrite=overwrite,
+        workers=workers,
+        keep_scans=keep_scans,
     )
     return runner.run(progress=progress)

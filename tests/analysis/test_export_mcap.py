@@ -23,7 +23,7 @@ from dynmap_sim.analysis.export_mcap import export_mcap, pose_topics, ros_name  
 from dynmap_sim.analysis.scenarios import load_scenario  # noqa: E402
 from dynmap_sim.cli import main  # noqa: E402
 from dynmap_sim.experiments.results import ResultsDB  # noqa: E402
-from dynmap_sim.experiments.runner import run_experiment  # noqa: E402
+from dynmap_sim.experiments.runner import ExperimentRunner, run_experiment  # noqa: E402
 
 SCENARIO = Path(__file__).resolve().parents[2] / "worlds/scenarios/ci-apartment-mcl.toml"
 STORE = get_typestore(Stores.ROS2_JAZZY)
@@ -75,7 +75,7 @@ def test_counts_per_topic_match_the_store(results: Path, bag: Path) -> None:
     with Reader(bag) as reader:
         got = {topic: info.msgcount for topic, info in reader.topics.items()}
         assert reader.duration > 0
-    assert got == expected  # no /scan (ranges are not stored), no /plan (tour driver)
+    assert got == expected  # no /scan (ranges not kept), no /plan (tour driver)
     with (bag / f"{bag.name}.mcap").open("rb") as f:
         counted = Counter(ch.topic for _, ch, _ in make_reader(f).iter_messages())
     assert dict(counted) == expected
@@ -158,6 +158,36 @@ def test_day_and_run_choose_runs(results: Path, tmp_path: Path) -> None:
     res = export_mcap(results, tmp_path / "day2", days=(2, 2), run=1)
     assert res.counts["/tf_static"] == 1 and res.counts["/tf"] == 201
     assert any("/scan" in note for note in res.notes)
+
+
+def test_scans_kept_by_the_run_are_exported_as_laser_scans(tmp_path: Path) -> None:
+    """``run --keep-scans`` stores every scan's ranges; the bag then has one LaserScan per
+    scan in ``laser``, with the laser's geometry and the stored REP-117 ranges bit for bit,
+    and a resumed experiment keeps them too."""
+    out = tmp_path / "kept"
+    scn = load_scenario(SCENARIO)
+    first = ExperimentRunner(scn, out, (1, 2), 0, resume=False, keep_scans=True)
+    first.run(progress=False, stop_after=1)  # interrupted after day 1
+    assert main(["run", str(SCENARIO), "--days", "1-2", "--out", str(out), "-q",
+                 "--resume"]) == 0  # fmt: skip
+    res = export_mcap(out, tmp_path / "bag")
+    assert not any("/scan" in note for note in res.notes)
+    with ResultsDB.open(out) as db:
+        laser = db.meta()["laser"]
+        runs = db.query("SELECT day, run, n_steps FROM runs ORDER BY day, run")
+        assert [r[:2] for r in runs] == [(1, 1), (2, 1)]  # day 2 from the resumed run
+        stored = np.concatenate([db.scan_ranges(d, r) for d, r, _ in runs])
+    assert stored.shape == (sum(r[2] for r in runs), laser["n_beams"])
+    assert np.isposinf(stored).any() and np.isfinite(stored).mean() > 0.5
+    msgs = [m for _, m in _read_all(tmp_path / "bag")["/scan"]]
+    assert res.counts["/scan"] == len(msgs) == len(stored)
+    m = msgs[0]
+    assert m.header.frame_id == "laser"
+    assert m.angle_min == pytest.approx(laser["angle_min_rad"], abs=1e-6)
+    assert m.angle_increment == pytest.approx(laser["angle_increment_rad"], abs=1e-9)
+    assert m.range_max == pytest.approx(laser["range_max_m"])
+    assert m.scan_time == pytest.approx(laser["scan_period_s"])
+    np.testing.assert_array_equal(np.stack([m.ranges for m in msgs]), stored)
 
 
 def test_ros_names() -> None:
