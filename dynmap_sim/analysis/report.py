@@ -28,6 +28,7 @@ from dynmap_sim.metrics import (
     RUN_RPE_DELTA,
     RUN_RPE_UNIT,
     OverallSummary,
+    PointClassTally,
     class_scores,
     mean_per_scan,
     overall_summary,
@@ -250,6 +251,34 @@ def _summary_md(db: ResultsDB, path: Path, figures: list[Path], studies: list[St
                     f"| {label} | {name} | {_fmt(sc.precision[j])} | {_fmt(sc.recall[j])} "
                     f"| {sc.support[j]} |"
                 )
+    truth_rows = []
+    for k, label in enumerate(labels):
+        tallies = db.point_class_truth_per_day(k)
+        if not tallies:
+            continue
+        total = PointClassTally()
+        for t in tallies.values():
+            total.merge(t)
+        sc = class_scores(total.confusion)
+        f = total.fractions()
+        for j, name in enumerate(("dynamic", "semi-static", "static")):
+            truth_rows.append(
+                f"| {label} | {name} | {100 * f[j + 1]:.1f} % | {_fmt(sc.precision[j])} "
+                f"| {_fmt(sc.recall[j])} | {sc.support[j]} |"
+            )
+    if truth_rows:
+        lines += [
+            "",
+            "## Point classes against the truth seen before at that place (H&W §4.4)",
+            "",
+            "A person is dynamic; an object the robot has not seen at its current place in an "
+            "earlier run (new or moved) semi-static; the rest static. Share: of a scan's valid "
+            "points, averaged over the scans (per day in `point_classes_per_day.csv`).",
+            "",
+            "| localizer | class | share | precision | recall | support |",
+            "|---|---|---|---|---|---|",
+            *truth_rows,
+        ]
     for rep in studies:
         if rep.summary_lines:
             lines += ["", *rep.summary_lines]

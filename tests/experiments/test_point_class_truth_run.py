@@ -99,6 +99,9 @@ def test_report_writes_point_classes_per_day_csv(days_1_2):
     prec = [float(r["semistatic_precision"]) for r in body]
     assert prec[0] > 0.1 and prec[1] == 0.0
     assert body[0]["dynamic_precision"] == "nan"  # nothing reported dynamic
+    md = (days_1_2 / "summary.md").read_text()
+    assert "## Point classes against the truth seen before at that place" in md
+    assert "| all-semi | semi-static | 100.0 % |" in md
 
 
 def test_worker_processes_give_the_same_truth(tmp_path, days_1_2):
