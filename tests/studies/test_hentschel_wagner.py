@@ -187,3 +187,36 @@ def test_the_shipped_scenario_validates():
     assert {"static-mcl walls", "static-mcl tuned", "dynamic-map"} <= set(labels)
     assert scn.driver.kind == "autonomous" and scn.driver.speed_mps <= 0.2
     assert scn.sensor.overrides["range_max_m"] == 4.0
+
+
+def test_day_22_map_with_route_memory_from_a_driving_localizer(tmp_path):
+    """The localizer the autonomous driver steers on (run in lock-step) reports point classes
+    and a long-term map; after day 22 the study draws it with the driver's route memory."""
+    scn = parse_scenario(
+        {
+            "name": "hw-d22",
+            "world": str(ROOT / "worlds" / "apartment-hw.toml"),
+            "days": [22, 22],
+            "driver": {
+                "kind": "autonomous",
+                "localizer": "hw",
+                "speed_mps": 0.2,
+                "max_run_s": 6.0,
+            },
+            "prior": {"map": "walls", "initial_pose": "known"},
+            "localizers": [{"name": "point_class_localizers:WithLongTermMap", "label": "hw"}],
+        },
+        tmp_path / "s.toml",
+    )
+    out = tmp_path / "o"
+    ExperimentRunner(scn, out, scn.days, 0, resume=False, overwrite=True, workers=1).run(
+        progress=False
+    )
+    with ResultsDB.open(out) as db:
+        t = db.point_class_truth_per_day(0)
+        # the first run of the experiment: every object is new, the blocker too
+        assert list(t) == [22] and t[22].n_scans == 61
+        assert t[22].confusion[2, 2] > 0 and t[22].confusion[1].sum() == 0
+    names = {p.name for p in write_report(out)}
+    assert {"hw_ltm_day22.png", "hw_ltm_day7.png"} - names == {"hw_ltm_day7.png"}
+    assert "route_memory.png" in names
