@@ -114,6 +114,16 @@ class RouteMemoryParams:
     #: the first and last segments' times are learned. 0.2 m ≈ two localization errors (H&W
     #: §7.3: 0.11 m); larger would time a partial segment as a whole one.
     pass_tolerance_m: float = 0.2
+    #: §5.1 places the robot on the segment at minimal lateral distance. Where a route passes
+    #: a place twice (into a room and back out the same doorway) that is ambiguous, and the
+    #: position flipped to the other pass, so the robot drove the room's loop again and again
+    #: (office floor, day 1: six times round office A). So the tracked route's segments within
+    #: this arc length [m] of the last tracked position (either way) are preferred: the
+    #: nearest of them wins unless another segment is ``continuity_m`` nearer. 2 m is far
+    #: more than a robot drives between two scans, far less than a room's loop.
+    continuity_window_m: float = 2.0
+    #: ... by this much [m]: the corridor half-width, inside which both passes lie.
+    continuity_m: float = 0.35
 
 
 class Waypoint(NamedTuple):
@@ -234,6 +244,25 @@ class RouteGraph:
         if exclude is not None and exclude in self.index and len(d) > 1:
             d[self.index[exclude]] = np.inf
         return int(self.node_ids[int(np.argmin(d))])
+
+    def edge_projection(
+        self, xy: ArrayLike, u: int, v: int
+    ) -> tuple[Edge, float, FloatArray] | None:
+        """The passable route segment ``u -> v`` with ``xy`` projected onto it, as
+        :meth:`nearest_edge` returns it; None when the graph has no such segment."""
+        e = next(
+            (
+                e
+                for e in self.out.get(int(u), [])
+                if e.v == int(v) and e.route_id != JOIN and np.isfinite(e.travel_time_s)
+            ),
+            None,
+        )
+        if e is None:
+            return None
+        a, b = self.position(e.u)[None], self.position(e.v)[None]
+        frac, proj, _ = _project(np.asarray(xy, float)[:2], a, b)
+        return e, float(frac[0]), proj[0]
 
     def nearest_edge(
         self, xy: ArrayLike, exclude_to: int | None = None
@@ -412,22 +441,38 @@ class RouteMemory:
             }
         return self._segs
 
-    def locate(self, pose: ArrayLike, prefer_route: int | None = None) -> RoutePosition | None:
+    def locate(
+        self,
+        pose: ArrayLike,
+        prefer_route: int | None = None,
+        prefer_along_m: float | None = None,
+    ) -> RoutePosition | None:
         """The robot's position relative to the routes (§5.1): over every segment of every
         route (vectorized), the one at minimal lateral distance; None for an empty memory.
-        On a tie ``prefer_route`` wins (the route the robot is on, so a join does not flip)."""
+        On a tie ``prefer_route`` wins (the route the robot is on, so a join does not flip);
+        with ``prefer_along_m`` (its last arc length on that route) that route's segments
+        within ``continuity_window_m`` of it along the route win unless another is
+        ``continuity_m`` nearer (a route that passes a place twice keeps the robot's pass)."""
         s = self._segments()
         if s["a"].shape[0] == 0:
             return None
         p = np.asarray(pose, float)[:2]
         u, proj, dist = _project(p, s["a"], s["b"])
         k = int(np.argmin(dist))
+        seg_len = np.hypot(*(s["b"] - s["a"]).T)
         if prefer_route is not None:
             mine = np.flatnonzero(s["rid"] == prefer_route)
             if mine.size:
                 k2 = int(mine[np.argmin(dist[mine])])
                 if dist[k2] <= dist[k] + 1e-9:
                     k = k2
+                if prefer_along_m is not None:
+                    along = s["s0"][mine] + u[mine] * seg_len[mine]
+                    cont = mine[np.abs(along - prefer_along_m) <= self.params.continuity_window_m]
+                    if cont.size:
+                        k3 = int(cont[np.argmin(dist[cont])])
+                        if dist[k3] <= dist[k] + self.params.continuity_m:
+                            k = k3
         d = s["b"][k] - s["a"][k]
         length = float(np.hypot(*d))
         lateral = (
@@ -476,8 +521,12 @@ class RouteMemory:
         """
         pose = np.asarray(pose, float)
         xy, heading = pose[:2], float(pose[2]) if pose.size > 2 else 0.0
-        prefer = self._track.route_id if self._track is not None else None
-        pos = self.locate(pose, prefer_route=prefer)
+        tr = self._track
+        pos = (
+            self.locate(pose)
+            if tr is None
+            else self.locate(pose, prefer_route=tr.route_id, prefer_along_m=tr.s_prev_m)
+        )
         if pos is None:
             return None
         if pos.inside:

@@ -73,6 +73,7 @@ from dynmap_sim.agent.navigation.route_memory import (
     RouteGraph,
     RouteMemory,
     RouteMemoryParams,
+    RoutePosition,
 )
 from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
 from dynmap_sim.agent.planning.costmap import Costmap, CostmapParams, samples_along
@@ -270,6 +271,8 @@ class NavigationStack:
         self._force_plan = False
         self._armed = False
         self._via_k = 0  # via points passed in this run
+        #: the route position of the last step (H&W §5.1), None off the corridors
+        self._route_pos: RoutePosition | None = None
         self._day_s = 0.0
         self._costmap_t: float | None = None
         self._global: ClearanceGrid | None = None  # the costmap's clearance at the last plan
@@ -437,7 +440,7 @@ class NavigationStack:
             self.costmap.update(pose, scan, self.laser)
             self._costmap_t = t_s
             self._local = None
-        self.route_memory.observe(pose, self._day_s + t_s)
+        self._route_pos = self.route_memory.observe(pose, self._day_s + t_s)
         assert self.goal_xy is not None
         while self._via_k < len(self._vias):
             via_xy = self._vias[self._via_k][0]
@@ -561,14 +564,23 @@ class NavigationStack:
             return None
         self.plans += 1
         target_xy = self._target()[0]
-        return plan_route(
-            g,
-            pose[:2],
-            target_xy,
-            self.params.speed_mps,
-            goal_id=self._goal_node(g),
-            leave_goal_m=self._leave_target_m(),
-        )
+        pos = self._route_pos
+        on = (pos.from_id, pos.to_id) if pos is not None and pos.inside else None
+        for start_on in (on, None) if on is not None else (None,):
+            # from the segment the robot is tracked on; failing that (the way on is blocked,
+            # the way back is not), from wherever the graph is nearest
+            plan = plan_route(
+                g,
+                pose[:2],
+                target_xy,
+                self.params.speed_mps,
+                goal_id=self._goal_node(g),
+                leave_goal_m=self._leave_target_m(),
+                start_on=start_on,
+            )
+            if plan is not None:
+                return plan
+        return None
 
     @staticmethod
     def _node_of(g: RouteGraph, xy: FloatArray | None, waypoint_id: int | None) -> int:

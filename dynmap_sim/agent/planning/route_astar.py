@@ -138,6 +138,7 @@ def plan_route(
     v_max_mps: float | None = None,
     goal_id: int | None = None,
     leave_goal_m: float = 0.0,
+    start_on: tuple[int, int] | None = None,
 ) -> PlannedPath | None:
     """Plan from the robot's position ``start_xy`` to the node nearest ``goal_xy`` [m] (or to
     node ``goal_id`` when given: a loop route's end coincides with its start).
@@ -151,7 +152,10 @@ def plan_route(
     that from the goal before it ends there (:func:`astar`), and no virtual start edge ends
     at the goal: so the plan drives the loop instead of standing still — also when the
     loop's start and end waypoints belong to two routes (the loop cut by forgetting) and a
-    zero-length join connects them.
+    zero-length join connects them. ``start_on`` ``(u, v)``: the segment the robot is tracked
+    on (:meth:`RouteMemory.observe`); the plan then enters the graph along it alone, so a
+    route that passes the robot's place twice is continued on the pass it is on, not
+    restarted on the other.
     """
     if graph.node_ids.size == 0:
         return None
@@ -161,11 +165,15 @@ def plan_route(
         return None
     avoid = goal if leave_goal_m > 0.0 else None
     v_h = heuristic_speed_mps(graph, v_max_mps)
-    near = graph.nearest_node(p, exclude=avoid)
-    d = float(np.hypot(*(graph.position(near) - p)))
-    hw_near = float(graph.half_width_m[graph.index[near]])
-    starts = [Edge(START, near, d, 0.0 if math.isinf(v_h) else d / v_h, False, hw_near, -1)]
-    hit = graph.nearest_edge(p, exclude_to=avoid)
+    hit = None if start_on is None else graph.edge_projection(p, *start_on)
+    if hit is not None and hit[0].v != avoid:
+        starts = []  # along the tracked segment only
+    else:
+        near = graph.nearest_node(p, exclude=avoid)
+        d = float(np.hypot(*(graph.position(near) - p)))
+        hw_near = float(graph.half_width_m[graph.index[near]])
+        starts = [Edge(START, near, d, 0.0 if math.isinf(v_h) else d / v_h, False, hw_near, -1)]
+        hit = graph.nearest_edge(p, exclude_to=avoid)
     start_point = p
     if hit is not None:
         e, u, proj = hit

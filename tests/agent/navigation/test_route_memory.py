@@ -24,6 +24,28 @@ def straight(now_s: float = 0.0, **kw) -> RouteMemory:
 
 
 # ---------------------------------------------------------------------------- §5.1 locate
+#: Into a room and out through the same doorway (x = 4), then on east: the stretch
+#: (4, -1) -> (4, 0) lies on the way in (4, 0) -> (4, -3).
+ROOM = [[0.0, 0.0], [4.0, 0.0], [4.0, -3.0], [2.5, -3.0], [2.5, -2.0], [4.0, -1.0],
+        [4.0, 0.0], [8.0, 0.0]]  # fmt: skip
+
+
+@pytest.mark.parametrize("window_m, on_way_out", [(2.0, True), (0.0, False)])
+def test_a_place_passed_twice_keeps_the_pass_the_robot_is_on(drive_fn, window_m, on_way_out):
+    """§5.1's nearest segment is ambiguous where a route passes a place twice; the tracked
+    position keeps the pass (``continuity_window_m``; 0 m: the nearest, the way in), and a
+    plan from it (``start_on``) goes on east instead of round the room again."""
+    params = RouteMemoryParams(continuity_window_m=window_m)
+    mem = RouteMemory.from_prior(ROOM, 0.35, 0.35, 0.0, params=params)
+    out_m = float(np.sum(np.hypot(*np.diff(np.array(ROOM[:6]), axis=0).T))) + 0.5
+    drive_fn(mem, [*ROOM[:6], [4.0, -0.5]], 0.35, 0.0)
+    pos = mem.locate([4.0, -0.5, math.pi / 2], mem._track.route_id, mem._track.s_prev_m)
+    assert (abs(pos.along_m - out_m) < 0.3) is on_way_out
+    plan = plan_route(mem.graph(), [4.0, -0.5], ROOM[-1], 0.35, start_on=(pos.from_id, pos.to_id))
+    length = float(np.sum(np.hypot(*np.diff(plan.xy, axis=0).T)))
+    assert (length < 5.0) is on_way_out  # 0.5 m up and 4 m east; else ~12 m round the room
+
+
 def test_locate_inside_and_outside_the_corridor():
     mem = RouteMemory.from_prior([[0.0, 0.0], [4.0, 0.0]], 0.2, 0.35, 0.0, densify=False)
     pos = mem.locate([1.5, 0.2, 0.0])
