@@ -285,7 +285,7 @@ class Boom(DeadReckoning):
 
 
 def test_a_failing_cell_is_recorded_and_the_others_finish(tmp_path, capsys):
-    (tmp_path / "boom_loc.py").write_text(textwrap.dedent(BOOM))
+    (tmp_path / "sweep_boom_loc.py").write_text(textwrap.dedent(BOOM))
     scn = tmp_path / "boom.toml"
     scn.write_text(
         textwrap.dedent(
@@ -297,7 +297,7 @@ def test_a_failing_cell_is_recorded_and_the_others_finish(tmp_path, capsys):
             kind = "tour"
             max_run_s = 10.0
             [[localizers]]
-            name = "boom_loc:Boom"
+            name = "sweep_boom_loc:Boom"
             label = "boom"
             """
         )
