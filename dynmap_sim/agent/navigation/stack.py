@@ -39,8 +39,9 @@ nav2 composes its servers:
 
 The run ends for the stack when the estimate is within ``goal_tolerance_m`` of the goal
 (:attr:`NavigationStack.done`); a route that ends where it starts (a loop) is driven through
-via points (``loop_via_fractions`` of its length, each passed within ``via_tolerance_m``)
-before its end counts, and the end only once the robot has been ``goal_arm_m`` away from it.
+via points (every ``loop_via_spacing_m`` of it, passed within ``via_tolerance_m`` or once
+the robot is tracked beyond them) before its end counts, and the end only once the robot
+has been ``goal_arm_m`` away from it.
 Everything here sees only what the agent sees: estimate, scan, odometry, the prior.
 
 Time: ``t_s`` of :meth:`NavigationStack.step` is the time within the run's day [s] (seconds
@@ -122,14 +123,20 @@ class StackParams:
     #: from it [m] (also while it is nearer, planning leaves the goal: no zero-length plan).
     goal_arm_m: float = 1.0
     #: A loop (a prior route whose end is within ``goal_arm_m`` of its start) is driven
-    #: through via points at these fractions of its length, in order, then to its end (nav2's
-    #: NavigateThroughPoses). Without them the run's task is "reach the start again": once
-    #: the route memory joins a recorded route near the start to one near the end, route A*
-    #: takes that shortcut (office floor: 0 of 20 runs went round, each "reached" its goal
-    #: after 2-6 m). The paper's routes had a start and an end (§7.1); empty: goal only.
-    loop_via_fractions: tuple[float, ...] = (1.0 / 3.0, 2.0 / 3.0)
-    #: A via point is passed when the estimate comes this close [m]: wider than the goal's
-    #: tolerance, as a via point only fixes the way round, and a detour may pass it aside.
+    #: through via points every this many metres of it, in order, then to its end (nav2's
+    #: NavigateThroughPoses); 0: the goal only. Without them the run's task is "reach the
+    #: start again": once the route memory joins a recorded route near the start to one near
+    #: the end, route A* takes that shortcut (office floor: 0 of 20 runs went round, each
+    #: "reached" its goal after 2-6 m). Two via points at thirds were too few: in the lab the
+    #: shortest way to the first one skipped 16 m of the loop (1 of 15 runs went round). 5 m
+    #: is shorter than any stretch a recorded route could cut off with profit, and longer
+    #: than a block the robot must go round (a via point there is passed by the rule below).
+    #: The paper's routes had a start and an end (§7.1).
+    loop_via_spacing_m: float = 5.0
+    #: A via point is passed when the estimate comes this close [m] (wider than the goal's
+    #: tolerance: a via point only fixes the way round, a detour may pass it aside), when the
+    #: robot is tracked on the prior route beyond it (a detour round a block rejoined after
+    #: it), or skipped when nothing can reach it.
     via_tolerance_m: float = 0.5
     #: How far along the path ahead the corridor is checked for a cut at each replan [m]: the
     #: costmap marks obstacles up to 2.5 m, so a block is planned around before the follower
@@ -174,12 +181,10 @@ class StackParams:
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0.0):
                 raise ValueError(f"StackParams.{name} must be finite and > 0, got {v!r}")
-        if not all(0.0 < f < 1.0 for f in self.loop_via_fractions) or list(
-            self.loop_via_fractions
-        ) != sorted(self.loop_via_fractions):
+        if not (math.isfinite(self.loop_via_spacing_m) and self.loop_via_spacing_m >= 0.0):
             raise ValueError(
-                "StackParams.loop_via_fractions must be increasing fractions in (0, 1), got "
-                f"{self.loop_via_fractions!r}"
+                f"StackParams.loop_via_spacing_m must be finite and >= 0, got "
+                f"{self.loop_via_spacing_m!r}"
             )
         if self.cut_offsets < 1 or self.cut_offsets % 2 == 0:
             raise ValueError(
@@ -232,8 +237,10 @@ class NavigationStack:
         self.costmap: Costmap | None = None
         self.goal_xy: FloatArray | None = None
         self._goal_id: int | None = None
-        #: a loop's via points ``[xy, waypoint id or None]``, in order (kept across runs)
-        self._vias: list[tuple[FloatArray, int | None]] = []
+        #: a loop's via points ``[xy, waypoint id]``, in order (kept across runs)
+        self._vias: list[tuple[FloatArray, int]] = []
+        #: arc length [m] of the prior route's waypoints, whose ids are 0..len-1 in order
+        self._prior_cum_m = np.zeros(0)
         self._pending_grid: OccupancyGrid | None = None
         self._graph: RouteGraph | None = None
         self._new_run_state()
@@ -305,6 +312,7 @@ class NavigationStack:
             self._goal_id = int(prior_route.ids[-1])
             self.goal_xy = route[-1].copy()
             self._vias = self._loop_vias(prior_route)
+            self._prior_cum_m = prior_route.cumulative_m()
         else:
             self.route_memory.reset_run()
             if route is not None and not np.allclose(route[-1], self.goal_xy):
@@ -320,18 +328,41 @@ class NavigationStack:
         self._graph = None
         self._event(0.0, "begin_run", f"day {prior.day} run {prior.run}")
 
-    def _loop_vias(self, prior_route: Route) -> list[tuple[FloatArray, int | None]]:
-        """The via points of a loop: the prior route's waypoints nearest the fractions
-        ``loop_via_fractions`` of its length; none for a route that is no loop."""
-        xy = prior_route.xy
-        if np.hypot(*(xy[-1] - xy[0])) > self.params.goal_arm_m:
+    def _loop_vias(self, prior_route: Route) -> list[tuple[FloatArray, int]]:
+        """The via points of a loop: the prior route's waypoints nearest every
+        ``loop_via_spacing_m`` of its length (none within half a spacing of its end); none
+        for a route that is no loop."""
+        xy, spacing = prior_route.xy, self.params.loop_via_spacing_m
+        if spacing <= 0.0 or np.hypot(*(xy[-1] - xy[0])) > self.params.goal_arm_m:
             return []
         cum = prior_route.cumulative_m()
-        vias = []
-        for f in self.params.loop_via_fractions:
-            k = int(np.argmin(np.abs(cum - f * cum[-1])))
-            vias.append((xy[k].copy(), int(prior_route.ids[k])))
-        return vias
+        at = np.arange(spacing, cum[-1] - 0.5 * spacing, spacing)
+        idx = sorted({int(np.argmin(np.abs(cum - s))) for s in at})
+        return [(xy[k].copy(), int(prior_route.ids[k])) for k in idx]
+
+    def _pass_vias(self, t_s: float, pose: FloatArray) -> None:
+        """Count the via points passed (``via_tolerance_m``): the next one reached, or those
+        behind the prior route's waypoint the robot is tracked on by at most two via spacings
+        (a detour round a block rejoined after them; never the whole loop when its end is seen
+        at its start)."""
+        k, n = self._via_k, len(self._vias)
+        if k < n and np.hypot(*(pose[:2] - self._vias[k][0])) <= self.params.via_tolerance_m:
+            k += 1
+        pos = self._route_pos
+        if k < n and self._armed and pos is not None and pos.inside:
+            here = pos.from_id
+            if here < len(self._prior_cum_m):
+                cum, reach = self._prior_cum_m, 2.0 * self.params.loop_via_spacing_m
+                while (
+                    k < n
+                    and self._vias[k][1] <= here
+                    and cum[here] - cum[self._vias[k][1]] <= reach
+                ):
+                    k += 1
+        if k > self._via_k:
+            self._event(t_s, "via", f"via points {self._via_k + 1}-{k} of {n} passed")
+            self._via_k = k
+            self._force_plan = True
 
     def _target(self) -> tuple[FloatArray, int | None, bool]:
         """What the robot heads for now: ``(xy, waypoint id, is_via)``; the next via point
@@ -442,16 +473,10 @@ class NavigationStack:
             self._local = None
         self._route_pos = self.route_memory.observe(pose, self._day_s + t_s)
         assert self.goal_xy is not None
-        while self._via_k < len(self._vias):
-            via_xy = self._vias[self._via_k][0]
-            if np.hypot(*(pose[:2] - via_xy)) > p.via_tolerance_m:
-                break
-            self._via_k += 1
-            self._force_plan = True
-            self._event(t_s, "via", f"via point {self._via_k} of {len(self._vias)} passed")
         to_goal = float(np.hypot(*(pose[:2] - self.goal_xy)))
         if not self._armed and to_goal > self.params.goal_arm_m:
             self._armed = True
+        self._pass_vias(t_s, pose)
         if (
             not self.done
             and self._armed
@@ -893,6 +918,12 @@ class NavigationStack:
             # at a loop's start the goal is here: a grid path alone has nowhere to go (route
             # A* and the bridged plan, which drive the route, found nothing)
             path = None
+        if path is None and self._target()[2]:
+            # a via point nothing reaches (in a block, say): on to the next one
+            self._via_k += 1
+            self._force_plan = True
+            self._event(t_s, "via_skipped", f"via point {self._via_k} unreachable: skipped")
+            return
         if path is None:
             if self.mode != GRID or self._path is not None:
                 self._event(t_s, "no_path", "neither a route nor a grid path to the goal")
