@@ -453,6 +453,35 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_slam_eval(args: argparse.Namespace) -> int:
+    from dynmap_sim.analysis.export import write_tum
+    from dynmap_sim.errors import FileError, InputError, regular_file_size
+    from dynmap_sim.experiments.slam_eval import slam_eval
+
+    regular_file_size(args.log, FileError)
+    regular_file_size(args.relations, FileError)
+    outs = [(opt, _output_file(p)) for opt, p in (("--tum", args.tum), ("--json", args.json)) if p]
+    for opt, p in outs:
+        if p.exists() and not args.force:
+            raise InputError(f"{opt} {p}: exists; pass --force to replace it or choose another")
+    res = slam_eval(
+        Path(args.log),
+        Path(args.relations),
+        progress=not args.quiet,
+        note=lambda text: print(text, file=sys.stderr),
+    )
+    for line in res.table():
+        print(line)
+    for opt, p in outs:
+        existed = p.exists()
+        if opt == "--tum":
+            write_tum(p, res.stamps_s, res.trajectory)
+        else:
+            p.write_text(json.dumps(res.summary(), indent=2) + "\n", encoding="utf-8")
+        print(_wrote(p, existed))
+    return 0
+
+
 def _sweep_seeds(text: str) -> tuple[int, ...]:
     """``--seeds 0-3``, ``0,2,5`` or ``7``."""
     from dynmap_sim.errors import InputError
@@ -762,6 +791,17 @@ def build_parser() -> argparse.ArgumentParser:
         "--force", action="store_true", help="replace earlier results in --out (else refused)"
     )
     s.set_defaults(func=_cmd_replay)
+
+    s = sub.add_parser(
+        "slam-eval", help="map a CARMEN log and score it by Kümmerle's relation error"
+    )
+    s.add_argument("log", help="CARMEN log file (raw odometry)")
+    s.add_argument("--relations", required=True, help="relations file (t1 t2 x y z r p yaw)")
+    s.add_argument("--tum", help="write the loop-closed trajectory here (TUM, the log's stamps)")
+    s.add_argument("--json", help="write the relation error and timings here (JSON)")
+    s.add_argument("--force", action="store_true", help="replace existing --tum/--json files")
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    s.set_defaults(func=_cmd_slam_eval)
 
     s = sub.add_parser(
         "sweep",
