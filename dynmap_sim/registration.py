@@ -57,11 +57,17 @@ def register_envs() -> None:
     if ENV_IDS[0] in gymnasium.registry:
         return
     entry = "dynmap_sim.registration:make_env"
-    common: dict[str, Any] = {"entry_point": entry, "disable_env_checker": True}
+    vec = "dynmap_sim.vector_env:make_vector_env"  # gymnasium.make_vec: DynMapVectorEnv
+    common: dict[str, Any] = {
+        "entry_point": entry,
+        "vector_entry_point": vec,
+        "disable_env_checker": True,
+    }
     gymnasium.register(id=ENV_IDS[0], kwargs={"world": "apartment"}, **common)
     gymnasium.register(id=ENV_IDS[1], kwargs={"world": "lab"}, **common)
     gymnasium.register(
         id=ENV_IDS[2],
         entry_point="dynmap_sim.registration:make_world_env",
+        vector_entry_point=vec,
         disable_env_checker=True,
     )

@@ -1,0 +1,130 @@
+"""N robots in N worlds as one Gymnasium ``VectorEnv`` (the envs' ``vector_entry_point``).
+
+``gymnasium.make_vec("dynmap_sim/Lab-v0", num_envs=8)`` builds a :class:`DynMapVectorEnv`:
+``N`` :class:`~dynmap_sim.env.DynMapEnv` sub-envs whose observations are written straight
+into preallocated batch arrays (``scan`` ``(N, n_beams)`` float32, ``odom`` ``(N, 3)``) and
+whose infos are batched the way Gymnasium's own vector envs batch them (``VectorEnv._add_info``:
+an array per key plus a ``_key`` mask), without ``SyncVectorEnv``'s per-step deep copies and
+wrapper layers.
+
+Semantics are those of ``SyncVectorEnv`` of the same sub-envs, number for number (the tests
+check it): ``reset(seed=s)`` seeds sub-env ``i`` with ``s + i`` (or ``seed[i]`` for a list),
+``options`` go to every sub-env; autoreset is Gymnasium's default
+:attr:`~gymnasium.vector.AutoresetMode.NEXT_STEP`: the step after a sub-env terminated or was
+truncated resets it (``reset()`` without seed: the next run of its calendar), ignores its
+action and returns its first observation with reward 0 and ``terminated = truncated =
+False``.
+
+What is *not* batched yet: each sub-env's world (people, pymunk bodies) and ray casting run
+one after another inside the step; batching them across worlds (one cast call for all
+envs) is issue 13 item 2's open part. The gain over ``SyncVectorEnv`` is the copies and
+layers it skips (measured in ``benchmarks/bench_peers.py``).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from dynmap_sim.env import DynMapEnv
+
+
+class DynMapVectorEnv(VectorEnv):
+    """``num_envs`` :class:`DynMapEnv` sub-envs built with the same keyword arguments."""
+
+    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
+
+    def __init__(self, num_envs: int = 1, **kwargs: Any) -> None:
+        if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
+            raise ValueError(f"num_envs must be an integer >= 1, got {num_envs!r}")
+        if kwargs.get("render_mode") is not None:
+            raise ValueError("DynMapVectorEnv does not render; use gymnasium.make for frames")
+        self.num_envs = num_envs
+        self.envs = [DynMapEnv(**kwargs) for _ in range(num_envs)]
+        first = self.envs[0]
+        self.single_observation_space = first.observation_space
+        self.single_action_space = first.action_space
+        self.observation_space = batch_space(self.single_observation_space, num_envs)
+        self.action_space = batch_space(self.single_action_space, num_envs)
+        self.render_mode = None
+        n_beams = self.single_observation_space["scan"].shape[0]
+        self._scan = np.zeros((num_envs, n_beams), dtype=np.float32)
+        self._odom = np.zeros((num_envs, 3), dtype=np.float64)
+        self._rewards = np.zeros(num_envs, dtype=np.float64)
+        self._terminations = np.zeros(num_envs, dtype=np.bool_)
+        self._truncations = np.zeros(num_envs, dtype=np.bool_)
+        self._autoreset = np.zeros(num_envs, dtype=np.bool_)
+
+    def _obs(self) -> dict[str, np.ndarray]:
+        return {"scan": self._scan.copy(), "odom": self._odom.copy()}
+
+    def _put(self, i: int, obs: dict[str, np.ndarray]) -> None:
+        self._scan[i] = obs["scan"]
+        self._odom[i] = obs["odom"]
+
+    def reset(
+        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        """Reset every sub-env (seeds as ``SyncVectorEnv``: ``seed + i`` or ``seed[i]``)."""
+        if seed is None:
+            seeds: list[int | None] = [None] * self.num_envs
+        elif isinstance(seed, int) and not isinstance(seed, bool):
+            seeds = [seed + i for i in range(self.num_envs)]
+        else:
+            seeds = list(seed)
+            if len(seeds) != self.num_envs:
+                raise ValueError(f"reset: {len(seeds)} seeds for {self.num_envs} envs")
+        infos: dict[str, Any] = {}
+        for i, (env, s) in enumerate(zip(self.envs, seeds, strict=True)):
+            obs, info = env.reset(seed=s, options=options)
+            self._put(i, obs)
+            infos = self._add_info(infos, info, i)
+        self._autoreset[:] = False
+        self._terminations[:] = False
+        self._truncations[:] = False
+        return self._obs(), infos
+
+    def step(
+        self, actions: Any
+    ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        """Step every sub-env with its row of ``actions`` ``(num_envs, 2)``; NEXT_STEP
+        autoreset for those that ended on the previous step."""
+        a = np.asarray(actions)
+        if a.shape != (self.num_envs, 2):
+            raise ValueError(f"actions must have shape ({self.num_envs}, 2), got {a.shape}")
+        infos: dict[str, Any] = {}
+        for i, env in enumerate(self.envs):
+            if self._autoreset[i]:
+                obs, info = env.reset()
+                self._rewards[i] = 0.0
+                self._terminations[i] = False
+                self._truncations[i] = False
+            else:
+                obs, r, term, trunc, info = env.step(a[i])
+                self._rewards[i] = r
+                self._terminations[i] = term
+                self._truncations[i] = trunc
+            self._put(i, obs)
+            infos = self._add_info(infos, info, i)
+        np.logical_or(self._terminations, self._truncations, out=self._autoreset)
+        return (
+            self._obs(),
+            self._rewards.copy(),
+            self._terminations.copy(),
+            self._truncations.copy(),
+            infos,
+        )
+
+    def close_extras(self, **kwargs: Any) -> None:
+        for env in self.envs:
+            env.close()
+
+
+def make_vector_env(num_envs: int = 1, **kwargs: Any) -> DynMapVectorEnv:
+    """The ``vector_entry_point`` of the registered envs (``World-v0`` needs ``world=``)."""
+    if "world" not in kwargs:
+        raise ValueError("dynmap_sim/World-v0 needs world=PATH (a world TOML file) or a WorldSpec")
+    return DynMapVectorEnv(num_envs=num_envs, **kwargs)
