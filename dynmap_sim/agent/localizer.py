@@ -99,6 +99,7 @@ LOCALIZERS: Registry[Localizer] = Registry(
         "dynmap_sim.agent.dead_reckoning",
         "dynmap_sim.agent.localization.particle_filter",
         "dynmap_sim.agent.localization.dynamic_map_localizer",
+        "dynmap_sim.agent.localization.adaptive_memory.localizer",
     ),
 )
 

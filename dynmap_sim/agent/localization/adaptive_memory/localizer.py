@@ -1,0 +1,480 @@
+"""H&W §6.1: ``adaptive-memory``, Monte Carlo localization on the static points only, on the
+long-term map whose expected ranges fit the current scan best.
+
+Per scan (the data flow of H&W Fig. 2):
+
+1. The pose is predicted from the last estimate and the odometry (the pose at hand when the
+   scan arrives; everything below uses it, as MCL runs last in Fig. 2).
+2. The scan (sensory memory) is segmented into boxes and tracked (:mod:`.object_tracker`,
+   §4.2): points get dynamic / static / unknown (eqs. 10-11).
+3. ``u`` of the tracker's static points update the current long-term slot's grid (eq. 1 picks
+   the slot; :mod:`.ltm_map`, §4.3, eqs. 12-15).
+4. The semistatic test (§4.4): a non-dynamic point with no obstacle of that map within its
+   uncertainty is semistatic. Final classes: dynamic; semistatic; static (tracked, slow,
+   explained by the map); unknown (not associated, explained by the map).
+5. MCL (§6.1) with the project's AMCL core (:class:`~dynmap_sim.agent.localization.
+   particle_filter.AMCLFilter`, ``mcl_config``) on the static points only; with fewer than
+   ``min_static_points`` the explained unknown points are added (the first scan of a run has
+   no associated box at all). The map is the long-term slot whose ray-cast expected ranges
+   have the least mean squared error against the scan (every ``select_every_scans``).
+
+Odometry, scans and the prior only: the agent never sees the truth.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dynmap_sim import se2
+from dynmap_sim.agent.localization.adaptive_memory.ltm_map import (
+    LTMMap,
+    LTMParams,
+    point_covariances,
+)
+from dynmap_sim.agent.localization.adaptive_memory.memory_stores import (
+    SLOT_INITS,
+    LTMStore,
+    SlotBuffer,
+)
+from dynmap_sim.agent.localization.adaptive_memory.object_tracker import (
+    DYNAMIC,
+    SEMISTATIC,
+    STATIC,
+    UNKNOWN,
+    ObjectTracker,
+    TrackerParams,
+    point_classes_of,
+    segment_scan,
+)
+from dynmap_sim.agent.localization.likelihood_field import LikelihoodTable, select_beams
+from dynmap_sim.agent.localization.particle_filter import (
+    CONFIGS,
+    AMCLFilter,
+    information_lambda_min,
+    regularized_covariance,
+)
+from dynmap_sim.agent.localizer import Localizer, register_localizer
+from dynmap_sim.agent.params import check_fields, coerce_fields
+from dynmap_sim.types import Diagnostic, LaserSpec, Odometry, PoseEstimate, Prior, Scan
+
+FloatArray = NDArray[np.float64]
+
+NAME = "adaptive-memory"
+DAY_S = 86400.0
+
+
+@dataclass(frozen=True)
+class AdaptiveMemoryConfig:
+    """Parameters of ``adaptive-memory`` (H&W 2011; § and eq. are the paper's; "ours" where
+    the paper is silent)."""
+
+    # -- stores (§3, eq. 1; §7.1) --------------------------------------------------------
+    #: Sensory memory: slot length [s] and slots (§7.1: 0.1 s, 10).
+    sm_dt_s: float = 0.1
+    sm_slots: int = 10
+    #: Short-term memory: slot length [s] and slots (§7.1: 0.1 s, 100).
+    stm_dt_s: float = 0.1
+    stm_slots: int = 100
+    #: Long-term memory: slot length [s] and slots (§7.1: 8640 s, 10: one day).
+    ltm_dt_s: float = 8640.0
+    ltm_slots: int = 10
+    #: What a long-term slot starts from when it becomes current (ours; §3 is silent):
+    #: ``copy_latest`` | ``prior_only`` | ``keep`` (:class:`.memory_stores.LTMStore`).
+    slot_init: str = "copy_latest"
+    #: Time of day [s] of a run's start (ours: the prior carries the day and run, not the
+    #: clock; 36000 = 10:00, the apartment's run), plus ``run_spacing_s`` per later run of a
+    #: day. ``t`` of eq. 1 is ``(day - 1)·86400 + run_clock_s + (run - 1)·run_spacing_s +
+    #: scan stamp``, ``t_s`` the first midnight.
+    run_clock_s: float = 36000.0
+    run_spacing_s: float = 0.0
+    # -- long-term grids (§4.3, eqs. 12-15; §7.1) -----------------------------------------
+    #: Grid cell [m] (§7.1: 50 mm).
+    cell_m: float = 0.05
+    #: Share of the static points that enter the long-term map per scan (§4.3, §7.1: 0.05).
+    u: float = 0.05
+    #: Inverse sensor model peak (ours; Elfes [15] style): P(occ) at the point's mean.
+    p_hit: float = 0.7
+    #: Free-space evidence along the sampled points' beams (ours; the paper has occupied
+    #: evidence only, so moved furniture would never leave the map). On by default: week 2
+    #: moves furniture every day and a map that keeps every old place attracts MCL to them.
+    free_space: bool = True
+    #: Log-odds added to a cell a sampled beam passed (ours: P = 0.4).
+    l_free: float = -0.4
+    #: Free space stops this many standard deviations of the point before it (ours).
+    free_stop_sigma: float = 3.0
+    #: Log-odds clamp (ours): a cell at ``l_max`` needs ~6 free passes to drop below
+    #: ``l_occupied``, so a moved cupboard fades within a run, a wall seen past a person not.
+    l_min: float = -2.0
+    l_max: float = 3.5
+    #: A cell is an obstacle (§4.4's test, §6.1's map) from this log-odds (ours: P = 0.8,
+    #: two independent hits at a point's mean; one stray point is not an obstacle).
+    l_occupied: float = 1.4
+    #: Half-width of the Gaussian stencil of a point [cells] (ours: 3 cells = 15 cm, > 3σ of a
+    #: well-localized point).
+    stencil_cells: int = 3
+    #: Floor added to every point covariance [m, std] (ours: half a cell).
+    cov_floor_m: float = 0.025
+    # -- reading covariance Σ_s (§4.1, eq. 4; URG-04LX datasheet) ---------------------------
+    #: Range noise: max(sigma_r_min_m, sigma_r_rel · r) (URG-04LX: 10 mm or 1 %).
+    sigma_r_min_m: float = 0.01
+    sigma_r_rel: float = 0.01
+    #: Bearing noise [rad] (ours: the 0.36° step's quantization, 0.36°/sqrt(12)).
+    sigma_alpha_rad: float = float(np.deg2rad(0.36) / np.sqrt(12.0))
+    # -- semistatic test (§4.4) ------------------------------------------------------------
+    #: "Within the uncertainty of the scan point" (ours: Mahalanobis <= 2, at least 1.5
+    #: cells), searched at most this many cells away.
+    semistatic_sigma: float = 2.0
+    semistatic_max_cells: int = 4
+    # -- objects (§4.2, eqs. 8-11) ----------------------------------------------------------
+    #: Speed threshold of eq. 10 [m/s] (§7.1: 0.3).
+    v_thres: float = 0.3
+    #: Segmentation (ours; the paper gives none): adaptive breakpoint angle [deg] (Borges &
+    #: Aldon 2004), least points of a box, missing beams bridged inside a segment.
+    breakpoint_lambda_deg: float = 10.0
+    min_box_points: int = 3
+    max_gap_beams: int = 2
+    #: The sliding-wall trap (ours; :mod:`.object_tracker`): boxes longer than this [m] are
+    #: never dynamic (a person or a robot is shorter), nor those cut by the field of view
+    #: and, with ``occlusion_never_dynamic``, by a nearer return.
+    max_dynamic_length_m: float = 1.2
+    occlusion_never_dynamic: bool = True
+    #: Kalman filter (ours; "a common Kalman filter as in [7]"): white acceleration [m/s^2],
+    #: centre measurement noise [m], initial speed std [m/s], association gate [m]; a box is
+    #: dynamic after ``confirm_steps`` fast updates in a row (and static again after as many
+    #: slow ones); a track is dropped after ``max_misses`` scans unseen.
+    track_sigma_accel: float = 1.0
+    track_sigma_meas_m: float = 0.05
+    track_sigma_v0: float = 1.0
+    track_gate_m: float = 0.5
+    confirm_steps: int = 3
+    max_misses: int = 2
+    # -- localization (§6.1) -----------------------------------------------------------------
+    #: The project's AMCL configuration (``tuned`` | ``nav2-default``) and field overrides.
+    mcl_config: str = "tuned"
+    mcl_overrides: dict[str, Any] = field(default_factory=dict)
+    #: Below this many static points, the explained unknown ones join (ours).
+    min_static_points: int = 20
+    #: Map selection (§6.1: least mean squared error of expected ranges) every this many
+    #: scans (ours: 1 Hz), over ``select_beams`` beams; switch only if better by
+    #: ``select_margin`` (ours: 10 %, no flapping between equal maps).
+    select_every_scans: int = 10
+    select_beams: int = 60
+    select_margin: float = 0.1
+    #: The MCL's likelihood field is rebuilt from the chosen long-term map every this many
+    #: scans (ours: 5 s; the map changes a little every scan, the field costs a distance
+    #: transform).
+    map_refresh_scans: int = 50
+
+    def __post_init__(self) -> None:
+        coerce_fields(self, NAME)
+        check_fields(
+            self,
+            NAME,
+            positive=(
+                "sm_dt_s", "sm_slots", "stm_dt_s", "stm_slots", "ltm_dt_s", "ltm_slots",
+                "cell_m", "l_max", "l_occupied", "stencil_cells", "cov_floor_m",
+                "semistatic_sigma", "semistatic_max_cells", "v_thres", "breakpoint_lambda_deg",
+                "min_box_points", "max_dynamic_length_m", "track_sigma_accel",
+                "track_sigma_meas_m", "track_sigma_v0", "track_gate_m", "confirm_steps",
+                "select_every_scans", "select_beams", "map_refresh_scans", "free_stop_sigma",
+            ),
+            non_negative=(
+                "run_clock_s", "run_spacing_s", "sigma_r_min_m", "sigma_r_rel",
+                "sigma_alpha_rad", "max_gap_beams", "max_misses", "min_static_points",
+            ),
+            fraction=("u", "select_margin"),
+            finite=("l_free", "l_min"),
+            at_most={"p_hit": 1.0, "breakpoint_lambda_deg": 89.0, "stencil_cells": 20,
+                     "semistatic_max_cells": 20},
+        )  # fmt: skip
+        if not 0.5 < self.p_hit < 1.0:
+            raise ValueError(f"{NAME}: p_hit must be in (0.5, 1), got {self.p_hit!r}")
+        if self.l_free > 0 or self.l_min > 0:
+            raise ValueError(f"{NAME}: l_free and l_min must be <= 0")
+        if self.l_occupied > self.l_max:
+            raise ValueError(f"{NAME}: l_occupied must be <= l_max")
+        if self.slot_init not in SLOT_INITS:
+            raise ValueError(f"{NAME}: slot_init must be one of {SLOT_INITS}")
+        if self.mcl_config not in CONFIGS:
+            raise ValueError(f"{NAME}: mcl_config must be one of {sorted(CONFIGS)}")
+        unknown = set(self.mcl_overrides) - set(asdict(CONFIGS[self.mcl_config]))
+        if unknown:
+            raise ValueError(f"{NAME}: unknown mcl_overrides {sorted(unknown)}")
+
+    def ltm_params(self) -> LTMParams:
+        return LTMParams(
+            p_hit=self.p_hit, free_space=self.free_space, l_free=self.l_free,
+            free_stop_sigma=self.free_stop_sigma, l_min=self.l_min, l_max=self.l_max,
+            l_occupied=self.l_occupied, stencil_cells=self.stencil_cells,
+            semistatic_sigma=self.semistatic_sigma,
+            semistatic_max_cells=self.semistatic_max_cells, cov_floor_m=self.cov_floor_m,
+        )  # fmt: skip
+
+    def tracker_params(self) -> TrackerParams:
+        return TrackerParams(
+            v_thres=self.v_thres, breakpoint_lambda_deg=self.breakpoint_lambda_deg,
+            sigma_r_m=self.sigma_r_min_m, min_points=self.min_box_points,
+            max_gap_beams=self.max_gap_beams, max_dynamic_length_m=self.max_dynamic_length_m,
+            occlusion_never_dynamic=self.occlusion_never_dynamic,
+            sigma_accel=self.track_sigma_accel, sigma_meas_m=self.track_sigma_meas_m,
+            sigma_v0=self.track_sigma_v0, gate_m=self.track_gate_m,
+            confirm_steps=self.confirm_steps, max_misses=self.max_misses,
+        )  # fmt: skip
+
+
+class StaticPointFilter(AMCLFilter):
+    """The AMCL core fed only the beams of ``point_mask`` (the static points, §6.1): up to
+    ``max_beams`` of them, evenly spread over the masked beams."""
+
+    point_mask: NDArray[np.bool_] | None = None
+
+    def _beams_of(self, ranges_m: Any) -> tuple[FloatArray, FloatArray]:
+        r = np.asarray(ranges_m, dtype=np.float64)
+        ok = np.isfinite(r) & (r > 0) & (r < self.range_max) & (r >= self.range_min)
+        if self.point_mask is not None:
+            ok &= self.point_mask
+        idx = np.nonzero(ok)[0]
+        if len(idx) > self.config.max_beams > 0:
+            idx = idx[select_beams(len(idx), self.config.max_beams)]
+        return r[idx], self.all_angles[idx]
+
+    def set_grid(self, grid: Any) -> None:
+        """Localize on ``grid`` from now on, keeping the particles."""
+        self.grid = grid
+        self.table = LikelihoodTable(grid, self.lf)
+        free = grid.free_points()
+        if len(free):
+            self.free_xy = free
+
+
+@register_localizer(NAME)
+class AdaptiveMemoryLocalizer(Localizer):
+    """Hentschel & Wagner's adaptive memory model (module doc); parameters are the fields
+    of :class:`AdaptiveMemoryConfig`. Needs the prior's walls (H&W Fig. 4)."""
+
+    needs_prior_walls = True
+
+    diagnostics = (
+        Diagnostic("n_dynamic", "int32", doc="valid points classified dynamic (eq. 10-11)"),
+        Diagnostic("n_semistatic", "int32", doc="valid points classified semistatic (§4.4)"),
+        Diagnostic("n_static", "int32", doc="valid points classified static"),
+        Diagnostic("ltm_slot", "int16", doc="long-term slot whose map MCL used (§6.1)"),
+        Diagnostic("static_points_used", "int32", doc="points that entered the MCL update"),
+        Diagnostic("scan_loglik", "float64", doc="mean per-beam log-likelihood of the used points"),
+        Diagnostic("n_tracked_objects", "int32", doc="boxes tracked in the short-term memory"),
+        Diagnostic("lambda_min", "float64", doc="smallest eigenvalue of the inverse covariance"),
+    )
+
+    def __init__(self, laser: LaserSpec, rng: np.random.Generator, **params: Any) -> None:
+        fields_ = set(AdaptiveMemoryConfig.__dataclass_fields__)
+        unknown = sorted(set(params) - fields_)
+        if unknown:
+            raise TypeError(f"{NAME}: unknown parameters {unknown}; known: {sorted(fields_)}")
+        super().__init__(laser, rng)
+        self.config = AdaptiveMemoryConfig(**params)
+        c = self.config
+        self.mcl = replace(CONFIGS[c.mcl_config], **c.mcl_overrides)
+        self.lp = c.ltm_params()
+        self.tracker = ObjectTracker(c.tracker_params())
+        self.angles = laser.angles()
+        self.mount = np.asarray(laser.mount_pose, dtype=np.float64)
+        self.range_max = float(laser.range_max_m)
+        self.sm: SlotBuffer[np.ndarray] = SlotBuffer(c.sm_dt_s, c.sm_slots)
+        self.stm: SlotBuffer[np.ndarray] = SlotBuffer(c.stm_dt_s, c.stm_slots)
+        self.ltm: LTMStore | None = None
+        self._prior_map: LTMMap | None = None
+        self.filter: StaticPointFilter | None = None
+        self.used_slot = -1
+        self._t0 = 0.0
+        self._est = np.zeros(3)
+        self._cov = np.eye(3)
+        self._odom_prev: FloatArray | None = None
+        self._odom_at_update: FloatArray | None = None
+        self._est_at_update = np.zeros(3)
+        self._n_scans = 0
+        self._day = 0
+
+    # -- run ------------------------------------------------------------------------------
+    def begin_run(self, prior: Prior) -> None:
+        c = self.config
+        if self.ltm is None:
+            if prior.walls is None or len(prior.walls) == 0:
+                raise ValueError(f"{NAME} needs the prior's walls (H&W Fig. 4)")
+            seed = None if prior.initial_pose is None else np.asarray(prior.initial_pose)[:2]
+            self._prior_map = LTMMap.from_prior(prior.walls, seed, c.cell_m, self.lp)
+            self.ltm = LTMStore(c.ltm_dt_s, c.ltm_slots, c.slot_init, self._prior_map.copy)
+        self._day = prior.day
+        self._t0 = (
+            max(prior.day - 1, 0) * DAY_S + c.run_clock_s + max(prior.run - 1, 0) * c.run_spacing_s
+        )
+        self.ltm.activate(self._t0)
+        self.tracker.reset()
+        self.sm.clear()
+        self.stm.clear()
+        self.used_slot = self.ltm.current
+        grid = self.ltm.map(self.used_slot).occupancy_grid(self.lp)
+        self.filter = StaticPointFilter(grid, self.laser, self.mcl)
+        self.filter.all_angles = self.angles
+        if prior.initial_pose is None:
+            self.filter.init_uniform(self.rng)
+        else:
+            cov = (
+                np.asarray(prior.initial_pose_cov, float)
+                if prior.initial_pose_cov is not None
+                else np.diag([self.mcl.init_sigma_xy**2] * 2 + [self.mcl.init_sigma_theta**2])
+            )
+            self.filter.init_gaussian(prior.initial_pose, cov, self.rng)
+        self._est, self._cov = self.filter.estimate()
+        self._est_at_update = self._est.copy()
+        self._odom_prev = None
+        self._odom_at_update = None
+        self._n_scans = 0
+
+    # -- one scan -------------------------------------------------------------------------
+    def update(self, odom: Odometry, scan: Scan) -> PoseEstimate:
+        f, ltm = self.filter, self.ltm
+        if f is None or ltm is None:
+            raise RuntimeError(f"{NAME}: update() before begin_run()")
+        c = self.config
+        t = self._t0 + float(scan.stamp_s)
+        ltm.activate(t)  # eq. 1
+        pose_odom = np.asarray(odom.pose, dtype=np.float64)
+        # 1. the predicted pose
+        pred = (
+            self._est
+            if self._odom_prev is None
+            else se2.compose(self._est, se2.between(self._odom_prev, pose_odom))
+        )
+        self._odom_prev = pose_odom.copy()
+        ranges = np.asarray(scan.ranges_m, dtype=np.float64)
+        self.sm.put(t, ranges)  # sensory memory (§4.1)
+        valid = np.isfinite(ranges) & (ranges > 0) & (ranges < self.range_max)
+        # 2. objects (§4.2)
+        boxes = segment_scan(ranges, self.angles, self.mount, self.range_max,
+                             self.tracker.params)  # fmt: skip
+        box_cls, _ = self.tracker.update(boxes, pose_odom, t)
+        tracked = point_classes_of(boxes, box_cls)
+        # 3. long-term map update (§4.3) with u of the tracker's static points
+        vi = np.nonzero(valid)[0]
+        rv = ranges[vi]
+        sig_r = np.maximum(c.sigma_r_min_m, c.sigma_r_rel * rv)
+        pts, covs = point_covariances(pred, self._cov, self.mount, rv, self.angles[vi],
+                                      c.sigma_alpha_rad, sig_r)  # fmt: skip
+        cur = ltm.map()
+        stat = np.nonzero(tracked[vi] == STATIC)[0]
+        n_take = int(round(c.u * len(stat)))
+        if n_take:
+            take = self.rng.choice(stat, size=n_take, replace=False)
+            laser_xy = se2.compose(pred, self.mount)[:2]
+            cur.update(laser_xy, pts[take], covs[take], self.lp)
+        # 4. the semistatic test (§4.4)
+        explained = cur.explained(pts, covs, self.lp)
+        cls_v = tracked[vi].copy()
+        cls_v[(cls_v != DYNAMIC) & ~explained] = SEMISTATIC
+        classes = np.full(len(ranges), UNKNOWN, dtype=np.int8)
+        classes[vi] = cls_v
+        self.stm.put(t, classes)  # short-term memory: the classified scan
+        # 5. map selection and MCL (§6.1) on the static points
+        if self._n_scans % c.select_every_scans == 0:
+            self._select_map(pred, ranges)
+        elif self._n_scans % c.map_refresh_scans == 0:
+            f.set_grid(ltm.map(self.used_slot).occupancy_grid(self.lp))
+        use = classes == STATIC
+        if int(use.sum()) < c.min_static_points:
+            use |= classes == UNKNOWN
+        f.point_mask = use
+        self._mcl_step(pose_odom, ranges)
+        self._n_scans += 1
+        mean = se2.compose(self._est_at_update, se2.between(self._odom_at_update, pose_odom))
+        self._est = mean
+        cov = regularized_covariance(self._cov)
+        r_used, _ = f._beams_of(ranges)
+        extras = {
+            "point_classes": classes,
+            "n_dynamic": int(np.sum(cls_v == DYNAMIC)),
+            "n_semistatic": int(np.sum(cls_v == SEMISTATIC)),
+            "n_static": int(np.sum(cls_v == STATIC)),
+            "ltm_slot": int(self.used_slot),
+            "static_points_used": len(r_used),
+            "scan_loglik": f.mean_beam_loglik(mean, ranges),
+            "n_tracked_objects": self.tracker.n_tracks,
+            "lambda_min": information_lambda_min(cov),
+        }
+        return PoseEstimate(mean=mean, cov=cov, extras=extras)
+
+    def _mcl_step(self, pose_odom: FloatArray, ranges: FloatArray) -> None:
+        """StaticMCL's update rule: filter when the odometry moved ``update_min_d/a``."""
+        f, m = self.filter, self.mcl
+        assert f is not None
+        if self._odom_at_update is None:
+            do = True
+        else:
+            d = pose_odom - self._odom_at_update
+            d[2] = se2.wrap_angle(d[2])
+            do = abs(d[0]) > m.update_min_d or abs(d[1]) > m.update_min_d
+            do = do or abs(d[2]) > m.update_min_a
+            if do:
+                f.predict(self._odom_at_update, pose_odom, self.rng)
+        if not do:
+            return
+        f.correct(ranges)
+        self._est_at_update, self._cov = f.estimate()
+        f.resample(self.rng)
+        self._odom_at_update = pose_odom.copy()
+
+    def _select_map(self, pose: FloatArray, ranges: FloatArray) -> None:
+        """§6.1: the filled slot whose expected ranges fit the scan with the least mean
+        squared error (at the predicted pose, ``select_beams`` beams)."""
+        ltm, c = self.ltm, self.config
+        assert ltm is not None and self.filter is not None
+        slots = ltm.filled()
+        best, best_mse, used_mse = self.used_slot, np.inf, np.inf
+        if len(slots) > 1:
+            beams = select_beams(len(ranges), c.select_beams)
+            r = ranges[beams]
+            ok = np.isfinite(r) & (r > 0)
+            r = np.minimum(np.where(ok, r, self.range_max), self.range_max)
+            ok |= np.isposinf(ranges[beams])
+            laser_pose = se2.compose(pose, self.mount)
+            for k in slots:
+                e = ltm.map(k).expected_ranges(laser_pose, self.angles[beams], self.range_max,
+                                               self.lp)  # fmt: skip
+                mse = float(np.mean((e[ok] - r[ok]) ** 2)) if ok.any() else np.inf
+                if k == self.used_slot:
+                    used_mse = mse
+                if mse < best_mse:
+                    best, best_mse = k, mse
+            if best != self.used_slot and not best_mse < (1.0 - c.select_margin) * used_mse:
+                best = self.used_slot
+        if self.used_slot not in slots:
+            best = ltm.current
+        self.used_slot = best
+        self.filter.set_grid(ltm.map(best).occupancy_grid(self.lp))
+
+    # -- day ------------------------------------------------------------------------------
+    def day_artifacts(self) -> dict[str, dict[str, np.ndarray]]:
+        """``ltm``: the current long-term slot's grid after the day (log-odds ``(H, W)``
+        float32, rows along y, ``origin_m``, ``resolution_m``, ``ltm_slot``), as the
+        ``dynamic-map`` hands over its map (named arrays). With one run a day and
+        ``slot_init = copy_latest`` the other slots hold earlier copies of it."""
+        if self.ltm is None or self.ltm.current < 0:
+            return {}
+        m = self.ltm.map()
+        return {
+            "ltm": {
+                "logodds": m.logodds.copy(),
+                "origin_m": m.origin.copy(),
+                "resolution_m": np.array(m.resolution),
+                "ltm_slot": np.array(self.ltm.current, dtype=np.int16),
+            }
+        }
+
+    def ltm_bytes(self) -> int:
+        """Memory of the long-term grids held now [bytes]."""
+        if self.ltm is None:
+            return 0
+        return sum(self.ltm.map(k).logodds.nbytes for k in self.ltm.filled())

@@ -1,0 +1,246 @@
+"""H&W §4.3 (eqs. 12-15): long-term obstacle grids, and §4.4: the semistatic test.
+
+One occupancy grid (Elfes [15]) of 50 mm cells per long-term slot, kept as log-odds (Elfes'
+Bayesian update is an addition in log-odds). Each scan, ``u`` of the static points (a random
+``u·n_stat`` of them, inspired by Biber & Duckett) enter the current slot's grid:
+
+* eq. 12: the world point ``s' = (x + r cos(φ+α), y + r sin(φ+α))`` (plus the laser's mount);
+* eqs. 13-14: its covariance ``Σ'' = ∇F blockdiag(Σ_p, Σ_s) ∇Fᵀ`` from the pose covariance
+  ``Σ_p`` and the reading's ``Σ_s = diag(σ_α², σ_r²)`` (:func:`point_covariances`);
+* eq. 15: the point's pdf ``N(s', Σ'')`` raises the cells around it: a cell at Mahalanobis
+  distance ``m`` gets the inverse sensor model ``P(occ) = 0.5 + (p_hit - 0.5)·exp(-m²/2)``
+  (a peak-normalized Gaussian; Elfes' sensor model for a return), added as log-odds.
+
+The paper gives occupied evidence only, so furniture that moved would never leave the map.
+``free_space``: the cells a sampled point's beam passed through before it (up to
+``free_stop_sigma`` standard deviations before the return) get ``l_free`` each (once per beam).
+Log-odds are clamped to ``[l_min, l_max]``. The prior's walls (H&W Fig. 4) are seeded in every
+map at ``l_max`` and pinned: the paper's walls are the localization landmarks the robot was
+given, and no evidence removes them.
+
+§4.4's semistatic test: a point with no occupied cell (log-odds >= ``l_occupied``) of the map
+within its uncertainty (Mahalanobis distance ``semistatic_sigma``, at least one cell) is
+semistatic, "not yet in long-term memory".
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dynmap_sim.agent.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
+
+FloatArray = NDArray[np.float64]
+
+
+def logit(p: float) -> float:
+    return float(np.log(p / (1.0 - p)))
+
+
+@dataclass(frozen=True)
+class LTMParams:
+    """Grid update parameters (set from ``AdaptiveMemoryConfig``; see its field docs)."""
+
+    p_hit: float = 0.7
+    free_space: bool = True
+    l_free: float = -0.4
+    free_stop_sigma: float = 3.0
+    l_min: float = -2.0
+    l_max: float = 3.5
+    l_occupied: float = 1.4
+    stencil_cells: int = 3
+    semistatic_sigma: float = 2.0
+    semistatic_max_cells: int = 4
+    cov_floor_m: float = 0.025
+
+
+class LTMMap:
+    """One long-term slot's grid: ``logodds`` ``(H, W)`` float32 (rows along y), lower-left
+    corner ``origin`` [m], ``resolution`` [m], ``pinned`` the prior's wall cells."""
+
+    def __init__(
+        self,
+        logodds: NDArray[np.float32],
+        origin: FloatArray,
+        resolution: float,
+        pinned: NDArray[np.bool_],
+        prior_free: NDArray[np.bool_],
+    ) -> None:
+        self.logodds = logodds
+        self.origin = np.asarray(origin, dtype=np.float64)
+        self.resolution = float(resolution)
+        self.pinned = pinned
+        self.prior_free = prior_free
+
+    @classmethod
+    def from_prior(cls, walls: FloatArray, seed_xy: FloatArray | None, resolution: float,
+                   params: LTMParams) -> LTMMap:  # fmt: skip
+        """A map of the prior's walls (H&W Fig. 4), seeded at ``l_max`` and pinned."""
+        g = OccupancyGrid.from_segments(walls, resolution_m=resolution, free_seed_xy_m=seed_xy)
+        pinned = g.occupancy == OCCUPIED
+        lo = np.zeros(g.shape, dtype=np.float32)
+        lo[pinned] = params.l_max
+        return cls(lo, g.origin_xy_m, resolution, pinned, g.occupancy == FREE)
+
+    def copy(self) -> LTMMap:
+        return LTMMap(self.logodds.copy(), self.origin, self.resolution, self.pinned,
+                      self.prior_free)  # fmt: skip
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.logodds.shape  # type: ignore[return-value]
+
+    def cells(self, xy: FloatArray) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        ix = np.floor((xy[..., 0] - self.origin[0]) / self.resolution).astype(np.intp)
+        iy = np.floor((xy[..., 1] - self.origin[1]) / self.resolution).astype(np.intp)
+        return ix, iy
+
+    def occupied(self, params: LTMParams) -> NDArray[np.bool_]:
+        return self.logodds >= params.l_occupied
+
+    # -- eq. 15: Elfes' Bayesian update ------------------------------------------------
+    def update(
+        self, laser_xy: FloatArray, points: FloatArray, covs: FloatArray, params: LTMParams
+    ) -> None:
+        """Fuse points ``(n, 2)`` with covariances ``(n, 2, 2)`` seen from ``laser_xy``."""
+        if len(points) == 0:
+            return
+        h, w = self.shape
+        res = self.resolution
+        flat_all = []
+        add_all = []
+        # Occupied: peak-normalized Gaussian on a (2k+1)^2 stencil around each point.
+        k = params.stencil_cells
+        off = np.arange(-k, k + 1)
+        ox, oy = np.meshgrid(off, off)
+        ox, oy = ox.ravel(), oy.ravel()
+        ix, iy = self.cells(points)
+        cx = ix[:, None] + ox[None, :]
+        cy = iy[:, None] + oy[None, :]
+        dx = self.origin[0] + (cx + 0.5) * res - points[:, 0:1]
+        dy = self.origin[1] + (cy + 0.5) * res - points[:, 1:2]
+        cov = covs + np.eye(2) * params.cov_floor_m**2
+        inv = np.linalg.inv(cov)
+        m2 = inv[:, 0, 0, None] * dx * dx + 2 * inv[:, 0, 1, None] * dx * dy
+        m2 += inv[:, 1, 1, None] * dy * dy
+        p = 0.5 + (params.p_hit - 0.5) * np.exp(-0.5 * m2)
+        ok = (cx >= 0) & (cx < w) & (cy >= 0) & (cy < h) & (m2 < 9.0)
+        flat_all.append((cy * w + cx)[ok])
+        add_all.append(np.log(p / (1.0 - p))[ok])
+        if params.free_space:
+            d = points - laser_xy[None, :]
+            r = np.hypot(d[:, 0], d[:, 1])
+            sig = np.sqrt(
+                np.maximum(np.einsum("nij,ni,nj->n", cov, d, d) / np.maximum(r, 1e-9) ** 2, 0)
+            )
+            stop = r - np.maximum(params.free_stop_sigma * sig, res)
+            step = 0.5 * res
+            t = np.arange(0.0, float(stop.max(initial=0.0)), step)
+            if len(t):
+                u = d / np.maximum(r, 1e-9)[:, None]
+                fx = laser_xy[0] + u[:, 0:1] * t[None, :]
+                fy = laser_xy[1] + u[:, 1:2] * t[None, :]
+                fix, fiy = self.cells(np.stack([fx, fy], axis=-1))
+                okf = (t[None, :] < stop[:, None]) & (fix >= 0) & (fix < w) & (fiy >= 0) & (fiy < h)
+                ray = np.broadcast_to(np.arange(len(points))[:, None], fix.shape)
+                key = np.unique(ray[okf] * (h * w) + (fiy * w + fix)[okf])  # once per beam
+                flat_all.append(key % (h * w))
+                add_all.append(np.full(len(key), params.l_free))
+        flat = np.concatenate(flat_all)
+        add = np.concatenate(add_all)
+        lo = self.logodds.ravel()
+        np.add.at(lo, flat, add.astype(np.float32))
+        np.clip(lo, params.l_min, params.l_max, out=lo)
+        self.logodds[self.pinned] = params.l_max
+
+    # -- §4.4 ---------------------------------------------------------------------------
+    def explained(
+        self, points: FloatArray, covs: FloatArray, params: LTMParams
+    ) -> NDArray[np.bool_]:
+        """Points with an occupied cell within their uncertainty (the complement of §4.4's
+        semistatic test): Mahalanobis distance <= ``semistatic_sigma`` or within one cell."""
+        n = len(points)
+        if n == 0:
+            return np.zeros(0, bool)
+        h, w = self.shape
+        res = self.resolution
+        k = params.semistatic_max_cells
+        off = np.arange(-k, k + 1)
+        ox, oy = np.meshgrid(off, off)
+        ox, oy = ox.ravel(), oy.ravel()
+        ix, iy = self.cells(points)
+        cx = ix[:, None] + ox[None, :]
+        cy = iy[:, None] + oy[None, :]
+        inside = (cx >= 0) & (cx < w) & (cy >= 0) & (cy < h)
+        occ = np.zeros(cx.shape, bool)
+        occ[inside] = self.logodds[cy[inside], cx[inside]] >= params.l_occupied
+        dx = self.origin[0] + (cx + 0.5) * res - points[:, 0:1]
+        dy = self.origin[1] + (cy + 0.5) * res - points[:, 1:2]
+        inv = np.linalg.inv(covs + np.eye(2) * params.cov_floor_m**2)
+        m2 = inv[:, 0, 0, None] * dx * dx + 2 * inv[:, 0, 1, None] * dx * dy
+        m2 += inv[:, 1, 1, None] * dy * dy
+        near = (m2 <= params.semistatic_sigma**2) | (dx * dx + dy * dy <= (1.5 * res) ** 2)
+        return np.any(occ & near, axis=1)
+
+    # -- for MCL and map selection (§6.1) ------------------------------------------------
+    def occupancy_grid(self, params: LTMParams, max_dist_m: float = 2.0) -> OccupancyGrid:
+        """The map as a ternary :class:`OccupancyGrid` for the MCL core."""
+        occ = np.full(self.shape, UNKNOWN, dtype=np.int8)
+        occ[self.prior_free | (self.logodds < 0)] = FREE
+        occ[self.occupied(params)] = OCCUPIED
+        return OccupancyGrid(occ, self.origin, self.resolution, max_dist_m)
+
+    def expected_ranges(
+        self, laser_pose: FloatArray, angles: FloatArray, range_max: float, params: LTMParams
+    ) -> FloatArray:
+        """Ray-cast ranges [m] on the occupied cells (half-cell steps; ``range_max`` when
+        nothing is hit)."""
+        step = 0.5 * self.resolution
+        t = np.arange(1, int(np.ceil(range_max / step)) + 1) * step
+        a = laser_pose[2] + angles
+        xs = laser_pose[0] + np.cos(a)[:, None] * t[None, :]
+        ys = laser_pose[1] + np.sin(a)[:, None] * t[None, :]
+        ix, iy = self.cells(np.stack([xs, ys], axis=-1))
+        h, w = self.shape
+        inside = (ix >= 0) & (ix < w) & (iy >= 0) & (iy < h)
+        hit = np.zeros(ix.shape, bool)
+        hit[inside] = self.logodds[iy[inside], ix[inside]] >= params.l_occupied
+        first = np.argmax(hit, axis=1)
+        return np.where(hit.any(axis=1), t[first], range_max)
+
+
+def point_covariances(
+    pose: FloatArray,
+    cov_pose: FloatArray,
+    mount: FloatArray,
+    ranges: FloatArray,
+    angles: FloatArray,
+    sigma_alpha: float,
+    sigma_r: FloatArray,
+) -> tuple[FloatArray, FloatArray]:
+    """Eqs. 12-14: world points ``(n, 2)`` of readings ``(r, α)`` taken at robot ``pose``
+    (laser ``mount`` in the robot frame) and their covariances ``(n, 2, 2)``
+    ``Σ'' = ∇F blockdiag(Σ_p, Σ_s) ∇Fᵀ``. The pose part's ∂/∂φ is the lever arm from the
+    robot's centre to the point (the paper's ``-r sin(φ+α), r cos(φ+α)`` with the mount)."""
+    x, y, phi = pose
+    c, s = np.cos(phi), np.sin(phi)
+    lx = x + c * mount[0] - s * mount[1]
+    ly = y + s * mount[0] + c * mount[1]
+    b = phi + mount[2] + angles
+    cb, sb = np.cos(b), np.sin(b)
+    px, py = lx + ranges * cb, ly + ranges * sb
+    n = len(ranges)
+    jp = np.zeros((n, 2, 3))
+    jp[:, 0, 0] = jp[:, 1, 1] = 1.0
+    jp[:, 0, 2] = -(py - y)
+    jp[:, 1, 2] = px - x
+    js = np.empty((n, 2, 2))  # columns: alpha, r
+    js[:, 0, 0], js[:, 1, 0] = -ranges * sb, ranges * cb
+    js[:, 0, 1], js[:, 1, 1] = cb, sb
+    ss = np.zeros((n, 2, 2))
+    ss[:, 0, 0] = sigma_alpha**2
+    ss[:, 1, 1] = np.asarray(sigma_r) ** 2
+    cov = jp @ cov_pose @ jp.transpose(0, 2, 1) + js @ ss @ js.transpose(0, 2, 1)
+    return np.column_stack([px, py]), cov
