@@ -77,15 +77,44 @@ class DynMapVectorEnv(VectorEnv):
             seeds = list(seed)
             if len(seeds) != self.num_envs:
                 raise ValueError(f"reset: {len(seeds)} seeds for {self.num_envs} envs")
-        infos: dict[str, Any] = {}
+        infos = []
         for i, (env, s) in enumerate(zip(self.envs, seeds, strict=True)):
             obs, info = env.reset(seed=s, options=options)
             self._put(i, obs)
-            infos = self._add_info(infos, info, i)
+            infos.append(info)
         self._autoreset[:] = False
         self._terminations[:] = False
         self._truncations[:] = False
-        return self._obs(), infos
+        return self._obs(), self._batch_infos(infos)
+
+    def _batch_infos(self, infos: list[dict[str, Any]]) -> dict[str, Any]:
+        """The sub-envs' infos batched exactly as ``VectorEnv._add_info`` batches them (an
+        array per key, ``_key`` masks, nested dicts recursively), one array call per key
+        instead of one assignment per key and env; infos with differing keys go through
+        ``_add_info``."""
+        first = infos[0]
+        if any(info.keys() != first.keys() for info in infos[1:]):
+            out: dict[str, Any] = {}
+            for i, info in enumerate(infos):
+                out = self._add_info(out, info, i)
+            return out
+        out = {}
+        n = self.num_envs
+        for key, value in first.items():
+            vals = [info[key] for info in infos]
+            if isinstance(value, dict):
+                arr: Any = self._batch_infos(vals)
+            elif type(value) in (int, float, bool) or issubclass(type(value), np.number):
+                arr = np.array(vals, dtype=type(value))
+            elif isinstance(value, np.ndarray):
+                arr = np.stack(vals).astype(value.dtype, copy=False)
+            else:
+                arr = np.full(n, fill_value=None, dtype=object)
+                for i, v in enumerate(vals):
+                    arr[i] = v
+            out[key] = arr
+            out[f"_{key}"] = np.ones(n, dtype=np.bool_)
+        return out
 
     def step(
         self, actions: Any
@@ -95,7 +124,7 @@ class DynMapVectorEnv(VectorEnv):
         a = np.asarray(actions)
         if a.shape != (self.num_envs, 2):
             raise ValueError(f"actions must have shape ({self.num_envs}, 2), got {a.shape}")
-        infos: dict[str, Any] = {}
+        infos = []
         for i, env in enumerate(self.envs):
             if self._autoreset[i]:
                 obs, info = env.reset()
@@ -108,14 +137,14 @@ class DynMapVectorEnv(VectorEnv):
                 self._terminations[i] = term
                 self._truncations[i] = trunc
             self._put(i, obs)
-            infos = self._add_info(infos, info, i)
+            infos.append(info)
         np.logical_or(self._terminations, self._truncations, out=self._autoreset)
         return (
             self._obs(),
             self._rewards.copy(),
             self._terminations.copy(),
             self._truncations.copy(),
-            infos,
+            self._batch_infos(infos),
         )
 
     def close_extras(self, **kwargs: Any) -> None:

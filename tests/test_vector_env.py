@@ -33,6 +33,7 @@ def _assert_same(a, b) -> None:
             _assert_same(x, y)
     else:
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+        assert np.asarray(a).dtype == np.asarray(b).dtype
 
 
 @pytest.fixture(scope="module")
