@@ -1,0 +1,277 @@
+"""``adaptive-memory`` (H&W 2011 §3-4, §6.1): stores, tracker, long-term grids, semistatic
+test and the localizer, on closed-form and synthetic scans, and a short apartment run."""
+
+from __future__ import annotations
+
+import pickle
+import textwrap
+
+import numpy as np
+import pytest
+from synthetic_scans import LASER, box, drifting_stream, polyline_path, raycast, room_segments
+
+from dynmap_sim.agent.localization.adaptive_memory.localizer import (
+    AdaptiveMemoryConfig,
+    AdaptiveMemoryLocalizer,
+)
+from dynmap_sim.agent.localization.adaptive_memory.ltm_map import (
+    LTMMap,
+    LTMParams,
+    point_covariances,
+)
+from dynmap_sim.agent.localization.adaptive_memory.memory_stores import (
+    LTMStore,
+    SlotBuffer,
+    slot_index,
+)
+from dynmap_sim.agent.localization.adaptive_memory.object_tracker import (
+    DYNAMIC,
+    STATIC,
+    ObjectTracker,
+    TrackerParams,
+    point_classes_of,
+    segment_scan,
+)
+from dynmap_sim.agent.localizer import LOCALIZERS, make_localizer
+from dynmap_sim.types import Prior
+
+WALLS = np.concatenate(
+    [
+        np.array([[0, 0], [8, 0], [8, 3], [5, 3], [5, 6], [0, 6]], float),
+        np.roll(np.array([[0, 0], [8, 0], [8, 3], [5, 3], [5, 6], [0, 6]], float), -1, axis=0),
+    ],
+    axis=1,
+)
+MOUNT = np.zeros(3)
+
+
+# ---------------------------------------------------------------- stores (§3, eq. 1)
+def test_slot_index_is_eq_1():
+    # LTM: 10 slots of 8640 s from midnight; 10:00 is slot floor(36000 / 8640) = 4, every day.
+    assert slot_index(36000.0, 0.0, 8640.0, 10) == 4
+    assert slot_index(86400.0 + 36000.0, 0.0, 8640.0, 10) == 4
+    assert slot_index(8639.9, 0.0, 8640.0, 10) == 0 and slot_index(8640.0, 0.0, 8640.0, 10) == 1
+    # STM: 100 slots of 0.1 s wrap after 10 s; times before t_s wrap backwards.
+    assert slot_index(10.05, 0.0, 0.1, 100) == 0 and slot_index(-0.05, 0.0, 0.1, 100) == 99
+    buf = SlotBuffer(0.1, 10)
+    for k in range(15):
+        buf.put(0.1 * k + 0.01, k)
+    assert buf.latest() == 14 and buf.items() == list(range(5, 15))
+
+
+def test_a_new_ltm_slot_starts_from_its_named_choice():
+    made = []
+
+    class Grid:
+        def __init__(self, v):
+            self.v = v
+
+        def copy(self):
+            return Grid(self.v)
+
+    def new():
+        made.append(1)
+        return Grid(0)
+
+    store = LTMStore(8640.0, 10, "copy_latest", new)
+    assert store.activate(36000.0) == 4
+    store.map().v = 7  # learned on day 1
+    store.activate(36000.0 + 8640.0)  # next slot: a copy of the latest map
+    assert store.current == 5 and store.map().v == 7 and store.map() is not store.map(4)
+    literal = LTMStore(8640.0, 10, "prior_only", new)
+    literal.activate(36000.0)
+    literal.map().v = 7
+    literal.activate(36000.0 + 86400.0)  # the same slot a day later is current already
+    literal.activate(36000.0 + 8640.0)
+    assert literal.map().v == 0
+    with pytest.raises(ValueError, match="slot_init"):
+        LTMStore(8640.0, 10, "bogus", new)
+
+
+# ---------------------------------------------------------------- tracker (§4.2)
+def _points_scan(pose, segs):
+    return raycast(pose, LASER.angles(), segs, LASER.range_max_m)
+
+
+def test_a_moving_box_is_dynamic_and_a_still_one_static():
+    params = TrackerParams()
+    tr = ObjectTracker(params)
+    robot = np.array([1.0, 1.0, 0.0])
+    walls = room_segments(cupboard=False)
+    for k in range(12):
+        person = box(3.0, 0.8 + 0.1 * k, 3.3, 1.1 + 0.1 * k)  # 1 m/s across the beam fan
+        still = box(2.0, 4.0, 2.3, 4.3)
+        segs = np.concatenate([walls, person, still])
+        r = _points_scan(robot, segs)
+        boxes = segment_scan(r, LASER.angles(), MOUNT, LASER.range_max_m, params)
+        cls, speed = tr.update(boxes, np.array([5.0, -2.0, 0.3]), 0.1 * k)  # any odom origin
+        pc = point_classes_of(boxes, cls)
+    # beams that hit the person / the still box on the last scan
+    hx = robot[0] + r * np.cos(LASER.angles())
+    hy = robot[1] + r * np.sin(LASER.angles())
+    on_person = (hx > 2.95) & (hx < 3.35) & (hy > 1.85) & (hy < 2.25)
+    on_still = (hx > 1.95) & (hx < 2.35) & (hy > 3.95) & (hy < 4.35)
+    assert on_person.sum() >= 3 and on_still.sum() >= 3
+    assert np.all(pc[on_person] == DYNAMIC)
+    assert np.all(pc[on_still] == STATIC)
+
+
+def test_a_long_wall_seen_from_a_moving_robot_is_never_dynamic():
+    """The sliding-wall trap: the visible part of a long wall moves with the robot."""
+    params = TrackerParams()
+    tr = ObjectTracker(params)
+    wall = np.array([[0.0, 1.0, 20.0, 1.0]])  # a 20 m wall 1 m to the robot's left
+    dyn = 0
+    for k in range(40):
+        robot = np.array([2.0 + 0.035 * k, 0.0, 0.0])  # 0.35 m/s
+        r = _points_scan(robot, wall)
+        boxes = segment_scan(r, LASER.angles(), MOUNT, LASER.range_max_m, params)
+        cls, _ = tr.update(boxes, robot, 0.1 * k)  # exact odometry
+        pc = point_classes_of(boxes, cls)
+        dyn += int(np.sum(pc == DYNAMIC))
+    assert dyn == 0
+    assert np.mean(pc[np.isfinite(r)] == STATIC) > 0.9
+    # Without the trap's guards the wall's box slides as fast as the robot and looks dynamic
+    naive = TrackerParams(max_dynamic_length_m=1e9, occlusion_never_dynamic=False, v_thres=0.2)
+    boxes = segment_scan(r, LASER.angles(), MOUNT, LASER.range_max_m, naive)
+    assert boxes.never_dynamic.all()  # cut by the field of view at both ends: still guarded
+
+
+# ---------------------------------------------------------------- LTM grids (§4.3, §4.4)
+def _map(params):
+    return LTMMap.from_prior(WALLS, np.array([1.0, 1.0]), 0.05, params)
+
+
+def test_ltm_update_raises_hit_cells_and_free_space_lowers_the_ray():
+    pose = np.array([1.0, 1.025, 0.0])
+    ranges = np.array([2.025])  # ends at a cell centre
+    for free in (True, False):
+        p = LTMParams(free_space=free)
+        m = _map(p)
+        pts, covs = point_covariances(pose, np.diag([1e-4, 1e-4, 1e-5]), MOUNT, ranges,
+                                      np.array([0.0]), 0.001, np.array([0.01]))  # fmt: skip
+        np.testing.assert_allclose(pts, [[3.025, 1.025]])
+        before = m.logodds.copy()
+        m.update(pose[:2], pts, covs, p)
+        ix, iy = m.cells(pts)
+        assert m.logodds[iy[0], ix[0]] > before[iy[0], ix[0]] + 0.5
+        jx, jy = m.cells(np.array([[2.0, 1.025]]))  # halfway along the beam
+        if free:
+            assert m.logodds[jy[0], jx[0]] == pytest.approx(p.l_free)
+        else:
+            assert m.logodds[jy[0], jx[0]] == 0.0
+        # pinned walls stay at the clamp
+        assert np.all(m.logodds[m.pinned] == p.l_max)
+
+
+def test_point_covariance_is_eq_13_14():
+    pose = np.array([0.0, 0.0, 0.0])
+    cov_p = np.diag([0.01, 0.04, 0.0])
+    _, c = point_covariances(pose, cov_p, MOUNT, np.array([2.0]), np.array([np.pi / 2]),
+                             0.0, np.array([0.1]))  # fmt: skip
+    # beam along +y: range noise along y, pose x/y noise as is
+    np.testing.assert_allclose(c[0], [[0.01, 0.0], [0.0, 0.04 + 0.01]], atol=1e-12)
+    _, c = point_covariances(pose, np.diag([0, 0, 0.01]), MOUNT, np.array([2.0]),
+                             np.array([0.0]), 0.0, np.array([0.0]))  # fmt: skip
+    np.testing.assert_allclose(c[0], [[0.0, 0.0], [0.0, 4 * 0.01]], atol=1e-12)  # lever arm
+
+
+def test_semistatic_test_flags_a_new_object_not_a_mapped_wall():
+    p = LTMParams()
+    m = _map(p)
+    pts = np.array([[4.0, 0.0], [3.0, 2.0]])  # on the south wall / a new object in the room
+    covs = np.broadcast_to(np.eye(2) * 0.02**2, (2, 2, 2)).copy()
+    np.testing.assert_array_equal(m.explained(pts, covs, p), [True, False])
+    m.update(np.array([1.0, 1.0]), pts[1:], covs[1:], p)
+    assert not m.explained(pts, covs, p)[1]  # one stray point is no obstacle (l_occupied)
+    for _ in range(5):  # seen again and again, the object enters long-term memory
+        m.update(np.array([1.0, 1.0]), pts[1:], covs[1:], p)
+    np.testing.assert_array_equal(m.explained(pts, covs, p), [True, True])
+
+
+# ---------------------------------------------------------------- localizer (§6.1)
+def test_registered_and_params_checked():
+    assert LOCALIZERS.get("adaptive-memory") is AdaptiveMemoryLocalizer
+    rng = np.random.default_rng(0)
+    with pytest.raises(ValueError, match="^adaptive-memory: u must be a number in"):
+        make_localizer("adaptive-memory", laser=LASER, rng=rng, u=1.5)
+    with pytest.raises(ValueError, match="^adaptive-memory: v_thres must be"):
+        make_localizer("adaptive-memory", laser=LASER, rng=rng, v_thres=-1)
+    with pytest.raises(TypeError, match="unknown parameters \\['bogus'\\]"):
+        make_localizer("adaptive-memory", laser=LASER, rng=rng, bogus=1)
+    with pytest.raises(ValueError, match="mcl_overrides"):
+        AdaptiveMemoryConfig(mcl_overrides={"nope": 1})
+    assert AdaptiveMemoryConfig(ltm_slots=10.0).ltm_slots == 10
+
+
+def _run(loc, truth, segs, rng, day, person=None):
+    loc.begin_run(Prior(initial_pose=truth[0].copy(), walls=WALLS, day=day, run=1))
+    ests = [loc.update(o, s) for o, s in drifting_stream(truth, segs, LASER, rng, person)]
+    loc.end_run()
+    loc.end_day()
+    err = np.array([np.hypot(*(e.mean[:2] - t[:2])) for e, t in zip(ests, truth, strict=True)])
+    return ests, err
+
+
+def test_tracks_a_synthetic_run_learns_the_furniture_and_reports_its_diagnostics():
+    corners = np.array([[1.0, 1.0], [4.2, 1.0], [6.5, 1.5], [4.2, 1.2], [4.0, 3.8], [1.0, 3.6]])
+    truth = polyline_path(corners, step_m=0.05, turn_step_rad=0.15)
+    segs = room_segments(cupboard=True)
+    loc = make_localizer("adaptive-memory", laser=LASER, rng=np.random.default_rng(1))
+    rng = np.random.default_rng(0)
+    ests, err1 = _run(loc, truth, segs, rng, day=1)
+    assert err1.max() < 0.2 and err1.mean() < 0.08
+    semi1 = np.mean([e.extras["n_semistatic"] for e in ests])
+    ests, err2 = _run(loc, truth, segs, rng, day=2)
+    semi2 = np.mean([e.extras["n_semistatic"] for e in ests])
+    assert err2.max() < 0.2
+    assert semi2 < 0.5 * semi1  # the furniture is in long-term memory on day 2
+    e = ests[-1]
+    names = {d.name for d in AdaptiveMemoryLocalizer.diagnostics}
+    assert {"n_dynamic", "n_semistatic", "n_static", "ltm_slot", "static_points_used",
+            "scan_loglik", "n_tracked_objects"} <= names  # fmt: skip
+    assert names <= set(e.extras)
+    pc = e.extras["point_classes"]
+    assert (
+        pc.dtype == np.int8 and pc.shape == (LASER.n_beams,) and set(np.unique(pc)) <= {0, 1, 2, 3}
+    )
+    n_valid = int(np.sum(np.isfinite(ests[-1].extras["point_classes"]) & (pc > 0)))
+    assert e.extras["n_dynamic"] + e.extras["n_semistatic"] + e.extras["n_static"] == n_valid
+    assert e.extras["ltm_slot"] == 4 and e.extras["static_points_used"] > 20
+    art = loc.day_artifacts()["ltm"]
+    assert art["logodds"].ndim == 2 and art["origin_m"].shape == (2,)
+    assert float(art["resolution_m"]) == 0.05 and int(art["ltm_slot"]) == 4
+    clone = pickle.loads(pickle.dumps(loc))
+    assert np.array_equal(clone.ltm.map().logodds, loc.ltm.map().logodds)
+
+
+def test_runs_on_the_shipped_apartment(tmp_path):
+    """A short tour of the shipped apartment through the experiment engine."""
+    from dynmap_sim.testing import run_scenario
+
+    scn = tmp_path / "ci-apartment-adaptive.toml"
+    scn.write_text(
+        textwrap.dedent("""
+        name = "ci-apartment-adaptive"
+        world = "apartment"
+        days = [1, 1]
+        seeds = [0]
+        [sensor]
+        preset = "urg-04lx"
+        [driver]
+        kind = "tour"
+        speed_mps = 0.35
+        max_run_s = 12.0
+        [prior]
+        map = "walls"
+        initial_pose = "known"
+        [[localizers]]
+        name = "adaptive-memory"
+        label = "adaptive-memory"
+        [expectations.localizers.adaptive-memory]
+        mean_error_m = 0.1
+        max_error_m = 0.25
+        lost_fraction = 0.0
+    """)
+    )
+    run_scenario(scn, out_dir=tmp_path / "out")
