@@ -15,7 +15,10 @@ Supported lines (CARMEN ``logger`` format, one message per line, ``#`` comments)
 * ``RAWLASER1..4 type start_angle fov resolution max_range accuracy remission_mode n
   r_1..r_n n_rem rem_1..rem_m timestamp host logger_timestamp`` (no poses).
 
-Ranges at or beyond the maximum range become ``+inf`` (no return), non-positive ones
+Old ``FLASER`` lines state no maximum range: it is the reading the scanner repeats for "no
+return" (:func:`saturation_range`; 80 m when none repeats). Time stamps that go back are an
+error, equal consecutive ones a warning. Ranges at or beyond the maximum range become
+``+inf`` (no return), non-positive ones
 ``NaN`` (REP-117). Odometry is linearly interpolated (heading unwrapped) to each scan's
 timestamp from the ``ODOM`` lines, or taken from the laser lines' odometry when the log has
 none. When laser lines carry poses, the robot poses they imply are the **reference**.
@@ -25,6 +28,7 @@ from __future__ import annotations
 
 import gzip
 import math
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -159,6 +163,19 @@ def _parse_laser(tok: list[str], where: str, errs: list[tuple[str, str]]) -> _La
         return None
 
 
+def saturation_range(ranges: FloatArray, min_share: float = 1e-3) -> float | None:
+    """The maximum range of an old ``FLASER`` log, which does not state it: the largest
+    reading when at least ``min_share`` of all readings equal it (a scanner prints "no
+    return" as its maximum, e.g. 50.00 or 81.91 m, over and over); ``None`` otherwise."""
+    finite = ranges[np.isfinite(ranges)]
+    if finite.size == 0:
+        return None
+    top = float(finite.max())
+    if top < 4.0 or np.mean(finite >= top - 1e-6) < min_share:
+        return None
+    return top
+
+
 def interpolate_poses(t_src: FloatArray, poses: FloatArray, t: FloatArray) -> FloatArray:
     """Poses ``(N, 3)`` at times ``t`` by linear interpolation (heading unwrapped), clamped."""
     order = np.argsort(t_src, kind="stable")
@@ -217,6 +234,9 @@ def read_carmen(path: str | Path, laser_id: int = 1, max_errors: int = 20) -> Ca
         off = se2.between(m0.robot_pose, m0.laser_pose)
         mount = (float(off[0]), float(off[1]), float(off[2]))
     max_range = float(m0.max_range) if m0.max_range > 0 else 80.0
+    if kind in ("FLASER", "RLASER"):  # no maximum range on the line: find the saturation
+        sat = saturation_range(np.array([m.ranges for m in msgs], dtype=np.float64))
+        max_range = sat if sat is not None else max_range
     laser = LaserSpec(
         name=f"carmen-{kind.lower()}",
         n_beams=n,
@@ -229,6 +249,19 @@ def read_carmen(path: str | Path, laser_id: int = 1, max_errors: int = 20) -> Ca
         mount_pose=mount,
     )
     stamps = np.array([m.stamp for m in msgs])
+    steps = np.diff(stamps)
+    if np.any(steps < 0):
+        k = int(np.argmax(steps < 0)) + 1
+        raise CarmenLogError(
+            p,
+            [(kind, f"time stamps go back at scan {k} ({stamps[k - 1]:.6f} -> {stamps[k]:.6f})")],
+        )
+    if np.any(steps == 0):
+        warnings.warn(
+            f"{p}: {int(np.sum(steps == 0))} of {len(stamps)} scans have the time stamp of the "
+            "scan before (too few digits?): they cannot be told apart by time",
+            stacklevel=2,
+        )
     ranges = np.array([m.ranges for m in msgs], dtype=np.float64)
     ranges = np.where(ranges >= max_range, np.inf, ranges)
     ranges = np.where(ranges <= 0.0, np.nan, ranges).astype(np.float32)
