@@ -160,29 +160,41 @@ class LTMMap:
         self, points: FloatArray, covs: FloatArray, params: LTMParams
     ) -> NDArray[np.bool_]:
         """Points with an occupied cell within their uncertainty (the complement of §4.4's
-        semistatic test): Mahalanobis distance <= ``semistatic_sigma`` or within one cell."""
+        semistatic test): a cell centre within ``semistatic_sigma`` standard deviations
+        along the point's widest axis (largest eigenvalue of ``Σ''``, a circle that holds
+        the Mahalanobis ellipse), at least 1.5 cells, at most ``semistatic_max_cells``.
+        Two stages: the 3 x 3 cells around each point decide most points (a return on a
+        known wall); the rest search their whole circle."""
         n = len(points)
         if n == 0:
             return np.zeros(0, bool)
         h, w = self.shape
         res = self.resolution
-        k = params.semistatic_max_cells
-        off = np.arange(-k, k + 1)
-        ox, oy = np.meshgrid(off, off)
-        ox, oy = ox.ravel(), oy.ravel()
+        a = covs[:, 0, 0] + params.cov_floor_m**2
+        c = covs[:, 1, 1] + params.cov_floor_m**2
+        b = covs[:, 0, 1]
+        lam = 0.5 * (a + c) + np.sqrt(0.25 * (a - c) ** 2 + b * b)
+        rho = np.clip(params.semistatic_sigma * np.sqrt(lam), 1.5 * res,
+                      params.semistatic_max_cells * res)  # fmt: skip
+        occ = (self.logodds >= params.l_occupied).ravel()
         ix, iy = self.cells(points)
-        cx = ix[:, None] + ox[None, :]
-        cy = iy[:, None] + oy[None, :]
-        inside = (cx >= 0) & (cx < w) & (cy >= 0) & (cy < h)
-        occ = np.zeros(cx.shape, bool)
-        occ[inside] = self.logodds[cy[inside], cx[inside]] >= params.l_occupied
-        dx = self.origin[0] + (cx + 0.5) * res - points[:, 0:1]
-        dy = self.origin[1] + (cy + 0.5) * res - points[:, 1:2]
-        inv = np.linalg.inv(covs + np.eye(2) * params.cov_floor_m**2)
-        m2 = inv[:, 0, 0, None] * dx * dx + 2 * inv[:, 0, 1, None] * dx * dy
-        m2 += inv[:, 1, 1, None] * dy * dy
-        near = (m2 <= params.semistatic_sigma**2) | (dx * dx + dy * dy <= (1.5 * res) ** 2)
-        return np.any(occ & near, axis=1)
+        fx = (points[:, 0] - self.origin[0]) / res - ix - 0.5  # offset from the cell centre
+        fy = (points[:, 1] - self.origin[1]) / res - iy - 0.5
+        out = np.zeros(n, bool)
+        todo = np.arange(n)
+        k_max = int(np.ceil(rho.max() / res))
+        for k in (1, k_max) if k_max > 1 else (1,):
+            if len(todo) == 0:
+                break
+            off = np.arange(-k, k + 1)
+            ox, oy = (g.ravel() for g in np.meshgrid(off, off))
+            cx = np.clip(ix[todo, None] + ox[None, :], 0, w - 1)
+            cy = np.clip(iy[todo, None] + oy[None, :], 0, h - 1)
+            d2 = (ox[None, :] - fx[todo, None]) ** 2 + (oy[None, :] - fy[todo, None]) ** 2
+            hit = occ[cy * w + cx] & (d2 * res * res <= rho[todo, None] ** 2)
+            out[todo] = hit.any(axis=1)
+            todo = todo[~out[todo]]
+        return out
 
     # -- for MCL and map selection (§6.1) ------------------------------------------------
     def occupancy_grid(self, params: LTMParams, max_dist_m: float = 2.0) -> OccupancyGrid:
