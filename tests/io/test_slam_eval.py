@@ -102,3 +102,13 @@ def test_relations_of_another_log_are_refused(tmp_path):
     other.write_text("5.0 6.0 1 0 0 0 0 0\n")
     with pytest.raises(InputError, match="none of its 1 relations"):
         slam_eval(log, other)
+
+
+def test_incremental_closures_hold_on_the_synthetic_loop(tmp_path):
+    from dynmap_sim.agent.mapping.first_run import FirstRunConfig
+
+    log, rel, n_rel = write_log_and_relations(tmp_path)
+    cfg = FirstRunConfig.from_params(incremental_loops=True, keep_closures=True)
+    res = slam_eval(log, rel, config=cfg)
+    assert res.loop_closed.n_relations == n_rel
+    assert res.loop_closed.translation_mean_m < 0.05

@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 
 from dynmap_sim import se2
 from dynmap_sim.agent.mapping.correlative_matcher import LikelihoodTable, correlative_match
+from dynmap_sim.agent.mapping.incremental_loops import incremental_closures
 from dynmap_sim.agent.mapping.keyframe_slam import KeyframeSLAM
 from dynmap_sim.agent.mapping.pose_graph import Edge, optimize_pose_graph
 from dynmap_sim.agent.mapping.scan_matcher import MatchResult, PointMap, match_scan
@@ -87,6 +88,13 @@ class LoopClosureConfig:
     #: Rounds of pairwise ICP edges + robust optimization after the global closures (one:
     #: the same quality as two in half the back-end time).
     graph_rounds: int = 1
+    #: Close loops keyframe by keyframe with a window that grows with the path since the
+    #: last closure (:mod:`.incremental_loops`) instead of once over the whole drift.
+    incremental_loops: bool = False
+    #: Keep the correlative closures in the graph of the ICP rounds. Off (as before): the
+    #: ICP round optimizes the sequential edges and its own pairwise edges only, so where
+    #: those find no loop edge the graph relaxes back to the front end's shape.
+    keep_closures: bool = False
 
     def __post_init__(self) -> None:
         coerce_fields(self)
@@ -103,6 +111,8 @@ class LoopClosure:
 
     def __init__(self, config: LoopClosureConfig) -> None:
         self.config = config
+        #: Counts of the last incremental closure search (:mod:`.incremental_loops`).
+        self.stats: dict[str, int] = {}
 
     def optimize(self, slam: KeyframeSLAM) -> tuple[FloatArray, int]:
         """The keyframe poses ``(K, 3)`` after closing loops, and the number of loop-closing
@@ -111,16 +121,22 @@ class LoopClosure:
         poses = np.array([k.pose for k in slam.keyframes])
         seq = self.sequential_edges(poses)
         n_loops = 0
-        if c.global_loops:
+        kept: list[Edge] = []  # closures that stay in the graph of the ICP rounds
+        if c.global_loops and c.incremental_loops:
+            poses, kept = incremental_closures(self, slam, seq)
+            if not c.keep_closures:
+                kept = []
+        elif c.global_loops:
             loops = self.global_loop_edges(poses, slam)
             if loops:  # verified and mutually consistent: least squares without robust loss
                 poses = optimize_pose_graph(poses, seq + loops, anchor=0, loss="linear")
+                kept = loops if c.keep_closures else []
         for _ in range(c.graph_rounds):
             matches = self.match_edges(poses, slam)
             n_loops = sum(1 for e in matches if e.j - e.i > c.loop_min_gap)
             if not matches:
                 break
-            poses = optimize_pose_graph(poses, seq + matches, anchor=0)
+            poses = optimize_pose_graph(poses, seq + kept + matches, anchor=0)
         return poses, n_loops
 
     # -- edges ---------------------------------------------------------------------------
@@ -269,6 +285,7 @@ class LoopClosure:
         i: int,
         w_xy_m: float,
         path_m: float,
+        w_theta_rad: float | None = None,
     ) -> Edge | None:
         """Correlative search of keyframe ``i`` around ``j``'s submap, verified by ICP."""
         c = self.config
@@ -290,7 +307,9 @@ class LoopClosure:
             table,
             se2.between(poses[j], poses[i]),
             window_xy_m=float(w_xy_m),
-            window_theta_rad=float(min(a_r + b_r * path_m, cap_r)),
+            window_theta_rad=float(
+                min(a_r + b_r * path_m, cap_r) if w_theta_rad is None else w_theta_rad
+            ),
         )
         if cres.score < c.loop_min_score:
             return None
