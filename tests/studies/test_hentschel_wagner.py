@@ -184,8 +184,12 @@ def test_the_shipped_scenario_validates():
     scn = load_scenario(ROOT / "worlds" / "scenarios" / "apartment-28d-hw.toml")
     assert scn.world_path.name == "apartment-hw.toml"
     labels = scn.labels
-    assert {"static-mcl walls", "static-mcl tuned", "dynamic-map"} <= set(labels)
-    assert scn.driver.kind == "autonomous" and scn.driver.speed_mps <= 0.2
+    assert {"adaptive-memory", "static-mcl walls", "static-mcl tuned", "dynamic-map"} <= set(labels)
+    assert scn.driver.kind == "autonomous" and scn.driver.localizer == "adaptive-memory"
+    assert scn.driver.speed_mps <= 0.2
+    walls = next(loc for loc in scn.localizers if loc.display == "static-mcl walls")
+    assert walls.params["map_source"] == "prior-walls"
+    assert STUDIES.get("hentschel-wagner")().scenario_errors(scn, ["hw_never_lost"]) == []
     assert scn.sensor.overrides["range_max_m"] == 4.0
 
 
