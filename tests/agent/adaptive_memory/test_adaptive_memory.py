@@ -275,3 +275,34 @@ def test_runs_on_the_shipped_apartment(tmp_path):
     """)
     )
     run_scenario(scn, out_dir=tmp_path / "out")
+
+
+def test_a_walking_person_is_dynamic_and_the_room_is_not():
+    """The localizer's point classes: a person walking 0.6 m/s across the room is dynamic
+    (eqs. 10-11), the walls and furniture seen from the moving robot are not."""
+    truth = np.column_stack([np.linspace(1.0, 3.0, 70), np.full(70, 1.0), np.zeros(70)])
+    segs = room_segments(cupboard=True)
+
+    def person(k):
+        x = 0.6 + 0.06 * k  # in front of the far north wall (y = 6)
+        return box(x, 3.5, x + 0.3, 3.8)
+
+    loc = make_localizer("adaptive-memory", laser=LASER, rng=np.random.default_rng(1))
+    loc.begin_run(Prior(initial_pose=truth[0].copy(), walls=WALLS, day=1, run=1))
+    stream = drifting_stream(truth, segs, LASER, np.random.default_rng(0), person)
+    on_person = on_room = dyn_person = dyn_room = 0
+    for k, (o, s) in enumerate(stream):
+        pc = loc.update(o, s).extras["point_classes"]
+        if k < 10:
+            continue  # tracks are confirmed after a few scans
+        r0 = raycast(truth[k], LASER.angles(), segs, LASER.range_max_m)
+        r1 = raycast(truth[k], LASER.angles(), np.concatenate([segs, person(k)]), 5.6)
+        hit_p = r1 < r0 - 0.05
+        room = np.isfinite(r0) & ~hit_p
+        on_person += hit_p.sum()
+        dyn_person += np.sum(pc[hit_p] == 1)
+        on_room += room.sum()
+        dyn_room += np.sum(pc[room] == 1)
+    assert on_person > 100
+    assert dyn_person / on_person > 0.7
+    assert dyn_room / on_room < 0.005
