@@ -52,7 +52,7 @@ class TrackerParams:
     sigma_meas_m: float = 0.05
     sigma_v0: float = 1.0
     gate_m: float = 0.5
-    confirm_steps: int = 3
+    confirm_steps: int = 2
     max_misses: int = 2
 
 
