@@ -10,15 +10,18 @@ and back-end time.
 The logs are read from ``../shared/data/slam-benchmark`` (next to the repository) or from
 ``--data DIR``; without them the script says so and exits 0 (a clean clone has none).
 
-    nice python benchmarks/bench_slam_logs.py [--data DIR] [--logs fr079 csail]
+    nice python benchmarks/bench_slam_logs.py [--data DIR] [--logs fr079 csail] \
+        [--mapper-params '{"seed_window": [0.3, 0.4]}']
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from pathlib import Path
 
+from dynmap_sim.agent.mapping.first_run import FirstRunConfig
 from dynmap_sim.experiments.slam_eval import slam_eval
 
 #: name -> (log, relations, published translation errors "mean ± std" [m]:
@@ -42,7 +45,14 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="folder of the logs")
     ap.add_argument("--logs", nargs="+", default=list(LOGS), choices=list(LOGS))
+    ap.add_argument(
+        "--mapper-params",
+        type=json.loads,
+        default={},
+        help="first-run mapper parameters as JSON, e.g. '{\"seed_window\": [0.3, 0.4]}'",
+    )
     args = ap.parse_args()
+    config = FirstRunConfig.from_params(**args.mapper_params)
     missing = [
         args.data / f for name in args.logs for f in LOGS[name][:2] if not (args.data / f).exists()
     ]
@@ -53,7 +63,7 @@ def main() -> int:
     for name in args.logs:
         log, rel, published = LOGS[name]
         print(f"mapping {name} ...", file=sys.stderr, flush=True)
-        rows.append((name, slam_eval(args.data / log, args.data / rel), published))
+        rows.append((name, slam_eval(args.data / log, args.data / rel, config=config), published))
     print()
     print(
         "| log | first-run SLAM, relation error [m] | rotation [deg] | GMapping | graph mapping "

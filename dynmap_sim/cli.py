@@ -464,9 +464,25 @@ def _cmd_slam_eval(args: argparse.Namespace) -> int:
     for opt, p in outs:
         if p.exists() and not args.force:
             raise InputError(f"{opt} {p}: exists; pass --force to replace it or choose another")
+    from dynmap_sim.agent.mapping.first_run import FirstRunConfig
+
+    params: dict = {}
+    for item in args.mapper_param or []:
+        key, sep, val = item.partition("=")
+        if not sep or not key.strip():
+            raise InputError(f"--mapper-param {item!r}: expected KEY=VALUE")
+        try:
+            params[key.strip()] = json.loads(val)
+        except json.JSONDecodeError:
+            params[key.strip()] = val
+    try:
+        config = FirstRunConfig.from_params(**params)
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"--mapper-param: {exc}") from None
     res = slam_eval(
         Path(args.log),
         Path(args.relations),
+        config=config,
         progress=not args.quiet,
         note=lambda text: print(text, file=sys.stderr),
     )
@@ -799,6 +815,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--relations", required=True, help="relations file (t1 t2 x y z r p yaw)")
     s.add_argument("--tum", help="write the loop-closed trajectory here (TUM, the log's stamps)")
     s.add_argument("--json", help="write the relation error and timings here (JSON)")
+    s.add_argument(
+        "--mapper-param",
+        action="append",
+        metavar="KEY=VALUE",
+        help="a first-run mapper parameter (mapper_params), e.g. seed_window=[0.3,0.4]; repeat",
+    )
     s.add_argument("--force", action="store_true", help="replace existing --tum/--json files")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_cmd_slam_eval)

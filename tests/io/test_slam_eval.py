@@ -112,3 +112,12 @@ def test_incremental_closures_hold_on_the_synthetic_loop(tmp_path):
     res = slam_eval(log, rel, config=cfg)
     assert res.loop_closed.n_relations == n_rel
     assert res.loop_closed.translation_mean_m < 0.05
+
+
+def test_mapper_params_are_passed_and_checked(tmp_path, capsys):
+    log, rel, _ = write_log_and_relations(tmp_path, n=60)
+    args = ["slam-eval", str(log), "--relations", str(rel), "-q"]
+    assert main([*args, "--mapper-param", "seed_window=[0.3,0.4]"]) == 0
+    assert "loop-closed" in capsys.readouterr().out
+    assert main([*args, "--mapper-param", "no_such_param=1"]) != 0
+    assert "no_such_param" in capsys.readouterr().err
