@@ -9,9 +9,11 @@ Per scan (the data flow of H&W Fig. 2):
    §4.2): points get dynamic / static / unknown (eqs. 10-11).
 3. ``u`` of the tracker's static points update the current long-term slot's grid (eq. 1 picks
    the slot; :mod:`.ltm_map`, §4.3, eqs. 12-15), at the predicted pose (``ltm_update_pose``).
-4. The semistatic test (§4.4): a non-dynamic point with no obstacle of that map within its
-   uncertainty is semistatic. Final classes: dynamic; semistatic; static (tracked, slow,
-   explained by the map); unknown (not associated, explained by the map).
+4. The semistatic test (§4.4), on the map as it was before this scan's points: a non-dynamic
+   point with no obstacle of that map within its uncertainty is semistatic; a fast box the
+   map mostly explains is not dynamic (``ltm_veto_dynamic``). Final classes: dynamic;
+   semistatic; static (tracked, slow, explained by the map); unknown (not associated,
+   explained by the map).
 5. MCL (§6.1) with the project's AMCL core (:class:`~dynmap_sim.agent.localization.
    particle_filter.AMCLFilter`, ``mcl_config``) on the static points only; with fewer than
    ``min_static_points`` the explained unknown points are added (the first scan of a run has
@@ -99,8 +101,10 @@ class AdaptiveMemoryConfig:
     #: Share of the static points that enter the long-term map per scan (§4.3, §7.1: 0.05).
     u: float = 0.05
     #: The pose the long-term update uses (ours; Fig. 2 draws the LTM update before MCL):
-    #: ``predicted`` (default): the odometry-predicted pose, the LTM updated before the §4.4
-    #: test as in Fig. 2; ``estimate``: after this scan's MCL step, with its covariance.
+    #: ``predicted`` (default): the odometry-predicted pose, before MCL as in Fig. 2;
+    #: ``estimate``: after this scan's MCL step, with its covariance. Either way the §4.4
+    #: test sees the map before this scan's points (one scan's points alone never make an
+    #: obstacle: ``l_occupied`` is above a single hit's log-odds).
     #: Measured on the apartment days 1-7 (tour, same stream): mean error 0.037 m with
     #: ``predicted`` against 0.063 m with ``estimate`` (every day worse): learning the map at
     #: the pose just fitted to it reinforces that pose's errors.
