@@ -101,7 +101,9 @@ class KeyframeSLAMConfig:
     dynamic_filter_lags: tuple[int, ...] = (3, 8)
     #: Seed ICP by a correlative search around the odometry prediction (Olson 2009; the
     #: real-time correlative matcher of Hess et al. 2016 §IV, whose result is then the prior
-    #: of the fine matcher): half-windows ``(xy [m], theta [rad])``; ``(0, 0)`` off. For
+    #: of the fine matcher): half-windows ``(xy [m], theta [rad])``, each widened by the
+    #: odometry step itself (a step odometry reports late, in one jump, is not trusted);
+    #: ``(0, 0)`` off. For
     #: real wheel odometry, which errs by up to 20 degrees in a step (CSAIL): ICP's 0.3 m
     #: basin cannot undo that and the estimate stayed on odometry.
     seed_window: tuple[float, float] = (0.0, 0.0)
@@ -109,6 +111,9 @@ class KeyframeSLAMConfig:
     #: within which map and scan points take part.
     seed_resolution_m: float = 0.1
     seed_range_m: float = 15.0
+    #: The seed replaces the odometry prediction only if its score (mean likelihood per
+    #: point) is at least this much higher than the prediction's.
+    seed_min_gain: float = 0.05
 
     def __post_init__(self) -> None:
         coerce_fields(self)
@@ -253,13 +258,21 @@ class KeyframeSLAM:
                 if self._seed_table is not None:
                     near = sub[np.hypot(sub[:, 0], sub[:, 1]) <= c.seed_range_m]
                     if len(near) >= 20:
-                        seed = correlative_match(
-                            voxel_downsample(near, c.seed_resolution_m),
+                        thin = voxel_downsample(near, c.seed_resolution_m)
+                        found = correlative_match(
+                            thin,
                             self._seed_table,
                             pred,
-                            window_xy_m=c.seed_window[0],
-                            window_theta_rad=c.seed_window[1],
-                        ).pose
+                            window_xy_m=c.seed_window[0] + d,
+                            window_theta_rad=c.seed_window[1] + a,
+                        )
+                        at_pred = correlative_match(
+                            thin, self._seed_table, pred, window_xy_m=0.0, window_theta_rad=0.0
+                        )
+                        # Move off odometry only for a clearly better fit (Karto's response
+                        # test): an ambiguous view (corridor, turn in place) keeps odometry.
+                        if found.score >= at_pred.score + c.seed_min_gain:
+                            seed = found.pose
                 res = match_scan(
                     sub,
                     self._local,
