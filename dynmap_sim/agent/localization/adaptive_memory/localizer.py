@@ -188,6 +188,9 @@ class AdaptiveMemoryConfig:
     mcl_overrides: dict[str, Any] = field(default_factory=dict)
     #: Below this many static points, the explained unknown ones join (ours).
     min_static_points: int = 20
+    #: The points MCL uses: ``static`` (§6.1) or ``non-dynamic`` (static, unknown and
+    #: semistatic: the whole scan but the people; ours, for comparison).
+    mcl_points: str = "static"
     #: Map selection (§6.1: least mean squared error of expected ranges) every this many
     #: scans (ours: 1 Hz), over ``select_beams`` beams; switch only if better by
     #: ``select_margin`` (ours: 10 %, no flapping between equal maps).
@@ -229,6 +232,8 @@ class AdaptiveMemoryConfig:
             raise ValueError(f"{NAME}: l_occupied must be <= l_max")
         if self.ltm_update_pose not in LTM_UPDATE_POSES:
             raise ValueError(f"{NAME}: ltm_update_pose must be one of {LTM_UPDATE_POSES}")
+        if self.mcl_points not in ("static", "non-dynamic"):
+            raise ValueError(f"{NAME}: mcl_points must be 'static' or 'non-dynamic'")
         if self.slot_init not in SLOT_INITS:
             raise ValueError(f"{NAME}: slot_init must be one of {SLOT_INITS}")
         if self.mcl_config not in CONFIGS:
@@ -426,7 +431,9 @@ class AdaptiveMemoryLocalizer(Localizer):
         elif self._n_scans % c.map_refresh_scans == 0:
             f.set_grid(ltm.map(self.used_slot).occupancy_grid(self.lp))
         use = classes == STATIC
-        if int(use.sum()) < c.min_static_points:
+        if c.mcl_points == "non-dynamic":
+            use = valid & (classes != DYNAMIC)
+        elif int(use.sum()) < c.min_static_points:
             use |= classes == UNKNOWN
         f.point_mask = use
         self._mcl_step(pose_odom, ranges)
