@@ -184,7 +184,7 @@ def test_semistatic_test_flags_a_new_object_not_a_mapped_wall():
     np.testing.assert_array_equal(m.explained(pts, covs, p), [True, False])
     m.update(np.array([1.0, 1.0]), pts[1:], covs[1:], p)
     assert not m.explained(pts, covs, p)[1]  # one stray point is no obstacle (l_occupied)
-    for _ in range(5):  # seen again and again, the object enters long-term memory
+    for _ in range(8):  # seen again and again, the object enters long-term memory
         m.update(np.array([1.0, 1.0]), pts[1:], covs[1:], p)
     np.testing.assert_array_equal(m.explained(pts, covs, p), [True, True])
 

@@ -49,7 +49,7 @@ class LTMParams:
     free_stop_sigma: float = 3.0
     l_min: float = -2.0
     l_max: float = 3.5
-    l_occupied: float = 1.4
+    l_occupied: float = 2.5
     stencil_cells: int = 3
     semistatic_sigma: float = 2.0
     semistatic_max_cells: int = 4
