@@ -228,7 +228,7 @@ def test_bad_invocations_of_every_command(capsys, tmp_path):
             ["toy", "--out", "/dev/null/x"],
             "error: cannot create folder /dev/null/x: Not a directory",
         ),
-        (["schema", "-o", "/nonexistent/x.json"], "folder /nonexistent does not exist"),
+        (["schema", "-o", tmp_path / "nope" / "x.json"], f"folder {tmp_path / 'nope'} does not"),
         (["schema", "-o", tmp_path / "dir"], "is a folder; give a file name"),
         (["schema", "-o", fifo], "not a regular file"),  # writing would block on the pipe
         (["export", tmp_path, "--tum", "/dev/null/x"], "cannot create folder /dev/null/x"),
