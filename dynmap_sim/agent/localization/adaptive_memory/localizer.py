@@ -122,6 +122,9 @@ class AdaptiveMemoryConfig:
     #: Free-space evidence along the sampled points' beams (ours; the paper has occupied
     #: evidence only, so moved furniture would never leave the map). On by default: week 2
     #: moves furniture every day and a map that keeps every old place attracts MCL to them.
+    #: Measured (apartment days 1-14, tour, seed 0): on: mean error 0.043-0.053 m on days
+    #: 8-10, 0.09-0.13 m on days 11-14; off: 0.10-0.19 m on days 8-10, 0.05-0.09 m on days
+    #: 11-14; 0 % lost either way (ATE 0.077 m on, 0.091 m off). Both are worth a study.
     free_space: bool = True
     #: Log-odds added to a cell a sampled beam passed (ours: P = 0.4).
     l_free: float = -0.4
