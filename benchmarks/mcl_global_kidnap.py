@@ -18,57 +18,40 @@ from __future__ import annotations
 
 import argparse
 import pickle
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
 from dynmap_sim import se2
 from dynmap_sim.agent.localization.particle_filter import StaticMCL
-from dynmap_sim.experiments.drivers import TourDriver, TourParams
-from dynmap_sim.experiments.runner import make_env
+from dynmap_sim.experiments.runner import ExperimentRunner
 from dynmap_sim.experiments.scenario import parse_scenario
 from dynmap_sim.types import Odometry, Prior, Scan
 
 
 def record(world: str, days: int, seed: int) -> tuple[object, list[dict[str, np.ndarray]]]:
-    """Drive the route on days 1..days; return the laser spec and per-day streams."""
+    """Drive the route with the tour operator on run 1 of days 1..days, through the
+    experiment engine's episode loop; return the laser spec and per-day streams."""
     sc = parse_scenario(
         {"name": "rec", "world": world, "days": [1, days], "localizers": [{"name": "odometry"}]}
     )
-    env = make_env(sc)
-    u = env.unwrapped
-    route = np.asarray(u.world.spec.robot.route, float)
     out = []
-    for day in range(1, days + 1):
-        obs, info = env.reset(seed=seed, options={"day": day, "run": 1})
-        driver = TourDriver(
-            route, TourParams(robot_radius_m=float(getattr(u, "robot_radius_m", 0.2)))
-        )
-        driver.begin_run(u.world.geometry, np.asarray(info["truth"]["pose"], float))
-        odo, rng_l, tru, t = [], [], [], []
-        coll = False
-        while True:
-            pose = np.asarray(info["truth"]["pose"], float)
-            odo.append(np.array(obs["odom"], float))
-            rng_l.append(np.array(obs["scan"], np.float32))
-            tru.append(pose)
-            t.append(float(info["truth"]["time"][2]))
-            if driver.done:
-                break
-            action = driver.act(pose, info["truth"]["people"], t[-1], bumped=coll)
-            obs, _, term, trunc, info = env.step(action)
-            coll = bool(info.get("collision", False))
-            if term or trunc:
-                break
-        out.append(
-            {
-                "odom": np.array(odo),
-                "ranges": np.array(rng_l),
-                "truth": np.array(tru),
-                "t": np.array(t),
-            }
-        )
-    return u.laser_spec, out
+    with tempfile.TemporaryDirectory() as tmp:
+        runner = ExperimentRunner(sc, Path(tmp), (1, days), seed, resume=False)
+        try:
+            for i, slot in enumerate(runner.slots):
+                episode = runner.loop.run(i, runner.state)
+                if slot.run != 1:
+                    continue
+                s = episode.stream
+                out.append(
+                    {"odom": s.odom, "ranges": s.scans, "truth": episode.truth, "t": s.stamps_s}
+                )
+        finally:
+            runner.db.close()
+    return runner.laser, out
 
 
 def feed(loc: StaticMCL, odom: np.ndarray, ranges: np.ndarray, t0: float = 0.0) -> np.ndarray:
