@@ -373,6 +373,13 @@ class NavigationStack:
         assert self.goal_xy is not None
         return self.goal_xy, self._goal_id, False
 
+    def _avoid_entry(self, g: RouteGraph) -> int | None:
+        """While heading for a loop's via point, its end (on its start) is no entry to the
+        graph: from there no route leads on, and the robot would go round to get back."""
+        if not self._target()[2] or self.goal_xy is None:
+            return None
+        return self._node_of(g, self.goal_xy, self._goal_id)
+
     def _leave_target_m(self) -> float:
         """``leave_goal_m`` of the planners: a loop's start must be left before it can end the
         run (not for a via point, which lies away from the start)."""
@@ -602,6 +609,7 @@ class NavigationStack:
                 goal_id=self._goal_node(g),
                 leave_goal_m=self._leave_target_m(),
                 start_on=start_on,
+                avoid_entry=self._avoid_entry(g),
             )
             if plan is not None:
                 return plan
@@ -666,6 +674,7 @@ class NavigationStack:
             p.speed_mps,
             goal_id=goal,
             leave_goal_m=self._leave_target_m(),
+            avoid_entry=self._avoid_entry(g),
         )
         if plan is None or not any(e in legs for e in plan.edges):
             return plan

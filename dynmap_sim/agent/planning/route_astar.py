@@ -139,6 +139,7 @@ def plan_route(
     goal_id: int | None = None,
     leave_goal_m: float = 0.0,
     start_on: tuple[int, int] | None = None,
+    avoid_entry: int | None = None,
 ) -> PlannedPath | None:
     """Plan from the robot's position ``start_xy`` to the node nearest ``goal_xy`` [m] (or to
     node ``goal_id`` when given: a loop route's end coincides with its start).
@@ -155,7 +156,8 @@ def plan_route(
     zero-length join connects them. ``start_on`` ``(u, v)``: the segment the robot is tracked
     on (:meth:`RouteMemory.observe`); the plan then enters the graph along it alone, so a
     route that passes the robot's place twice is continued on the pass it is on, not
-    restarted on the other.
+    restarted on the other. ``avoid_entry``: a node the robot must not enter the graph at
+    (a loop's end, which lies on its start, while heading for a via point).
     """
     if graph.node_ids.size == 0:
         return None
@@ -163,7 +165,7 @@ def plan_route(
     goal = graph.nearest_node(goal_xy) if goal_id is None else int(goal_id)
     if goal not in graph.index:
         return None
-    avoid = goal if leave_goal_m > 0.0 else None
+    avoid = goal if leave_goal_m > 0.0 else avoid_entry
     v_h = heuristic_speed_mps(graph, v_max_mps)
     hit = None if start_on is None else graph.edge_projection(p, *start_on)
     if hit is not None and hit[0].v != avoid:
