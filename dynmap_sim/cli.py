@@ -61,6 +61,34 @@ def _localizer_arg(text: str) -> str:
     return text
 
 
+def _reference_offset(text: str) -> float | None:
+    """``--reference-offset``: seconds (finite), or ``auto`` (``None``: estimated)."""
+    import math
+
+    if text.strip().lower() == "auto":
+        return None
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected seconds or auto, not {text!r}") from None
+    if not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"must be a finite number of seconds, not {text!r}")
+    return v
+
+
+def _positive_seconds(text: str) -> float:
+    """A finite duration > 0 [s]."""
+    import math
+
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected seconds, not {text!r}") from None
+    if not (math.isfinite(v) and v > 0):
+        raise argparse.ArgumentTypeError(f"must be a number of seconds > 0, not {text!r}")
+    return v
+
+
 def _output_file(path: str) -> Path:
     """An output file named by ``-o``: its folder must exist (a typo does not create folders)
     and it must not be a folder, a device or a pipe (writing to a FIFO would block)."""
@@ -294,14 +322,15 @@ def _write_report(out: Path) -> None:
         print(f"wrote {path}")
 
 
-def _headline(out: Path) -> list[str]:
+def _headline(out: Path, timing: bool = False) -> list[str]:
     """The headline numbers of a results folder: per localizer ATE RMSE, mean and max
-    position error and the lost fraction (:func:`dynmap_sim.analysis.report.overall_stats`);
-    goals reached and collisions when the results hold navigation measures."""
+    position error and the lost fraction (:func:`dynmap_sim.analysis.report.overall_stats`),
+    with ``timing`` the time per scan too; goals reached and collisions when the results hold
+    navigation measures. Without any ground truth: that line and the time per scan only."""
     import math
 
     from dynmap_sim.analysis.navigation import goals_reached_line
-    from dynmap_sim.analysis.report import overall_stats
+    from dynmap_sim.analysis.report import NO_GROUND_TRUTH, has_ground_truth, overall_stats
     from dynmap_sim.experiments.results import ResultsDB
 
     with ResultsDB.open(out) as db:
@@ -310,14 +339,23 @@ def _headline(out: Path) -> list[str]:
         stats = overall_stats(db)
         nav = db.nav_runs()
         goals = goals_reached_line(db)
+        truth = has_ground_truth(db)
 
     def num(v: float) -> str:
         return "n/a" if v is None or math.isnan(v) else f"{v:.3f}"
 
-    table = [("localizer", "ATE RMSE [m]", "mean [m]", "max [m]", "lost")]
+    def ms(v: float) -> str:
+        return "n/a" if v is None or math.isnan(v) else f"{v:.2f}"
+
+    if truth:
+        table = [("localizer", "ATE RMSE [m]", "mean [m]", "max [m]", "lost")]
+    else:
+        table = [("localizer", "scans")]
+    if timing:
+        table[0] += ("update [ms/scan]",)
     for s in stats:
         lost = s["lost_fraction"]
-        table.append(
+        row: tuple[str, ...] = (
             (
                 str(s["localizer"]),
                 num(s["ate_rmse_m"]),
@@ -325,9 +363,13 @@ def _headline(out: Path) -> list[str]:
                 num(s["max_error_m"]),
                 "n/a" if math.isnan(lost) else f"{100.0 * lost:.1f} %",
             )
+            if truth
+            else (str(s["localizer"]), str(s["n_scans"]))
         )
+        table.append(row + ((ms(s["update_ms_per_scan"]),) if timing else ()))
     widths = [max(len(row[j]) for row in table) for j in range(len(table[0]))]
-    lines = [
+    lines = [] if truth else [f"{NO_GROUND_TRUTH}: the localizers are not scored"]
+    lines += [
         "  ".join(
             c.ljust(w) if j == 0 else c.rjust(w)
             for j, (c, w) in enumerate(zip(row, widths, strict=True))
@@ -435,10 +477,15 @@ def _cmd_check(args: argparse.Namespace) -> int:
 
 
 def _cmd_replay(args: argparse.Namespace) -> int:
-    from dynmap_sim.errors import FileError, regular_file_size
+    from dynmap_sim.errors import FileError, InputError, regular_file_size
+    from dynmap_sim.experiments.reference import REFERENCE_TOLERANCE_S
     from dynmap_sim.experiments.replay import replay_log
 
     regular_file_size(args.log, FileError)  # a FIFO or a device would hang the reader
+    if args.reference is not None:
+        regular_file_size(args.reference, FileError)
+    elif args.reference_offset is not None or args.reference_tolerance is not None:
+        raise InputError("--reference-offset and --reference-tolerance need --reference REF.log")
     _refuse_results(args.out, args.force, "replay")
     out = replay_log(
         Path(args.log),
@@ -446,9 +493,12 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         out_dir=Path(args.out),
         map_from_log_poses=args.map_from_log_poses,
         note=lambda text: print(text, file=sys.stderr),
+        reference=Path(args.reference) if args.reference is not None else None,
+        reference_offset_s=args.reference_offset,
+        reference_tolerance_s=args.reference_tolerance or REFERENCE_TOLERANCE_S,
     )
     print(f"results in {out}")
-    for line in _headline(out):
+    for line in _headline(out, timing=True):
         print(line)
     return 0
 
@@ -799,8 +849,34 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument(
         "--map-from-log-poses",
         action="store_true",
-        help="build the map from the poses in the log's laser lines and give it to every "
-        "localizer that accepts a map (e.g. static-mcl); the others still map on day 1",
+        help="build the map from the log's scans at the reference poses (--reference; without "
+        "it, at the poses on the log's laser lines, which on a raw log are its odometry) and "
+        "give it to every localizer that accepts a map (e.g. static-mcl); the others still "
+        "map on day 1",
+    )
+    s.add_argument(
+        "--reference",
+        metavar="REF.log",
+        help="ground truth: a CARMEN log (plain or gzip) whose laser lines carry the true "
+        "poses, e.g. a Radish '-corrected' log, matched to the scans by time stamp; scans "
+        "without a match get no error. Without it the log has no ground truth and no errors "
+        "are stored (the log itself may be given to score against its own laser-line poses)",
+    )
+    s.add_argument(
+        "--reference-offset",
+        type=_reference_offset,
+        default=None,
+        metavar="SECONDS|auto",
+        help="seconds added to the reference's time stamps to put them on the log's clock; "
+        "default auto: the median difference over the scans both logs hold (0 without any)",
+    )
+    s.add_argument(
+        "--reference-tolerance",
+        type=_positive_seconds,
+        default=None,
+        metavar="SECONDS",
+        help="largest time difference between a scan and the reference pose it takes "
+        "(default: REFERENCE_TOLERANCE_S, 0.1 s)",
     )
     s.add_argument("--out", required=True, help="results folder")
     s.add_argument(

@@ -6,8 +6,8 @@ and the quaternion a rotation about z by the heading.
 
 A ``replay`` folder holds two passes over one log: ``<label>.tum`` is the localization pass
 and ``<label>-mapping.tum`` the mapping pass, both stamped with the log's own clock (so they
-line up with anything else made from the log), and ``truth.tum`` the log's reference poses
-when it has them.
+line up with anything else made from the log), and ``truth.tum`` the reference poses matched
+to the scans (``replay --reference``; the scans without one are left out) when there are any.
 """
 
 from __future__ import annotations
@@ -94,6 +94,7 @@ def _export_replay(db: ResultsDB, meta: dict[str, Any], dst: Path) -> list[Path]
             if not len(d["t_s"]):
                 continue
             if k == 0 and day == 2 and meta.get("has_reference"):
-                written.append(write_tum(dst / "truth.tum", t0 + d["t_s"], d["truth"]))
+                ok = np.isfinite(d["truth"]).all(axis=1)  # scans with a reference pose
+                written.append(write_tum(dst / "truth.tum", t0 + d["t_s"][ok], d["truth"][ok]))
             written.append(write_tum(dst / f"{name}{suffix}.tum", t0 + d["t_s"], d["estimate"]))
     return written

@@ -532,7 +532,8 @@ def _write_runs(
             )
             if twist is not None:
                 put("/odom", s, msgs.odometry(s, odom[i], odom_var[i], twist[i]))
-            put("/truth/pose", s, msgs.pose_stamped(s, "map", truth[i]))
+            if np.isfinite(truth[i]).all():  # a replay's scans without reference: none
+                put("/truth/pose", s, msgs.pose_stamped(s, "map", truth[i]))
             if ranges is not None:
                 put("/scan", s, msgs.laser_scan(s, laser, ranges[i]))
             for topic, (poses, _) in zip(topics, est, strict=True):

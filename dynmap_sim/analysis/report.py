@@ -3,6 +3,10 @@
 Figures mirror the papers: the mean localization error per day for each localizer (H&W §7,
 Fig. 7), the error over time within runs, scan likelihood and certainty (λ_min) over time
 (B&D §5.2, Figs. 10–11) when a localizer reports them, and trajectories over the map.
+
+A results folder without any ground truth (a ``replay`` of a log without ``--reference``)
+is not scored: the summary says "this log has no ground truth" and lists what was measured
+(time per scan, likelihoods), and the error figures are left out.
 """
 
 from __future__ import annotations
@@ -154,6 +158,15 @@ def write_point_classes_csv(rows: list[dict[str, Any]], path: Path) -> Path:
     return path
 
 
+#: What the summary says of a results folder without ground truth.
+NO_GROUND_TRUTH = "this log has no ground truth"
+
+
+def has_ground_truth(db: ResultsDB) -> bool:
+    """Whether any stored scan has a truth pose (a replay without reference has none)."""
+    return bool(db.query("SELECT 1 FROM scans WHERE x IS NOT NULL LIMIT 1"))
+
+
 def overall_stats(db: ResultsDB) -> list[dict[str, Any]]:
     """Whole-experiment figures per localizer (ATE, RPE, lost/recovered; update time), from
     :func:`dynmap_sim.metrics.overall_summary` (its fields, the label, ``update_ms_per_scan``)."""
@@ -195,6 +208,13 @@ def _summary_md(db: ResultsDB, path: Path, figures: list[Path], studies: list[St
         f"{wall_s / 60.0:.1f} min of wall time",
         f"- collisions: {coll}; skipped waypoints: {skipped}; mean route progress "
         f"{100.0 * prog:.0f} %",
+    ]
+    if meta.get("reference_summary"):
+        lines += [f"- {meta['reference_summary']}; scans without a reference pose are not scored"]
+    if not has_ground_truth(db):
+        lines += _no_truth_lines(db, overall)
+        return _finish_summary(db, path, lines, labels, figures, studies)
+    lines += [
         "",
         "## Overall (position error in the map frame, no alignment)",
         "",
@@ -225,6 +245,49 @@ def _summary_md(db: ResultsDB, path: Path, figures: list[Path], studies: list[St
             f"| {100.0 * r['lost_fraction']:.1f} % | {_fmt(r['mean_scan_loglik'])} "
             f"| {_fmt(r['mean_lambda_min'], 1)} |"
         )
+    return _finish_summary(db, path, lines, labels, figures, studies)
+
+
+def _no_truth_lines(db: ResultsDB, overall: list[dict[str, Any]]) -> list[str]:
+    """The overall section of a folder without ground truth: what was measured, no errors."""
+    lines = [
+        "",
+        "## Overall",
+        "",
+        f"**{NO_GROUND_TRUTH}**: the poses on a raw log's laser lines are its odometry, so the "
+        "localizers are not scored (no errors are stored). Give a reference log with the true "
+        "poses (`replay --reference`) to score them.",
+        "",
+        "| localizer | scans | update [ms/scan] | scans/s | mean scan loglik | mean λ_min |",
+        "|---|---|---|---|---|---|",
+    ]
+    rows = {
+        int(k): (_f(a), _f(b))
+        for k, a, b in db.query(
+            "SELECT loc, avg(scan_loglik), avg(lambda_min) FROM estimates GROUP BY loc"
+        )
+    }
+    for k, s in enumerate(overall):
+        ms = s["update_ms_per_scan"]
+        rate = 1e3 / ms if ms and math.isfinite(ms) and ms > 0 else math.nan
+        ll, lam = rows.get(k, (math.nan, math.nan))
+        lines.append(
+            f"| {s['localizer']} | {s['n_scans']} | {_fmt(ms, 2)} | {_fmt(rate, 1)} "
+            f"| {_fmt(ll)} | {_fmt(lam, 1)} |"
+        )
+    return lines
+
+
+def _finish_summary(
+    db: ResultsDB,
+    path: Path,
+    lines: list[str],
+    labels: list[str],
+    figures: list[Path],
+    studies: list[StudyReport],
+) -> Path:
+    """The sections after the per-day table (mapping runs, point classes, studies, events,
+    figures); writes ``summary.md``."""
     mapping = _mapping_run_labels(db)
     if mapping:
         lines += [
@@ -501,11 +564,15 @@ def write_report(out_dir: str | Path) -> list[Path]:
         pc_rows = point_class_rows(db)
         if pc_rows:
             written.append(write_point_classes_csv(pc_rows, out / "point_classes_per_day.csv"))
-        figs = [
-            _fig_error_per_day(db, out / "error_per_day.png"),
-            _fig_error_over_time(db, out / "error_over_time.png"),
-            _fig_trajectories(db, out / "trajectories.png"),
-        ]
+        figs = (
+            [
+                _fig_error_per_day(db, out / "error_per_day.png"),
+                _fig_error_over_time(db, out / "error_over_time.png"),
+            ]
+            if has_ground_truth(db)
+            else []
+        )
+        figs.append(_fig_trajectories(db, out / "trajectories.png"))
         lik = _fig_likelihood(db, out / "likelihood_certainty.png")
         if lik is not None:
             figs.append(lik)

@@ -8,19 +8,24 @@ store as simulated experiments (:mod:`dynmap_sim.experiments.results`):
 * **day 2, run 1 — localization**: every localizer localizes on the log again against the
   map it now has.
 
-With ``map_from_log_poses=True`` and a log whose laser lines carry (corrected) poses, the
-map is instead rendered directly from those poses (keyframes every 0.3 m / 0.3 rad) and
-given to every localizer that accepts a map (:class:`~dynmap_sim.agent.localizer.MapUser`);
-the others still map on day 1 (``note`` says which), and when none accepts one the option is
-refused.
+With ``map_from_log_poses=True`` the map is instead rendered directly from poses (keyframes
+every 0.3 m / 0.3 rad): the reference poses when there is a reference, else the poses on the
+log's laser lines (on a raw log: its odometry). It goes to every localizer that accepts a
+map (:class:`~dynmap_sim.agent.localizer.MapUser`); the others still map on day 1 (``note``
+says which), and when none accepts one the option is refused.
 
 The results folder reads like a simulated experiment's: ``meta`` names the log as the world,
 lists the two runs as ``slots`` (so the report says "2 of 2 runs done") and keeps the log's
 first time stamp (``log_start_s``: the export writes the log's own clock); every
-``update()`` is timed and checked against the localizer contract.
+``update()`` is timed and checked against the localizer contract; the time per scan of
+each localizer is stored as ``update_ms_per_scan`` of ``run_summaries``, as for a run.
 
-When the log carries poses, they are the reference for all errors (the "truth" columns);
-otherwise errors are NaN and only the estimates, likelihoods and certainties are stored.
+**Ground truth** comes only from a reference (``reference=``, :mod:`.reference`): a CARMEN
+log whose laser lines carry true poses, matched to the scans by time stamp (the log itself
+may be its own reference). Scans without a matching reference pose have no truth and no
+error. Without a reference the log has no ground truth (a raw log's laser-line poses are its
+odometry): truth and errors are stored as NULL, ``meta.has_reference`` is false and the
+report says "this log has no ground truth" instead of scoring the localizers.
 Localizer names are registry names, optionally with parameters:
 ``static-mcl,config=nav2-default,map_source=first-run``.
 """
@@ -43,6 +48,12 @@ from dynmap_sim.agent.grid import OccupancyGrid
 from dynmap_sim.agent.localizer import Localizer, MapUser, make_localizer
 from dynmap_sim.errors import InputError
 from dynmap_sim.experiments.bench import DiagnosticsRecorder, LocalizerRun
+from dynmap_sim.experiments.reference import (
+    REFERENCE_TOLERANCE_S,
+    ReferenceMatch,
+    load_reference,
+    start_pose,
+)
 from dynmap_sim.experiments.results import ResultsDB, RunRecord
 from dynmap_sim.experiments.runner import ExperimentRunner, localizer_seeds
 from dynmap_sim.io.carmen import CarmenLog, read_carmen
@@ -74,12 +85,16 @@ def keyframe_indices(poses: np.ndarray, dist_m: float = 0.3, angle_rad: float = 
     return keep
 
 
-def map_from_poses(log: CarmenLog) -> OccupancyGrid:
-    """A 5 cm grid rendered from the log's reference poses (keyframes only)."""
-    if log.reference is None:
-        raise InputError(f"{log.path}: --map-from-log-poses needs laser lines with poses")
-    kf = keyframe_indices(log.reference)
-    return OccupancyGrid.from_scans(log.reference[kf], log.ranges_m[kf], log.laser)
+def map_from_poses(log: CarmenLog, poses: np.ndarray | None = None) -> OccupancyGrid:
+    """A 5 cm grid rendered from the log's scans at ``poses`` ``(T, 3)`` (NaN rows skipped;
+    default: the poses on its laser lines), keyframes only."""
+    if poses is None:
+        if log.reference is None:
+            raise InputError(f"{log.path}: --map-from-log-poses needs laser lines with poses")
+        poses = log.reference
+    have = np.flatnonzero(np.isfinite(poses).all(axis=1))
+    kf = have[keyframe_indices(poses[have])]
+    return OccupancyGrid.from_scans(poses[kf], log.ranges_m[kf], log.laser)
 
 
 def _run_pass(
@@ -87,6 +102,7 @@ def _run_pass(
     locs: list[Localizer],
     priors: list[Prior],
     day: int,
+    truth: np.ndarray,
     labels: list[str] | None = None,
 ) -> RunRecord:
     n_loc, n = len(locs), len(log)
@@ -116,7 +132,6 @@ def _run_pass(
         diag.end_day(loc)
     t0 = float(log.stamps_s[0])
     date, start_s = _log_date_and_start(log)
-    truth = log.reference if log.reference is not None else np.full((n, 3), np.nan)
     return RunRecord(
         day=day,
         run=1,
@@ -153,12 +168,25 @@ def replay_log(
     out_dir: Path,
     map_from_log_poses: bool,
     note: Callable[[str], None] | None = None,
+    reference: Path | None = None,
+    reference_offset_s: float | None = None,
+    reference_tolerance_s: float = REFERENCE_TOLERANCE_S,
 ) -> Path:
     """Replay CARMEN ``log`` through ``localizers`` into a results store in ``out_dir``;
-    ``note`` gets what the user should know (which localizers took the log's map)."""
+    ``note`` gets what the user should know (which localizers took the log's map, how the
+    reference matched). ``reference``: a CARMEN log with the true poses on its laser lines,
+    matched by time stamp (:func:`~dynmap_sim.experiments.reference.load_reference`, with
+    ``reference_offset_s`` ``None`` = estimated, and ``reference_tolerance_s``); ``None``:
+    the log has no ground truth and no errors are stored."""
     data = read_carmen(log)
     if len(data) < 2:
         raise InputError(f"{log}: the log has fewer than 2 scans")
+    ref: ReferenceMatch | None = None
+    if reference is not None:
+        ref = load_reference(reference, data, reference_offset_s, reference_tolerance_s)
+        if note is not None:
+            note(f"note: {ref.describe()}")
+    truth = ref.poses if ref is not None else np.full((len(data), 3), np.nan)
     specs = [parse_localizer_arg(a) for a in localizers]
     rngs = localizer_seeds(0, len(specs))
     try:
@@ -176,7 +204,7 @@ def replay_log(
                 f"--map-from-log-poses: none of the localizers takes a map ({', '.join(localizers)}"
                 "); give one that does (e.g. static-mcl) or drop the option"
             )
-        grid = map_from_poses(data)
+        grid = map_from_poses(data, ref.poses if ref is not None else None)
         for i, loc in enumerate(locs):
             if takes[i]:
                 loc.set_map(grid)
@@ -189,10 +217,16 @@ def replay_log(
                 f"not to {', '.join(others)}, which take no map (a localizer that maps "
                 "builds its own on the first pass)"
             )
-    start = data.reference[0] if data.reference is not None else np.zeros(3)
+    if ref is not None:
+        start = start_pose(data, ref.poses)
+    else:  # the frame the laser-line poses (and a map from them) are in
+        start = data.reference[0] if data.reference is not None else np.zeros(3)
     date, start_s = _log_date_and_start(data)
     ident = hashlib.sha256(Path(log).read_bytes())
     ident.update(json.dumps([localizers, bool(map_from_log_poses)]).encode())
+    if ref is not None:
+        ident.update(Path(ref.path).read_bytes())
+        ident.update(json.dumps([ref.offset_s, ref.tolerance_s]).encode())
     db = ResultsDB.create(out_dir, overwrite=True)
     try:
         db.set_meta(
@@ -208,7 +242,13 @@ def replay_log(
             first_date=date,
             experiment_hash=ident.hexdigest(),
             laser=dataclasses.asdict(data.laser),
-            has_reference=data.reference is not None,
+            has_reference=ref is not None,
+            reference_path=str(ref.path) if ref is not None else None,
+            reference_offset_s=ref.offset_s if ref is not None else None,
+            reference_offset_source=ref.offset_source if ref is not None else None,
+            reference_tolerance_s=ref.tolerance_s if ref is not None else None,
+            reference_matched=ref.n_matched if ref is not None else 0,
+            reference_summary=ref.describe() if ref is not None else None,
             map_from_log_poses=bool(map_from_log_poses),
             complete=False,
         )
@@ -220,7 +260,7 @@ def replay_log(
                 Prior(initial_pose=start.copy(), day=day, run=1, first_run=day == 1 and not g)
                 for g in given_map
             ]
-            rec = _run_pass(data, locs, priors, day, labels=list(localizers))
+            rec = _run_pass(data, locs, priors, day, truth, labels=list(localizers))
             summaries = [ExperimentRunner._run_summary(k, rec) for k in range(len(locs))]
             db.write_run(rec, summaries, True, None, "replay", 0)
         db.set_meta(complete=True)

@@ -759,17 +759,20 @@ class ResultsDB:
                 )
 
     def _day_summaries(self, day: int, n_loc: int) -> list[dict[str, float]]:
-        """Summaries of all scans of ``day`` per localizer (reads uncommitted rows too)."""
+        """Summaries of all scans of ``day`` per localizer (reads uncommitted rows too); the
+        errors of the scans with truth (a replay's scans without a reference pose have none),
+        ``n_scans`` of all."""
         out = []
         for k in range(n_loc):
             rows = self.con.execute(
-                "SELECT err_m, err_theta_rad, scan_loglik, lambda_min FROM estimates "
-                "WHERE loc=? AND day=?",
+                "SELECT e.err_m, e.err_theta_rad, e.scan_loglik, e.lambda_min, s.x IS NOT NULL "
+                "FROM estimates e JOIN scans s USING (day, run, step) WHERE e.loc=? AND e.day=?",
                 (k, day),
             ).fetchall()
-            a = np.array(rows, dtype=np.float64).reshape(-1, 4)
-            s = day_summary(a[:, 0], a[:, 1], a[:, 2], a[:, 3])
-            out.append({"loc": k, "day": day, **s.to_dict()})
+            a = np.array(rows, dtype=np.float64).reshape(-1, 5)
+            m = a[:, 4] > 0
+            s = day_summary(a[m, 0], a[m, 1], a[:, 2], a[:, 3])
+            out.append({"loc": k, "day": day, **s.to_dict(), "n_scans": len(a)})
         return out
 
     @property

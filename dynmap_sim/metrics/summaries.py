@@ -12,6 +12,10 @@ Every number of ``run_summaries``, ``day_summaries``, the per-scan errors of ``e
 Results are frozen dataclasses with ``to_dict``/``from_dict`` and ``to_json``/``from_json``
 that load back equal (:class:`~.result.Result`). All errors are in the map frame without alignment
 (:mod:`.pose_error`); a localizer is lost above :data:`~.lost.LOST_THRESHOLD_M`.
+
+A scan whose truth is NaN (a replayed log where no reference pose matched it, or a log with
+no ground truth at all) has no error: run and overall summaries score only the scans that
+have truth (NaN figures when none has), while ``n_scans`` and the time per scan count all.
 """
 
 from __future__ import annotations
@@ -89,6 +93,11 @@ class OverallSummary(Result):
         return rpe_label(self.rpe_delta, self.rpe_unit)
 
 
+def has_truth(truth: ArrayLike) -> NDArray[np.bool_]:
+    """``(T,)``: which scans have a truth pose (no NaN in ``truth`` ``(T, 3)``)."""
+    return np.isfinite(np.asarray(truth, dtype=np.float64).reshape(-1, 3)).all(axis=1)
+
+
 def scan_errors(
     truth: ArrayLike, estimate: ArrayLike
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -119,13 +128,17 @@ def run_summary(
     """:class:`RunSummary` of one run: truth and estimate ``(T, 3)`` at times ``t_s`` [s],
     the optional per-scan ``scan_loglik`` and ``lambda_min`` (NaN: not reported) and the
     wall time ``update_s`` [s] spent in ``update()``."""
+    n = len(np.asarray(t_s).ravel())
+    m = has_truth(truth)
+    truth = np.asarray(truth, dtype=np.float64).reshape(-1, 3)[m]
+    estimate = np.asarray(estimate, dtype=np.float64).reshape(-1, 3)[m]
+    t = np.asarray(t_s, dtype=np.float64).ravel()[m]
     err, herr = scan_errors(truth, estimate)
     s = summarize(err, herr, scan_loglik, lambda_min)
-    lost = lost_stats(err, t_s)
-    r = rpe(truth, estimate, delta=RUN_RPE_DELTA, unit=RUN_RPE_UNIT)
-    n = len(err)
+    lost = lost_stats(err, t)
+    r = rpe(truth, estimate, delta=RUN_RPE_DELTA, unit=RUN_RPE_UNIT, stamps_s=t)
     return RunSummary(
-        **s.to_dict(),
+        **(s.to_dict() | {"n_scans": n}),
         n_lost_episodes=lost.n_episodes,
         n_recovered=lost.n_recovered,
         mean_time_to_recover_s=lost.mean_time_to_recover_s,
@@ -151,6 +164,9 @@ def overall_summary(
     est = np.asarray(estimate, dtype=np.float64).reshape(-1, 3)
     keys = np.asarray(runs)
     keys = keys.reshape(len(t), -1) if keys.size else np.zeros((len(t), 1))
+    n_all = len(t)
+    m = has_truth(truth)
+    truth, est, t, keys = truth[m], est[m], t[m], keys[m]
     err, herr = scan_errors(truth, est)
     n_ep = n_rec = 0
     rec_times: list[float] = []
@@ -175,7 +191,7 @@ def overall_summary(
     a = ate(truth, est) if n else None
     nan = math.nan
     return OverallSummary(
-        n_scans=int(n),
+        n_scans=int(n_all),
         ate_rmse_m=a.rmse if a else nan,
         mean_error_m=a.mean if a else nan,
         max_error_m=a.max if a else nan,

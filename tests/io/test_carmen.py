@@ -137,6 +137,8 @@ def test_replay_writes_results(tmp_path):
             "static-mcl",
             "--localizer",
             "static-mcl,config=nav2-default",
+            "--reference",  # the log's own laser-line poses are the truth
+            str(p),
             "--out",
             str(out),
         ]
@@ -159,6 +161,8 @@ def test_replay_writes_results(tmp_path):
                 "--localizer",
                 "static-mcl",
                 "--map-from-log-poses",
+                "--reference",
+                str(p),
                 "--out",
                 str(out2),
             ]
@@ -184,7 +188,7 @@ def test_a_replay_folder_reports_and_exports_like_an_experiment(tmp_path, capsys
     write_log(p)
     out = tmp_path / "r"
     args = ["replay", str(p), "--localizer", "odometry", "--localizer", "static-mcl"]
-    assert main([*args, "--out", str(out)]) == 0
+    assert main([*args, "--reference", str(p), "--out", str(out)]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert lines[0] == f"results in {out}"
     assert lines[1].startswith("localizer") and "ATE RMSE [m]" in lines[1]  # the headline
