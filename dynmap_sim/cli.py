@@ -12,6 +12,7 @@ import json
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TypeVar
 
 Handler = Callable[[argparse.Namespace], int]
 
@@ -32,12 +33,20 @@ def _days(text: str) -> tuple[int, int]:
 MAX_SEED = 2**63 - 1
 
 
+T = TypeVar("T")
+
+
+def _converted(text: str, convert: Callable[[str], T], expected: str) -> T:
+    """``convert(text)``, or an argparse error saying what was ``expected``."""
+    try:
+        return convert(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected {expected}, not {text!r}") from None
+
+
 def _seed(text: str) -> int:
     """A seed: an integer in 0 .. 2**63 - 1."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"seed must be an integer, not {text!r}") from None
+    v = _converted(text, int, "an integer seed")
     if not 0 <= v <= MAX_SEED:
         raise argparse.ArgumentTypeError(f"seed must be in 0..2**63-1, not {v}")
     return v
@@ -45,10 +54,7 @@ def _seed(text: str) -> int:
 
 def _positive(text: str) -> int:
     """An integer >= 1 (a day, a run, a number of workers)."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, not {text!r}") from None
+    v = _converted(text, int, "an integer")
     if v < 1:
         raise argparse.ArgumentTypeError(f"must be at least 1, not {v}")
     return v
@@ -67,10 +73,7 @@ def _reference_offset(text: str) -> float | None:
 
     if text.strip().lower() == "auto":
         return None
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected seconds or auto, not {text!r}") from None
+    v = _converted(text, float, "seconds or auto")
     if not math.isfinite(v):
         raise argparse.ArgumentTypeError(f"must be a finite number of seconds, not {text!r}")
     return v
@@ -80,10 +83,7 @@ def _positive_seconds(text: str) -> float:
     """A finite duration > 0 [s]."""
     import math
 
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected seconds, not {text!r}") from None
+    v = _converted(text, float, "seconds")
     if not (math.isfinite(v) and v > 0):
         raise argparse.ArgumentTypeError(f"must be a number of seconds > 0, not {text!r}")
     return v
