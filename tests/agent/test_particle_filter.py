@@ -387,3 +387,74 @@ def test_floor_makes_a_filter_that_started_wrong_inject():
         probs[floor] = f.injection_probability()
     assert probs[float("-inf")] == 0.0
     assert probs[TUNED.recovery_floor_loglik] == pytest.approx(TUNED.recovery_max_fraction)
+
+
+def _track(f, scan, rng, n, center=True):
+    """``n`` updates on ``scan`` without motion, resampling around the estimate."""
+    est = None
+    for _ in range(n):
+        f.correct(scan)
+        est, _ = f.estimate()
+        f.resample(rng, center=est if center else None)
+    return est
+
+
+def test_local_resetting_repairs_an_odometry_glitch():
+    """tuned: the cloud is 0.3 m and 15 degrees off (the odometry missed a turn, as on
+    FR079): poses drawn near the estimate pull it back within a few updates, with no global
+    pose injected; without local resetting (or without a center) it stays off."""
+    segs = room()
+    grid = OccupancyGrid.from_segments(segs, free_seed_xy_m=(1, 1))
+    pose = np.array([2.0, 2.0, 0.3])
+    good = raycast(pose, LASER.angles(), segs, LASER.range_max_m)
+    off = pose + np.array([0.3, 0.0, np.deg2rad(15.0)])
+    cov = np.diag([0.02**2, 0.02**2, 0.01**2])
+    errs = {}
+    for name, cfg, center in (
+        ("local", TUNED, True),
+        ("no center", TUNED, False),
+        ("off", replace(TUNED, recovery_local_ratio=0.0), True),
+    ):
+        rng = np.random.default_rng(7)
+        f = AMCLFilter(grid, LASER, cfg)
+        f.init_gaussian(pose, cov, rng)
+        _track(f, good, rng, 10, center)  # w_slow learns the level of a good fit
+        f.particles = f.particles + (off - pose)  # the glitch
+        est = _track(f, good, rng, TUNED.recovery_local_max_updates, center)
+        errs[name] = float(np.hypot(*(est[:2] - pose[:2])))
+        assert f.n_random_injected == 0
+        if name == "local":
+            assert f.n_local_injected > 0
+            assert abs(se2.wrap_angle(est[2] - pose[2])) < np.deg2rad(3.0)
+        else:
+            assert f.n_local_injected == 0
+    assert errs["local"] < 0.05
+    assert errs["no center"] > 0.2 and errs["off"] > 0.2
+
+
+def test_local_resetting_yields_to_the_global_recovery():
+    """After a kidnapping local draws stop after ``recovery_local_max_updates`` resets (or
+    as soon as the global gate counts), and Table 8.3's global injection takes over."""
+    segs = room()
+    grid = OccupancyGrid.from_segments(segs, free_seed_xy_m=(1, 1))
+    rng = np.random.default_rng(8)
+    pose = np.array([2.0, 2.0, 0.3])
+    f = AMCLFilter(grid, LASER, TUNED)
+    f.init_gaussian(pose, np.diag([0.02**2, 0.02**2, 0.01**2]), rng)
+    _track(f, raycast(pose, LASER.angles(), segs, LASER.range_max_m), rng, 10)
+    far = raycast(np.array([3.7, 3.5, 2.5]), LASER.angles(), segs, LASER.range_max_m)
+    f.correct(far)
+    assert f.local_probability() > 0.0  # a bad update resets locally at once
+    local_updates = 0
+    for _ in range(40):
+        if f.local_probability() > 0.0:
+            local_updates += 1
+            assert f.injection_probability() == 0.0  # local first ...
+        est, _ = f.estimate()
+        f.resample(rng, center=est)
+        f.correct(far)
+        if f.n_random_injected:
+            break
+    assert 1 <= local_updates <= TUNED.recovery_local_max_updates
+    assert f.n_random_injected > 0  # ... then global
+    assert NAV2_DEFAULT.recovery_local_ratio == 0.0

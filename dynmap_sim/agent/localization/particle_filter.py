@@ -28,6 +28,13 @@ Table 8.4 "KLD_Sampling_MCL"; Fox 2003) exactly as nav2_amcl composes it:
   mapped walls) are left out of the averages (``recovery_distance_filter_m``, Fox et al.
   1999's distance filter, :mod:`.distance_filter`), unless that would leave out more than
   half of them. See :class:`MCLConfig`;
+* ``tuned`` only: **local resetting first** (Lenser & Veloso 2000's sensor resetting, drawn
+  around the estimate): when this update's per-beam likelihood falls below half of
+  ``w_ref``, up to 30 % of the draws are poses near the estimate, for at most 10 updates
+  and only before the global gate above counts. It repairs the odometry glitches of real
+  logs (a missed 10-16 degree turn on FR079) that otherwise drift the cloud off, open the
+  global gate and let a random pose 26-35 m away win for seconds
+  (``recovery_local_ratio``);
 * KLD-sampling picks the number of particles (0.5 m x 0.5 m x 10 degree bins,
   :mod:`.kld_sampling`), low-variance resampling draws them (:mod:`.resampling`);
 * the estimate is the mean of the heaviest cluster of particles (clusters are connected
@@ -147,6 +154,32 @@ class MCLConfig:
     #: threshold can be higher and a real kidnapping is found sooner (apartment: median
     #: 6.3 s, max 8.4 s, against 8.0 s / 12.5 s without the filter at threshold 0.3).
     recovery_distance_filter_m: float = 0.0
+    #: **Local resetting first** (per-beam mode only; 0 off, as nav2). Sensor resetting
+    #: localization (Lenser & Veloso 2000, "Sensor resetting localization for poorly
+    #: modelled mobile robots", ICRA) replaces a share ``1 - P_avg / threshold`` of the
+    #: samples at once when the *current* average likelihood falls below a threshold; here
+    #: the share is ``1 - w_last / (recovery_local_ratio * w_ref)``, ``w_last`` this update's
+    #: per-beam average (unsmoothed, unlike ``w_fast``), and the new poses are drawn around
+    #: the current estimate (``recovery_local_sigma_xy`` / ``_theta``) instead of uniformly.
+    #: Why: on real logs (FR079, raw wheel odometry) the odometry now and then misses a
+    #: 10-16 degree turn or adds 8 cm in one step. The tracked cloud, far narrower than such
+    #: an error, then drifts 1 m off within a few scans, its fit drops, Table 8.3's global
+    #: poses are injected and one of them 26-35 m away wins for seconds. Redrawing near the
+    #: estimate repairs the glitch before the global gate opens (Gutmann & Fox 2002 found
+    #: resetting best for small errors, w_slow/w_fast for kidnapping: both are kept, local
+    #: first). Local draws stop once the global gate counts (``n_low_updates > 0``) and
+    #: after ``recovery_local_max_updates`` resets without the fit getting back to ``w_ref``:
+    #: after a kidnapping local poses only fit the wrong place a little better, which would
+    #: keep ``w_fast`` above the global threshold and delay the global recovery.
+    recovery_local_ratio: float = 0.0
+    #: Cap on the share of local draws per update (:attr:`recovery_local_ratio`).
+    recovery_local_max_fraction: float = 0.0
+    #: Standard deviation [m] of the local draws around the estimate in x and y.
+    recovery_local_sigma_xy: float = 0.5
+    #: Standard deviation [rad] of the local draws around the estimate's heading.
+    recovery_local_sigma_theta: float = 0.3
+    #: Local resets allowed before the fit is back to ``w_ref`` (then global recovery only).
+    recovery_local_max_updates: int = 10
     resample_interval: int = 1
     update_min_d: float = 0.25
     update_min_a: float = 0.2
@@ -166,11 +199,14 @@ class MCLConfig:
             non_negative=(
                 "max_beams", "alpha1", "alpha2", "alpha3", "alpha4", "z_hit", "z_rand",
                 "recovery_ratio_threshold", "recovery_distance_filter_m", "update_min_d",
+                "recovery_local_sigma_xy", "recovery_local_sigma_theta",
+                "recovery_local_max_updates",
                 "update_min_a", "init_sigma_xy", "init_sigma_theta",
             ),
             fraction=(
                 "beam_skip_threshold", "beam_skip_error_threshold", "recovery_alpha_slow",
-                "recovery_alpha_fast", "recovery_max_fraction",
+                "recovery_alpha_fast", "recovery_max_fraction", "recovery_local_ratio",
+                "recovery_local_max_fraction",
             ),
             finite=("laser_max_range", "laser_min_range"),
             not_nan=("recovery_floor_loglik",),
@@ -195,7 +231,8 @@ NAV2_DEFAULT = MCLConfig()
 #: by first-run SLAM (a few cm of map error) -> sigma_hit 0.12 m with the proper product model;
 #: wheel odometry that drifts ~1-2 % -> alphas 0.05; people and unmapped objects -> beam
 #: skipping; kidnapping and global localization -> Table 8.3 recovery, 8000 particles at most
-#: and the real 99 % normal quantile as pf_z; updates every 0.1 m / 0.1 rad.
+#: and the real 99 % normal quantile as pf_z; updates every 0.1 m / 0.1 rad; local resetting
+#: before the global recovery (``recovery_local_*``: real odometry glitches, FR079).
 #: Measured with benchmarks/mcl_apartment_week1.py and benchmarks/mcl_global_kidnap.py.
 TUNED = MCLConfig(
     alpha1=0.05,
@@ -222,6 +259,11 @@ TUNED = MCLConfig(
     recovery_min_updates=5,
     recovery_max_fraction=0.35,
     recovery_distance_filter_m=0.3,
+    recovery_local_ratio=0.5,
+    recovery_local_max_fraction=0.3,
+    recovery_local_sigma_xy=0.5,
+    recovery_local_sigma_theta=0.3,
+    recovery_local_max_updates=10,
     update_min_d=0.1,
     update_min_a=0.1,
     init_sigma_xy=0.2,
@@ -344,11 +386,13 @@ class AMCLFilter:
         self.weights = np.zeros(0)
         self.reset_recovery()
         self.n_random_injected = 0
+        #: Poses drawn near the estimate by local resetting (``recovery_local_ratio``).
+        self.n_local_injected = 0
 
     def reset_recovery(self) -> None:
         """Forget the recovery averages (at initialization, and in nav2 after injecting)."""
-        self.w_slow = self.w_fast = 0.0
-        self.n_low_updates = 0
+        self.w_slow = self.w_fast = self.w_last = 0.0
+        self.n_low_updates = self.n_local_updates = 0
 
     # -- initialization ------------------------------------------------------------------
     def random_poses(self, n: int, rng: np.random.Generator) -> FloatArray:
@@ -409,6 +453,11 @@ class AMCLFilter:
             # beams without it), beam skipping not applied.
             use = self._recovery_beams(w_prev, r, a)
             total = per_beam_average(lw_prev, np.take(self.table.logp, cells[:, use]))
+            # This update's average feeds local resetting; a fit back at w_ref ends a
+            # local-resetting episode.
+            self.w_last = total
+            if total >= self.reference_weight():
+                self.n_local_updates = 0
         if total > 0 and np.isfinite(total):
             w_avg = total / len(self.particles) if c.recovery_w_avg_per_sample else total
             self.w_slow, self.w_fast = running_averages(self.w_slow, self.w_fast, w_avg, c)
@@ -450,8 +499,36 @@ class AMCLFilter:
             return 0.0
         return min(max(0.0, 1.0 - self.w_fast / w_ref), c.recovery_max_fraction)
 
-    def resample(self, rng: np.random.Generator) -> None:
-        """``pf_update_resample``: KLD-sized, low-variance, with random-pose injection."""
+    def local_probability(self) -> float:
+        """Probability that a resampling draw is a pose near the estimate (local resetting,
+        :attr:`MCLConfig.recovery_local_ratio`): ``1 - w_last / (ratio * w_ref)``, capped at
+        ``recovery_local_max_fraction``; 0 once the global gate counts or after
+        ``recovery_local_max_updates`` resets without the fit back at ``w_ref``."""
+        c = self.config
+        w_ref = self.reference_weight()
+        if (
+            w_ref <= 0
+            or c.recovery_local_ratio <= 0
+            or self.w_last <= 0
+            or self.n_low_updates > 0
+            or self.n_local_updates >= c.recovery_local_max_updates
+        ):
+            return 0.0
+        p = 1.0 - self.w_last / (c.recovery_local_ratio * w_ref)
+        return min(max(0.0, p), c.recovery_local_max_fraction)
+
+    def local_poses(self, center: ArrayLike, n: int, rng: np.random.Generator) -> FloatArray:
+        """``n`` poses drawn from a normal distribution around ``center`` (local resetting)."""
+        c = self.config
+        sd = np.array([c.recovery_local_sigma_xy] * 2 + [c.recovery_local_sigma_theta])
+        q = np.asarray(center, dtype=np.float64) + rng.standard_normal((n, 3)) * sd
+        q[:, 2] = se2.wrap_angle(q[:, 2])
+        return q
+
+    def resample(self, rng: np.random.Generator, center: ArrayLike | None = None) -> None:
+        """``pf_update_resample``: KLD-sized, low-variance, with random-pose injection; with
+        the current estimate as ``center``, also local resetting (:meth:`local_probability`;
+        without it, none: e.g. adaptive-memory's filter)."""
         c = self.config
         w_diff = self.injection_probability()
         n_max = c.max_particles
@@ -461,16 +538,24 @@ class AMCLFilter:
         is_rand = rng.random(n_max) < w_diff
         if is_rand.any():
             cand[is_rand] = self.random_poses(int(is_rand.sum()), rng)
+        is_new, is_local = is_rand, np.zeros(n_max, dtype=bool)
+        p_loc = self.local_probability() if center is not None else 0.0
+        if p_loc > 0:
+            is_local = ~is_rand & (rng.random(n_max) < p_loc)
+            cand[is_local] = self.local_poses(center, int(is_local.sum()), rng)
+            is_new = is_rand | is_local
+            self.n_local_updates += 1
         keys = bin_keys(cand, c.kld_cell_m, c.kld_angle_rad)
         n = kld_prefix_size(keys, c.pf_err, c.pf_z, c.min_particles, c.max_particles)
-        n_rand = int(is_rand[:n].sum())
-        idx = low_variance_resample(self.weights, n - n_rand, rng)
+        n_new = int(is_new[:n].sum())
+        idx = low_variance_resample(self.weights, n - n_new, rng)
         parts = [self.particles[idx]]
-        if n_rand:
-            parts.append(cand[:n][is_rand[:n]])
+        if n_new:
+            parts.append(cand[:n][is_new[:n]])
         self.particles = np.concatenate(parts)
         self.weights = np.full(len(self.particles), 1.0 / len(self.particles))
-        self.n_random_injected += n_rand
+        self.n_random_injected += int(is_rand[:n].sum())
+        self.n_local_injected += int(is_local[:n].sum())
         if w_diff > 0 and self.config.recovery_reset:
             self.reset_recovery()
 
@@ -663,7 +748,7 @@ class StaticMCL(Localizer, MapUser):
             # random poses just injected for recovery would weigh as much as the others.
             self._est_at_update, self._cov = f.estimate()
             if self._n_updates % max(1, c.resample_interval) == 0:
-                f.resample(self.rng)
+                f.resample(self.rng, center=self._est_at_update)
             self._odom_at_update = pose_odom.copy()
         mean = se2.compose(self._est_at_update, se2.between(self._odom_at_update, pose_odom))
         cov = regularized_covariance(self._cov)
