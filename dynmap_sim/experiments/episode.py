@@ -334,7 +334,9 @@ class EpisodeLoop:
             steered=steered,
             clearance_m=clearance,
             person_clearance_m=np.asarray(person_l, dtype=np.float64),
-            goal_reached=goal_reached(bool(terminated), progress_on_route, end_m),
+            goal_reached=goal_reached(
+                bool(terminated), progress_on_route, end_m, truth_arr, cfg.route
+            ),
             shortest_path_m=shortest_m,
             driver_stats=driver_stats,
             driver_artifacts=dict(driver.run_artifacts()),

@@ -29,6 +29,7 @@ from dynmap_sim.metrics.navigation import (
     nav_day_summary,
     nav_run_summary,
     path_length_m,
+    route_progress_with_detours,
     spl,
 )
 from dynmap_sim.metrics.point_classes import (
@@ -85,6 +86,7 @@ __all__ = [
     "nav_day_summary",
     "nav_run_summary",
     "path_length_m",
+    "route_progress_with_detours",
     "spl",
     "BEAM_TO_POINT_CLASS",
     "LOST_THRESHOLD_M",

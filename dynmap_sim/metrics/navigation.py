@@ -29,6 +29,15 @@ GOAL_REACHED_M = 0.5
 #: ... after this share of the route was followed (the env's own test is stricter: 0.3 m).
 GOAL_PROGRESS = 0.95
 
+#: :func:`route_progress_with_detours`: the robot is back on the route within this distance of
+#: it [m] (the env's progress tracker has no such notion: it follows the route only segment
+#: by segment, at most 2 m per step, so a detour that rejoins farther ahead stalls it).
+REJOIN_M = 0.5
+#: ... and a rejoin may skip at most this share of the route's length (the blocked stretch a
+#: detour went round). Less than the share between a loop's start and its end, so a robot at a
+#: loop's start is never taken to be at its end.
+MAX_SKIP_FRACTION = 0.3
+
 #: A person closer than this to the robot's disc [m] is a near miss (issue 15; the distance
 #: at which nav2's Collision Monitor examples slow down for an obstacle).
 NEAR_MISS_M = 0.3
@@ -59,13 +68,71 @@ def clearances(
     return best - float(radius_m)
 
 
-def goal_reached(env_terminated: bool, route_progress: float, end_distance_m: float) -> bool:
+def goal_reached(
+    env_terminated: bool,
+    route_progress: float,
+    end_distance_m: float,
+    track_xy: ArrayLike | None = None,
+    route: ArrayLike | None = None,
+) -> bool:
     """The run's goal, the end of its route, was reached (by the truth): the env ended the
     episode at the route's end, or the robot followed :data:`GOAL_PROGRESS` of the route and
-    stopped within :data:`GOAL_REACHED_M` of its end."""
-    return bool(env_terminated) or (
-        route_progress >= GOAL_PROGRESS and end_distance_m <= GOAL_REACHED_M
-    )
+    stopped within :data:`GOAL_REACHED_M` of its end. ``route_progress`` is the env's share;
+    given the true track ``track_xy`` and the ``route``, a run that stopped at the end with
+    less is judged again by :func:`route_progress_with_detours` (the env's tracker stalls
+    behind a detour that rejoins the route farther ahead)."""
+    if env_terminated:
+        return True
+    if end_distance_m > GOAL_REACHED_M:
+        return False
+    if route_progress >= GOAL_PROGRESS:
+        return True
+    if track_xy is None or route is None:
+        return False
+    return route_progress_with_detours(track_xy, route) >= GOAL_PROGRESS
+
+
+def route_progress_with_detours(
+    xy: ArrayLike,
+    route: ArrayLike,
+    rejoin_m: float = REJOIN_M,
+    max_skip_fraction: float = MAX_SKIP_FRACTION,
+    local_m: float = 2.0,
+) -> float:
+    """Share of ``route`` ``(K, 2)`` followed by the true track ``xy`` ``(T, 2+)`` [0..1], a
+    detour around a block counting as followed. Each step the progress moves to the nearest
+    route position ahead of it that lies within ``rejoin_m`` of the robot: at most
+    ``local_m`` [m] ahead while the robot is on the route within ``local_m`` of its progress
+    (as the env's tracker, which gains at most 2 m a step), at most ``max_skip_fraction`` of
+    the route ahead when it is off it (a detour rejoining); none: it stays. The nearest
+    position ahead, and the local reach while on the route, keep a place the route passes
+    twice (a corridor driven out and back) on the pass being driven."""
+    pts = np.asarray(route, dtype=np.float64).reshape(-1, 2)
+    track = np.asarray(xy, dtype=np.float64).reshape(-1, np.shape(xy)[-1] if np.ndim(xy) else 2)
+    if len(pts) < 2 or len(track) == 0:
+        return 1.0 if len(pts) < 2 else 0.0
+    a, ab = pts[:-1], np.diff(pts, axis=0)
+    seg_len = np.hypot(*ab.T)
+    total = float(seg_len.sum())
+    if total <= 0.0:
+        return 1.0
+    cum = np.concatenate([[0.0], np.cumsum(seg_len)])[:-1]
+    ap = track[:, None, :2] - a[None]  # (T, S, 2)
+    u = np.clip(np.einsum("tsj,sj->ts", ap, ab) / np.maximum(seg_len**2, 1e-18), 0.0, 1.0)
+    dist = np.hypot(*(ap - u[..., None] * ab[None]).transpose(2, 0, 1))  # (T, S)
+    pos = cum[None] + u * seg_len[None]  # route position of each projection [m]
+    near = dist <= rejoin_m
+    max_skip = max_skip_fraction * total
+    progress = 0.0
+    for t in range(len(track)):
+        on, p_t = near[t], pos[t]
+        # on the route near the progress: follow it locally; off it (a detour): rejoin ahead
+        here = np.any(on & (p_t >= progress - local_m) & (p_t <= progress + local_m))
+        reach = local_m if here else max_skip
+        cand = p_t[on & (p_t > progress) & (p_t <= progress + reach)]
+        if cand.size:
+            progress = float(cand.min())
+    return min(1.0, progress / total)
 
 
 def path_length_m(xy: ArrayLike) -> float:
