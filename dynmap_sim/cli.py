@@ -723,9 +723,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument(
         "--keep-scans",
         action="store_true",
-        help="also store every scan's ranges (about 2.3 kB a scan of 683 beams), so that "
-        "export --mcap writes /scan and video draws the scan; a resumed experiment keeps what "
-        "it began with",
+        help="also store every scan's ranges (about 2.3 kB a scan of 683 beams) and the "
+        "people's positions, so that export --mcap writes /scan and /world/people and video "
+        "draws the scan; a resumed experiment keeps what it began with",
     )
     s.set_defaults(func=_cmd_run)
 
@@ -740,9 +740,10 @@ def build_parser() -> argparse.ArgumentParser:
         description="Export a results folder: TUM trajectories (--tum), Parquet tables "
         "(--parquet, extra 'analysis') for pandas and polars, and/or a ROS 2 bag "
         "(--mcap, extra 'ros') for Foxglove, RViz and `ros2 bag play`. The bag holds /tf, "
-        "/tf_static, /odom, /truth/pose, /<localizer>/pose, /world/obstacles, /plan, and /scan "
-        "when the experiment was run with --keep-scans; no OccupancyGrid, because no "
-        "localizer's map is stored as a grid.",
+        "/tf_static, /odom, /truth/pose, /<localizer>/pose, /world/obstacles, /plan, "
+        "/<localizer>/map (OccupancyGrid) of a localizer that stores its map as a grid "
+        "(adaptive-memory), and /scan and /world/people when the experiment was run with "
+        "--keep-scans.",
     )
     s.add_argument("dir", help="a results folder (written by run, check or replay)")
     s.add_argument("--tum", help="output folder for TUM trajectory files")
@@ -750,8 +751,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--mcap",
         metavar="OUT",
         help="write a ROS 2 bag folder OUT (metadata.yaml + OUT.mcap; zstd chunks, ros2 "
-        'profile) of the chosen runs; needs pip install "dynmap-sim[ros]". /scan only when '
-        "the experiment was run with --keep-scans",
+        'profile) of the chosen runs; needs pip install "dynmap-sim[ros]". /scan and '
+        "/world/people only when the experiment was run with --keep-scans",
     )
     s.add_argument(
         "--parquet",
@@ -784,8 +785,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="A video of one stored run, one frame per scan: the run's obstacles, the "
         "route, the planned path and a dynamic-map's long-term map when stored, the true pose "
         "and each localizer's estimate with trails, errors, bumper and events, and the scan "
-        "when the experiment was run with --keep-scans. The results store keeps no people, so "
-        "none is drawn (watch them live with the env's render()).",
+        "when the experiment was run with --keep-scans. People are not drawn (watch them live "
+        "with the env's render(), or in the --mcap bag of a --keep-scans run).",
     )
     s.add_argument("dir", help="a results folder (written by run, check or replay)")
     s.add_argument("--day", type=_positive, required=True, help="day of the run to show")

@@ -16,7 +16,7 @@ from dynmap_sim.robot.diff_drive import DiffDriveRobot, RobotParams
 from dynmap_sim.robot.route import RouteProgress
 from dynmap_sim.sensors.lidar import LidarNoise, make_lidar
 from dynmap_sim.sensors.odometry import EncoderNoise, WheelOdometry
-from dynmap_sim.truth import ObstacleSnapshot, RunSlot, WorldFacts, read_only
+from dynmap_sim.truth import ObstacleSnapshot, PeopleSnapshot, RunSlot, WorldFacts, read_only
 from dynmap_sim.types import LaserSpec
 from dynmap_sim.world import World, WorldSpec, load_world, resolve_world_path
 
@@ -384,6 +384,15 @@ class DynMapEnv(gymnasium.Env):
             vel = crowd.vel[:n]
             out[:n, 2] = np.arctan2(vel[:, 1], vel[:, 0])  # heading of motion, as people_poses
         return out, n
+
+    def people(self) -> PeopleSnapshot:
+        """A read-only snapshot of the current run's people (ids, positions, radii)."""
+        crowd = self.world.crowd
+        return PeopleSnapshot(
+            ids=tuple(crowd.ids),
+            xy=read_only(np.asarray(crowd.pos, dtype=np.float64).reshape(-1, 2)),
+            radius=read_only(np.asarray(crowd.radius, dtype=np.float64).ravel()),
+        )
 
     # -- extras ---------------------------------------------------------------------------
     def teleport(self, pose: Any) -> None:

@@ -70,3 +70,13 @@ class ObstacleSnapshot:
     segment_object: NDArray[np.int32] = field(default_factory=_no_index)
     circle_object: NDArray[np.int32] = field(default_factory=_no_index)
     object_ids: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class PeopleSnapshot:
+    """The people of the current run [m]: ``ids`` (the crowd's, fixed for a run), ``xy``
+    ``(n, 2)`` their positions now and ``radius`` ``(n,)`` their bodies' radii."""
+
+    ids: tuple[str, ...]
+    xy: FloatArray
+    radius: FloatArray

@@ -20,15 +20,26 @@ Topics, from what the results store holds:
   ``geometry_msgs/msg/PoseStamped`` in ``map``.
 * ``/world/obstacles`` ``visualization_msgs/msg/MarkerArray``: the run's static segments as
   one ``LINE_LIST`` per class (walls, furniture, ...), after a ``DELETEALL``; transient local.
+* ``/world/people`` ``visualization_msgs/msg/MarkerArray``: the people at each scan, one
+  ``CYLINDER`` per person (ns ``people``, id: the person's index in the run's crowd, which is
+  fixed for a run; diameter its body's, :data:`PERSON_HEIGHT_M` tall) living one scan period,
+  so one who leaves the floor fades; when the experiment kept them (``run --keep-scans``).
+* ``/<label>/map`` ``nav_msgs/msg/OccupancyGrid`` in ``map``, for each localizer that hands
+  over its map as a grid (named arrays ``logodds`` ``(H, W)`` rows along y, ``origin_m``
+  lower-left corner, ``resolution_m``; e.g. ``adaptive-memory``'s long-term map ``ltm``):
+  per run, the grid it handed over after the run's day (else the latest earlier day), as
+  the H&W figures show it, stamped at the run's first scan; transient local. Occupancy is
+  ``round(100 p)`` of the log-odds' probability, -1 where the log-odds are 0 (never
+  observed, or evenly).
 * ``/plan`` ``nav_msgs/msg/Path``: the driver's last planned path of a run, stamped at the
   run's last scan, where the driver stored one; transient local.
 * ``/scan`` ``sensor_msgs/msg/LaserScan`` in ``laser`` (REP-117 ranges: +inf no return,
   -inf too close), one per scan, when the experiment kept its ranges (``run --keep-scans``).
 
-Not exported, because the store does not hold it: ``/scan`` of an experiment run without
-``--keep-scans``, the people (their tracks are not stored), and an
-``nav_msgs/msg/OccupancyGrid`` of a localizer's map (no localizer stores a grid; the dynamic
-map's ``map_snapshot`` holds per-local-map range medians). :attr:`McapExport.notes` says so.
+Not exported, because the store does not hold it: ``/scan`` and ``/world/people`` of an
+experiment run without ``--keep-scans`` (or, for the people, written before they were
+kept), and a map of a localizer that stores none as a grid (the dynamic map's
+``map_snapshot`` holds per-local-map range medians). :attr:`McapExport.notes` says so.
 
 Stamps are nanoseconds since the Unix epoch of the run's calendar date plus its clock time:
 the TUM export's timestamp plus the first date's epoch seconds. A ``replay`` folder uses the
@@ -59,6 +70,10 @@ ROS_EXTRA = 'pip install "dynmap-sim[ros]"'
 ODOMETRY_CLASS = "odometry"
 #: rosbag2 metadata version written (ROS 2 Humble to Jazzy read it).
 BAG_VERSION = 8
+#: The people's cylinders' height [m] (the simulation's people are discs: a display height).
+PERSON_HEIGHT_M = 1.7
+#: The people's colour (RGBA, 0-1).
+_PERSON_RGBA = (0.85, 0.1, 0.1, 0.8)
 
 _EPOCH = dt.date(1970, 1, 1)
 _NS = 1_000_000_000
@@ -197,7 +212,16 @@ class _Msgs:
             twist=t["geometry_msgs/msg/TwistWithCovariance"](twist=tw, covariance=np.zeros(36)),
         )
 
-    def marker(self, ns: int, name: str, ident: int, kind: int, **kw: Any) -> Any:
+    def marker(
+        self,
+        ns: int,
+        name: str,
+        ident: int,
+        kind: int,
+        shape: int | None = None,
+        lifetime_ns: int = 0,
+        **kw: Any,
+    ) -> Any:
         t = self.t
         u8 = np.zeros(0, dtype=np.uint8)
         fields: dict[str, Any] = {
@@ -210,9 +234,11 @@ class _Msgs:
             header=self.header(ns, "map"),
             ns=name,
             id=ident,
-            type=t["visualization_msgs/msg/Marker"].LINE_LIST,
+            type=t["visualization_msgs/msg/Marker"].LINE_LIST if shape is None else shape,
             action=kind,
-            lifetime=t["builtin_interfaces/msg/Duration"](sec=0, nanosec=0),
+            lifetime=t["builtin_interfaces/msg/Duration"](
+                sec=int(lifetime_ns // _NS), nanosec=int(lifetime_ns % _NS)
+            ),
             frame_locked=False,
             colors=[],
             texture_resource="",
@@ -248,6 +274,49 @@ class _Msgs:
             )
         return t["visualization_msgs/msg/MarkerArray"](markers=markers)
 
+    def people(self, ns: int, xy: np.ndarray, radius: np.ndarray, lifetime_ns: int) -> Any:
+        """One ``CYLINDER`` per person on the floor (finite position), id its index."""
+        t = self.t
+        marker_t = t["visualization_msgs/msg/Marker"]
+        r, g, b, a = _PERSON_RGBA
+        markers = [
+            self.marker(
+                ns,
+                "people",
+                j,
+                marker_t.ADD,
+                shape=marker_t.CYLINDER,
+                lifetime_ns=lifetime_ns,
+                pose=t["geometry_msgs/msg/Pose"](
+                    position=t["geometry_msgs/msg/Point"](
+                        x=float(xy[j, 0]), y=float(xy[j, 1]), z=0.5 * PERSON_HEIGHT_M
+                    ),
+                    orientation=self.quat(0.0),
+                ),
+                scale=t["geometry_msgs/msg/Vector3"](
+                    x=2.0 * float(radius[j]), y=2.0 * float(radius[j]), z=PERSON_HEIGHT_M
+                ),
+                color=t["std_msgs/msg/ColorRGBA"](r=r, g=g, b=b, a=a),
+            )
+            for j in range(len(xy))
+            if np.isfinite(xy[j]).all()
+        ]
+        return t["visualization_msgs/msg/MarkerArray"](markers=markers)
+
+    def occupancy_grid(self, ns: int, grid: _Grid) -> Any:
+        t = self.t
+        h, w = grid.data.shape
+        info = t["nav_msgs/msg/MapMetaData"](
+            map_load_time=self.time(ns),
+            resolution=float(grid.resolution_m),
+            width=w,
+            height=h,
+            origin=self.pose(np.array([grid.origin_m[0], grid.origin_m[1], 0.0])),
+        )
+        return t["nav_msgs/msg/OccupancyGrid"](
+            header=self.header(ns, "map"), info=info, data=grid.data.ravel()
+        )
+
     def path(self, ns: int, xy: np.ndarray) -> Any:
         heading = np.zeros(len(xy))
         if len(xy) > 1:  # each pose faces the next point
@@ -259,6 +328,65 @@ class _Msgs:
             for (x, y), h in zip(xy, heading, strict=True)
         ]
         return self.t["nav_msgs/msg/Path"](header=self.header(ns, "map"), poses=poses)
+
+
+@dataclass(frozen=True)
+class _Grid:
+    """A localizer's map as ROS cells: ``data`` ``(H, W)`` int8 (0-100, -1 unknown), row 0
+    at ``origin_m`` (the lower-left corner [m]), ``resolution_m`` [m/cell]."""
+
+    data: np.ndarray
+    origin_m: tuple[float, float]
+    resolution_m: float
+
+
+def occupancy_from_logodds(logodds: np.ndarray) -> np.ndarray:
+    """ROS occupancy of log-odds cells: ``round(100 p)`` (int8), -1 where they are 0 (no
+    evidence) or not finite."""
+    lo = np.asarray(logodds, dtype=np.float64)
+    p = 1.0 / (1.0 + np.exp(-np.clip(np.nan_to_num(lo), -50.0, 50.0)))
+    out = np.rint(100.0 * p).astype(np.int8)
+    out[(lo == 0.0) | ~np.isfinite(lo)] = -1
+    return out
+
+
+def _grid_of(arrays: Any) -> _Grid | None:
+    """The grid among a day artifact's named arrays (``logodds`` with ``origin_m`` and
+    ``resolution_m``), or None."""
+    if not isinstance(arrays, dict) or not {"logodds", "origin_m", "resolution_m"} <= set(arrays):
+        return None
+    lo = np.asarray(arrays["logodds"])
+    origin = np.asarray(arrays["origin_m"], dtype=np.float64).ravel()
+    res = float(np.asarray(arrays["resolution_m"], dtype=np.float64).ravel()[0])
+    if lo.ndim != 2 or lo.dtype.kind not in "fiu" or origin.size < 2 or not res > 0:
+        return None
+    return _Grid(occupancy_from_logodds(lo), (float(origin[0]), float(origin[1])), res)
+
+
+def stored_grids(db: ResultsDB, loc: int) -> list[tuple[int, _Grid]]:
+    """``(day, grid)`` of every map localizer ``loc`` handed over as a grid, by day (of
+    one artifact name: the first that holds grids)."""
+    if not db.query("SELECT count(*) FROM sqlite_master WHERE type='table' AND name='artifacts'")[
+        0
+    ][0]:
+        return []
+    names = [
+        str(n)
+        for (n,) in db.query(
+            "SELECT DISTINCT name FROM artifacts WHERE loc=? ORDER BY name", (loc,)
+        )
+    ]
+    for name in names:
+        grids = [(d, g) for d, a in db.artifacts(loc, name) if (g := _grid_of(a)) is not None]
+        if grids:
+            return grids
+    return []
+
+
+def _grid_for_day(grids: list[tuple[int, _Grid]], day: int) -> _Grid | None:
+    """The grid handed over after ``day``, else after the latest day before it."""
+    before = [g for d, g in grids if d <= day]
+    return before[-1] if before else None
 
 
 def _qos(transient_local: bool) -> list[Any]:
@@ -404,16 +532,17 @@ def export_mcap(
                 "/scan not exported: the experiment kept no laser ranges (run it with "
                 "--keep-scans to store them)"
             )
-        result.notes.append("people not exported: the results store keeps no tracks of people")
         if odo_loc is None:
             result.notes.append(
                 "/odom not exported: no dead-reckoning localizer ('odometry') in the results; "
                 f"/tf has map->odom identity and odom->base_link from {labels[chosen]!r}"
             )
-        result.notes.append(
-            "no OccupancyGrid: no localizer's map is stored as a grid in the results (the "
-            "artifacts hold at most the dynamic map's range medians per local map)"
-        )
+        grids = {k: g for k in range(len(labels)) if (g := stored_grids(db, k))}
+        if not grids:
+            result.notes.append(
+                "no OccupancyGrid: no localizer's map is stored as a grid in the results (the "
+                "artifacts hold at most the dynamic map's range medians per local map)"
+            )
         plans = {(d, r): blob for d, r, blob in db.driver_artifacts("planned_path.f8")}
         staging = dst.parent / f".{dst.name}.partial-{os.getpid()}"
         shutil.rmtree(staging, ignore_errors=True)
@@ -439,6 +568,15 @@ def export_mcap(
                     plans,
                     meta if replay else None,
                     meta.get("laser"),
+                    grids,
+                )
+            if "/world/people" not in result.counts:
+                kept = any(db.scan_people(d, r) is not None for d, r, _ in runs)
+                result.notes.append(
+                    "/world/people not exported: no people on the floor in the exported runs"
+                    if kept
+                    else "/world/people not exported: the results hold no people's tracks "
+                    "(run the experiment with --keep-scans to store them)"
                 )
             if dst.exists():
                 shutil.rmtree(dst)
@@ -461,6 +599,7 @@ def _write_runs(
     plans: dict[tuple[int, int], bytes],
     replay_meta: dict[str, Any] | None,
     laser: dict[str, Any] | None,
+    grids: dict[int, list[tuple[int, _Grid]]],
 ) -> None:
     """Every message of the chosen runs, in time order per run."""
     conns: dict[str, Any] = {}
@@ -472,11 +611,17 @@ def _write_runs(
         "/truth/pose": "geometry_msgs/msg/PoseStamped",
         "/plan": "nav_msgs/msg/Path",
         "/scan": "sensor_msgs/msg/LaserScan",
+        "/world/people": "visualization_msgs/msg/MarkerArray",
     }
     latched = {"/tf_static", "/world/obstacles", "/plan"}
     topics = pose_topics(labels)
     for topic in topics:
         types[topic] = "geometry_msgs/msg/PoseStamped"
+    map_topics = {k: topics[k].removesuffix("/pose") + "/map" for k in grids}
+    for topic in map_topics.values():
+        types[topic] = "nav_msgs/msg/OccupancyGrid"
+        latched.add(topic)
+    period_s = float((laser or {}).get("scan_period_s") or 0.0)
 
     def put(topic: str, ns: int, msg: Any) -> None:
         if topic not in conns:
@@ -517,7 +662,20 @@ def _write_runs(
         geom = db.geometry(day, run_)
         if geom is not None:
             put("/world/obstacles", t0_ns, msgs.obstacles(t0_ns, *geom))
+        for k, topic in map_topics.items():
+            grid = _grid_for_day(grids[k], day)
+            if grid is not None:
+                put(topic, t0_ns, msgs.occupancy_grid(t0_ns, grid))
         ranges = db.scan_ranges(day, run_) if laser is not None else None
+        people = db.scan_people(day, run_)
+        if people is not None and not people.ids:
+            people = None  # nobody on the floor this run
+        if people is not None and len(people.xy) != n:
+            raise InputError(
+                f"{db.path}: day {day} run {run_}: {len(people.xy)} people's rows for {n} scans"
+            )
+        life_s = period_s if period_s > 0 else float(np.median(np.diff(t_s))) if n > 1 else 0.0
+        life_ns = int(round(life_s * _NS))  # 0: forever (ids are stable: the next replaces)
         for i in range(n):
             s = int(ns[i])
             put(
@@ -536,6 +694,8 @@ def _write_runs(
                 put("/truth/pose", s, msgs.pose_stamped(s, "map", truth[i]))
             if ranges is not None:
                 put("/scan", s, msgs.laser_scan(s, laser, ranges[i]))
+            if people is not None:
+                put("/world/people", s, msgs.people(s, people.xy[i], people.radius_m, life_ns))
             for topic, (poses, _) in zip(topics, est, strict=True):
                 put(topic, s, msgs.pose_stamped(s, "map", poses[i]))
         blob = plans.get((day, run_))

@@ -119,6 +119,11 @@ class Episode:
     #: the driver's counts (:meth:`Driver.stats`) and what it handed over after the run
     driver_stats: dict[str, float] | None = None
     driver_artifacts: dict[str, bytes] | None = None
+    #: the run's people (only with :attr:`EpisodeLoop.keep_people`; None: not kept): their
+    #: ids and radii [m], and ``(T, n, 2)`` positions [m] at each scan
+    people_ids: tuple[str, ...] | None = None
+    people_radius_m: FloatArray | None = None
+    people_xy: FloatArray | None = None
 
 
 @dataclass(frozen=True)
@@ -144,6 +149,9 @@ class EpisodeLoop:
         self.config = config
         self.slots = slots
         self.dt_s = float(self.u.laser_spec.scan_period_s)
+        #: record the people's positions at every scan (``run --keep-scans``; an env
+        #: without a ``people()`` truth view records none)
+        self.keep_people = False
 
     def prior(self, i: int, facts: WorldFacts) -> Prior:
         """The prior of run ``i`` (of :attr:`slots`): what the scenario grants the agent."""
@@ -219,6 +227,9 @@ class EpisodeLoop:
         free_clearance_m = radius_m + FREE_MARGIN_M
         shortest_m = self._shortest_path_m(start, static_grid, free_clearance_m)
         person_l: list[float] = []
+        people_of = getattr(self.u, "people", None) if self.keep_people else None
+        crowd = people_of() if people_of is not None else None
+        people_l: list[FloatArray] = []
         events: list[tuple[int, float, str, str]] = []
         max_steps = int(round(cfg.max_run_s / self.dt_s)) if cfg.max_run_s is not None else None
         lockstep = None
@@ -254,6 +265,8 @@ class EpisodeLoop:
             truth_l.append(pose)
             coll_l.append(collision)
             person_l.append(self._person_clearance_m(pose, radius_m))
+            if crowd is not None:
+                people_l.append(_positions(people_of(), crowd.ids))
             if lockstep is not None:
                 estimate = lockstep.update(t_s, odom_l[-1], scan_l[-1], class_l[-1], point_l[-1])
             progress_frac = float(info.get("route_progress", progress_frac))
@@ -340,6 +353,15 @@ class EpisodeLoop:
             shortest_path_m=shortest_m,
             driver_stats=driver_stats,
             driver_artifacts=dict(driver.run_artifacts()),
+            people_ids=crowd.ids if crowd is not None else None,
+            people_radius_m=(
+                np.array(crowd.radius, dtype=np.float64) if crowd is not None else None
+            ),
+            people_xy=(
+                np.asarray(people_l, dtype=np.float64).reshape(len(t_l), len(crowd.ids), 2)
+                if crowd is not None
+                else None
+            ),
         )
 
     def _shortest_path_m(self, start: FloatArray, grid: ClearanceGrid, clearance_m: float) -> float:
@@ -372,4 +394,17 @@ def _people(obstacles: Any) -> NDArray[np.bool_]:
     if obj.shape == cls.shape:
         legs = obj[cls == BeamClass.PERSON]
         out[legs[(legs >= 0) & (legs < n)]] = True
+    return out
+
+
+def _positions(now: Any, ids: tuple[str, ...]) -> FloatArray:
+    """``(len(ids), 2)`` positions of the people ``ids`` in the snapshot ``now`` (NaN for
+    one not in it: the crowd of a run is fixed, so this is a guard)."""
+    if now.ids == ids:
+        return np.array(now.xy, dtype=np.float64).reshape(-1, 2)
+    where = {k: i for i, k in enumerate(now.ids)}
+    out = np.full((len(ids), 2), np.nan)
+    for j, k in enumerate(ids):
+        if k in where:
+            out[j] = now.xy[where[k]]
     return out

@@ -32,6 +32,9 @@ format 3, ``results_format`` in ``meta``):
 * ``geometry`` — the static segments of each run's world (for report figures);
 * ``scan_ranges`` — per run, every scan's laser ranges (zlib of float32 rows), only for an
   experiment run with ``--keep-scans`` (``meta.keep_scans``; absent otherwise);
+* ``scan_people`` — per run, the people's ids (JSON), body radii [m] and positions at every
+  scan (zlib of float32 ``(T, n, 2)``), also only with ``--keep-scans`` (the engine's truth,
+  for the bag export; folders written before it have no such table);
 * ``checkpoint`` — the pickled driver and RNG states, the next run to do, the scenario hash,
   the names and SHA-256 digests of the localizer files, and a SHA-256 of the blob, so a
   corrupt or mismatched checkpoint is refused.
@@ -165,6 +168,13 @@ CREATE TABLE IF NOT EXISTS checkpoint (
 _SCAN_RANGES_TABLE = """CREATE TABLE IF NOT EXISTS scan_ranges (
     day INTEGER, run INTEGER, n_beams INTEGER, ranges BLOB, PRIMARY KEY (day, run))"""
 
+#: Made with ``scan_ranges`` (optional like it): the people's ids (a JSON list; the crowd of a
+#: run is fixed), radii (little-endian float64 ``(n,)``) and positions (zlib level 1 of
+#: little-endian float32 ``(T, n, 2)``, NaN: not on the floor).
+_SCAN_PEOPLE_TABLE = """CREATE TABLE IF NOT EXISTS scan_people (
+    day INTEGER, run INTEGER, n_people INTEGER, ids TEXT, radius BLOB, xy BLOB,
+    PRIMARY KEY (day, run))"""
+
 #: The layout this version writes (``results_format`` in ``meta``; none: format 1).
 RESULTS_FORMAT = 3
 
@@ -215,6 +225,16 @@ class LocalizerDiagnostics:
 
 
 @dataclass
+class PeopleTrack:
+    """The people of one run: ``ids``, ``radius_m`` ``(n,)`` and ``xy`` ``(T, n, 2)`` [m]
+    at each scan (NaN: not on the floor)."""
+
+    ids: tuple[str, ...]
+    radius_m: NDArray[np.float64]
+    xy: NDArray[np.float64]
+
+
+@dataclass
 class RunRecord:
     """Everything one run produces, as arrays (written in bulk by :meth:`ResultsDB.write_run`).
 
@@ -249,6 +269,8 @@ class RunRecord:
     point_tallies: list[PointClassTally] = field(default_factory=list)
     #: the laser ranges ``(T, n_beams)`` [m], REP-117, kept with ``run --keep-scans``
     ranges: NDArray[np.float32] | None = None
+    #: the people at each scan, kept with ``run --keep-scans`` (None: not kept)
+    people: PeopleTrack | None = None
 
     def scan_diagnostic(self, loc: int, name: str) -> NDArray[np.float64] | None:
         """Per-scan values ``(T, ...)`` of diagnostic ``name`` of localizer ``loc`` (None
@@ -690,6 +712,21 @@ class ResultsDB:
                     "INSERT OR REPLACE INTO scan_ranges VALUES (?,?,?,?)",
                     (d, r, ranges.shape[1], zlib.compress(ranges.tobytes(), 1)),
                 )
+            if rec.people is not None:
+                p = rec.people
+                xy = np.ascontiguousarray(p.xy, dtype="<f4").reshape(n, len(p.ids), 2)
+                self.con.execute(_SCAN_PEOPLE_TABLE)
+                self.con.execute(
+                    "INSERT OR REPLACE INTO scan_people VALUES (?,?,?,?,?,?)",
+                    (
+                        d,
+                        r,
+                        len(p.ids),
+                        json.dumps(list(p.ids)),
+                        np.ascontiguousarray(p.radius_m, dtype="<f8").tobytes(),
+                        zlib.compress(xy.tobytes(), 1),
+                    ),
+                )
             for k, s in enumerate(run_summaries):
                 self.con.execute(
                     "INSERT INTO run_summaries VALUES (:loc, :day, :run, :n_scans, "
@@ -1048,6 +1085,32 @@ class ResultsDB:
         if row is None:
             return None
         return np.frombuffer(zlib.decompress(row[1]), dtype="<f4").reshape(-1, int(row[0]))
+
+    def scan_people(self, day: int, run: int) -> PeopleTrack | None:
+        """The run's people at every scan (:class:`PeopleTrack`, positions ``(T, n, 2)``
+        [m]), or None when the experiment did not keep them (``run --keep-scans``; folders
+        written before the people were kept have none)."""
+        if not self._has_table("scan_people"):
+            return None
+        row = self.con.execute(
+            "SELECT n_people, ids, radius, xy FROM scan_people WHERE day=? AND run=?",
+            (day, run),
+        ).fetchone()
+        if row is None:
+            return None
+        n = int(row[0])
+        xy = np.frombuffer(zlib.decompress(row[3]), dtype="<f4").astype(np.float64)
+        return PeopleTrack(
+            tuple(json.loads(row[1])),
+            np.frombuffer(row[2], dtype="<f8").copy(),
+            xy.reshape(-1, n, 2) if n else np.zeros((self._n_steps(day, run), 0, 2)),
+        )
+
+    def _n_steps(self, day: int, run: int) -> int:
+        row = self.con.execute(
+            "SELECT n_steps FROM runs WHERE day=? AND run=?", (day, run)
+        ).fetchone()
+        return 0 if row is None else int(row[0])
 
     def driver_artifacts(self, name: str) -> list[tuple[int, int, bytes]]:
         """``(day, run, data)`` of the driver's artifact ``name``, by run."""

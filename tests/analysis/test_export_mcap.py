@@ -19,13 +19,35 @@ from rosbags.rosbag2 import Reader  # noqa: E402
 from rosbags.typesys import Stores, get_typestore  # noqa: E402
 
 from dynmap_sim.analysis.export import export_tum  # noqa: E402
-from dynmap_sim.analysis.export_mcap import export_mcap, pose_topics, ros_name  # noqa: E402
+from dynmap_sim.analysis.export_mcap import (  # noqa: E402
+    PERSON_HEIGHT_M,
+    export_mcap,
+    occupancy_from_logodds,
+    pose_topics,
+    ros_name,
+)
 from dynmap_sim.analysis.scenarios import load_scenario  # noqa: E402
 from dynmap_sim.cli import main  # noqa: E402
 from dynmap_sim.experiments.results import ResultsDB  # noqa: E402
-from dynmap_sim.experiments.runner import ExperimentRunner, run_experiment  # noqa: E402
+from dynmap_sim.experiments.runner import ExperimentRunner, make_env, run_experiment  # noqa: E402
+from dynmap_sim.experiments.scenario import parse_scenario  # noqa: E402
 
-SCENARIO = Path(__file__).resolve().parents[2] / "worlds/scenarios/ci-apartment-mcl.toml"
+ROOT = Path(__file__).resolve().parents[2]
+SCENARIO = ROOT / "worlds/scenarios/ci-apartment-mcl.toml"
+#: Two apartment days with its two visitors (days 15-21), 10 s a run, with the localizer
+#: that hands over its long-term map as a grid
+PEOPLE_AND_MAP = {
+    "name": "ci-apartment-people-map",
+    "world": "apartment",
+    "days": [15, 16],
+    "sensor": {"preset": "urg-04lx"},
+    "driver": {"kind": "tour", "speed_mps": 0.35, "max_run_s": 10.0},
+    "prior": {"map": "walls", "initial_pose": "known"},
+    "localizers": [
+        {"name": "odometry", "label": "odometry"},
+        {"name": "adaptive-memory", "label": "adaptive-memory"},
+    ],
+}
 STORE = get_typestore(Stores.ROS2_JAZZY)
 
 
@@ -33,6 +55,14 @@ STORE = get_typestore(Stores.ROS2_JAZZY)
 def results(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("ci") / "results"
     return run_experiment(load_scenario(SCENARIO), out_dir=out, progress=False, workers=1)
+
+
+@pytest.fixture(scope="module")
+def people_results(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """``run --keep-scans`` of :data:`PEOPLE_AND_MAP`: ranges, people and the grids."""
+    out = tmp_path_factory.mktemp("people") / "results"
+    scn = parse_scenario(PEOPLE_AND_MAP, ROOT / "worlds/scenarios/people-map.toml")
+    return run_experiment(scn, out_dir=out, progress=False, workers=1, keep_scans=True)
 
 
 @pytest.fixture(scope="module")
@@ -158,6 +188,9 @@ def test_day_and_run_choose_runs(results: Path, tmp_path: Path) -> None:
     res = export_mcap(results, tmp_path / "day2", days=(2, 2), run=1)
     assert res.counts["/tf_static"] == 1 and res.counts["/tf"] == 201
     assert any("/scan" in note for note in res.notes)
+    # a folder without the people's table (no --keep-scans, or written before it) says so
+    assert any("/world/people" in n and "--keep-scans" in n for n in res.notes)
+    assert any("no OccupancyGrid" in note for note in res.notes)  # MCL keeps no grid
 
 
 def test_scans_kept_by_the_run_are_exported_as_laser_scans(tmp_path: Path) -> None:
@@ -172,6 +205,9 @@ def test_scans_kept_by_the_run_are_exported_as_laser_scans(tmp_path: Path) -> No
                  "--resume"]) == 0  # fmt: skip
     res = export_mcap(out, tmp_path / "bag")
     assert not any("/scan" in note for note in res.notes)
+    # the people were kept too (also after the resume), but days 1-2 have nobody on the floor
+    assert any("no people on the floor" in note for note in res.notes)
+    assert "/world/people" not in res.counts
     with ResultsDB.open(out) as db:
         laser = db.meta()["laser"]
         runs = db.query("SELECT day, run, n_steps FROM runs ORDER BY day, run")
@@ -211,3 +247,130 @@ def test_cli_refuses_to_overwrite_and_names_the_extra(
     assert main(["export", str(results), "--mcap", str(tmp_path / "other")]) == 1
     assert 'pip install "dynmap-sim[ros]"' in capsys.readouterr().err
     assert not (tmp_path / "other").exists()
+
+
+def test_people_are_exported_as_cylinders_at_every_scan(
+    people_results: Path, tmp_path: Path
+) -> None:
+    """``run --keep-scans`` keeps the people's positions per scan; the bag has one
+    MarkerArray per scan on ``/world/people``: a CYLINDER per person (ns ``people``, id its
+    index, stable over the run) at the stored position, its body's diameter, living one
+    scan period."""
+    res = export_mcap(people_results, tmp_path / "bag")
+    assert not any("people" in note or "OccupancyGrid" in note for note in res.notes)
+    with ResultsDB.open(people_results) as db:
+        runs = [(d, r) for d, r in db.query("SELECT day, run FROM runs ORDER BY day, run")]
+        tracks = [db.scan_people(d, r) for d, r in runs]
+        period = db.meta()["laser"]["scan_period_s"]
+        n_scans = db.query("SELECT count(*) FROM scans")[0][0]
+    assert all(t is not None and len(t.ids) == 2 for t in tracks)  # the two visitors
+    stored = np.concatenate([t.xy for t in tracks])
+    assert stored.shape == (n_scans, 2, 2) and np.isfinite(stored).all()
+    msgs = _read_all(tmp_path / "bag")["/world/people"]
+    assert res.counts["/world/people"] == len(msgs) == n_scans
+    with (tmp_path / "bag" / "bag.mcap").open("rb") as f:
+        n_mcap = sum(ch.topic == "/world/people" for _, ch, _ in make_reader(f).iter_messages())
+    assert n_mcap == n_scans
+    truth_stamps = [s for s, _ in _read_all(tmp_path / "bag")["/truth/pose"]]
+    assert [s for s, _ in msgs] == truth_stamps  # one per scan, at the scan's stamp
+    for i in (0, 57, n_scans - 1):
+        markers = msgs[i][1].markers
+        assert [(m.ns, m.id, m.type, m.action) for m in markers] == [
+            ("people", 0, 3, 0),
+            ("people", 1, 3, 0),
+        ]
+        for j, m in enumerate(markers):
+            assert m.header.frame_id == "map"
+            np.testing.assert_allclose([m.pose.position.x, m.pose.position.y], stored[i, j])
+            assert m.pose.position.z == pytest.approx(PERSON_HEIGHT_M / 2)
+            assert m.scale.x == m.scale.y == pytest.approx(2 * tracks[0].radius_m[j])
+            assert m.lifetime.sec * 1e9 + m.lifetime.nanosec == pytest.approx(period * 1e9)
+    # they walk: at most 1.1 m/s (the visitors' top speed) between scans, and move
+    step = np.hypot(*np.diff(tracks[0].xy, axis=0).transpose(2, 0, 1))
+    assert step.max() <= 1.1 * period + 1e-3 and step.sum(axis=0).min() > 1.0
+
+
+def test_the_stored_people_are_the_engines_truth(people_results: Path) -> None:
+    """The first scan's people are where the env puts them on reset of that day and run."""
+    scn = parse_scenario(PEOPLE_AND_MAP, ROOT / "worlds/scenarios/people-map.toml")
+    env = make_env(scn)
+    try:
+        with ResultsDB.open(people_results) as db:
+            for day, run in db.query("SELECT day, run FROM runs ORDER BY day, run"):
+                track = db.scan_people(day, run)
+                _, info = env.reset(seed=0, options={"day": day, "run": run})
+                now = env.unwrapped.people()
+                assert track.ids == now.ids == ("person:visitor_loop:0", "person:visitor:0")
+                np.testing.assert_allclose(track.xy[0], now.xy, atol=1e-5)  # float32
+                np.testing.assert_allclose(track.xy[0], info["truth"]["people"][:2, :2], atol=1e-5)
+                np.testing.assert_array_equal(track.radius_m, now.radius)
+    finally:
+        env.close()
+
+
+def _cell(grid: object, x: float, y: float) -> int:
+    """The occupancy of the OccupancyGrid's cell holding ``(x, y)`` by ROS conventions."""
+    info = grid.info  # type: ignore[attr-defined]
+    ix = int((x - info.origin.position.x) // info.resolution)
+    iy = int((y - info.origin.position.y) // info.resolution)
+    return int(grid.data[iy * info.width + ix])  # type: ignore[attr-defined]
+
+
+def test_a_localizers_grid_is_exported_as_an_occupancy_grid(
+    people_results: Path, tmp_path: Path
+) -> None:
+    """adaptive-memory hands over its long-term map after each day; the bag has it on
+    ``/adaptive_memory/map`` once per run (the day's grid), latched, in ``map``, with the
+    stored shape, resolution and origin, cells row-major from the origin."""
+    res = export_mcap(people_results, tmp_path / "bag")
+    with ResultsDB.open(people_results) as db:
+        labels = db.labels()
+        arts = db.artifacts(labels.index("adaptive-memory"), "ltm")
+        assert db.scan_people(1, 1) is None  # no such run: None, as for an old folder
+    assert [d for d, _ in arts] == [15, 16]
+    env = make_env(parse_scenario(PEOPLE_AND_MAP, ROOT / "worlds/scenarios/people-map.toml"))
+    walls = np.asarray(env.unwrapped.world_facts().wall_segments, dtype=float)  # the prior
+    env.close()
+    assert "/odometry/map" not in res.counts and res.counts["/adaptive_memory/map"] == 2
+    with Reader(tmp_path / "bag") as reader:
+        qos = {c.topic: c.ext.offered_qos_profiles for c in reader.connections}
+    assert qos["/adaptive_memory/map"][0].durability == QosDurability.TRANSIENT_LOCAL
+    with (tmp_path / "bag" / "bag.mcap").open("rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        channel = next(c for c in summary.channels.values() if c.topic == "/adaptive_memory/map")
+        assert summary.schemas[channel.schema_id].name == "nav_msgs/msg/OccupancyGrid"
+        assert summary.statistics.channel_message_counts[channel.id] == 2
+    msgs = _read_all(tmp_path / "bag")
+    first_stamps = [msgs["/tf_static"][k][0] for k in range(2)]
+    for (stamp, grid), (_, art), t0 in zip(
+        msgs["/adaptive_memory/map"], arts, first_stamps, strict=True
+    ):
+        assert stamp == t0 and grid.header.frame_id == "map"
+        lo = art["logodds"]
+        h, w = lo.shape
+        assert (grid.info.height, grid.info.width) == (h, w) and len(grid.data) == h * w
+        assert grid.info.resolution == pytest.approx(0.05)
+        origin = grid.info.origin
+        np.testing.assert_allclose([origin.position.x, origin.position.y], art["origin_m"])
+        assert (origin.orientation.w, origin.orientation.z) == (1.0, 0.0)
+        np.testing.assert_array_equal(grid.data, occupancy_from_logodds(lo).ravel())
+        data = grid.data.reshape(h, w)
+        assert set(np.unique(data)) <= {-1, *range(101)} and (data == -1).any()
+        # known cells, at the ROS index ((y - oy) // res) * width + (x - ox) // res: the
+        # prior's outer wall (its outline's edge y = -0.1 m from x = -0.1 to 8.1 m) is pinned
+        # at l_max = 3.5 -> 97 in the cell just above the edge; outside it, never observed
+        (x0, y0, x1, y1) = walls[0]
+        assert y0 == y1 == -0.1 and x1 - x0 > 8
+        assert _cell(grid, 4.0, -0.1 + 0.025) == 97 and _cell(grid, 4.0, -0.1 - 0.025) == -1
+    # a bag of day 15 alone has the map after day 15
+    res = export_mcap(people_results, tmp_path / "day15", days=(15, 15))
+    ((_, only),) = _read_all(tmp_path / "day15")["/adaptive_memory/map"]
+    np.testing.assert_array_equal(only.data, occupancy_from_logodds(arts[0][1]["logodds"]).ravel())
+
+
+def test_occupancy_from_logodds_follows_ros() -> None:
+    lo = np.array([[0.0, 3.5, -2.0], [np.nan, 50.0, -60.0]], dtype=np.float32)
+    np.testing.assert_array_equal(
+        occupancy_from_logodds(lo), np.array([[-1, 97, 12], [-1, 100, 0]], dtype=np.int8)
+    )
