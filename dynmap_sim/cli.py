@@ -725,7 +725,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="also store every scan's ranges (about 2.3 kB a scan of 683 beams) and the "
         "people's positions, so that export --mcap writes /scan and /world/people and video "
-        "draws the scan; a resumed experiment keeps what it began with",
+        "draws the scan and the people; a resumed experiment keeps what it began with",
     )
     s.set_defaults(func=_cmd_run)
 
@@ -785,8 +785,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="A video of one stored run, one frame per scan: the run's obstacles, the "
         "route, the planned path and a dynamic-map's long-term map when stored, the true pose "
         "and each localizer's estimate with trails, errors, bumper and events, and the scan "
-        "when the experiment was run with --keep-scans. People are not drawn (watch them live "
-        "with the env's render(), or in the --mcap bag of a --keep-scans run).",
+        "and the people when the experiment was run with --keep-scans.",
     )
     s.add_argument("dir", help="a results folder (written by run, check or replay)")
     s.add_argument("--day", type=_positive, required=True, help="day of the run to show")

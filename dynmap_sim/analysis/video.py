@@ -11,11 +11,11 @@ again) with the numpy rasterizer the env renders with (:mod:`dynmap_sim.raster`)
 * the true pose (blue disc, heading, trail) and each chosen localizer's estimate (its colour,
   heading, trail); a header with the day, run, date and clock, the time in the run, each
   localizer's position error, the bumper and the latest event (kidnapping, detour, ...);
-* the scan's returns from the true pose, when the experiment kept its ranges
-  (``run --keep-scans``).
+* the scan's returns from the true pose and the people (red discs of their body radius), when
+  the experiment kept them (``run --keep-scans``).
 
-Not drawn: the people (the store keeps no tracks of them), nor the scan of an experiment run
-without ``--keep-scans``; watch those live with the env's ``render()``.
+Not drawn: the scan and the people of an experiment run without ``--keep-scans``; watch
+those live with the env's ``render()``.
 
 MP4 is encoded by the ffmpeg that ships with the ``imageio-ffmpeg`` wheel (H.264, yuv420p),
 GIF by Pillow (for short runs: its frames are held in memory); either is written to a
@@ -38,12 +38,13 @@ from numpy.typing import NDArray
 from dynmap_sim.errors import InputError
 from dynmap_sim.experiments.results import ResultsDB
 from dynmap_sim.raster import CLASS_RGB, Canvas, polyline
+from dynmap_sim.types import BeamClass
 
 #: Output formats by suffix.
 SUFFIXES = (".mp4", ".gif")
 #: What a video cannot show, and why (the CLI's help and note say it too).
-NOT_STORED = "the results store keeps no people, so none is drawn"
 NO_SCANS = "the experiment kept no laser ranges (run it with --keep-scans), so no scan is drawn"
+NO_PEOPLE = "the experiment kept no people (run it with --keep-scans), so none is drawn"
 #: Seconds an event stays in the header.
 EVENT_HOLD_S = 3.0
 
@@ -109,6 +110,9 @@ class _Run:
     #: returns of each scan in the map frame from the true pose ``(T, n_beams, 2)``, NaN
     #: where a beam has none; None when the ranges were not kept
     scan_xy: NDArray[np.float64] | None
+    #: the people at each scan ``(T, n, 3)`` ``x, y, radius`` [m] (NaN: not on the floor);
+    #: None when they were not kept
+    people: NDArray[np.float64] | None
     events: list[tuple[float, str]]  # (t_s, text)
     bounds: tuple[float, float, float, float]
     fps: int
@@ -240,6 +244,11 @@ def load_run(db: ResultsDB, day: int, run: int, labels: list[str], fps: int | No
     scan_xy = None
     if ranges is not None and laser is not None and len(ranges) == len(a):
         scan_xy = _returns_xy(a[:, 2:5], ranges, laser)
+    track = db.scan_people(day, run)
+    people = None
+    if track is not None and len(track.xy) == len(a):
+        radius = np.broadcast_to(track.radius_m, track.xy.shape[:2])[..., None]
+        people = np.concatenate([track.xy, radius], axis=2)
     events = [
         (float(t), f"{kind}: {detail}" if detail else str(kind))
         for t, kind, detail in db.query(
@@ -269,6 +278,7 @@ def load_run(db: ResultsDB, day: int, run: int, labels: list[str], fps: int | No
         map_points=map_points,
         map_note=map_note,
         scan_xy=scan_xy,
+        people=people,
         events=events,
         bounds=tuple(float(b) for b in bounds),  # type: ignore[arg-type]
         fps=fps if fps is not None else _fps(meta, a[:, 1]),
@@ -378,8 +388,11 @@ class _Frames:
         ]
         if run.scan_xy is not None:
             self.legend.append(("scan", _SCAN))
-        self.legend.append(("(no people stored)" if run.scan_xy is not None else
-                            "(no scans or people stored)", _MAP))  # fmt: skip
+        if run.people is not None:
+            self.legend.append(("people", CLASS_RGB[BeamClass.PERSON]))
+        missing = [w for w, x in (("scans", run.scan_xy), ("people", run.people)) if x is None]
+        if missing:
+            self.legend.append((f"(no {' or '.join(missing)} stored)", _MAP))
         chars = [  # the longest text of each line (monospaced: width = chars x advance)
             len(self._title(self.start + 86399.0)),
             sum(len(label) + 9 for label in ["truth", *run.labels]),
@@ -422,6 +435,9 @@ class _Frames:
                     if np.isfinite(seg).all():
                         canvas.lines(seg, _lighter(rgb))
             canvas.img = trail.copy()
+            if run.people is not None:
+                here = run.people[i]
+                canvas.discs(here[np.isfinite(here[:, 0])], CLASS_RGB[BeamClass.PERSON])
             if run.scan_xy is not None:
                 hits = run.scan_xy[i]
                 canvas.points(hits[np.isfinite(hits[:, 0])], _SCAN)
@@ -538,7 +554,9 @@ def write_video(
     if not len(data.t_s):
         raise InputError(f"day {day} run {run}: no scans stored, nothing to show")
     frames = _Frames(data, size_px)
-    notes = [NOT_STORED] + ([] if data.scan_xy is not None else [NO_SCANS])
+    notes = ([] if data.scan_xy is not None else [NO_SCANS]) + (
+        [] if data.people is not None else [NO_PEOPLE]
+    )
     if data.planned is None:
         notes.append("the driver stored no planned path for this run")
     if len(data.segments) == 0:

@@ -13,7 +13,9 @@ from dynmap_sim.analysis import video  # noqa: E402
 from dynmap_sim.cli import main  # noqa: E402
 from dynmap_sim.experiments.results import ResultsDB  # noqa: E402
 from dynmap_sim.experiments.runner import run_experiment  # noqa: E402
-from dynmap_sim.experiments.scenario import load_scenario  # noqa: E402
+from dynmap_sim.experiments.scenario import load_scenario, parse_scenario  # noqa: E402
+from dynmap_sim.raster import CLASS_RGB  # noqa: E402
+from dynmap_sim.types import BeamClass  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 CI = ROOT / "worlds" / "scenarios" / "ci-apartment.toml"
@@ -173,3 +175,35 @@ def test_record_video_records_an_episode_of_the_env(tmp_path):
     reader = iio.get_reader(mp4, format="ffmpeg")
     assert reader.count_frames() == steps + 1  # the reset's frame and one per step
     reader.close()
+
+
+def test_kept_people_are_drawn_as_red_discs_where_they_were(tmp_path):
+    """With ``run --keep-scans`` the people are kept too: each frame draws them, a disc of
+    their body radius in the person colour at their stored position (apartment day 15: two
+    visitors)."""
+    scn = parse_scenario(
+        {
+            "name": "video-people",
+            "world": "apartment",
+            "days": [15, 15],
+            "driver": {"kind": "tour", "speed_mps": 0.35, "max_run_s": 5.0},
+            "prior": {"map": "walls", "initial_pose": "known"},
+            "localizers": [{"name": "odometry", "label": "odometry"}],
+        },
+        ROOT / "worlds" / "scenarios" / "video-people.toml",
+    )
+    out = tmp_path / "people"
+    run_experiment(scn, out_dir=out, progress=False, workers=1, keep_scans=True)
+    with ResultsDB.open(out) as db:
+        run = video.load_run(db, 15, 1, [])
+    assert run.people is not None and run.people.shape[0] == len(run.t_s)
+    on_floor = run.people[0][np.isfinite(run.people[0, :, 0])]
+    assert len(on_floor) >= 1
+    frames = video._Frames(run, 480)
+    frame = next(iter(frames))
+    for x, y, radius in on_floor:
+        assert radius > 0.1
+        r, c = frames.canvas.px(np.array([x, y]))
+        pixel = frame[frames.header_px + r, frames.map_left + c]
+        assert tuple(pixel) in {tuple(CLASS_RGB[BeamClass.PERSON]), tuple(video._SCAN)}
+    assert "people" in [text for text, _ in frames.legend]
