@@ -16,13 +16,14 @@ For each world, drives day 1 run 1 with the tour driver, runs
 from __future__ import annotations
 
 import argparse
+import json
 import time
 
 import numpy as np
 from mcl_global_kidnap import record  # same folder (benchmarks/)
 
 from dynmap_sim import se2
-from dynmap_sim.agent.mapping.first_run import FirstRunMapper
+from dynmap_sim.agent.mapping.first_run import FirstRunConfig, FirstRunMapper
 from dynmap_sim.experiments.runner import make_env
 from dynmap_sim.experiments.scenario import parse_scenario
 from dynmap_sim.types import BeamClass, Odometry, Scan
@@ -46,8 +47,14 @@ def distance_to_geometry(points: np.ndarray, segs: np.ndarray, circles: np.ndarr
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--worlds", nargs="+", default=["apartment", "lab"])
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--worlds", nargs="+", default=["apartment", "lab"], help="shipped worlds")
+    ap.add_argument("--seed", type=int, default=0, help="world and noise seed")
+    ap.add_argument(
+        "--mapper-params",
+        type=json.loads,
+        default={},
+        help="first-run mapper parameters as JSON, e.g. '{\"seed_window\": [0.3, 0.4]}'",
+    )
     args = ap.parse_args()
     for world in args.worlds:
         laser, runs = record(world, 1, args.seed)
@@ -63,7 +70,7 @@ def main() -> None:
         keep = np.asarray(geom.circle_class) != int(BeamClass.PERSON)
         circles = np.asarray(geom.circles, float)[keep]
         truth = run["truth"]
-        mapper = FirstRunMapper(laser, truth[0])
+        mapper = FirstRunMapper(laser, truth[0], FirstRunConfig.from_params(**args.mapper_params))
         t0 = time.perf_counter()
         est = np.array(
             [
