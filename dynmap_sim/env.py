@@ -144,8 +144,9 @@ class DynMapEnv(gymnasium.Env):
     ``lidar_noise``: a ``LidarNoise``. ``people``: False removes all people. ``robot``:
     ``RobotParams`` (limits, wheel geometry with UMBmark errors ``E_d``/``E_b``, slip);
     ``encoder``: ``EncoderNoise``. ``dt_s``: step period (default the scan period).
-    ``render_mode``: None or ``"rgb_array"`` (``"human"`` is not supported: show the frames
-    yourself). A bad argument raises ``ValueError`` naming it and its value.
+    ``render_mode``: None, ``"rgb_array"`` (``render()`` returns the frame) or ``"human"``
+    (a window shows it at every reset and step, in real time; pygame, extra ``video``).
+    A bad argument raises ``ValueError`` naming it and its value.
 
     ## Seeding and episodes
 
@@ -171,7 +172,7 @@ class DynMapEnv(gymnasium.Env):
     be checkpointed and resumed bit for bit.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+    metadata = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
 
     def __init__(
         self,
@@ -249,6 +250,7 @@ class DynMapEnv(gymnasium.Env):
         self._slot = -1  # index of the current run in the calendar (-1: none yet)
         self._started = False
         self._last: dict[str, Any] | None = None
+        self._window: Any = None  # render_mode="human": a HumanWindow, opened lazily
 
     # -- Gymnasium API ----------------------------------------------------------------------
     def reset(
@@ -372,7 +374,19 @@ class DynMapEnv(gymnasium.Env):
             "stamp_s": self.world.elapsed_s,
         }
         self._last = {"pose": pose, "reading": reading}
+        if self.render_mode == "human":
+            self._show()
         return obs, info
+
+    def _show(self) -> None:
+        """``render_mode="human"``: the frame in the window (opened at the first frame)."""
+        if self._window is None:
+            from dynmap_sim.human_window import HumanWindow
+
+            self._window = HumanWindow(
+                f"dynmap_sim: {self.spec_world.name}", self.metadata["render_fps"]
+            )
+        self._window.show(_render(self))
 
     def _people(self) -> tuple[FloatArray, int]:
         """People poses padded to ``max_people`` rows ``(inf, inf, 0)``, and their number."""
@@ -442,9 +456,18 @@ class DynMapEnv(gymnasium.Env):
         return slot.day, slot.run
 
     def render(self) -> np.ndarray | None:
+        """``"rgb_array"``: the frame ``(H, W, 3)`` uint8; ``"human"``: None (the window
+        already shows it, Gymnasium's convention); None without a render mode."""
         if self.render_mode != "rgb_array":
             return None
         return _render(self)
+
+    def close(self) -> None:
+        """Close the ``"human"`` window, if one is open."""
+        if self._window is not None:
+            self._window.close()
+            self._window = None
+        super().close()
 
 
 # -- rendering: the numpy rasterizer of dynmap_sim.raster (no matplotlib state, ~ms per frame) --

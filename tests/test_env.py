@@ -1,5 +1,6 @@
 """The Gymnasium env: checker, determinism, vector envs, episodes, action handling."""
 
+import sys
 import warnings
 
 import gymnasium
@@ -330,8 +331,8 @@ def test_world_env_needs_a_world():
             "given), got 0.0",
         ),
         (
-            {"render_mode": "human"},
-            "render_mode 'human' is not supported; render modes: None, 'rgb_array'",
+            {"render_mode": "humans"},
+            "render_mode 'humans' is not supported; render modes: None, 'human', 'rgb_array'",
         ),
     ],
 )
@@ -350,10 +351,35 @@ def test_rgb_array_list_through_make_collects_frames():
     env.close()
 
 
-def test_human_render_mode_through_make_names_the_render_modes():
-    """No HumanRendering wrapper (it needs pygame, not a dependency): the env's own error."""
-    with pytest.raises(ValueError, match=r"render modes: None, 'rgb_array'"):
-        gymnasium.make("dynmap_sim/Lab-v0", render_mode="human")
+def test_human_render_mode_shows_every_frame_in_a_window(monkeypatch):
+    """``render_mode="human"`` (extra ``video``): a pygame window shows the rgb_array frame
+    at every reset and step (SDL's dummy video driver here, no screen); ``render()`` returns
+    None; ``close()`` closes the window."""
+    pytest.importorskip("pygame")
+    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+    env = gymnasium.make("dynmap_sim/Apartment-v0", render_mode="human")
+    twin = DynMapEnv(world="apartment", render_mode="rgb_array")
+    env.reset(seed=0)
+    twin.reset(seed=0)
+    u = env.unwrapped
+    window = u._window
+    assert window is not None and not window.closed
+    np.testing.assert_array_equal(window.pixels(), twin.render())
+    action = np.array([0.3, 0.2], np.float32)
+    env.step(action)
+    twin.step(action)
+    np.testing.assert_array_equal(window.pixels(), twin.render())
+    assert env.render() is None
+    env.close()
+    assert u._window is None and window.closed
+    twin.close()
+
+
+def test_human_render_mode_without_pygame_says_which_extra(monkeypatch):
+    monkeypatch.setitem(sys.modules, "pygame", None)  # import pygame fails
+    env = DynMapEnv(world="apartment", render_mode="human")
+    with pytest.raises(ImportError, match=r"dynmap-sim\[video\]"):
+        env.reset(seed=0)
 
 
 @pytest.mark.parametrize(
