@@ -12,9 +12,7 @@ their ratio; issue 15's target is stack <= 20 % of the lock-stepped dynamic-map.
 from __future__ import annotations
 
 import argparse
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
@@ -22,10 +20,6 @@ from dynmap_sim.agent.localizer import make_localizer
 from dynmap_sim.agent.navigation.policy import NavigationPolicy
 from dynmap_sim.agent.navigation.stack import NavigationStack
 from dynmap_sim.env import DynMapEnv
-
-# the prior a scenario grants, as the stack's tests build it
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "agent" / "navigation"))
-from test_stack import prior_of  # noqa: E402
 
 
 class _Timed:
@@ -65,7 +59,7 @@ def main() -> None:
     print("navigation stack vs lock-stepped dynamic-map, apartment, per scan (mean)")
     for day in range(1, args.days + 1):
         obs, info = env.reset(seed=0, options={"day": day})
-        policy.reset(prior_of(env, day))
+        policy.reset(u.world_facts().prior(day))  # what a scenario grants
         t_loc.times.clear()
         t_stack.times.clear()
         err, n, done, term = [], 0, False, False

@@ -16,6 +16,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from dynmap_sim.types import Prior
+
 FloatArray = NDArray[np.float64]
 
 
@@ -49,6 +51,31 @@ class WorldFacts:
     route: FloatArray
     wall_segments: FloatArray
     slots: tuple[RunSlot, ...]
+
+    def prior(
+        self,
+        day: int,
+        run: int = 1,
+        first_run: bool | None = None,
+        sigma_xy_m: float = 0.05,
+        sigma_theta_rad: float = 0.05,
+        walls: bool = True,
+    ) -> Prior:
+        """The prior a scenario with ``[prior] map = "walls"`` (``walls``) and a known
+        initial pose grants for run ``run`` of ``day``: the start pose with a Gaussian of
+        ``sigma_xy_m`` / ``sigma_theta_rad``, the static walls (H&W Fig. 4), the bounds and
+        the route; ``first_run`` defaults to day 1 run 1. For a plain Gymnasium loop that
+        drives an agent without the experiment engine."""
+        return Prior(
+            initial_pose=np.array(self.start_pose, dtype=float),
+            initial_pose_cov=np.diag([sigma_xy_m**2, sigma_xy_m**2, sigma_theta_rad**2]),
+            walls=np.array(self.wall_segments, dtype=float) if walls else None,
+            bounds=self.bounds,
+            route=np.array(self.route, dtype=float),
+            day=day,
+            run=run,
+            first_run=(day, run) == (1, 1) if first_run is None else first_run,
+        )
 
 
 def _no_index() -> NDArray[np.int32]:

@@ -391,3 +391,17 @@ def test_non_real_actions_are_refused(apartment, action):
     apartment.reset(seed=0)
     with pytest.raises(ValueError, match=r"action must be 2 real numbers \(v_mps, omega_radps\)"):
         apartment.step(action)
+
+
+def test_world_facts_prior_is_what_a_walls_scenario_grants():
+    """``WorldFacts.prior``: the start pose with its covariance, the static walls, bounds and
+    route; the first run is day 1 run 1."""
+    env = DynMapEnv(world="apartment")
+    f = env.world_facts()
+    p = f.prior(day=2, run=1, sigma_xy_m=0.1, sigma_theta_rad=0.02)
+    np.testing.assert_array_equal(p.initial_pose, f.start_pose)
+    np.testing.assert_allclose(np.diag(p.initial_pose_cov), [0.01, 0.01, 0.0004])
+    np.testing.assert_array_equal(p.walls, f.wall_segments)
+    np.testing.assert_array_equal(p.route, f.route)
+    assert (p.day, p.run, p.first_run, p.bounds) == (2, 1, False, f.bounds)
+    assert f.prior(day=1).first_run and f.prior(day=1, walls=False).walls is None

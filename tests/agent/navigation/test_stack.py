@@ -18,17 +18,7 @@ from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Prior, Scan
 
 def prior_of(env, day: int) -> Prior:
     """What a scenario grants: start pose, walls, bounds, the route (H&W Fig. 4)."""
-    f = env.unwrapped.world_facts()
-    return Prior(
-        initial_pose=np.array(f.start_pose),
-        initial_pose_cov=np.diag([0.05**2, 0.05**2, 0.05**2]),
-        walls=np.array(f.wall_segments),
-        bounds=f.bounds,
-        day=day,
-        run=1,
-        first_run=day == 1,
-        route=np.array(f.route),
-    )
+    return env.unwrapped.world_facts().prior(day)
 
 
 def drive(env, policy, day: int):
