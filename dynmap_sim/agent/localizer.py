@@ -22,7 +22,7 @@ registered twice is an error).
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
@@ -89,6 +89,22 @@ class MapUser(ABC):
     @abstractmethod
     def set_map(self, grid: OccupancyGrid) -> None:
         """Localize on ``grid`` from now on; no map of its own is built any more."""
+
+
+class ScanMapUser(ABC):
+    """Capability of a :class:`Localizer` whose map is made of scans (e.g. ``dynamic-map``'s
+    sample-based local maps, Biber & Duckett 2009 §4): it accepts scans at given poses as its
+    first map instead of mapping its first run with its own SLAM.
+
+    Whoever has poses for a log's scans (replay's ``--map-from-log-poses``, e.g. a reference
+    log's corrected poses) tests ``isinstance(loc, ScanMapUser)`` and calls
+    :meth:`set_map_from_scans` before the first run.
+    """
+
+    @abstractmethod
+    def set_map_from_scans(self, poses: np.ndarray, ranges_m: Sequence[np.ndarray]) -> None:
+        """Make the first map from scans ``ranges_m`` (each ``(n_beams,)`` [m], ``inf``: no
+        return) taken at robot ``poses`` ``(K, 3)`` in the map frame; no first-run SLAM."""
 
 
 #: The localizer registry (built-in localizers register themselves on first lookup).

@@ -11,8 +11,10 @@ store as simulated experiments (:mod:`dynmap_sim.experiments.results`):
 With ``map_from_log_poses=True`` the map is instead rendered directly from poses (keyframes
 every 0.3 m / 0.3 rad): the reference poses when there is a reference, else the poses on the
 log's laser lines (on a raw log: its odometry). It goes to every localizer that accepts a
-map (:class:`~dynmap_sim.agent.localizer.MapUser`); the others still map on day 1 (``note``
-says which), and when none accepts one the option is refused.
+map: a grid to a :class:`~dynmap_sim.agent.localizer.MapUser` (``static-mcl``), the keyframe
+scans at those poses to a :class:`~dynmap_sim.agent.localizer.ScanMapUser` (``dynamic-map``);
+the others still map on day 1 (``note`` says which), and when none accepts one the option is
+refused.
 
 The results folder reads like a simulated experiment's: ``meta`` names the log as the world,
 lists the two runs as ``slots`` (so the report says "2 of 2 runs done") and keeps the log's
@@ -37,7 +39,7 @@ import datetime as dt
 import hashlib
 import json
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -45,7 +47,7 @@ import numpy as np
 
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import OccupancyGrid
-from dynmap_sim.agent.localizer import Localizer, MapUser, make_localizer
+from dynmap_sim.agent.localizer import Localizer, MapUser, ScanMapUser, make_localizer
 from dynmap_sim.errors import InputError
 from dynmap_sim.experiments.bench import DiagnosticsRecorder, LocalizerRun
 from dynmap_sim.experiments.reference import (
@@ -85,16 +87,63 @@ def keyframe_indices(poses: np.ndarray, dist_m: float = 0.3, angle_rad: float = 
     return keep
 
 
-def map_from_poses(log: CarmenLog, poses: np.ndarray | None = None) -> OccupancyGrid:
-    """A 5 cm grid rendered from the log's scans at ``poses`` ``(T, 3)`` (NaN rows skipped;
-    default: the poses on its laser lines), keyframes only."""
+def keyframe_scans(
+    log: CarmenLog, poses: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """The log's keyframes (every 0.3 m / 0.3 rad) at ``poses`` ``(T, 3)`` (NaN rows skipped;
+    default: the poses on its laser lines): their poses ``(K, 3)`` and ranges ``(K, B)`` [m]."""
     if poses is None:
         if log.reference is None:
             raise InputError(f"{log.path}: --map-from-log-poses needs laser lines with poses")
         poses = log.reference
     have = np.flatnonzero(np.isfinite(poses).all(axis=1))
     kf = have[keyframe_indices(poses[have])]
-    return OccupancyGrid.from_scans(poses[kf], log.ranges_m[kf], log.laser)
+    return poses[kf], log.ranges_m[kf]
+
+
+def map_from_poses(log: CarmenLog, poses: np.ndarray | None = None) -> OccupancyGrid:
+    """A 5 cm grid rendered from the log's keyframe scans at ``poses`` (:func:`keyframe_scans`)."""
+    kf_poses, kf_ranges = keyframe_scans(log, poses)
+    return OccupancyGrid.from_scans(kf_poses, kf_ranges, log.laser)
+
+
+def _give_maps(
+    log: CarmenLog,
+    ref: ReferenceMatch | None,
+    locs: list[Localizer],
+    localizers: Sequence[str],
+    note: Callable[[str], None] | None,
+) -> list[bool]:
+    """``--map-from-log-poses``: the map from the log's poses (the reference's when given) to
+    every localizer that takes one — a grid to a :class:`MapUser`, the keyframe scans at
+    those poses to a :class:`ScanMapUser`; which localizers got one."""
+    grids = [isinstance(loc, MapUser) for loc in locs]
+    scans = [isinstance(loc, ScanMapUser) and not g for loc, g in zip(locs, grids, strict=True)]
+    takes = [g or m for g, m in zip(grids, scans, strict=True)]
+    if not any(takes):
+        raise InputError(
+            f"--map-from-log-poses: none of the localizers takes a map ({', '.join(localizers)}"
+            "); give one that does (e.g. static-mcl, dynamic-map) or drop the option"
+        )
+    poses = ref.poses if ref is not None else None
+    if any(grids):
+        grid = map_from_poses(log, poses)
+    if any(scans):
+        kf_poses, kf_ranges = keyframe_scans(log, poses)
+    for loc, g, m in zip(locs, grids, scans, strict=True):
+        if g:
+            loc.set_map(grid)
+        elif m:
+            loc.set_map_from_scans(kf_poses, kf_ranges)
+    others = [a for a, t in zip(localizers, takes, strict=True) if not t]
+    if note is not None and others:
+        takers = ", ".join(a for a, t in zip(localizers, takes, strict=True) if t)
+        note(
+            f"note: --map-from-log-poses: the map from the log's poses goes to {takers}; "
+            f"not to {', '.join(others)}, which take no map (a localizer that maps "
+            "builds its own on the first pass)"
+        )
+    return takes
 
 
 def _run_pass(
@@ -196,27 +245,9 @@ def replay_log(
         ]
     except (TypeError, ValueError) as exc:
         raise InputError(f"--localizer: {exc}") from None
-    given_map = [False] * len(locs)
-    if map_from_log_poses:
-        takes = [isinstance(loc, MapUser) for loc in locs]
-        if not any(takes):
-            raise InputError(
-                f"--map-from-log-poses: none of the localizers takes a map ({', '.join(localizers)}"
-                "); give one that does (e.g. static-mcl) or drop the option"
-            )
-        grid = map_from_poses(data, ref.poses if ref is not None else None)
-        for i, loc in enumerate(locs):
-            if takes[i]:
-                loc.set_map(grid)
-                given_map[i] = True
-        others = [a for a, t in zip(localizers, takes, strict=True) if not t]
-        if note is not None and others:
-            takers = ", ".join(a for a, t in zip(localizers, takes, strict=True) if t)
-            note(
-                f"note: --map-from-log-poses: the map from the log's poses goes to {takers}; "
-                f"not to {', '.join(others)}, which take no map (a localizer that maps "
-                "builds its own on the first pass)"
-            )
+    given_map = (
+        _give_maps(data, ref, locs, localizers, note) if map_from_log_poses else [False] * len(locs)
+    )
     if ref is not None:
         start = start_pose(data, ref.poses)
     else:  # the frame the laser-line poses (and a map from them) are in

@@ -137,6 +137,48 @@ def test_map_from_the_reference_poses(tmp_path, capsys):
     assert mean_e < 0.15  # the reference's own 0-15 cm displacements bound what it can reach
 
 
+def test_dynamic_map_takes_the_scans_at_the_reference_poses(tmp_path, capsys):
+    """--map-from-log-poses gives dynamic-map (a ScanMapUser) the keyframe scans at the
+    reference poses as its first map: no first-run SLAM on pass 1, which already localizes
+    (within the reference's own 0-15 cm displacements), and both localizers get a map."""
+    _, ref, _ = write_logs(tmp_path, drop_every=0)
+    args = ["--localizer", "dynamic-map", "--localizer", "static-mcl", "--map-from-log-poses"]
+    assert _replay(tmp_path, *args, "--reference", str(ref)) == 0
+    assert "goes to dynamic-map, static-mcl" in capsys.readouterr().err
+    con = sqlite3.connect(tmp_path / "out" / "results.db")
+    for day in (1, 2):
+        (mean_e,) = con.execute(
+            "SELECT mean_error_m FROM run_summaries WHERE loc=1 AND day=?", (day,)
+        ).fetchone()
+        assert mean_e < 0.15, day
+
+
+def test_dynamic_map_given_scans_maps_no_first_run():
+    """``set_map_from_scans``: local maps at the given poses, none of the first-run mapper;
+    a static variant freezes as after its first day; mismatched input is refused."""
+    from dynmap_sim.agent.localizer import make_localizer
+    from dynmap_sim.types import LaserSpec, Prior
+
+    truth = _trajectory()
+    fov, nb = np.pi, 181
+    angles = -fov / 2 + fov / (nb - 1) * np.arange(nb)
+    segs = room_segments(cupboard=False)
+    ranges = [raycast(p, angles, segs, 8.0) for p in truth]
+    laser = LaserSpec(
+        name="test", n_beams=nb, angle_min_rad=-fov / 2, angle_increment_rad=fov / (nb - 1),
+        range_min_m=0.02, range_max_m=8.0, scan_period_s=0.2, time_increment_s=0.0,
+    )  # fmt: skip
+    for name in ("dynamic-map", "static-map"):
+        loc = make_localizer(name, laser=laser, rng=np.random.default_rng(0))
+        loc.set_map_from_scans(truth[::10], ranges[::10])
+        assert len(loc.dmap) >= 1  # the 2.3 m arc: local maps local_map_spacing_m apart
+        loc.begin_run(Prior(initial_pose=truth[0], day=1, run=1, first_run=True))
+        assert loc._mapper is None
+        assert loc.frozen == (name == "static-map")
+    with pytest.raises(ValueError, match="3 poses for 2 scans"):
+        loc.set_map_from_scans(truth[:3], ranges[:2])
+
+
 @pytest.mark.parametrize(
     ("case", "message"),
     [

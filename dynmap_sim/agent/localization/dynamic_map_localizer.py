@@ -52,13 +52,14 @@ the short-term memory λ1 learning online.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from dynmap_sim import se2
-from dynmap_sim.agent.localizer import Localizer, register_localizer
+from dynmap_sim.agent.localizer import Localizer, ScanMapUser, register_localizer
 from dynmap_sim.agent.mapping.first_run import FirstRunMapper
 from dynmap_sim.agent.mapping.scan_matcher import MatchResult, PointMap, match_scan
 from dynmap_sim.agent.mapping.scan_points import BeamDirections, scan_points_base
@@ -211,7 +212,7 @@ class DynamicMapConfig:
         return (self.odom_sigma_xy0_m, self.odom_k_xy, self.odom_sigma_th0_rad, self.odom_k_th)
 
 
-class DynamicMapLocalizer(Localizer):
+class DynamicMapLocalizer(Localizer, ScanMapUser):
     """Scan matching on a multi-timescale dynamic map (B&D §4); see the module docstring.
 
     ``mode``: ``"dynamic"``, ``"static"`` or ``"static+stm"`` (the registered variants set
@@ -289,6 +290,8 @@ class DynamicMapLocalizer(Localizer):
         #: and ``config.day_snapshots``: the map's own history, for figures like B&D Fig. 9
         self.day_snapshots: list[tuple[int, MapSnapshot]] = []
         self._day = 0
+        #: the first map came from scans at given poses (:meth:`set_map_from_scans`)
+        self._map_given = False
 
     # ------------------------------------------------------------------ pickling
     def __getstate__(self) -> dict[str, Any]:
@@ -330,7 +333,8 @@ class DynamicMapLocalizer(Localizer):
         self._cmap = None
         self._run_poses, self._run_ranges = [], []
         self._mapper = None
-        if (prior.first_run or len(self.dmap) == 0) and not self.frozen:
+        mapped = self._map_given and len(self.dmap) > 0
+        if (prior.first_run or len(self.dmap) == 0) and not self.frozen and not mapped:
             self._mapper = FirstRunMapper(self.laser, self._pose)
 
     def _beam_directions(self) -> BeamDirections:
@@ -531,6 +535,33 @@ class DynamicMapLocalizer(Localizer):
         if self.day_snapshots and self.day_snapshots[-1][0] == self._day:
             return {"map_snapshot": self.day_snapshots[-1][1].to_arrays()}
         return {}
+
+    def set_map_from_scans(self, poses: np.ndarray, ranges_m: Sequence[np.ndarray]) -> None:
+        """The first map from scans at given poses (:class:`ScanMapUser`; e.g. a log's
+        corrected poses): what the end of a SLAM-mapped first run does (§4, §4.4) with the
+        poses given — initial local maps ``local_map_spacing_m`` apart, each filled with its
+        scan, then λ2 and the daily timescales learn the scans offline; a static variant
+        freezes as after its first day."""
+        poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
+        if len(poses) == 0 or len(poses) != len(ranges_m):
+            raise ValueError(
+                f"set_map_from_scans: {len(poses)} poses for {len(ranges_m)} scans (need >= 1 each)"
+            )
+        for pose, r in zip(poses, ranges_m, strict=True):
+            if not len(self.dmap.near(pose, self.config.local_map_spacing_m)):
+                self.dmap.add_local_map(pose[:2], self._points_map(pose, r), self.rng)
+        if self.learns_ltm:
+            for levels, k in (
+                (self.dmap.levels("run"), self.config.ltm_scans_per_run),
+                (self.dmap.levels("day"), self.config.ltm_day_scans_per_run),
+            ):
+                sel = self._random_subset(len(poses), k)
+                pts = [self._points_map(poses[i], np.asarray(ranges_m[i], float)) for i in sel]
+                self.dmap.learn_offline(levels, poses[sel], pts, self.rng)
+        self._map_given = True
+        self.days_done += 1
+        if self.mode != "dynamic" and self.days_done >= self.config.freeze_after_day:
+            self.frozen = True
 
     def _init_local_maps(self, keyframes: list) -> None:
         """Initial local maps from the first run's keyframes (§4), ``local_map_spacing_m``
