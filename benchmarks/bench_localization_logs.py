@@ -1,0 +1,92 @@
+"""Localization with raw odometry on a real robot log, scored against its corrected poses
+(issue 16: "no jumps"; mean, max, lost, scans/s).
+
+Replays the Radish log FR079 (raw wheel odometry) exactly as ``dynmap-sim replay
+fr079.raw.log.gz --localizer L ... --map-from-log-poses --reference fr079-corrected.log.gz``
+does: every localizer gets the map of the keyframe scans at the corrected poses (a grid for
+``static-mcl``, the scans for ``dynamic-map``), then localizes twice on the raw log (pass 1,
+pass 2); errors only where a corrected pose matches a scan by time stamp. Printed per
+localizer and pass: mean, max error [m], the share of scans more than 1 m off and lost
+(> 0.5 m), and the update speed in scans/s (CPU of ``update()`` alone). CSAIL has no
+corrected log, so it cannot be scored this way.
+
+The logs are read from ``../shared/data/slam-benchmark`` (next to the repository) or from
+``--data DIR``; without them the script says so and exits 0 (a clean clone has none).
+
+    python benchmarks/bench_localization_logs.py [--data DIR] \
+        [--localizer static-mcl --localizer dynamic-map ...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import sqlite3
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from dynmap_sim.experiments.replay import replay_log
+
+LOG, REFERENCE = "fr079.raw.log.gz", "fr079-corrected.log.gz"
+DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "slam-benchmark"
+DEFAULT_LOCALIZERS = ["static-mcl", "static-mcl,config=nav2-default", "dynamic-map"]
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="folder of the logs")
+    ap.add_argument(
+        "--localizer",
+        action="append",
+        help="a localizer by registry name with optional parameters; repeat "
+        f"(default: {', '.join(DEFAULT_LOCALIZERS)})",
+    )
+    args = ap.parse_args()
+    log, ref = args.data / LOG, args.data / REFERENCE
+    missing = [p for p in (log, ref) if not p.exists()]
+    if missing:
+        print(f"skipped: the benchmark's logs are not there ({missing[0]}); give --data DIR")
+        return 0
+    localizers = args.localizer or DEFAULT_LOCALIZERS
+    notes: list[str] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        out = replay_log(
+            log, localizers, Path(tmp) / "out", map_from_log_poses=True, note=notes.append,
+            reference=ref,
+        )  # fmt: skip
+        con = sqlite3.connect(out / "results.db")
+        for n in notes:
+            print(n)
+        print(f"FR079, raw odometry, map from the corrected poses ({LOG} vs {REFERENCE})")
+        print("| localizer | pass | mean [m] | max [m] | > 1 m | lost (> 0.5 m) | scans/s |")
+        print("|---|---|---|---|---|---|---|")
+        for loc, label in enumerate(localizers):
+            for day in (1, 2):
+                err = np.array(
+                    [
+                        e
+                        for (e,) in con.execute(
+                            "SELECT err_m FROM estimates WHERE loc=? AND day=? AND err_m "
+                            "IS NOT NULL",
+                            (loc, day),
+                        )
+                    ]
+                )
+                (ms,) = con.execute(
+                    "SELECT update_ms_per_scan FROM run_summaries WHERE loc=? AND day=?",
+                    (loc, day),
+                ).fetchone()
+                print(
+                    f"| {label} | {day} | {err.mean():.3f} | {err.max():.2f} | "
+                    f"{100 * np.mean(err > 1.0):.1f} % | {100 * np.mean(err > 0.5):.1f} % | "
+                    f"{1000.0 / ms:.0f} |"
+                )
+        con.close()
+    print("targets (issue 16): no jump over 1 m, mean <= 0.05 m")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
