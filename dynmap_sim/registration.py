@@ -3,10 +3,9 @@
 The entry points are the functions :func:`make_env` and :func:`make_world_env`, not the env
 class, for two reasons:
 
-* ``gymnasium.make(..., render_mode="human")`` wraps an env whose class declares
-  ``rgb_array`` in ``HumanRendering``, which needs pygame (not a dependency); through a
-  function the render mode reaches :class:`~dynmap_sim.env.DynMapEnv`, whose error names
-  the render modes it has.
+* the render mode reaches :class:`~dynmap_sim.env.DynMapEnv` as given (``"human"``: its own
+  window, pygame from the ``video`` extra; an unknown mode: its error names the modes it
+  has), instead of Gymnasium choosing wrappers from the class's metadata.
 * ``dynmap_sim/World-v0`` needs ``world=PATH``; without it the env would silently be the lab.
 
 Gymnasium's passive env checker is off (``disable_env_checker=True``): in Gymnasium 1.4 it
