@@ -101,12 +101,6 @@ def keyframe_scans(
     return poses[kf], log.ranges_m[kf]
 
 
-def map_from_poses(log: CarmenLog, poses: np.ndarray | None = None) -> OccupancyGrid:
-    """A 5 cm grid rendered from the log's keyframe scans at ``poses`` (:func:`keyframe_scans`)."""
-    kf_poses, kf_ranges = keyframe_scans(log, poses)
-    return OccupancyGrid.from_scans(kf_poses, kf_ranges, log.laser)
-
-
 def _give_maps(
     log: CarmenLog,
     ref: ReferenceMatch | None,
@@ -125,11 +119,8 @@ def _give_maps(
             f"--map-from-log-poses: none of the localizers takes a map ({', '.join(localizers)}"
             "); give one that does (e.g. static-mcl, dynamic-map) or drop the option"
         )
-    poses = ref.poses if ref is not None else None
-    if any(grids):
-        grid = map_from_poses(log, poses)
-    if any(scans):
-        kf_poses, kf_ranges = keyframe_scans(log, poses)
+    kf_poses, kf_ranges = keyframe_scans(log, ref.poses if ref is not None else None)
+    grid = OccupancyGrid.from_scans(kf_poses, kf_ranges, log.laser) if any(grids) else None
     for loc, g, m in zip(locs, grids, scans, strict=True):
         if g:
             loc.set_map(grid)
