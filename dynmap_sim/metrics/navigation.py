@@ -56,16 +56,21 @@ def clearances(
     cir = np.asarray(circles, dtype=np.float64).reshape(-1, 3)
     best = np.full(len(p), np.inf)
     if len(seg):
-        a, ab = seg[:, :2], seg[:, 2:] - seg[:, :2]
-        ab2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-18)
-        ap = p[:, None, :] - a[None]
-        u = np.clip(np.einsum("tij,ij->ti", ap, ab) / ab2, 0.0, 1.0)
-        d = np.hypot(*(ap - u[..., None] * ab[None]).transpose(2, 0, 1))
+        _, d = _project(p, seg[:, :2], seg[:, 2:] - seg[:, :2])
         best = np.minimum(best, d.min(axis=1))
     if len(cir):
         d = np.hypot(*(p[:, None, :] - cir[None, :, :2]).transpose(2, 0, 1)) - cir[None, :, 2]
         best = np.minimum(best, d.min(axis=1))
     return best - float(radius_m)
+
+
+def _project(p: FloatArray, a: FloatArray, ab: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Points ``p`` ``(T, 2)`` onto segments ``a + u ab`` (``(S, 2)`` each): the clamped
+    parameters ``u`` and the distances [m], both ``(T, S)``."""
+    ab2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-18)
+    ap = p[:, None, :] - a[None]
+    u = np.clip(np.einsum("tij,ij->ti", ap, ab) / ab2, 0.0, 1.0)
+    return u, np.hypot(*(ap - u[..., None] * ab[None]).transpose(2, 0, 1))
 
 
 def goal_reached(
@@ -117,9 +122,7 @@ def route_progress_with_detours(
     if total <= 0.0:
         return 1.0
     cum = np.concatenate([[0.0], np.cumsum(seg_len)])[:-1]
-    ap = track[:, None, :2] - a[None]  # (T, S, 2)
-    u = np.clip(np.einsum("tsj,sj->ts", ap, ab) / np.maximum(seg_len**2, 1e-18), 0.0, 1.0)
-    dist = np.hypot(*(ap - u[..., None] * ab[None]).transpose(2, 0, 1))  # (T, S)
+    u, dist = _project(track[:, :2], a, ab)  # (T, S)
     pos = cum[None] + u * seg_len[None]  # route position of each projection [m]
     near = dist <= rejoin_m
     max_skip = max_skip_fraction * total
