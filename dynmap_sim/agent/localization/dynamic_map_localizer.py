@@ -497,7 +497,8 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
             self._mapper = None
             if len(smap.trajectory) == len(self._run_poses):
                 self._run_poses = [p.copy() for p in smap.trajectory]
-            self._init_local_maps(smap.keyframes)
+            kfs = smap.keyframes
+            self._init_local_maps([kf.pose for kf in kfs], [kf.ranges_m for kf in kfs])
         if self.learns_ltm and self._run_poses:
             sel = self._random_subset(len(self._run_poses), self.config.ltm_scans_per_run)
             poses = [self._run_poses[k] for k in sel]
@@ -538,39 +539,30 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
 
     def set_map_from_scans(self, poses: np.ndarray, ranges_m: Sequence[np.ndarray]) -> None:
         """The first map from scans at given poses (:class:`ScanMapUser`; e.g. a log's
-        corrected poses): what the end of a SLAM-mapped first run does (§4, §4.4) with the
-        poses given — initial local maps ``local_map_spacing_m`` apart, each filled with its
-        scan, then λ2 and the daily timescales learn the scans offline; a static variant
-        freezes as after its first day."""
+        corrected poses): the end of a first run (§4, §4.4) with the poses given instead of
+        the first-run SLAM's — initial local maps from the scans, then :meth:`end_run` and
+        :meth:`end_day` learn them as the run and the day they stand for (a static variant
+        freezes as after its first day)."""
         poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
         if len(poses) == 0 or len(poses) != len(ranges_m):
             raise ValueError(
                 f"set_map_from_scans: {len(poses)} poses for {len(ranges_m)} scans (need >= 1 each)"
             )
+        self._init_local_maps(poses, ranges_m)
         for pose, r in zip(poses, ranges_m, strict=True):
-            if not len(self.dmap.near(pose, self.config.local_map_spacing_m)):
-                self.dmap.add_local_map(pose[:2], self._points_map(pose, r), self.rng)
-        if self.learns_ltm:
-            for levels, k in (
-                (self.dmap.levels("run"), self.config.ltm_scans_per_run),
-                (self.dmap.levels("day"), self.config.ltm_day_scans_per_run),
-            ):
-                sel = self._random_subset(len(poses), k)
-                pts = [self._points_map(poses[i], np.asarray(ranges_m[i], float)) for i in sel]
-                self.dmap.learn_offline(levels, poses[sel], pts, self.rng)
+            self._store(pose, np.asarray(r, dtype=np.float64))
+        self.end_run()
+        self.end_day()
         self._map_given = True
-        self.days_done += 1
-        if self.mode != "dynamic" and self.days_done >= self.config.freeze_after_day:
-            self.frozen = True
 
-    def _init_local_maps(self, keyframes: list) -> None:
+    def _init_local_maps(self, poses: Sequence[FloatArray], ranges_m: Sequence[np.ndarray]) -> None:
         """Initial local maps from the first run's keyframes (§4), ``local_map_spacing_m``
-        apart; each is filled with its own keyframe scan."""
-        for kf in keyframes:
-            pose = np.asarray(kf.pose, dtype=np.float64)
+        apart; each is filled with its own keyframe scan (robot ``poses``, ``ranges_m`` [m])."""
+        for pose, r in zip(poses, ranges_m, strict=True):
+            pose = np.asarray(pose, dtype=np.float64)
             if len(self.dmap.near(pose, self.config.local_map_spacing_m)):
                 continue
-            self.dmap.add_local_map(pose[:2], self._points_map(pose, kf.ranges_m), self.rng)
+            self.dmap.add_local_map(pose[:2], self._points_map(pose, r), self.rng)
 
 
 @register_localizer("dynamic-map")
