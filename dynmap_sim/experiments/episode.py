@@ -37,6 +37,7 @@ from dynmap_sim.agent.planning.grid_dijkstra import GridDijkstra
 from dynmap_sim.experiments.bench import LocalizerOutput, LocalizerRun, RunStream
 from dynmap_sim.experiments.drivers import Driver, RunStart, StepInput
 from dynmap_sim.experiments.drivers.tour import plan_through_waypoints, static_clearance_grid
+from dynmap_sim.experiments.results import PeopleTrack
 from dynmap_sim.experiments.scenario import Kidnapping, PriorConfig
 from dynmap_sim.metrics import (
     SeenPlaces,
@@ -119,11 +120,9 @@ class Episode:
     #: the driver's counts (:meth:`Driver.stats`) and what it handed over after the run
     driver_stats: dict[str, float] | None = None
     driver_artifacts: dict[str, bytes] | None = None
-    #: the run's people (only with :attr:`EpisodeLoop.keep_people`; None: not kept): their
-    #: ids and radii [m], and ``(T, n, 2)`` positions [m] at each scan
-    people_ids: tuple[str, ...] | None = None
-    people_radius_m: FloatArray | None = None
-    people_xy: FloatArray | None = None
+    #: the run's people at each scan (only with :attr:`EpisodeLoop.keep_people`; None: not
+    #: kept)
+    people: PeopleTrack | None = None
 
 
 @dataclass(frozen=True)
@@ -353,12 +352,12 @@ class EpisodeLoop:
             shortest_path_m=shortest_m,
             driver_stats=driver_stats,
             driver_artifacts=dict(driver.run_artifacts()),
-            people_ids=crowd.ids if crowd is not None else None,
-            people_radius_m=(
-                np.array(crowd.radius, dtype=np.float64) if crowd is not None else None
-            ),
-            people_xy=(
-                np.asarray(people_l, dtype=np.float64).reshape(len(t_l), len(crowd.ids), 2)
+            people=(
+                PeopleTrack(
+                    crowd.ids,
+                    np.array(crowd.radius, dtype=np.float64),
+                    np.asarray(people_l, dtype=np.float64).reshape(len(t_l), len(crowd.ids), 2),
+                )
                 if crowd is not None
                 else None
             ),

@@ -38,7 +38,7 @@ from dynmap_sim.experiments.bench import (
 )
 from dynmap_sim.experiments.drivers import DriverContext, clip_route, make_driver
 from dynmap_sim.experiments.episode import EngineState, Episode, EpisodeLoop, LoopConfig
-from dynmap_sim.experiments.results import Checkpoint, PeopleTrack, ResultsDB, RunRecord
+from dynmap_sim.experiments.results import Checkpoint, ResultsDB, RunRecord
 from dynmap_sim.experiments.scenario import Scenario
 from dynmap_sim.metrics import NavRunSummary, RunSummary, nav_run_summary, run_summary
 
@@ -411,14 +411,7 @@ class ExperimentRunner:
             nav=self._nav_summary(sim),
             driver_artifacts=dict(sim.driver_artifacts or {}),
             ranges=stream.scans if self.keep_scans else None,
-            people=(
-                PeopleTrack(sim.people_ids, sim.people_radius_m, sim.people_xy)
-                if self.keep_scans
-                and sim.people_ids is not None
-                and sim.people_radius_m is not None
-                and sim.people_xy is not None
-                else None
-            ),
+            people=sim.people if self.keep_scans else None,
         )
         run_sum = [self._run_summary(k, rec) for k in range(len(outs))]
         self._loc_states = [o.state for o in outs]
