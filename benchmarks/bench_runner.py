@@ -27,10 +27,16 @@ from pathlib import Path
 import numpy as np
 
 from dynmap_sim.agent.localizer import make_localizer
-from dynmap_sim.experiments.drivers import TourDriver, TourParams, clip_route
+from dynmap_sim.experiments.drivers import (
+    DriverContext,
+    RunStart,
+    StepInput,
+    clip_route,
+    make_driver,
+)
 from dynmap_sim.experiments.runner import localizer_seeds, make_env, run_experiment
 from dynmap_sim.experiments.scenario import load_scenario
-from dynmap_sim.types import Odometry, Prior, Scan
+from dynmap_sim.types import Odometry, Scan
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -42,21 +48,21 @@ def bare_loop(scenario, days, seed):
     t0, c0 = time.perf_counter(), time.process_time()
     env = make_env(scenario)
     u = env.unwrapped
-    spec = u.world.spec
     rngs = localizer_seeds(seed, len(scenario.localizers))
     locs = [
         make_localizer(c.name, laser=u.laser_spec, rng=rngs[k + 1], **c.params)
         for k, c in enumerate(scenario.localizers)
     ]
     d = scenario.driver
-    params = TourParams(
+    facts = u.world_facts()
+    context = DriverContext(
+        route=clip_route(np.asarray(facts.route, float), d.route_fraction),
         speed_mps=d.speed_mps,
-        robot_radius_m=u.robot_params.radius_m,
-        clearance_m=d.clearance_m,
-        wait_for_people=d.wait_for_people,
-        dt_s=u.laser_spec.scan_period_s,
+        robot_radius_m=float(u.robot_radius_m),
+        dt_s=float(u.laser_spec.scan_period_s),
+        laser=u.laser_spec,
     )
-    driver = TourDriver(clip_route(np.asarray(spec.robot.route, float), d.route_fraction), params)
+    driver = make_driver(d.kind, context, dict(d.params))
     slots = [s for s in u.world.calendar.slots if days[0] <= s.day <= days[1]]
     max_steps = (
         None if d.max_run_s is None else int(round(d.max_run_s / u.laser_spec.scan_period_s))
@@ -64,18 +70,15 @@ def bare_loop(scenario, days, seed):
     n = 0
     for i, slot in enumerate(slots):
         obs, info = env.reset(seed=seed, options={"day": slot.day, "run": slot.run})
-        prior = Prior(
-            initial_pose=np.asarray(spec.robot.start, float),
-            initial_pose_cov=np.diag([0.05**2, 0.05**2, 0.05**2]),
-            walls=u.world.wall_segments() if scenario.prior.map == "walls" else None,
-            bounds=tuple(spec.bounds),
-            day=slot.day,
-            run=slot.run,
-            first_run=i == 0,
-        )
+        pc = scenario.prior  # as the runner's episode loop grants it
+        prior = facts.prior(
+            slot.day, slot.run, first_run=i == 0, walls=pc.map == "walls",
+            sigma_xy_m=pc.initial_pose_sigma_xy_m, sigma_theta_rad=pc.initial_pose_sigma_theta_rad,
+        )  # fmt: skip
         for loc in locs:
             loc.begin_run(prior)
-        driver.begin_run(u.world.geometry, info["truth"]["pose"])
+        start = np.asarray(info["truth"]["pose"], dtype=np.float64)
+        driver.begin_run(RunStart(prior, start, u.obstacles()))
         step, term, trunc, coll = 0, False, False, False
         while True:
             t = float(info["truth"]["time"][2])
@@ -85,7 +88,12 @@ def bare_loop(scenario, days, seed):
             n += 1
             if term or trunc or driver.done or (max_steps is not None and step >= max_steps):
                 break
-            a = driver.act(info["truth"]["pose"], info["truth"]["people"], t, bumped=coll)
+            a = driver.act(
+                StepInput(
+                    t, odom, scan, bumped=coll,
+                    pose=info["truth"]["pose"], people=info["truth"]["people"],
+                )
+            )  # fmt: skip
             obs, _, term, trunc, info = env.step(a)
             coll = bool(info["collision"])
             step += 1
