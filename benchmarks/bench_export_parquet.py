@@ -1,7 +1,7 @@
 """The Parquet export of a large results folder: time, rows, bytes, against references.
 
-    dynmap-sim run worlds/scenarios/lab-5w.toml --out /work/meas/lab-full   # ~6 min or more
-    python benchmarks/bench_export_parquet.py /work/meas/lab-full
+    dynmap-sim run worlds/scenarios/lab-5w.toml --out results/lab-full   # ~6 min or more
+    python benchmarks/bench_export_parquet.py results/lab-full
 
 Measured in the same process, best of ``--repeat`` each (wall clock and process CPU time;
 CPU time is the steadier one on a shared machine):
@@ -90,13 +90,17 @@ def best_of(repeat: int, fn: Callable[[], object]) -> tuple[float, float, object
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("dir", nargs="?", default="/work/meas/lab-full", help="a results folder")
+    ap.add_argument(
+        "dir", help="a results folder (e.g. of dynmap-sim run worlds/scenarios/lab-5w.toml)"
+    )
     ap.add_argument("--repeat", type=int, default=3, help="best of N (default 3)")
     ap.add_argument(
         "--replicate-to", type=int, metavar="N", help="measure a copy enlarged to N scans"
     )
     args = ap.parse_args()
     src = Path(args.dir)
+    if not (src / "results.db").is_file():
+        ap.error(f"{src}: no results.db here (make one with dynmap-sim run ... --out {src})")
     tmp = Path(tempfile.mkdtemp(prefix="bench-pq-"))
     try:
         if args.replicate_to:
