@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dynmap_sim.errors import InputError
 from dynmap_sim.experiments.replay import replay_log
 
 LOG, REFERENCE = "fr079.raw.log.gz", "fr079-corrected.log.gz"
@@ -52,10 +53,13 @@ def main() -> int:
     localizers = args.localizer or DEFAULT_LOCALIZERS
     notes: list[str] = []
     with tempfile.TemporaryDirectory() as tmp:
-        out = replay_log(
-            log, localizers, Path(tmp) / "out", map_from_log_poses=True, note=notes.append,
-            reference=ref,
-        )  # fmt: skip
+        try:
+            out = replay_log(
+                log, localizers, Path(tmp) / "out", map_from_log_poses=True,
+                note=notes.append, reference=ref,
+            )  # fmt: skip
+        except InputError as exc:
+            ap.error(str(exc))
         con = sqlite3.connect(out / "results.db")
         for n in notes:
             print(n)
