@@ -169,6 +169,13 @@ class StackParams:
     #: Clear the costmap's obstacle layer before the recovery's replan (nav2's
     #: ``ClearEntireCostmap``): stale marks, e.g. of a person gone, may be what blocks.
     clear_costmap_on_replan: bool = True
+    #: The recovery's replan during a detour round a block that is still blocked plans the
+    #: detour again from where the robot stands (on the costmap the recovery just cleared)
+    #: instead of asking route A* first. Route A* cannot use the detour (it is no route
+    #: yet): it would send the robot the whole way round the loop back to the block (office
+    #: floor, corridor closed: a person in the open-plan aisle stopped the detour, the
+    #: replan turned the robot back and every run of the closure ended at the time limit).
+    keep_detour_on_recovery: bool = True
     #: Tunables of the parts; the stack sets the robot radius, speed and hard clearance.
     route_memory: RouteMemoryParams = field(default_factory=RouteMemoryParams)
     costmap: CostmapParams = field(default_factory=CostmapParams)
@@ -276,6 +283,7 @@ class NavigationStack:
         self._rejoin_seg = 0  # detour: follower segment from which the robot is back on the path
         self._last_plan_t: float | None = None
         self._force_plan = False
+        self._recovery_replan = False  # the pending forced plan is the recovery's replan
         self._armed = False
         self._via_k = 0  # via points passed in this run
         #: the route position of the last step (H&W §5.1), None off the corridors
@@ -518,6 +526,7 @@ class NavigationStack:
                 if self.params.clear_costmap_on_replan:
                     self.costmap.clear_obstacles()
                 self._force_plan = True
+                self._recovery_replan = True
             elif act.command is not None:
                 cmd = act.command
         return self.monitor.filter(cmd, scan, t_s)
@@ -704,9 +713,19 @@ class NavigationStack:
         """The periodic planning step: unblock what is seen free, then keep, refresh or
         replace the path (module doc)."""
         forced = self._force_plan
+        recovering, self._recovery_replan = self._recovery_replan, False
         self._force_plan = False
         self._last_plan_t = t_s
         self._unblock_seen_free(t_s, pose, scan, grid)
+        if (
+            recovering
+            and self.params.keep_detour_on_recovery
+            and self.mode == DETOUR
+            and self.route_memory is not None
+            and self.route_memory.blocked
+            and self._go_around(t_s, pose, grid)
+        ):
+            return
         if self.mode == DETOUR and not forced and self._path is not None:
             if self.follower.segment < self._rejoin_seg and not self.follower.done:
                 if self._cut_ahead(self._path, self._path_hw, grid, pose) is not None:

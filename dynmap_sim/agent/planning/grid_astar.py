@@ -233,7 +233,10 @@ def plan_around(
     cell; the first stretch whose clearance is below ``planner.min_clearance_m`` is the
     block, and ``planner`` plans from the robot to the first free point behind it (to the
     next free stretch's first point if that one cannot be reached). When nothing blocks the
-    path ahead, the result is the robot's position followed by the rest of the path. The
+    path ahead, the result is the robot's position followed by the rest of the path, with a
+    grid path to that nearest point when it is farther than ``snap_m`` and the straight line
+    to it is not free (a robot on a detour, whose nearest path point may lie behind a
+    wall). The
     start is moved to the nearest free cell within ``snap_m`` [m] when the robot stands in
     the inflated zone. None when the path cannot be rejoined (e.g. the block covers its end).
     """
@@ -243,14 +246,24 @@ def plan_around(
     ahead = pts[k0:]
     ok = grid.clearance_at(ahead) >= planner.min_clearance_m
     blocked = np.nonzero(~ok)[0]
-    if len(blocked) == 0:
-        return np.concatenate([here[None], _vertices_after(path_xy, s[k0]), pts[-1:]])
+    tail = [_vertices_after(path_xy, s[k0]), pts[-1:]]
+    if len(blocked) == 0 and (
+        float(np.hypot(*(pts[k0] - here))) <= snap_m
+        or grid.segment_clear(here, pts[k0], planner.min_clearance_m)
+    ):
+        return np.concatenate([here[None], *tail])
     start = grid.nearest_free(here, planner.min_clearance_m, snap_m)
     if start is None:
         return None
+    lead = here[None] if np.any(start != here) else np.zeros((0, 2))
+    if len(blocked) == 0:
+        # nothing blocks the path ahead, but the robot is away from it (on a detour) and
+        # the straight way to its nearest point is not free: reach that point on the grid
+        leg = planner.plan(start, pts[k0], grid)
+        rest = tail if k0 < len(pts) - 1 else []
+        return None if leg is None else np.concatenate([lead, leg, *rest])
     # first points of the free stretches behind the first block
     first_free = np.nonzero(ok[1:] & ~ok[:-1])[0] + 1
-    lead = here[None] if np.any(start != here) else np.zeros((0, 2))
     for k in first_free[first_free > blocked[0]]:
         leg = planner.plan(start, ahead[k], grid)
         if leg is not None:

@@ -188,3 +188,23 @@ def test_plan_around_a_block_just_before_the_goal(kernel) -> None:
     out = plan_around(short, np.array([2.0, 1.5]), grid, planner)
     assert out is not None and np.allclose(out[-1], short[-1])
     assert np.all(np.hypot(*np.diff(out, axis=0).T) > 0)  # no repeated vertex
+
+
+def test_plan_around_from_behind_a_wall_reaches_the_path_on_the_grid(kernel) -> None:
+    """A robot on a detour, in a room whose wall separates it from the nearest point of the
+    path (office floor, issue 15): the way back goes through the room's door, not through
+    the wall, even though nothing blocks the path ahead of that point."""
+    walls = np.array(
+        [[0, 0, 10, 0], [0, 3, 4, 3], [5, 3, 10, 3], [0, 6, 10, 6], [0, 0, 0, 6], [10, 0, 10, 6]],
+        float,
+    )  # a corridor (y 0..3) and a room above it (y 3..6), the door at x 4..5
+    grid = build_clearance_grid(walls, np.zeros((0, 3)), resolution_m=RES)
+    planner = GridAStar(MIN_C, PREF_C)
+    path = np.array([[9.5, 1.5], [5.0, 1.5], [0.5, 1.5]])  # heading west along the corridor
+    here = np.array([8.0, 4.5])  # in the room, above the path's point (8, 1.5)
+    out = plan_around(path, here, grid, planner)
+    assert out is not None
+    assert np.allclose(out[0], here) and np.allclose(out[-1], path[-1])
+    assert min_clearance_along(out[1:], grid) >= MIN_C - 0.5 * np.sqrt(2) * RES
+    crossing = out[np.abs(out[:, 1] - 3.0) < 0.6]  # through the door
+    assert crossing.size and np.all((crossing[:, 0] > 4.0) & (crossing[:, 0] < 5.0))
