@@ -52,6 +52,7 @@ from dynmap_sim.agent.planning.costmap_numba import (
     mark_scan,
     numba_available,
 )
+from dynmap_sim.agent.planning.costmap_numba import window_clearance as window_clearance_nb
 from dynmap_sim.types import LaserSpec, Prior, Scan
 
 FloatArray = NDArray[np.float64]
@@ -410,9 +411,15 @@ class Costmap:
         k_out = k_in + int(math.ceil(margin_m / res))
         r0, r1 = max(i - k_out, 0), min(i + k_out + 1, h)
         c0, c1 = max(j - k_out, 0), min(j + k_out + 1, w)
-        local = self._distance_m((r0, r1), (c0, c1))
         a0, a1 = max(i - k_in, 0), min(i + k_in + 1, h)
         b0, b1 = max(j - k_in, 0), min(j + k_in + 1, w)
+        if self._compiled():
+            clear = base.clearance_m.copy()
+            window_clearance_nb(
+                self.static, self.marks, (r0, r1, c0, c1), (a0, a1, b0, b1), res, margin_m, clear
+            )
+            return ClearanceGrid(base.origin, res, clear)
+        local = self._distance_m((r0, r1), (c0, c1))
         win = local[a0 - r0 : a1 - r0, b0 - c0 : b1 - c0]
         clear = base.clearance_m.copy()
         old = clear[a0:a1, b0:b1]

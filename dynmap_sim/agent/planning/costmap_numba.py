@@ -31,6 +31,13 @@ IntArray = NDArray[np.int64]
 OFFSET_CELLS = 1 << 16
 
 
+#: side of the blocks [cells] whose lack of marks lets :func:`_mark_scan_py` skip ray samples
+BLOCK = 8
+#: skipped samples keep this far [cells] inside their block: 6x float32's error of a ray
+#: sample's position near ``OFFSET_CELLS`` (half an ulp, 2^-8 cells, for each of two samples)
+BLOCK_MARGIN_CELLS = 0.05
+
+
 def _mark_scan_py(  # type: ignore[no-untyped-def]
     marks,
     origin_x_m,
@@ -85,6 +92,20 @@ def _mark_scan_py(  # type: ignore[no-untyped-def]
                 n_marked += 1
     n_samples = int(math.ceil(max_clear_m / (0.5 * res_m)))
     res32 = np.float32(res_m)
+    # blocks of BLOCK x BLOCK cells without a mark around the laser: the samples of a ray in
+    # one of them need no look (a cell without a mark stays without one)
+    lr = np.int64(np.int32(ray_origin_y32)) - OFFSET_CELLS
+    lc = np.int64(np.int32(ray_origin_x32)) - OFFSET_CELLS
+    reach = n_samples // 2 + 2
+    br0 = max(lr - reach, 0) // BLOCK
+    bc0 = max(lc - reach, 0) // BLOCK
+    br1 = max(min(lr + reach, h - 1) // BLOCK + 1, br0)
+    bc1 = max(min(lc + reach, w - 1) // BLOCK + 1, bc0)
+    marked_block = np.zeros((br1 - br0, bc1 - bc0), np.bool_)
+    for i in range(br0 * BLOCK, min(br1 * BLOCK, h)):
+        for j in range(bc0 * BLOCK, min(bc1 * BLOCK, w)):
+            if flat[i * w + j] > 0:
+                marked_block[i // BLOCK - br0, j // BLOCK - bc0] = True
     passed = np.empty(1024, np.int64)
     n_passed = 0
     for b in range(n_beams):
@@ -94,14 +115,42 @@ def _mark_scan_py(  # type: ignore[no-untyped-def]
             n_b -= 1
         dx32 = np.float32(cos_th[b])
         dy32 = np.float32(sin_th[b])
+        # 1 / direction (only for the conservative skip: its rounding does not matter)
+        inv_dx = 1.0 / float(dx32) if dx32 != 0.0 else math.inf
+        inv_dy = 1.0 / float(dy32) if dy32 != 0.0 else math.inf
         last = -1
-        for i in range(n_b):
+        i = 0
+        while i < n_b:
             t32 = np.float32(0.5 * i)
-            col = np.int64(np.int32(np.float32(ray_origin_x32 + np.float32(t32 * dx32))))
-            row = np.int64(np.int32(np.float32(ray_origin_y32 + np.float32(t32 * dy32))))
-            col -= OFFSET_CELLS
-            row -= OFFSET_CELLS
+            xf = np.float32(ray_origin_x32 + np.float32(t32 * dx32))
+            yf = np.float32(ray_origin_y32 + np.float32(t32 * dy32))
+            i += 1
+            col = np.int64(np.int32(xf)) - OFFSET_CELLS
+            row = np.int64(np.int32(yf)) - OFFSET_CELLS
             if row < 0 or row >= h or col < 0 or col >= w:
+                continue
+            bi, bj = row // BLOCK, col // BLOCK
+            if br0 <= bi < br1 and bc0 <= bj < bc1 and not marked_block[bi - br0, bj - bc0]:
+                # skip the next samples that surely stay in this block: those whose exact
+                # position is BLOCK_MARGIN_CELLS inside it (s: travel [cells] from here)
+                x, y = float(xf) - OFFSET_CELLS, float(yf) - OFFSET_CELLS
+                lo_x, hi_x = bj * BLOCK + BLOCK_MARGIN_CELLS, (bj + 1) * BLOCK - BLOCK_MARGIN_CELLS
+                lo_y, hi_y = bi * BLOCK + BLOCK_MARGIN_CELLS, (bi + 1) * BLOCK - BLOCK_MARGIN_CELLS
+                s_lo, s_hi = -math.inf, 2.0 * BLOCK
+                if dx32 > 0.0:
+                    s_lo, s_hi = max(s_lo, (lo_x - x) * inv_dx), min(s_hi, (hi_x - x) * inv_dx)
+                elif dx32 < 0.0:
+                    s_lo, s_hi = max(s_lo, (hi_x - x) * inv_dx), min(s_hi, (lo_x - x) * inv_dx)
+                elif not lo_x <= x <= hi_x:
+                    s_hi = -1.0
+                if dy32 > 0.0:
+                    s_lo, s_hi = max(s_lo, (lo_y - y) * inv_dy), min(s_hi, (hi_y - y) * inv_dy)
+                elif dy32 < 0.0:
+                    s_lo, s_hi = max(s_lo, (hi_y - y) * inv_dy), min(s_hi, (lo_y - y) * inv_dy)
+                elif not lo_y <= y <= hi_y:
+                    s_hi = -1.0
+                if s_lo <= 0.49 and s_hi >= 0.5:  # the next sample and those up to s_hi
+                    i += int(1.99 * s_hi)
                 continue
             key = row * w + col
             if key == last:
@@ -143,38 +192,40 @@ def _mark_scan_py(  # type: ignore[no-untyped-def]
     return False
 
 
-def _clearance_window_py(static, marks, r0, r1, c0, c1, res_m):  # type: ignore[no-untyped-def]
-    """Distance [m] from each cell of the window ``[r0:r1, c0:c1]`` to the nearest cell of it
-    that is ``static`` or has ``marks > 0`` (inf everywhere when none); exact EDT."""
+def _distance_py(  # type: ignore[no-untyped-def]
+    static, marks, r0, r1, c0, c1, a0, a1, b0, b1, cap_cells, res_m, margin_m, out
+):
+    """Distance [m] ``d`` from each cell of ``[a0:a1, b0:b1]`` to the nearest obstacle cell
+    (``static`` or ``marks > 0``) of the window ``[r0:r1, c0:c1]`` that holds it, written to
+    ``out`` (grid-sized) as ``d`` where ``d < margin_m``, else ``max(out, margin_m)`` (with
+    ``margin_m = inf``: ``d``, inf without an obstacle). Obstacles more than ``cap_cells``
+    away along their column are left out: ``d`` is exact up to ``cap_cells`` cells and never
+    below the exact value."""
     h, w = r1 - r0, c1 - c0
     inf_cells = h + w + 1  # farther than any distance in the window
-    g = np.empty((h, w), np.int64)  # distance along the column [cells], rows in order
-    any_occ = False
-    for i in range(h):
+    g = np.empty((a1 - a0, w), np.int64)  # distance along the column [cells]
+    last = np.full(w, -inf_cells, np.int64)  # the last obstacle row above, per column
+    for i in range(r0, a1):
         for j in range(w):
-            if static[r0 + i, c0 + j] or marks[r0 + i, c0 + j] > 0:
-                g[i, j] = 0
-                any_occ = True
-            elif i > 0 and g[i - 1, j] < inf_cells:
-                g[i, j] = g[i - 1, j] + 1
-            else:
-                g[i, j] = inf_cells
-    for i in range(h - 2, -1, -1):
+            if static[i, c0 + j] or marks[i, c0 + j] > 0:
+                last[j] = i
+            if i >= a0:
+                g[i - a0, j] = min(i - last[j], inf_cells)
+    nxt = np.full(w, r1 + inf_cells, np.int64)  # the next obstacle row below
+    for i in range(r1 - 1, a0 - 1, -1):
         for j in range(w):
-            if g[i + 1, j] + 1 < g[i, j]:
-                g[i, j] = g[i + 1, j] + 1
-    out = np.empty((h, w))
-    if not any_occ:
-        out[:] = math.inf
-        return out
+            if static[i, c0 + j] or marks[i, c0 + j] > 0:
+                nxt[j] = i
+            if i < a1 and nxt[j] - i < g[i - a0, j]:
+                g[i - a0, j] = nxt[j] - i
     v = np.empty(w, np.int64)  # columns of the parabolas of the lower envelope
     zn = np.empty(w + 1, np.int64)  # their left boundaries zn / zd (zd > 0)
     zd = np.empty(w + 1, np.int64)
     f = np.empty(w, np.int64)
-    for i in range(h):
+    for i in range(a1 - a0):
         k = -1
         for q in range(w):
-            if g[i, q] >= inf_cells:
+            if g[i, q] > cap_cells or g[i, q] >= inf_cells:
                 continue
             fq = g[i, q] * g[i, q]
             f[q] = fq
@@ -192,16 +243,21 @@ def _clearance_window_py(static, marks, r0, r1, c0, c1, res_m):  # type: ignore[
             zn[k], zd[k] = num, den  # k == 0: -inf, never read
         n_env = k + 1
         k = 0
-        for p in range(w):
-            while k + 1 < n_env and zn[k + 1] < p * zd[k + 1]:
-                k += 1
-            dq = p - v[k]
-            out[i, p] = math.sqrt(float(dq * dq + f[v[k]])) * res_m
-    return out
+        for p in range(b0 - c0, b1 - c0):
+            d = math.inf
+            if n_env > 0:
+                while k + 1 < n_env and zn[k + 1] < p * zd[k + 1]:
+                    k += 1
+                dq = p - v[k]
+                d = math.sqrt(float(dq * dq + f[v[k]])) * res_m
+            if d < margin_m:
+                out[a0 + i, c0 + p] = d
+            else:
+                out[a0 + i, c0 + p] = max(out[a0 + i, c0 + p], margin_m)
 
 
 _mark_scan_nb = compiled(_mark_scan_py)
-_clearance_window_nb = compiled(_clearance_window_py)
+_distance_nb = compiled(_distance_py)
 
 
 def mark_scan(*args: object, python: bool = False) -> bool:
@@ -218,7 +274,29 @@ def clearance_window(
     res_m: float,
     python: bool = False,
 ) -> FloatArray:
-    """The exact clearance [m] of the window ``rows x cols`` of the layers (kernel doc);
-    ``python``: the uncompiled kernel."""
-    fn = _clearance_window_py if python or _clearance_window_nb is None else _clearance_window_nb
-    return fn(static, marks, int(rows[0]), int(rows[1]), int(cols[0]), int(cols[1]), float(res_m))
+    """The exact clearance [m] of the window ``rows x cols`` of the layers (obstacles inside
+    it only; inf without one); ``python``: the uncompiled kernel."""
+    fn = _distance_py if python or _distance_nb is None else _distance_nb
+    (r0, r1), (c0, c1) = rows, cols
+    out = np.zeros(static.shape)
+    fn(static, marks, r0, r1, c0, c1, r0, r1, c0, c1, r1 - r0 + c1 - c0, res_m, math.inf, out)
+    return out[r0:r1, c0:c1]
+
+
+def window_clearance(
+    static: NDArray[np.bool_],
+    marks: NDArray[np.int8],
+    outer: tuple[int, int, int, int],
+    inner: tuple[int, int, int, int],
+    res_m: float,
+    margin_m: float,
+    out: FloatArray,
+    python: bool = False,
+) -> None:
+    """:meth:`.Costmap.window_clearance`'s update of ``out`` in the window ``inner`` (rows,
+    cols: ``a0, a1, b0, b1``) from the obstacles in ``outer`` (``r0, r1, c0, c1``): the exact
+    distance where below ``margin_m`` [m], else ``max(out, margin_m)``; ``python``: the
+    uncompiled kernel."""
+    fn = _distance_py if python or _distance_nb is None else _distance_nb
+    cap_cells = int(math.ceil(margin_m / res_m)) + 1  # every distance < margin_m is exact
+    fn(static, marks, *outer, *inner, cap_cells, res_m, margin_m, out)

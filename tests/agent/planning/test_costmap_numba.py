@@ -63,6 +63,9 @@ def test_scan_updates_of_numba_equal_numpy(seed: int) -> None:
     rng = np.random.default_rng(seed)
     segs = random_world(rng)
     fast, ref = costmaps(("numba", "numpy"), max_persistence_scans=int(rng.integers(1, 4)))
+    # scattered marks too: rays through blocks with and without marks, skipped or not
+    marks = (rng.random(fast.shape) < [0.0, 0.002, 0.01, 0.05][seed]).astype(np.int8)
+    fast.marks, ref.marks = marks, marks.copy()
     for _ in range(25):
         pose = np.array([rng.uniform(-0.5, 6.5), rng.uniform(-0.5, 4.5), rng.uniform(-4, 4)])
         scan = random_scan(rng, segs, pose)
@@ -141,3 +144,49 @@ def test_window_clearance_keeps_the_base_outside_the_window() -> None:
     assert out.clearance_m[i, j] == 7.0 and out.clearance_m[0, 0] == 7.0
     inner = out.clearance_m[i - 10 : i + 11, j - 10 : j + 11]
     assert np.all(inner == 7.0)  # no obstacle within the window's reach: the base's value
+
+
+@needs_numba
+def test_window_clearance_of_numba_equals_numpy_on_random_layers() -> None:
+    """Random obstacle layers, bases, centres (the grid's edges too), windows and margins:
+    the kernel's window clearance (its obstacles capped at the margin) equals numpy's."""
+    rng = np.random.default_rng(11)
+    fast, ref = costmaps(("numba", "numpy"))
+    h, w = fast.shape
+    for _ in range(200):
+        static = rng.random((h, w)) < rng.choice([0.0, 0.002, 0.02, 0.2])
+        marks = (rng.random((h, w)) < rng.choice([0.0, 0.01])).astype(np.int8)
+        for cm in (fast, ref):
+            cm.static, cm.marks = static, marks.copy()
+            cm._changed()
+        base = ClearanceGrid(fast.origin, fast.resolution_m, rng.uniform(0.0, 2.0, (h, w)))
+        centre = rng.uniform(-0.5, [6.5, 4.5])
+        window_m, margin_m = rng.uniform(0.05, 2.0), rng.uniform(0.05, 1.2)
+        a = fast.window_clearance(base, centre, window_m, margin_m)
+        b = ref.window_clearance(base, centre, window_m, margin_m)
+        np.testing.assert_array_equal(a.clearance_m, b.clearance_m)
+
+
+@needs_numba
+def test_rays_along_cell_and_block_edges_update_as_numpy() -> None:
+    """Axis-aligned and diagonal beams from laser poses on cell edges (where a ray grazes
+    the blocks the kernel skips), in dense marks: identical marks."""
+    rng = np.random.default_rng(4)
+    segs = random_world(rng)
+    fast, ref = costmaps(("numba", "numpy"))
+    marks = (rng.random(fast.shape) < 0.03).astype(np.int8)
+    fast.marks, ref.marks = marks, marks.copy()
+    res = fast.resolution_m
+    angles = MOUNTED.angles()
+    for _ in range(40):
+        k = int(rng.integers(0, MOUNTED.n_beams))
+        heading = float(rng.choice([0.0, 0.5, 1.0, 1.5, 0.25, 0.75])) * np.pi
+        theta = heading - angles[k] - MOUNTED.mount_pose[2]  # beam k along ``heading``
+        cell = rng.integers(8, 70, 2) + rng.choice([0.0, 0.5, 0.4999999, 0.25], 2)
+        lp_xy = fast.origin + cell * res
+        c, s = np.cos(theta), np.sin(theta)
+        mx, my = MOUNTED.mount_pose[:2]
+        pose = np.array([lp_xy[0] - (c * mx - s * my), lp_xy[1] - (s * mx + c * my), theta])
+        scan = random_scan(rng, segs, pose)
+        assert fast.update(pose, scan, MOUNTED) == ref.update(pose, scan, MOUNTED)
+        np.testing.assert_array_equal(fast.marks, ref.marks)
