@@ -350,7 +350,8 @@ class CorridorFollower(Controller):
             break
         cx, cy = carrot_on_segment(verts[self._seg], verts[self._seg + 1], x, y, p.lookahead_m)
         carrot = np.array([cx, cy])
-        s_carrot = float(self._cum[self._seg]) + float(np.hypot(*(carrot - verts[self._seg])))
+        a = verts[self._seg]
+        s_carrot = float(self._cum[self._seg]) + float(np.hypot(cx - a[0], cy - a[1]))
         xy = np.array([x, y])
         best, offsets, clear_near, here = self._choose_offset(xy, s_robot, carrot, s_carrot, grid)
         if best is None:
@@ -359,9 +360,11 @@ class CorridorFollower(Controller):
             return stop
         self._blocked = False
         self._offset_m = float(offsets[best])
-        hw_c = float(self._half_width_at(np.array([s_carrot]), np.array([self._seg]))[0])
+        # _half_width_at(s_carrot) on scalars
+        hw_c = min(float(self._seg_hw[self._seg]), max(float(self._cum[-1]) - s_carrot, 0.0))
         d_c = min(max(self._offset_m, -hw_c), hw_c)
-        tx, ty = carrot + d_c * self._normal[self._seg]
+        nx, ny = self._normal[self._seg]
+        tx, ty = cx + d_c * float(nx), cy + d_c * float(ny)
         # the shifted carrot in the robot frame
         c, sn = math.cos(th), math.sin(th)
         dx, dy = tx - x, ty - y

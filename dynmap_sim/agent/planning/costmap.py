@@ -262,7 +262,8 @@ class Costmap:
         cell appeared or disappeared (the clearance is then recomputed on demand)."""
         p = self.params
         ranges = np.asarray(scan.ranges_m if isinstance(scan, Scan) else scan, dtype=np.float64)
-        lp = se2.compose(np.asarray(pose, dtype=np.float64), np.asarray(laser.mount_pose, float))
+        pose = np.asarray(pose, dtype=np.float64)
+        lp = se2.compose(pose, np.asarray(laser.mount_pose, float))
         th = lp[2] + self._angles(laser)
         if self._compiled():
             changed = mark_scan(
@@ -281,8 +282,9 @@ class Costmap:
                 float(p.inf_clear_range_m),
                 float(p.obstacle_range_m),
                 int(p.max_persistence_scans),
-                *self._ray_origin(lp[:2]).tolist(),
-                self._footprint_keys(np.asarray(pose, dtype=np.float64)),
+                float(pose[0]),
+                float(pose[1]),
+                self._footprint,
             )
             if changed:
                 self._changed()

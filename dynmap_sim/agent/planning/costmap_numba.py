@@ -54,15 +54,30 @@ def _mark_scan_py(  # type: ignore[no-untyped-def]
     inf_clear_range_m,
     obstacle_range_m,
     max_persistence,
-    ray_origin_x32,
-    ray_origin_y32,
-    footprint_keys,
+    robot_x_m,
+    robot_y_m,
+    footprint_cells,
 ):
     """Mark and clear ``marks`` (``(H, W)`` int8, in place) with one scan; True when a cell's
-    obstacle state changed. The beam directions, the laser pose and the ray origin in cells
-    (float32, offset) come from the caller (numpy's trigonometry)."""
+    obstacle state changed. The beam directions come from the caller (numpy's
+    trigonometry); ``footprint_cells`` ``(K, 2)`` are the (row, col) offsets of the cells
+    around the robot's cell that are cleared."""
     h, w = marks.shape
     flat = marks.reshape(-1)
+    # the ray origin in cells for truncation, offset to stay >= 0 (Costmap._ray_origin)
+    ray_origin_x32 = np.float32((lp_x_m - origin_x_m) / res_m + 0.5 + OFFSET_CELLS)
+    ray_origin_y32 = np.float32((lp_y_m - origin_y_m) / res_m + 0.5 + OFFSET_CELLS)
+    # the footprint's cells in the grid (Costmap._footprint_keys)
+    robot_row = np.int64(np.rint((robot_y_m - origin_y_m) / res_m))
+    robot_col = np.int64(np.rint((robot_x_m - origin_x_m) / res_m))
+    footprint_keys = np.empty(footprint_cells.shape[0], np.int64)
+    n_foot = 0
+    for k in range(footprint_cells.shape[0]):
+        row = robot_row + footprint_cells[k, 0]
+        col = robot_col + footprint_cells[k, 1]
+        if 0 <= row < h and 0 <= col < w:
+            footprint_keys[n_foot] = row * w + col
+            n_foot += 1
     n_beams = ranges_m.shape[0]
     clear_m = np.zeros(n_beams)
     own_end = np.full(n_beams, -1, np.int64)
@@ -166,7 +181,6 @@ def _mark_scan_py(  # type: ignore[no-untyped-def]
                 passed = grown
             passed[n_passed] = key
             n_passed += 1
-    n_foot = footprint_keys.shape[0]
     before = np.empty(n_passed + n_marked + n_foot, np.bool_)
     for k in range(n_passed):
         before[k] = flat[passed[k]] > 0

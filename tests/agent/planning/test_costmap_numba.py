@@ -108,8 +108,8 @@ def test_python_kernel_of_the_scan_update_equals_numpy() -> None:
             p.inf_clear_range_m,
             p.obstacle_range_m,
             p.max_persistence_scans,
-            *ref._ray_origin(lp[:2]).tolist(),
-            ref._footprint_keys(pose),
+            *pose[:2].tolist(),
+            ref._footprint,
             python=True,
         )
         assert changed == ref.update(pose, scan, MOUNTED)
