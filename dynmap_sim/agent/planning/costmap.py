@@ -178,6 +178,8 @@ class Costmap:
         self._beams: tuple[LaserSpec, FloatArray] | None = None  # laser -> beam angles
         self._clearance: ClearanceGrid | None = None
         self._occupied: NDArray[np.bool_] | None = None
+        #: the last window_clearance: (its base, its window a0, a1, b0, b1, its array)
+        self._window: tuple[ClearanceGrid, tuple[int, int, int, int], FloatArray] | None = None
 
     @classmethod
     def for_prior(cls, prior: Prior, params: CostmapParams | None = None) -> Costmap:
@@ -387,6 +389,17 @@ class Costmap:
             )
         return self._clearance
 
+    def _window_buffer(self, base: ClearanceGrid) -> FloatArray:
+        """A copy of ``base``'s clearance for :meth:`window_clearance`: the last call's array
+        with its window restored from ``base`` when it had the same ``base``."""
+        last = getattr(self, "_window", None)  # (a costmap pickled before it had one)
+        if last is not None and last[0] is base:
+            (a0, a1, b0, b1), clear = last[1], last[2]
+            clear[a0:a1, b0:b1] = base.clearance_m[a0:a1, b0:b1]
+            return clear
+        self._window = None
+        return base.clearance_m.copy()
+
     def _distance_m(self, rows: tuple[int, int], cols: tuple[int, int]) -> FloatArray:
         """Distance [m] from each cell of the window ``rows x cols`` to the nearest obstacle
         of either layer inside it (inf when it has none): the exact Euclidean distance
@@ -405,7 +418,10 @@ class Costmap:
         of half-size ``window_m`` [m] around ``centre_xy`` recomputed from the current layers
         (nav2's rolling local costmap): exact where below ``margin_m`` [m] (obstacles up to
         ``margin_m`` outside the window are looked at), elsewhere in the window at least
-        ``margin_m`` (``base``'s value when larger). A new grid; ``base`` is not changed."""
+        ``margin_m`` (``base``'s value when larger). ``base`` is not changed. With the numba
+        kernels the grid's array is reused by the next call with the same ``base`` (only the
+        last window is restored from ``base``, no copy of the whole grid): use the grid before
+        calling again."""
         res = base.resolution_m
         h, w = base.shape
         i, j = base.cell_of(centre_xy)
@@ -416,10 +432,11 @@ class Costmap:
         a0, a1 = max(i - k_in, 0), min(i + k_in + 1, h)
         b0, b1 = max(j - k_in, 0), min(j + k_in + 1, w)
         if self._compiled():
-            clear = base.clearance_m.copy()
+            clear = self._window_buffer(base)
             window_clearance_nb(
                 self.static, self.marks, (r0, r1, c0, c1), (a0, a1, b0, b1), res, margin_m, clear
             )
+            self._window = (base, (a0, a1, b0, b1), clear)
             return ClearanceGrid(base.origin, res, clear)
         local = self._distance_m((r0, r1), (c0, c1))
         win = local[a0 - r0 : a1 - r0, b0 - c0 : b1 - c0]
@@ -429,4 +446,10 @@ class Costmap:
         return ClearanceGrid(base.origin, res, clear)
 
     def __getstate__(self) -> dict[str, object]:
-        return {**self.__dict__, "_clearance": None, "_occupied": None, "_beams": None}
+        return {
+            **self.__dict__,
+            "_clearance": None,
+            "_occupied": None,
+            "_beams": None,
+            "_window": None,
+        }
