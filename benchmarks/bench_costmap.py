@@ -7,6 +7,9 @@ ratios against references measured in the same run:
 1. ``Costmap.update`` per scan (obstacle layer: mark + clear all beams) against the existing
    one-scan tracer ``OccupancyGrid.from_scans`` on the same scan, and ``Costmap.clearance()``
    (the inflation: a distance transform) against ``build_clearance_grid`` of the same walls;
+   first the numpy backend against the default one (the numba kernels of
+   :mod:`~dynmap_sim.agent.planning.costmap_numba` when installed), with the follower's
+   ``window_clearance``, and whether both leave identical marks;
 2. ``grid-astar`` per plan (search + string pulling; compiled kernel and pure Python)
    against ``grid-dijkstra`` on the same grid and queries (with and without its graph built);
 3. ``plan_around`` (H&W §6.3 detour around a blocked path) per call.
@@ -27,6 +30,7 @@ from dynmap_sim import se2
 from dynmap_sim.agent.grid import OccupancyGrid
 from dynmap_sim.agent.planning.clearance_grid import build_clearance_grid
 from dynmap_sim.agent.planning.costmap import Costmap, CostmapParams
+from dynmap_sim.agent.planning.costmap_numba import numba_available
 from dynmap_sim.agent.planning.grid_astar import GridAStar, plan_around
 from dynmap_sim.agent.planning.grid_dijkstra import GridDijkstra
 
@@ -86,15 +90,35 @@ def main() -> None:
     scans = [raycast(lp, URG.angles(), world, URG.range_max_m) for lp in lps]
 
     print("1. costmap (10 m x 12 m + 1 m margin at 5 cm, 683-beam scans)")
-    cm = Costmap(CostmapParams(), (0.0, 0.0, 10.0, 12.0))
-    cm.set_static_segments(segs)
-    t0 = time.perf_counter()
-    changed = sum(cm.update(p, r, URG) for p, r in zip(poses, scans, strict=True))
-    t_update = (time.perf_counter() - t0) / len(scans)
+    t_update, t_edt, t_win, marks = {}, {}, {}, {}
+    for backend in ("numpy", "auto"):  # auto: the numba kernels when numba is installed
+        cm = Costmap(CostmapParams(), (0.0, 0.0, 10.0, 12.0))
+        cm.set_static_segments(segs)
+        cm.backend = backend
+        cm.update(poses[0], scans[0], URG)  # compiles or loads the kernels
+        cm.clear_obstacles()
+        t0 = time.perf_counter()
+        changed = sum(cm.update(p, r, URG) for p, r in zip(poses, scans, strict=True))
+        t_update[backend] = (time.perf_counter() - t0) / len(scans)
+        t_edt[backend] = best_of(lambda cm=cm: (cm._changed(), cm.clearance()), args.repeats)
+        base = cm.clearance()
+        t_win[backend] = best_of(
+            lambda cm=cm, base=base: [
+                cm.window_clearance(base, p[:2], 1.6, 0.8) for p in poses[::10]
+            ],
+            args.repeats,
+        ) / len(poses[::10])
+        marks[backend] = cm.marks.copy()
+    same = np.array_equal(marks["numpy"], marks["auto"])
+    print(f"   kernels: {'numba' if numba_available() else 'none (numpy only)'}; "
+          f"marks of both backends identical: {same}")  # fmt: skip
+    for what, t in (("update", t_update), ("clearance()", t_edt), ("window_clearance", t_win)):
+        print(f"   {what:17s} numpy {1e3 * t['numpy']:6.3f} ms, auto {1e3 * t['auto']:6.3f} ms"
+              f"  -> ratio {t['auto'] / t['numpy']:.2f}")  # fmt: skip
+    t_update, t_edt = t_update["auto"], t_edt["auto"]
     t_trace = best_of(
         lambda: OccupancyGrid.from_scans(poses[:1], scans[0][None], URG), args.repeats
     )
-    t_edt = best_of(lambda: (cm._changed(), cm.clearance()), args.repeats)
     t_ref = best_of(lambda: build_clearance_grid(segs, np.zeros((0, 3))), args.repeats)
     print(f"   grid {cm.shape[0]} x {cm.shape[1]} cells; {changed}/{len(scans)} scans changed it")
     print(f"   update per scan        {1e3 * t_update:7.2f} ms")

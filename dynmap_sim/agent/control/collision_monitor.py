@@ -41,6 +41,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from dynmap_sim.agent.control.control_numba import monitor_action, numba_available
 from dynmap_sim.types import LaserSpec, Scan
 
 FloatArray = NDArray[np.float64]
@@ -98,9 +99,19 @@ def count_in_box(points: FloatArray, x_min_m: float, x_max_m: float, half_width_
     return int(np.count_nonzero((x >= x_min_m) & (x <= x_max_m) & (np.abs(y) <= half_width_m)))
 
 
+#: the monitor's actions by :mod:`.control_numba`'s codes
+_ACTIONS = (PASS, SLOWDOWN, STOP, FOOTPRINT_STOP)
+
+
 class CollisionMonitor:
     """Filters ``(v, omega)`` commands by the raw scan (module doc); ``params``:
-    :class:`CollisionMonitorParams` fields."""
+    :class:`CollisionMonitorParams` fields.
+
+    :attr:`backend` ``"auto"`` checks the zones in the numba kernel of :mod:`.control_numba`
+    when numba is installed (the same actions), ``"numpy"`` in numpy.
+    """
+
+    backend: str = "auto"
 
     def __init__(self, laser: LaserSpec, robot_radius_m: float, **params: float) -> None:
         self.laser = laser
@@ -111,6 +122,36 @@ class CollisionMonitor:
         self.events: list[tuple[float, str, str]] = []
         #: the action of the last :meth:`filter`
         self.last_action = PASS
+        self._beam_trig: tuple[FloatArray, FloatArray] | None = None
+
+    def _action(self, v_mps: float, ranges_m: ArrayLike) -> str:
+        """:meth:`check` of the scan's points (:func:`scan_points`), by the kernel when
+        numba serves (:attr:`backend`)."""
+        if self.backend not in ("auto", "numba", "numpy"):
+            raise ValueError(f"backend must be auto, numba or numpy, got {self.backend!r}")
+        if self.backend == "numpy" or not numba_available():
+            return self.check(v_mps, scan_points(self.laser, ranges_m))
+        r = np.asarray(ranges_m, dtype=np.float64).reshape(-1)
+        if r.shape != (self.laser.n_beams,):
+            raise ValueError(f"a scan of {self.laser.n_beams} beams expected, got {r.shape}")
+        if self._beam_trig is None:  # numpy's cos / sin of the beams in the robot frame
+            ang = self.laser.angles() + self.laser.mount_pose[2]
+            self._beam_trig = (np.cos(ang), np.sin(ang))
+        p = self.params
+        zones = self.zones(v_mps)
+        code = monitor_action(
+            r,
+            *self._beam_trig,
+            float(self.laser.mount_pose[0]),
+            float(self.laser.mount_pose[1]),
+            float(self.laser.range_min_m),
+            float(v_mps),
+            p.robot_radius_m + p.footprint_margin_m,
+            *zones[STOP][1:],
+            *zones[SLOWDOWN][1:],
+            int(p.min_points),
+        )
+        return _ACTIONS[code]
 
     @property
     def stop_count(self) -> int:
@@ -163,7 +204,7 @@ class CollisionMonitor:
         if t_s is None:
             t_s = scan.stamp_s if isinstance(scan, Scan) else 0.0
         v, omega = float(cmd[0]), float(cmd[1])
-        action = self.check(v, scan_points(self.laser, ranges))
+        action = self._action(v, ranges)
         if action == FOOTPRINT_STOP:
             v, omega = 0.0, 0.0
         elif action == STOP:

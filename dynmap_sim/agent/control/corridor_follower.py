@@ -42,6 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from dynmap_sim.agent.control.control_numba import numba_available, probe_offsets
 from dynmap_sim.agent.control.controller import Controller, SpeedLimit, register_controller
 from dynmap_sim.agent.control.pure_pursuit import (
     advance_segment,
@@ -128,7 +129,13 @@ def speed_for_clearance(clearance_m: float, p: CorridorFollowerParams) -> float:
 @register_controller("corridor-follower")
 class CorridorFollower(Controller):
     """H&W §6.3's hybrid controller (module doc); ``params``: :class:`CorridorFollowerParams`
-    fields. ``set_path(path, half_widths)`` takes per-vertex corridor half-widths ``l``."""
+    fields. ``set_path(path, half_widths)`` takes per-vertex corridor half-widths ``l``.
+
+    :attr:`backend` ``"auto"`` probes the offsets in the numba kernel of
+    :mod:`.control_numba` when numba is installed (the same numbers), ``"numpy"`` in numpy.
+    """
+
+    backend: str = "auto"
 
     def __init__(self, speed_mps: float, min_clearance_m: float, **params: float) -> None:
         super().__init__(speed_mps, min_clearance_m)
@@ -137,6 +144,12 @@ class CorridorFollower(Controller):
         )
         k = self.params.n_offsets
         self._unit_offsets = np.linspace(-1.0, 1.0, k) if k > 1 else np.zeros(1)
+        p = self.params
+        #: arc lengths of the probe points ahead of the robot's projection [m]
+        self._probe_steps_m = np.arange(0.0, p.probe_ahead_m + 1e-9, p.probe_step_m)
+        #: fractions of the way robot -> shifted carrot at which it is probed (0 excluded)
+        n_t = max(2, int(math.ceil(p.lookahead_m / p.probe_step_m)) + 1)
+        self._way_fractions = np.linspace(0.0, 1.0, n_t)[1:]
         self._path: FloatArray | None = None
         self._n_seg = 0  # segments of the path (0: none)
         self._seg = 0
@@ -231,16 +244,51 @@ class CorridorFollower(Controller):
         carrot: FloatArray,
         s_carrot: float,
         grid: ClearanceGrid,
-    ) -> tuple[int | None, FloatArray, FloatArray]:
-        """Index of the best free offset (None: none is free), the candidate offsets [m] and
+    ) -> tuple[int | None, FloatArray, FloatArray, float]:
+        """Index of the best free offset (None: none is free), the candidate offsets [m],
         each candidate's minimum clearance within ``speed_probe_m`` ahead (the way to its
         carrot included unless the robot stands inside the hard clearance: a free offset's
-        value is then never below the hard clearance)."""
+        value is then never below the hard clearance) and the clearance at the robot [m]."""
         p = self.params
+        if self.backend not in ("auto", "numba", "numpy"):
+            raise ValueError(f"backend must be auto, numba or numpy, got {self.backend!r}")
+        if self.backend != "numpy" and numba_available():
+            n = len(self._unit_offsets)
+            offsets, clear_near = np.empty(n), np.empty(n)
+            best, here = probe_offsets(
+                self._path,
+                self._cum,
+                self._tangent,
+                self._normal,
+                self._seg_hw,
+                self._seg,
+                float(s_robot),
+                self._probe_steps_m,
+                self._unit_offsets,
+                float(carrot[0]),
+                float(carrot[1]),
+                float(s_carrot),
+                float(xy[0]),
+                float(xy[1]),
+                self._way_fractions,
+                grid.clearance_m,
+                float(grid.origin[0]),
+                float(grid.origin[1]),
+                float(grid.resolution_m),
+                p.min_clearance_m,
+                p.speed_probe_m,
+                p.clearance_enough_m,
+                p.offset_cost_per_m,
+                p.switch_cost_per_m,
+                self._offset_m,
+                offsets,
+                clear_near,
+            )
+            return (None if best < 0 else best), offsets, clear_near, here
         hw_seg = float(self._seg_hw[self._seg])
         offsets = self._unit_offsets * hw_seg  # (K,)
         # the shifted path ahead: (K, M) points
-        s = s_robot + np.arange(0.0, p.probe_ahead_m + 1e-9, p.probe_step_m)
+        s = s_robot + self._probe_steps_m
         s = np.minimum(s, self._cum[-1])
         base, normal, hw = self._shifted(s)
         d = np.clip(offsets[:, None], -hw[None, :], hw[None, :])  # (K, M)
@@ -249,8 +297,7 @@ class CorridorFollower(Controller):
         # the way there: robot -> shifted carrot (K, T)
         hw_c = float(self._half_width_at(np.array([s_carrot]), np.array([self._seg]))[0])
         targets = carrot + np.clip(offsets, -hw_c, hw_c)[:, None] * self._normal[self._seg]
-        n_t = max(2, int(math.ceil(p.lookahead_m / p.probe_step_m)) + 1)
-        w = np.linspace(0.0, 1.0, n_t)[1:]
+        w = self._way_fractions
         way = xy + w[None, :, None] * (targets[:, None, :] - xy)
         clear_way = grid.clearance_at(way)
         # the robot may already be inside the hard clearance (something came to it): then the
@@ -263,14 +310,14 @@ class CorridorFollower(Controller):
         if here >= p.min_clearance_m:
             clear_near = np.minimum(clear_near, clear_way.min(axis=1))
         if not free.any():
-            return None, offsets, clear_near
+            return None, offsets, clear_near, here
         score = (
             np.minimum(clear.min(axis=1), p.clearance_enough_m)
             - p.offset_cost_per_m * np.abs(offsets)
             - p.switch_cost_per_m * np.abs(offsets - self._offset_m)
         )
         score[~free] = -np.inf
-        return int(np.argmax(score)), offsets, clear_near
+        return int(np.argmax(score)), offsets, clear_near, here
 
     # ----------------------------------------------------------------- control
     def command(
@@ -303,18 +350,21 @@ class CorridorFollower(Controller):
             break
         cx, cy = carrot_on_segment(verts[self._seg], verts[self._seg + 1], x, y, p.lookahead_m)
         carrot = np.array([cx, cy])
-        s_carrot = float(self._cum[self._seg]) + float(np.hypot(*(carrot - verts[self._seg])))
+        a = verts[self._seg]
+        s_carrot = float(self._cum[self._seg]) + float(np.hypot(cx - a[0], cy - a[1]))
         xy = np.array([x, y])
-        best, offsets, clear_near = self._choose_offset(xy, s_robot, carrot, s_carrot, grid)
+        best, offsets, clear_near, here = self._choose_offset(xy, s_robot, carrot, s_carrot, grid)
         if best is None:
             self._blocked = True
             self._clearance_ahead_m = float(clear_near.max())
             return stop
         self._blocked = False
         self._offset_m = float(offsets[best])
-        hw_c = float(self._half_width_at(np.array([s_carrot]), np.array([self._seg]))[0])
+        # _half_width_at(s_carrot) on scalars
+        hw_c = min(float(self._seg_hw[self._seg]), max(float(self._cum[-1]) - s_carrot, 0.0))
         d_c = min(max(self._offset_m, -hw_c), hw_c)
-        tx, ty = carrot + d_c * self._normal[self._seg]
+        nx, ny = self._normal[self._seg]
+        tx, ty = cx + d_c * float(nx), cy + d_c * float(ny)
         # the shifted carrot in the robot frame
         c, sn = math.cos(th), math.sin(th)
         dx, dy = tx - x, ty - y
@@ -325,7 +375,6 @@ class CorridorFollower(Controller):
             return np.array([0.0, math.copysign(p.max_omega_radps, alpha)], dtype=np.float32)
         # speed: clearance law on the chosen offset (the robot's own spot counts unless it
         # is already inside the hard clearance: then it creeps out along the free offset)
-        here = float(grid.clearance_at(xy))
         d_speed = float(clear_near[best])
         if here >= p.min_clearance_m:
             d_speed = min(d_speed, here)

@@ -60,7 +60,6 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import ndimage
 
 from dynmap_sim import se2
 from dynmap_sim.agent.control.collision_monitor import CollisionMonitor, CollisionMonitorParams
@@ -539,35 +538,9 @@ class NavigationStack:
         p = self.params
         if self._local is not None and np.hypot(*(self._local[0] - pose[:2])) < 0.25:
             return self._local[1]
-        base = self._global
-        res = base.resolution_m
-        h, w = base.shape
-        i, j = base.cell_of(pose[:2])
-        k_in = int(math.ceil(p.local_window_m / res))
-        k_out = k_in + int(math.ceil(p.local_margin_m / res))
-        r0, r1, c0, c1 = (
-            max(i - k_out, 0),
-            min(i + k_out + 1, h),
-            max(j - k_out, 0),
-            min(j + k_out + 1, w),
+        grid = self.costmap.window_clearance(
+            self._global, pose[:2], p.local_window_m, p.local_margin_m
         )
-        occ = self.costmap.occupied_mask()[r0:r1, c0:c1]
-        local = (
-            ndimage.distance_transform_edt(~occ) * res if occ.any() else np.full(occ.shape, np.inf)
-        )
-        a0, a1, b0, b1 = (
-            max(i - k_in, 0),
-            min(i + k_in + 1, h),
-            max(j - k_in, 0),
-            min(j + k_in + 1, w),
-        )
-        win = local[a0 - r0 : a1 - r0, b0 - c0 : b1 - c0]
-        clear = base.clearance_m.copy()
-        old = clear[a0:a1, b0:b1]
-        clear[a0:a1, b0:b1] = np.where(
-            win < p.local_margin_m, win, np.maximum(old, p.local_margin_m)
-        )
-        grid = ClearanceGrid(base.origin, res, clear)
         self._local = (pose[:2].copy(), grid)
         return grid
 

@@ -36,6 +36,7 @@ and columns x.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,12 +46,19 @@ from scipy import ndimage
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import OCCUPIED, UNKNOWN, OccupancyGrid
 from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
+from dynmap_sim.agent.planning.costmap_numba import (
+    OFFSET_CELLS,
+    clearance_window,
+    mark_scan,
+    numba_available,
+)
+from dynmap_sim.agent.planning.costmap_numba import window_clearance as window_clearance_nb
 from dynmap_sim.types import LaserSpec, Prior, Scan
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
-_OFFSET = 1 << 16  # cells: keeps ray coordinates positive so that truncation is floor
+_OFFSET = OFFSET_CELLS  # cells: keeps ray coordinates positive so that truncation is floor
 
 
 @dataclass(frozen=True)
@@ -136,7 +144,13 @@ class Costmap:
 
     ``bounds = (xmin, ymin, xmax, ymax)`` [m] of the area (the prior's bounds); the grid
     covers it plus ``params.margin_m``. Picklable (plain arrays).
+
+    :attr:`backend` ``"auto"`` runs the scan update and the distance transforms in the numba
+    kernels of :mod:`.costmap_numba` when numba is installed (the same numbers), ``"numpy"``
+    always in numpy and scipy.
     """
+
+    backend: str = "auto"
 
     def __init__(
         self, params: CostmapParams | None, bounds: tuple[float, float, float, float]
@@ -164,6 +178,8 @@ class Costmap:
         self._beams: tuple[LaserSpec, FloatArray] | None = None  # laser -> beam angles
         self._clearance: ClearanceGrid | None = None
         self._occupied: NDArray[np.bool_] | None = None
+        #: the last window_clearance: (its base, its window a0, a1, b0, b1, its array)
+        self._window: tuple[ClearanceGrid, tuple[int, int, int, int], FloatArray] | None = None
 
     @classmethod
     def for_prior(cls, prior: Prior, params: CostmapParams | None = None) -> Costmap:
@@ -248,8 +264,33 @@ class Costmap:
         cell appeared or disappeared (the clearance is then recomputed on demand)."""
         p = self.params
         ranges = np.asarray(scan.ranges_m if isinstance(scan, Scan) else scan, dtype=np.float64)
-        lp = se2.compose(np.asarray(pose, dtype=np.float64), np.asarray(laser.mount_pose, float))
+        pose = np.asarray(pose, dtype=np.float64)
+        lp = se2.compose(pose, np.asarray(laser.mount_pose, float))
         th = lp[2] + self._angles(laser)
+        if self._compiled():
+            changed = mark_scan(
+                self.marks,
+                float(self.origin[0]),
+                float(self.origin[1]),
+                self.resolution_m,
+                float(lp[0]),
+                float(lp[1]),
+                np.cos(th),
+                np.sin(th),
+                ranges,
+                float(laser.range_min_m),
+                float(laser.range_max_m),
+                float(p.raytrace_range_m),
+                float(p.inf_clear_range_m),
+                float(p.obstacle_range_m),
+                int(p.max_persistence_scans),
+                float(pose[0]),
+                float(pose[1]),
+                self._footprint,
+            )
+            if changed:
+                self._changed()
+            return changed
         direction = np.stack([np.cos(th), np.sin(th)], axis=1)
         with np.errstate(invalid="ignore"):
             valid = np.isfinite(ranges) & (ranges >= laser.range_min_m)
@@ -290,8 +331,7 @@ class Costmap:
         n = int(np.ceil(length_m.max(initial=0.0) / (0.5 * res)))
         t_cells = (0.5 * np.arange(n)).astype(np.float32)  # sample distances [cells]
         keep = t_cells[None, :] * res < length_m[:, None]  # (B, n)
-        # nearest cell by truncation (float32: 10x faster than rint), offset to stay >= 0
-        o = ((origin_xy - self.origin) / res + 0.5 + _OFFSET).astype(np.float32)
+        o = self._ray_origin(origin_xy)
         d = direction.astype(np.float32)
         col = (o[0] + t_cells[None, :] * d[:, 0:1]).astype(np.int32) - _OFFSET
         row = (o[1] + t_cells[None, :] * d[:, 1:2]).astype(np.int32) - _OFFSET
@@ -300,6 +340,17 @@ class Costmap:
         key = row * w + col
         keep &= key != end_key[:, None]
         return key[keep]
+
+    def _ray_origin(self, origin_xy: FloatArray) -> NDArray[np.float32]:
+        """A ray origin in cells for truncation to the nearest cell (float32: 10x faster than
+        rint), offset by ``_OFFSET`` to stay >= 0."""
+        return ((origin_xy - self.origin) / self.resolution_m + 0.5 + _OFFSET).astype(np.float32)
+
+    def _compiled(self) -> bool:
+        """Whether the numba kernels serve (:attr:`backend`)."""
+        if self.backend not in ("auto", "numba", "numpy"):
+            raise ValueError(f"Costmap.backend must be auto, numba or numpy, got {self.backend!r}")
+        return self.backend != "numpy" and numba_available()
 
     def _footprint_keys(self, pose: FloatArray) -> IntArray:
         """Flat indices of the cells within ``footprint_clear_radius_m`` of the robot."""
@@ -332,14 +383,73 @@ class Costmap:
         layer (the grid is unbounded beyond its edge). Cached until a layer changes; treat it
         as read-only (planners cache their search graphs by its identity)."""
         if self._clearance is None:
-            occ = self.occupied_mask()
-            dist = (
-                ndimage.distance_transform_edt(~occ) if occ.any() else np.full(self.shape, np.inf)
-            )
+            h, w = self.shape
             self._clearance = ClearanceGrid(
-                self.origin.copy(), self.resolution_m, dist * self.resolution_m
+                self.origin.copy(), self.resolution_m, self._distance_m((0, h), (0, w))
             )
         return self._clearance
 
+    def _window_buffer(self, base: ClearanceGrid) -> FloatArray:
+        """A copy of ``base``'s clearance for :meth:`window_clearance`: the last call's array
+        with its window restored from ``base`` when it had the same ``base``."""
+        last = getattr(self, "_window", None)  # (a costmap pickled before it had one)
+        if last is not None and last[0] is base:
+            (a0, a1, b0, b1), clear = last[1], last[2]
+            clear[a0:a1, b0:b1] = base.clearance_m[a0:a1, b0:b1]
+            return clear
+        self._window = None
+        return base.clearance_m.copy()
+
+    def _distance_m(self, rows: tuple[int, int], cols: tuple[int, int]) -> FloatArray:
+        """Distance [m] from each cell of the window ``rows x cols`` to the nearest obstacle
+        of either layer inside it (inf when it has none): the exact Euclidean distance
+        transform (scipy's, or the numba kernel's, identical)."""
+        if self._compiled():
+            return clearance_window(self.static, self.marks, rows, cols, self.resolution_m)
+        occ = self.occupied_mask()[rows[0] : rows[1], cols[0] : cols[1]]
+        if not occ.any():
+            return np.full(occ.shape, np.inf)
+        return ndimage.distance_transform_edt(~occ) * self.resolution_m
+
+    def window_clearance(
+        self, base: ClearanceGrid, centre_xy: FloatArray, window_m: float, margin_m: float
+    ) -> ClearanceGrid:
+        """``base`` (a clearance of this costmap's cells, e.g. the last plan's) with the window
+        of half-size ``window_m`` [m] around ``centre_xy`` recomputed from the current layers
+        (nav2's rolling local costmap): exact where below ``margin_m`` [m] (obstacles up to
+        ``margin_m`` outside the window are looked at), elsewhere in the window at least
+        ``margin_m`` (``base``'s value when larger). ``base`` is not changed. With the numba
+        kernels the grid's array is reused by the next call with the same ``base`` (only the
+        last window is restored from ``base``, no copy of the whole grid): use the grid before
+        calling again."""
+        res = base.resolution_m
+        h, w = base.shape
+        i, j = base.cell_of(centre_xy)
+        k_in = int(math.ceil(window_m / res))
+        k_out = k_in + int(math.ceil(margin_m / res))
+        r0, r1 = max(i - k_out, 0), min(i + k_out + 1, h)
+        c0, c1 = max(j - k_out, 0), min(j + k_out + 1, w)
+        a0, a1 = max(i - k_in, 0), min(i + k_in + 1, h)
+        b0, b1 = max(j - k_in, 0), min(j + k_in + 1, w)
+        if self._compiled():
+            clear = self._window_buffer(base)
+            window_clearance_nb(
+                self.static, self.marks, (r0, r1, c0, c1), (a0, a1, b0, b1), res, margin_m, clear
+            )
+            self._window = (base, (a0, a1, b0, b1), clear)
+            return ClearanceGrid(base.origin, res, clear)
+        local = self._distance_m((r0, r1), (c0, c1))
+        win = local[a0 - r0 : a1 - r0, b0 - c0 : b1 - c0]
+        clear = base.clearance_m.copy()
+        old = clear[a0:a1, b0:b1]
+        clear[a0:a1, b0:b1] = np.where(win < margin_m, win, np.maximum(old, margin_m))
+        return ClearanceGrid(base.origin, res, clear)
+
     def __getstate__(self) -> dict[str, object]:
-        return {**self.__dict__, "_clearance": None, "_occupied": None, "_beams": None}
+        return {
+            **self.__dict__,
+            "_clearance": None,
+            "_occupied": None,
+            "_beams": None,
+            "_window": None,
+        }
