@@ -164,6 +164,20 @@ def test_ltm_update_raises_hit_cells_and_free_space_lowers_the_ray():
         assert np.all(m.logodds[m.pinned] == p.l_max)
 
 
+def test_points_not_marked_occupied_add_only_free_space():
+    p = LTMParams()
+    m = _map(p)
+    pose = np.array([1.0, 1.025, 0.0])
+    pts, covs = point_covariances(pose, np.diag([1e-4, 1e-4, 1e-5]), MOUNT,
+                                  np.array([2.025, 2.025]), np.array([0.0, 0.3]), 0.001,
+                                  np.array([0.01, 0.01]))  # fmt: skip
+    m.update(pose[:2], pts, covs, p, occupied=np.array([False, True]))
+    ix, iy = m.cells(pts)
+    assert m.logodds[iy[0], ix[0]] <= 0.0 < m.logodds[iy[1], ix[1]]
+    jx, jy = m.cells(np.array([[2.0, 1.025]]))  # the first beam still clears its ray
+    assert m.logodds[jy[0], jx[0]] == pytest.approx(p.l_free)
+
+
 def test_point_covariance_is_eq_13_14():
     pose = np.array([0.0, 0.0, 0.0])
     cov_p = np.diag([0.01, 0.04, 0.0])
@@ -243,6 +257,33 @@ def test_tracks_a_synthetic_run_learns_the_furniture_and_reports_its_diagnostics
     assert float(art["resolution_m"]) == 0.05 and int(art["ltm_slot"]) == 4
     clone = pickle.loads(pickle.dumps(loc))
     assert np.array_equal(clone.ltm.map().logodds, loc.ltm.map().logodds)
+
+
+def test_points_on_the_prior_walls_do_not_redraw_them():
+    """``ltm_learn_prior_walls``: by default a point the walls prior explains adds free
+    space only, so the long-term map learns the furniture but no second, shifted or
+    thickened copy of the walls (which let the pose drift with the map, issue 11)."""
+    from scipy.ndimage import distance_transform_edt
+
+    corners = np.array([[1.0, 1.0], [4.2, 1.0], [6.5, 1.5], [4.2, 1.2], [4.0, 3.8], [1.0, 3.6]])
+    truth = polyline_path(corners, step_m=0.05, turn_step_rad=0.15)
+    segs = room_segments(cupboard=True)
+    near = {}
+    for learn in (False, True):
+        loc = make_localizer("adaptive-memory", laser=LASER, rng=np.random.default_rng(1),
+                             ltm_learn_prior_walls=learn)  # fmt: skip
+        rng = np.random.default_rng(0)
+        _, err = _run(loc, truth, segs, rng, day=1)
+        assert err.mean() < 0.08
+        m = loc.ltm.map()
+        learned = (m.logodds >= LTMParams().l_occupied) & ~m.pinned
+        wall_dist = distance_transform_edt(~m.pinned) * m.resolution
+        near[learn] = int(np.sum(learned & (wall_dist <= 0.15)))
+        if not learn:  # the box, the cupboard and the sofa are learned
+            assert learned.sum() > 100
+            bx, by = m.cells(np.array([[2.2, 2.0], [6.9, 0.6], [1.4, 4.5]]))
+            assert np.all(learned[by, bx] | learned[by - 1, bx] | learned[by + 1, bx])
+    assert near[False] <= 10 < 500 < near[True]
 
 
 def test_runs_on_the_shipped_apartment(tmp_path):

@@ -102,9 +102,16 @@ class LTMMap:
 
     # -- eq. 15: Elfes' Bayesian update ------------------------------------------------
     def update(
-        self, laser_xy: FloatArray, points: FloatArray, covs: FloatArray, params: LTMParams
+        self,
+        laser_xy: FloatArray,
+        points: FloatArray,
+        covs: FloatArray,
+        params: LTMParams,
+        occupied: NDArray[np.bool_] | None = None,
     ) -> None:
-        """Fuse points ``(n, 2)`` with covariances ``(n, 2, 2)`` seen from ``laser_xy``."""
+        """Fuse points ``(n, 2)`` with covariances ``(n, 2, 2)`` seen from ``laser_xy``;
+        ``occupied`` (default all): the points that add occupied evidence (the others add
+        only the free space along their beams)."""
         if len(points) == 0:
             return
         h, w = self.shape
@@ -127,6 +134,8 @@ class LTMMap:
         m2 += inv[:, 1, 1, None] * dy * dy
         p = 0.5 + (params.p_hit - 0.5) * np.exp(-0.5 * m2)
         ok = (cx >= 0) & (cx < w) & (cy >= 0) & (cy < h) & (m2 < 9.0)
+        if occupied is not None:
+            ok &= np.asarray(occupied, dtype=bool)[:, None]
         flat_all.append((cy * w + cx)[ok])
         add_all.append(np.log(p / (1.0 - p))[ok])
         if params.free_space:
