@@ -51,13 +51,22 @@ def pick_goal(
     """A goal in line of sight of ``frm``: an attraction point or a free point of the areas,
     not within ``avoid = (centre, radius_m) + r`` (the robot's disc); ``frm`` if none.
 
-    Up to ``GOAL_TRIES`` tries, each drawing a goal (see :func:`_try_goal`). Tries are
-    evaluated ``SPECULATE`` at a time: their draws are made in the order one try after
-    another makes them, their candidates tested in one pass, and the generator is then put
-    back to where the first accepted try left it, so the goals and the draws are those of the
+    Up to ``GOAL_TRIES`` tries, each drawing a goal (see :func:`_try_goal`). Tries for a
+    free point of the areas (after the first, with several areas) are evaluated
+    ``SPECULATE`` at a time: their draws are made in the order one try after another makes
+    them, their candidates tested in one pass, and the generator is then put back to where
+    the first accepted try left it, so the goals and the draws are those of the
     one-at-a-time loop, number for number.
     """
+    # every try for attraction points (one draw and one line of sight each: nothing to
+    # gain), and the first alone for several areas (it is often accepted, and speculative
+    # tries there cost a draw of area indices each)
     left = GOAL_TRIES
+    while left > 0 and (pop.goals or (left == GOAL_TRIES and len(pop.areas) > 1)):
+        left -= 1
+        g = _try_goal(obstacles, rng, pop, r)
+        if g is not None and _accept_one(obstacles, g, frm, r, avoid):
+            return g
     while left > 0:
         n = min(SPECULATE, left)
         state = rng.bit_generator.state
@@ -74,7 +83,7 @@ def pick_goal(
             _draw_tries(obstacles, rng, pop, r, done, test=False)
             left -= 1
             g = _try_goal(obstacles, rng, pop, r)
-            if g is not None and _accept(obstacles, g[None, :], frm, r, avoid)[0]:
+            if g is not None and _accept_one(obstacles, g, frm, r, avoid):
                 return g
     return frm.copy()
 
@@ -96,13 +105,11 @@ def _draw_tries(
     n: int,
     test: bool = True,
 ) -> tuple[FloatArray, int]:
-    """The draws of ``n`` tries of :func:`pick_goal` in their order, assuming each try's
+    """The draws of ``n`` tries of :func:`pick_goal` for free points of the areas (no
+    attraction points) in their order, assuming each try's
     :func:`random_point` finds a free point in its first batch of 8 (``test``: check that
     with one :meth:`Obstacles.free_mask` of all candidates). Returns the goals ``(m, 2)`` of
     the first ``m <= n`` tries for which that holds, and ``m``."""
-    if pop.goals:
-        idx = [int(rng.integers(len(pop.goals))) for _ in range(n)]
-        return np.array([pop.goals[i] for i in idx], dtype=float).reshape(n, 2), n
     boxes = np.array(pop.areas, dtype=np.float64)
     if n == 0:
         return np.zeros((0, 2)), 0
@@ -125,6 +132,20 @@ def _draw_tries(
     m = n if found.all() else int(found.argmin())
     first = free[:m].argmax(axis=1)
     return cand.reshape(n, 8, 2)[np.arange(m), first], m
+
+
+def _accept_one(
+    obstacles: Obstacles,
+    g: FloatArray,
+    frm: FloatArray,
+    r: float,
+    avoid: tuple[FloatArray, float] | None,
+) -> bool:
+    """:func:`_accept` for one goal ``g``."""
+    gx, gy = float(g[0]), float(g[1])
+    if avoid is not None and math.hypot(gx - avoid[0][0], gy - avoid[0][1]) < avoid[1] + r:
+        return False
+    return math.hypot(gx - frm[0], gy - frm[1]) > GOAL_TOL_M and obstacles.visible(frm, g)
 
 
 def _accept(
