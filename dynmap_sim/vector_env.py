@@ -15,10 +15,13 @@ truncated resets it (``reset()`` without seed: the next run of its calendar), ig
 action and returns its first observation with reward 0 and ``terminated = truncated =
 False``.
 
-What is *not* batched yet: each sub-env's world (people, pymunk bodies) and ray casting run
-one after another inside the step; batching them across worlds (one cast call for all
-envs) is issue 13 item 2's open part. The gain over ``SyncVectorEnv`` is the copies and
-layers it skips (measured in ``benchmarks/bench_peers.py``).
+Batched: the scans of all sub-envs are cast in one pass
+(:func:`~dynmap_sim.sensors.lidar.cast_many`: each env's shapes go into its sensor frame on
+their own, then the broad phase and intersections of every env's (beam, shape) pairs are one
+set of numpy calls), with the same numbers as one env at a time. Not batched: each sub-env's
+robot, world (people, pymunk bodies) and lidar noise (its own generator) run one after
+another; the gain over ``SyncVectorEnv`` is the copies and layers it skips plus the shared
+cast (measured in ``benchmarks/bench_peers.py``).
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from dynmap_sim.env import DynMapEnv
+from dynmap_sim.sensors.lidar import cast_many
 
 
 class DynMapVectorEnv(VectorEnv):
@@ -124,20 +128,31 @@ class DynMapVectorEnv(VectorEnv):
         a = np.asarray(actions)
         if a.shape != (self.num_envs, 2):
             raise ValueError(f"actions must have shape ({self.num_envs}, 2), got {a.shape}")
-        infos = []
+        infos: list[dict[str, Any]] = [{}] * self.num_envs
+        moved: list[tuple[int, np.ndarray, bool]] = []  # (env, pose, collision) to observe
         for i, env in enumerate(self.envs):
             if self._autoreset[i]:
                 obs, info = env.reset()
                 self._rewards[i] = 0.0
                 self._terminations[i] = False
                 self._truncations[i] = False
+                self._put(i, obs)
+                infos[i] = info
             else:
-                obs, r, term, trunc, info = env.step(a[i])
+                pose, collision, r, term, trunc = env._advance(a[i])
                 self._rewards[i] = r
                 self._terminations[i] = term
                 self._truncations[i] = trunc
-            self._put(i, obs)
-            infos.append(info)
+                moved.append((i, pose, collision))
+        # the scans of all envs that moved, cast in one pass; noise and infos per env
+        if moved:
+            envs = [self.envs[i] for i, _, _ in moved]
+            casts = cast_many(
+                [e.lidar for e in envs], [p for _, p, _ in moved], [e.world.geometry for e in envs]
+            )
+            for env, (i, pose, collision), cast in zip(envs, moved, casts, strict=True):
+                obs, infos[i] = env._observe(pose, collision, cast)
+                self._put(i, obs)
         np.logical_or(self._terminations, self._truncations, out=self._autoreset)
         return (
             self._obs(),

@@ -44,7 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynmap_sim.se2 import compose
-from dynmap_sim.sensors.raycast import SegmentCache, beam_directions, cast_scan
+from dynmap_sim.sensors.raycast import SegmentCache, beam_directions, cast_scan, cast_scans
 from dynmap_sim.types import LaserSpec
 
 FloatArray = NDArray[np.float64]
@@ -178,6 +178,34 @@ def make_lidar(
     )
 
 
+def cast_many(
+    lidars: list[Lidar], robot_poses: list[FloatArray], geoms: list[GeometryLike]
+) -> list[tuple[FloatArray, NDArray]]:
+    """:meth:`Lidar.cast` of each lidar from its robot pose among its geometry; one
+    :func:`~dynmap_sim.sensors.raycast.cast_scans` pass for all when they are numpy
+    casters of the same beams (the same numbers as one by one)."""
+    first = lidars[0]
+    same = all(
+        lid.backend == "numpy" and lid.spec == first.spec and lid._cast is cast_scan
+        for lid in lidars
+    )
+    if len(lidars) < 2 or first.backend != "numpy" or not same:
+        return [lid.cast(p, g) for lid, p, g in zip(lidars, robot_poses, geoms, strict=True)]
+    spec = first.spec
+    ranges, hits = cast_scans(
+        [lid.sensor_pose(p) for lid, p in zip(lidars, robot_poses, strict=True)],
+        spec.angle_min_rad,
+        spec.angle_increment_rad,
+        first._cos,
+        first._sin,
+        spec.range_max_m,
+        [lid._segments(g) for lid, g in zip(lidars, geoms, strict=True)],
+        [g.circles if g.circles.shape[0] else None for g in geoms],
+        first._u,
+    )
+    return list(zip(ranges, hits, strict=True))
+
+
 @dataclass
 class LidarReading:
     """One scan: REP-117 ``ranges_m`` (float32) plus ground truth per beam.
@@ -276,17 +304,21 @@ class Lidar:
         """The laser's pose in the map frame for a robot (``base_link``) pose."""
         return compose(np.asarray(robot_pose, dtype=np.float64), self.spec.mount_pose)
 
-    def cast(self, robot_pose: FloatArray, geom: GeometryLike) -> tuple[FloatArray, NDArray]:
-        """Noise-free ranges [m] (``+inf``: no hit) and hit indices (see ``cast_scan``)."""
+    def sensor_pose(self, robot_pose: FloatArray) -> tuple[float, float, float]:
+        """The laser's pose ``(x, y, heading)`` [m, rad] in the map frame, as a tuple."""
         x, y, th = float(robot_pose[0]), float(robot_pose[1]), float(robot_pose[2])
         mx, my, myaw = self.spec.mount_pose
         if mx or my or myaw:
             c, s = math.cos(th), math.sin(th)
             x, y, th = x + c * mx - s * my, y + s * mx + c * my, th + myaw
+        return x, y, th
+
+    def cast(self, robot_pose: FloatArray, geom: GeometryLike) -> tuple[FloatArray, NDArray]:
+        """Noise-free ranges [m] (``+inf``: no hit) and hit indices (see ``cast_scan``)."""
         spec = self.spec
         circles = geom.circles if geom.circles.shape[0] else None
         return self._cast(
-            (x, y, th),
+            self.sensor_pose(robot_pose),
             spec.angle_min_rad,
             spec.angle_increment_rad,
             self._cos,
@@ -302,6 +334,13 @@ class Lidar:
     ) -> LidarReading:
         """One noisy scan from the robot at ``robot_pose`` (map frame) with truth labels."""
         true_r, hit = self.cast(robot_pose, geom)
+        return self.reading(true_r, hit, geom, rng)
+
+    def reading(
+        self, true_r: FloatArray, hit: NDArray, geom: GeometryLike, rng: np.random.Generator
+    ) -> LidarReading:
+        """The scan of noise-free ranges ``true_r`` and hit indices ``hit`` (of
+        :meth:`cast` among ``geom``): noise from ``rng`` and truth labels."""
         obj, cls = self._label_tables(geom)
         ranges = self.apply_noise(true_r, rng)
         return LidarReading(ranges, true_r, obj[hit], cls[hit])
