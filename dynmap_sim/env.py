@@ -363,13 +363,18 @@ class DynMapEnv(gymnasium.Env):
         pose: FloatArray,
         collision: bool,
         cast: tuple[FloatArray, NDArray[np.int64]] | None = None,
+        ranges_m: NDArray[np.float32] | None = None,
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """Observation and info at ``pose``; ``cast``: the scan's noise-free ranges and hit
-        indices when already cast (a vector env casts all its envs' scans at once)."""
+        indices when already cast, ``ranges_m`` its noisy readings when already made from
+        this env's lidar generator (a vector env casts and noises all its envs' scans at
+        once)."""
         if cast is None:
             reading = self.lidar.scan(pose, self.world.geometry, self._rng_lidar)
         else:
-            reading = self.lidar.reading(*cast, self.world.geometry, self._rng_lidar)
+            reading = self.lidar.reading(
+                *cast, self.world.geometry, self._rng_lidar, ranges_m=ranges_m
+            )
         slot = self.world.slot
         people, n_people = self._people()
         obs = {"scan": reading.ranges_m, "odom": self.odometry.pose}

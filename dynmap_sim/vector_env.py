@@ -18,10 +18,11 @@ False``.
 Batched: the scans of all sub-envs are cast in one pass
 (:func:`~dynmap_sim.sensors.lidar.cast_many`: each env's shapes go into its sensor frame on
 their own, then the broad phase and intersections of every env's (beam, shape) pairs are one
-set of numpy calls), with the same numbers as one env at a time. Not batched: each sub-env's
-robot, world (people, pymunk bodies) and lidar noise (its own generator) run one after
-another; the gain over ``SyncVectorEnv`` is the copies and layers it skips plus the shared
-cast (measured in ``benchmarks/bench_peers.py``).
+set of numpy calls), and their noise is one pass too (:meth:`Lidar.apply_noise_rows`: each
+env's draws from its own generator, in its own order, the arithmetic once), with the same
+numbers as one env at a time. Not batched: each sub-env's robot and world (people, pymunk
+bodies) run one after another; the gain over ``SyncVectorEnv`` is the copies and layers it
+skips plus the shared cast and noise (measured in ``benchmarks/bench_peers.py``).
 """
 
 from __future__ import annotations
@@ -61,6 +62,14 @@ class DynMapVectorEnv(VectorEnv):
         self._terminations = np.zeros(num_envs, dtype=np.bool_)
         self._truncations = np.zeros(num_envs, dtype=np.bool_)
         self._autoreset = np.zeros(num_envs, dtype=np.bool_)
+        # one noise pass for all scans needs the same laser, noise model and per-beam bias
+        lid = first.lidar
+        self._same_lidars = all(
+            e.lidar.spec == lid.spec
+            and e.lidar.noise == lid.noise
+            and np.array_equal(e.lidar._bias_m, lid._bias_m)
+            for e in self.envs
+        )
 
     def _obs(self) -> dict[str, np.ndarray]:
         return {"scan": self._scan.copy(), "odom": self._odom.copy()}
@@ -150,8 +159,14 @@ class DynMapVectorEnv(VectorEnv):
             casts = cast_many(
                 [e.lidar for e in envs], [p for _, p, _ in moved], [e.world.geometry for e in envs]
             )
-            for env, (i, pose, collision), cast in zip(envs, moved, casts, strict=True):
-                obs, infos[i] = env._observe(pose, collision, cast)
+            noisy: list[Any] = [None] * len(envs)
+            if self._same_lidars and len(envs) > 1:
+                true_r = np.stack([c[0] for c in casts])
+                noisy = list(envs[0].lidar.apply_noise_rows(true_r, [e._rng_lidar for e in envs]))
+            for env, (i, pose, collision), cast, rng_m in zip(
+                envs, moved, casts, noisy, strict=True
+            ):
+                obs, infos[i] = env._observe(pose, collision, cast, rng_m)
                 self._put(i, obs)
         np.logical_or(self._terminations, self._truncations, out=self._autoreset)
         return (

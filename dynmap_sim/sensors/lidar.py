@@ -337,12 +337,18 @@ class Lidar:
         return self.reading(true_r, hit, geom, rng)
 
     def reading(
-        self, true_r: FloatArray, hit: NDArray, geom: GeometryLike, rng: np.random.Generator
+        self,
+        true_r: FloatArray,
+        hit: NDArray,
+        geom: GeometryLike,
+        rng: np.random.Generator,
+        ranges_m: NDArray[np.float32] | None = None,
     ) -> LidarReading:
         """The scan of noise-free ranges ``true_r`` and hit indices ``hit`` (of
-        :meth:`cast` among ``geom``): noise from ``rng`` and truth labels."""
+        :meth:`cast` among ``geom``): noise from ``rng`` (or the noisy ``ranges_m`` already
+        made from ``true_r``) and truth labels."""
         obj, cls = self._label_tables(geom)
-        ranges = self.apply_noise(true_r, rng)
+        ranges = self.apply_noise(true_r, rng) if ranges_m is None else ranges_m
         return LidarReading(ranges, true_r, obj[hit], cls[hit])
 
     def apply_noise(
@@ -350,50 +356,81 @@ class Lidar:
     ) -> NDArray[np.float32]:
         """REP-117 readings from noise-free ranges (see the module docstring for the model).
 
-        ``true_range_m`` has shape ``(..., n_beams)`` (a batch of scans is allowed).
+        ``true_range_m`` has shape ``(..., n_beams)`` (a batch of scans is allowed; its draws
+        all come from ``rng``).
         """
+        r = np.asarray(true_range_m, dtype=np.float64)
+        if r.shape[-1] != self.spec.n_beams:
+            raise ValueError(f"expected (..., {self.spec.n_beams}) ranges, got shape {r.shape}")
+        return self._noise(r.reshape(-1, r.shape[-1]), [rng]).reshape(r.shape)
+
+    def apply_noise_rows(
+        self, true_range_m: FloatArray, rngs: list[np.random.Generator]
+    ) -> NDArray[np.float32]:
+        """:meth:`apply_noise` of each row of ``true_range_m`` ``(S, n_beams)`` with its own
+        generator ``rngs[i]``: row ``i`` reads what ``apply_noise(true_range_m[i], rngs[i])``
+        gives (the same draws in the same order), the arithmetic done once for all rows."""
+        r = np.asarray(true_range_m, dtype=np.float64)
+        if r.ndim != 2 or r.shape != (len(rngs), self.spec.n_beams):
+            raise ValueError(
+                f"expected ({len(rngs)}, {self.spec.n_beams}) ranges, got shape {r.shape}"
+            )
+        return self._noise(r, rngs)
+
+    def _noise(self, r: FloatArray, rngs: list[np.random.Generator]) -> NDArray[np.float32]:
+        """The noise model on ranges ``r`` ``(S, n_beams)`` whose rows fall into
+        ``len(rngs)`` equal groups of consecutive rows, group ``g`` drawing from ``rngs[g]``
+        (in the order one :meth:`apply_noise` of that group alone draws)."""
         nz = self.noise
         spec = self.spec
-        r = np.asarray(true_range_m, dtype=np.float64)
-        if r.shape[-1] != spec.n_beams:
-            raise ValueError(f"expected (..., {spec.n_beams}) ranges, got shape {r.shape}")
         hit = r <= spec.range_max_m
         sigma = (
             np.maximum(nz.sigma_rel * np.where(hit, r, 0.0), nz.sigma_m)
             if nz.sigma_rel
             else nz.sigma_m
         )
-        out = sigma * rng.standard_normal(r.shape)
+        rows = r.shape[0] // len(rngs)  # rows per group
+        if len(rngs) == 1:
+            out = rngs[0].standard_normal(r.shape)
+        else:
+            out = np.empty(r.shape)
+            for g, rng in enumerate(rngs):
+                rng.standard_normal(out=out[g * rows : (g + 1) * rows])
+        out *= sigma
         out += r + self._bias_m if nz.systematic_m else r  # inf stays inf
         flat_out = out.reshape(-1)
         flat_r = r.reshape(-1)
+        group_size = rows * spec.n_beams  # flat beams per group
         if nz.p_mixed > 0.0:
             # depth discontinuities between neighbours i, i+1 (NaN for no-hit beams: no edge)
             # (NaN arithmetic and comparisons are quiet: no errstate needed)
             rn = np.where(hit, r, np.nan)
-            edge = np.abs(rn[..., 1:] - rn[..., :-1]) > nz.mixed_jump_m
+            edge = np.abs(rn[:, 1:] - rn[:, :-1]) > nz.mixed_jump_m
             e = edge.ravel().nonzero()[0]
             if e.size:
                 # flat index of the left beam of each edge (rows are n_beams long)
-                left = e + e // (spec.n_beams - 1) if r.ndim > 1 else e
-                right = left + 1
-                beams = np.concatenate([left, right])
-                others = np.concatenate([right, left])
-                pick = rng.random(beams.size) < nz.p_mixed
+                left = e + e // (spec.n_beams - 1)
+                beams, others, owner = _edge_beams(left, left // group_size, len(rngs))
+                pick = _uniforms(rngs, owner) < nz.p_mixed
                 beams, others = beams[pick], others[pick]
-                w = rng.random(beams.size)
+                w = _uniforms(rngs, owner[pick])
                 flat_out[beams] = flat_r[beams] + w * (flat_r[others] - flat_r[beams])
         # one uniform per beam picks at most one of the rare events (disjoint intervals)
         p1 = nz.p_dropout
         p2 = p1 + nz.p_short
         p3 = p2 + nz.p_invalid
         if p3 > 0.0:
-            u = rng.random(r.shape)
+            if len(rngs) == 1:
+                u = rngs[0].random(r.shape)
+            else:
+                u = np.empty(r.shape)
+                for g, rng in enumerate(rngs):
+                    rng.random(out=u[g * rows : (g + 1) * rows])
             rare = ((u < p3) & hit).ravel().nonzero()[0]
             if rare.size:
                 ur = u.reshape(-1)[rare]
                 rmin = spec.range_min_m
-                short = rng.random(rare.size)
+                short = _uniforms(rngs, rare // group_size)
                 flat_out[rare] = np.where(
                     ur < p1,
                     np.inf,
@@ -402,3 +439,40 @@ class Lidar:
         out[out < spec.range_min_m] = -np.inf
         out[out > spec.range_max_m] = np.inf
         return out.astype(np.float32)
+
+
+def _edge_beams(
+    left: NDArray[np.int64], group: NDArray[np.int64], n_groups: int
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+    """The two beams of each edge (flat index ``left`` of its left beam, ascending, in
+    ``group``): per group its left beams then its right beams, the beam across the edge from
+    each, and the group of each."""
+    right = left + 1
+    if n_groups == 1:
+        return np.concatenate([left, right]), np.concatenate([right, left]), group.repeat(2)
+    counts = np.bincount(group, minlength=n_groups)
+    first = counts.cumsum() - counts  # first edge of each group
+    pos_l = first[group] + np.arange(left.size)  # = 2 first + (index within the group)
+    pos_r = pos_l + counts[group]
+    beams = np.empty(2 * left.size, dtype=np.int64)
+    others = np.empty(2 * left.size, dtype=np.int64)
+    owner = np.empty(2 * left.size, dtype=np.int64)
+    beams[pos_l], beams[pos_r] = left, right
+    others[pos_l], others[pos_r] = right, left
+    owner[pos_l] = owner[pos_r] = group
+    return beams, others, owner
+
+
+def _uniforms(rngs: list[np.random.Generator], owner: NDArray[np.int64]) -> FloatArray:
+    """One uniform in [0, 1) per entry of ``owner`` (ascending group indices) from its
+    group's generator, each group's drawn in one call (as a lone group would draw them)."""
+    if len(rngs) == 1:
+        return rngs[0].random(owner.size)
+    out = np.empty(owner.size)
+    counts = np.bincount(owner, minlength=len(rngs)).tolist()
+    at = 0
+    for rng, c in zip(rngs, counts, strict=True):
+        if c:
+            rng.random(out=out[at : at + c])
+            at += c
+    return out
