@@ -389,18 +389,12 @@ class Lidar:
             if nz.sigma_rel
             else nz.sigma_m
         )
-        rows = r.shape[0] // len(rngs)  # rows per group
-        if len(rngs) == 1:
-            out = rngs[0].standard_normal(r.shape)
-        else:
-            out = np.empty(r.shape)
-            for g, rng in enumerate(rngs):
-                rng.standard_normal(out=out[g * rows : (g + 1) * rows])
+        out = _row_draws(rngs, r.shape, "standard_normal")
         out *= sigma
         out += r + self._bias_m if nz.systematic_m else r  # inf stays inf
         flat_out = out.reshape(-1)
         flat_r = r.reshape(-1)
-        group_size = rows * spec.n_beams  # flat beams per group
+        group_size = r.size // len(rngs)  # flat beams per group
         if nz.p_mixed > 0.0:
             # depth discontinuities between neighbours i, i+1 (NaN for no-hit beams: no edge)
             # (NaN arithmetic and comparisons are quiet: no errstate needed)
@@ -420,12 +414,7 @@ class Lidar:
         p2 = p1 + nz.p_short
         p3 = p2 + nz.p_invalid
         if p3 > 0.0:
-            if len(rngs) == 1:
-                u = rngs[0].random(r.shape)
-            else:
-                u = np.empty(r.shape)
-                for g, rng in enumerate(rngs):
-                    rng.random(out=u[g * rows : (g + 1) * rows])
+            u = _row_draws(rngs, r.shape, "random")
             rare = ((u < p3) & hit).ravel().nonzero()[0]
             if rare.size:
                 ur = u.reshape(-1)[rare]
@@ -475,4 +464,16 @@ def _uniforms(rngs: list[np.random.Generator], owner: NDArray[np.int64]) -> Floa
         if c:
             rng.random(out=out[at : at + c])
             at += c
+    return out
+
+
+def _row_draws(rngs: list[np.random.Generator], shape: tuple[int, ...], kind: str) -> FloatArray:
+    """An array of ``shape`` of ``kind`` draws (``"standard_normal"`` or ``"random"``) whose
+    rows fall into ``len(rngs)`` equal groups, group ``g`` drawn by ``rngs[g]`` in one call."""
+    if len(rngs) == 1:
+        return getattr(rngs[0], kind)(shape)
+    out = np.empty(shape)
+    rows = shape[0] // len(rngs)
+    for g, rng in enumerate(rngs):
+        getattr(rng, kind)(out=out[g * rows : (g + 1) * rows])
     return out
