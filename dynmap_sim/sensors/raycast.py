@@ -184,14 +184,10 @@ class _Shapes(NamedTuple):
     cids: IntArray
 
 
-_NO_CIRCLES = (
-    np.zeros(0, np.complex128),
-    np.zeros(0),
-    np.zeros(0, bool),
-    np.zeros(0),
-    np.zeros(0),
-    np.zeros(0, np.int64),
-)
+def _no_circles() -> tuple[NDArray, ...]:
+    """The circle fields of :class:`_Shapes` for a scan with no circle in range (empty)."""
+    f, c = np.zeros(0), np.zeros(0, np.complex128)
+    return c, f, np.zeros(0, bool), f, f, np.zeros(0, np.int64)
 
 
 def _scan_shapes(
@@ -214,7 +210,7 @@ def _scan_shapes(
     span = np.abs(np.arctan2(a_x_d, ab.real))  # bearing interval of each segment [rad]
     first = np.where(a_x_d >= 0.0, a, b)
     start = np.arctan2(first.imag, first.real)
-    circ = _NO_CIRCLES
+    circ: tuple[NDArray, ...] | None = None
     if circles is not None and circles.shape[0] > 0:
         if circles.flags.c_contiguous and circles.dtype == np.float64:
             cw = circles[:, :2].view(np.complex128)[:, 0] - o  # centres, sensor at 0
@@ -233,7 +229,7 @@ def _scan_shapes(
             half[inside] = np.pi
             cstart = np.arctan2(c.imag, c.real) - half
             circ = (c, c0, inside, cstart, 2.0 * half, segments.n + cnear)
-    return _Shapes(a, d, a_x_d, start, span, sidx, *circ)
+    return _Shapes(a, d, a_x_d, start, span, sidx, *(circ or _no_circles()))
 
 
 def _cast_shapes(
