@@ -389,7 +389,10 @@ class Lidar:
             if nz.sigma_rel
             else nz.sigma_m
         )
-        out = _row_draws(rngs, r.shape, "standard_normal")
+        if len(rngs) == 1:
+            out = rngs[0].standard_normal(r.shape)
+        else:
+            out = _row_draws(rngs, r.shape, "standard_normal")
         out *= sigma
         out += r + self._bias_m if nz.systematic_m else r  # inf stays inf
         flat_out = out.reshape(-1)
@@ -403,23 +406,34 @@ class Lidar:
             e = edge.ravel().nonzero()[0]
             if e.size:
                 # flat index of the left beam of each edge (rows are n_beams long)
-                left = e + e // (spec.n_beams - 1)
-                beams, others, owner = _edge_beams(left, left // group_size, len(rngs))
-                pick = _uniforms(rngs, owner) < nz.p_mixed
-                beams, others = beams[pick], others[pick]
-                w = _uniforms(rngs, owner[pick])
+                left = e + e // (spec.n_beams - 1) if r.shape[0] > 1 else e
+                if len(rngs) == 1:
+                    right = left + 1
+                    beams = np.concatenate([left, right])
+                    others = np.concatenate([right, left])
+                    pick = rngs[0].random(beams.size) < nz.p_mixed
+                    beams, others = beams[pick], others[pick]
+                    w = rngs[0].random(beams.size)
+                else:
+                    beams, others, owner = _edge_beams(left, left // group_size, len(rngs))
+                    pick = _uniforms(rngs, owner) < nz.p_mixed
+                    beams, others = beams[pick], others[pick]
+                    w = _uniforms(rngs, owner[pick])
                 flat_out[beams] = flat_r[beams] + w * (flat_r[others] - flat_r[beams])
         # one uniform per beam picks at most one of the rare events (disjoint intervals)
         p1 = nz.p_dropout
         p2 = p1 + nz.p_short
         p3 = p2 + nz.p_invalid
         if p3 > 0.0:
-            u = _row_draws(rngs, r.shape, "random")
+            u = rngs[0].random(r.shape) if len(rngs) == 1 else _row_draws(rngs, r.shape, "random")
             rare = ((u < p3) & hit).ravel().nonzero()[0]
             if rare.size:
                 ur = u.reshape(-1)[rare]
                 rmin = spec.range_min_m
-                short = _uniforms(rngs, rare // group_size)
+                if len(rngs) == 1:
+                    short = rngs[0].random(rare.size)
+                else:
+                    short = _uniforms(rngs, rare // group_size)
                 flat_out[rare] = np.where(
                     ur < p1,
                     np.inf,
@@ -437,8 +451,6 @@ def _edge_beams(
     ``group``): per group its left beams then its right beams, the beam across the edge from
     each, and the group of each."""
     right = left + 1
-    if n_groups == 1:
-        return np.concatenate([left, right]), np.concatenate([right, left]), group.repeat(2)
     counts = np.bincount(group, minlength=n_groups)
     first = counts.cumsum() - counts  # first edge of each group
     pos_l = first[group] + np.arange(left.size)  # = 2 first + (index within the group)
@@ -455,8 +467,6 @@ def _edge_beams(
 def _uniforms(rngs: list[np.random.Generator], owner: NDArray[np.int64]) -> FloatArray:
     """One uniform in [0, 1) per entry of ``owner`` (ascending group indices) from its
     group's generator, each group's drawn in one call (as a lone group would draw them)."""
-    if len(rngs) == 1:
-        return rngs[0].random(owner.size)
     out = np.empty(owner.size)
     counts = np.bincount(owner, minlength=len(rngs)).tolist()
     at = 0
@@ -470,8 +480,6 @@ def _uniforms(rngs: list[np.random.Generator], owner: NDArray[np.int64]) -> Floa
 def _row_draws(rngs: list[np.random.Generator], shape: tuple[int, ...], kind: str) -> FloatArray:
     """An array of ``shape`` of ``kind`` draws (``"standard_normal"`` or ``"random"``) whose
     rows fall into ``len(rngs)`` equal groups, group ``g`` drawn by ``rngs[g]`` in one call."""
-    if len(rngs) == 1:
-        return getattr(rngs[0], kind)(shape)
     out = np.empty(shape)
     rows = shape[0] // len(rngs)
     for g, rng in enumerate(rngs):
