@@ -322,6 +322,13 @@ class DynMapEnv(gymnasium.Env):
         return int(v)
 
     def step(self, action: Any) -> tuple[dict[str, np.ndarray], float, bool, bool, dict[str, Any]]:
+        pose, collision, reward, terminated, truncated = self._advance(action)
+        obs, info = self._observe(pose, collision)
+        return obs, reward, terminated, truncated, info
+
+    def _advance(self, action: Any) -> tuple[FloatArray, bool, float, bool, bool]:
+        """Everything of :meth:`step` but the observation: the robot's new pose, the
+        collision flag, reward, terminated and truncated."""
         if not self._started:
             raise RuntimeError("call reset() before step()")
         kind = np.asarray(action).dtype.kind
@@ -349,13 +356,25 @@ class DynMapEnv(gymnasium.Env):
         reward = gained - (self.collision_penalty if res.collision else 0.0)
         terminated = self.route.done(x, y)
         truncated = self._steps >= self.max_episode_steps and not terminated
-        obs, info = self._observe(pose, res.collision)
-        return obs, float(reward), terminated, truncated, info
+        return pose, res.collision, float(reward), terminated, truncated
 
     def _observe(
-        self, pose: FloatArray, collision: bool
+        self,
+        pose: FloatArray,
+        collision: bool,
+        cast: tuple[FloatArray, NDArray[np.int64]] | None = None,
+        ranges_m: NDArray[np.float32] | None = None,
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        reading = self.lidar.scan(pose, self.world.geometry, self._rng_lidar)
+        """Observation and info at ``pose``; ``cast``: the scan's noise-free ranges and hit
+        indices when already cast, ``ranges_m`` its noisy readings when already made from
+        this env's lidar generator (a vector env casts and noises all its envs' scans at
+        once)."""
+        if cast is None:
+            reading = self.lidar.scan(pose, self.world.geometry, self._rng_lidar)
+        else:
+            reading = self.lidar.reading(
+                *cast, self.world.geometry, self._rng_lidar, ranges_m=ranges_m
+            )
         slot = self.world.slot
         people, n_people = self._people()
         obs = {"scan": reading.ranges_m, "odom": self.odometry.pose}

@@ -15,10 +15,14 @@ truncated resets it (``reset()`` without seed: the next run of its calendar), ig
 action and returns its first observation with reward 0 and ``terminated = truncated =
 False``.
 
-What is *not* batched yet: each sub-env's world (people, pymunk bodies) and ray casting run
-one after another inside the step; batching them across worlds (one cast call for all
-envs) is issue 13 item 2's open part. The gain over ``SyncVectorEnv`` is the copies and
-layers it skips (measured in ``benchmarks/bench_peers.py``).
+Batched: the scans of all sub-envs are cast in one pass
+(:func:`~dynmap_sim.sensors.lidar.cast_many`: each env's shapes go into its sensor frame on
+their own, then the broad phase and intersections of every env's (beam, shape) pairs are one
+set of numpy calls), and their noise is one pass too (:meth:`Lidar.apply_noise_rows`: each
+env's draws from its own generator, in its own order, the arithmetic once), with the same
+numbers as one env at a time. Not batched: each sub-env's robot and world (people, pymunk
+bodies) run one after another; the gain over ``SyncVectorEnv`` is the copies and layers it
+skips plus the shared cast and noise (measured in ``benchmarks/bench_peers.py``).
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from dynmap_sim.env import DynMapEnv
+from dynmap_sim.sensors.lidar import cast_many
 
 
 class DynMapVectorEnv(VectorEnv):
@@ -57,6 +62,14 @@ class DynMapVectorEnv(VectorEnv):
         self._terminations = np.zeros(num_envs, dtype=np.bool_)
         self._truncations = np.zeros(num_envs, dtype=np.bool_)
         self._autoreset = np.zeros(num_envs, dtype=np.bool_)
+        # one noise pass for all scans needs the same laser, noise model and per-beam bias
+        lid = first.lidar
+        self._same_lidars = all(
+            e.lidar.spec == lid.spec
+            and e.lidar.noise == lid.noise
+            and np.array_equal(e.lidar._bias_m, lid._bias_m)
+            for e in self.envs
+        )
 
     def _obs(self) -> dict[str, np.ndarray]:
         return {"scan": self._scan.copy(), "odom": self._odom.copy()}
@@ -124,20 +137,37 @@ class DynMapVectorEnv(VectorEnv):
         a = np.asarray(actions)
         if a.shape != (self.num_envs, 2):
             raise ValueError(f"actions must have shape ({self.num_envs}, 2), got {a.shape}")
-        infos = []
+        infos: list[dict[str, Any]] = [{}] * self.num_envs
+        moved: list[tuple[int, np.ndarray, bool]] = []  # (env, pose, collision) to observe
         for i, env in enumerate(self.envs):
             if self._autoreset[i]:
                 obs, info = env.reset()
                 self._rewards[i] = 0.0
                 self._terminations[i] = False
                 self._truncations[i] = False
+                self._put(i, obs)
+                infos[i] = info
             else:
-                obs, r, term, trunc, info = env.step(a[i])
+                pose, collision, r, term, trunc = env._advance(a[i])
                 self._rewards[i] = r
                 self._terminations[i] = term
                 self._truncations[i] = trunc
-            self._put(i, obs)
-            infos.append(info)
+                moved.append((i, pose, collision))
+        # the scans of all envs that moved, cast in one pass; noise and infos per env
+        if moved:
+            envs = [self.envs[i] for i, _, _ in moved]
+            casts = cast_many(
+                [e.lidar for e in envs], [p for _, p, _ in moved], [e.world.geometry for e in envs]
+            )
+            noisy: list[Any] = [None] * len(envs)
+            if self._same_lidars and len(envs) > 1:
+                true_r = np.stack([c[0] for c in casts])
+                noisy = list(envs[0].lidar.apply_noise_rows(true_r, [e._rng_lidar for e in envs]))
+            for env, (i, pose, collision), cast, rng_m in zip(
+                envs, moved, casts, noisy, strict=True
+            ):
+                obs, infos[i] = env._observe(pose, collision, cast, rng_m)
+                self._put(i, obs)
         np.logical_or(self._terminations, self._truncations, out=self._autoreset)
         return (
             self._obs(),

@@ -44,7 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynmap_sim.se2 import compose
-from dynmap_sim.sensors.raycast import SegmentCache, beam_directions, cast_scan
+from dynmap_sim.sensors.raycast import SegmentCache, beam_directions, cast_scan, cast_scans
 from dynmap_sim.types import LaserSpec
 
 FloatArray = NDArray[np.float64]
@@ -178,6 +178,34 @@ def make_lidar(
     )
 
 
+def cast_many(
+    lidars: list[Lidar], robot_poses: list[FloatArray], geoms: list[GeometryLike]
+) -> list[tuple[FloatArray, NDArray]]:
+    """:meth:`Lidar.cast` of each lidar from its robot pose among its geometry; one
+    :func:`~dynmap_sim.sensors.raycast.cast_scans` pass for all when they are numpy
+    casters of the same beams (the same numbers as one by one)."""
+    first = lidars[0]
+    same = all(
+        lid.backend == "numpy" and lid.spec == first.spec and lid._cast is cast_scan
+        for lid in lidars
+    )
+    if len(lidars) < 2 or first.backend != "numpy" or not same:
+        return [lid.cast(p, g) for lid, p, g in zip(lidars, robot_poses, geoms, strict=True)]
+    spec = first.spec
+    ranges, hits = cast_scans(
+        [lid.sensor_pose(p) for lid, p in zip(lidars, robot_poses, strict=True)],
+        spec.angle_min_rad,
+        spec.angle_increment_rad,
+        first._cos,
+        first._sin,
+        spec.range_max_m,
+        [lid._segments(g) for lid, g in zip(lidars, geoms, strict=True)],
+        [g.circles if g.circles.shape[0] else None for g in geoms],
+        first._u,
+    )
+    return list(zip(ranges, hits, strict=True))
+
+
 @dataclass
 class LidarReading:
     """One scan: REP-117 ``ranges_m`` (float32) plus ground truth per beam.
@@ -276,17 +304,21 @@ class Lidar:
         """The laser's pose in the map frame for a robot (``base_link``) pose."""
         return compose(np.asarray(robot_pose, dtype=np.float64), self.spec.mount_pose)
 
-    def cast(self, robot_pose: FloatArray, geom: GeometryLike) -> tuple[FloatArray, NDArray]:
-        """Noise-free ranges [m] (``+inf``: no hit) and hit indices (see ``cast_scan``)."""
+    def sensor_pose(self, robot_pose: FloatArray) -> tuple[float, float, float]:
+        """The laser's pose ``(x, y, heading)`` [m, rad] in the map frame, as a tuple."""
         x, y, th = float(robot_pose[0]), float(robot_pose[1]), float(robot_pose[2])
         mx, my, myaw = self.spec.mount_pose
         if mx or my or myaw:
             c, s = math.cos(th), math.sin(th)
             x, y, th = x + c * mx - s * my, y + s * mx + c * my, th + myaw
+        return x, y, th
+
+    def cast(self, robot_pose: FloatArray, geom: GeometryLike) -> tuple[FloatArray, NDArray]:
+        """Noise-free ranges [m] (``+inf``: no hit) and hit indices (see ``cast_scan``)."""
         spec = self.spec
         circles = geom.circles if geom.circles.shape[0] else None
         return self._cast(
-            (x, y, th),
+            self.sensor_pose(robot_pose),
             spec.angle_min_rad,
             spec.angle_increment_rad,
             self._cos,
@@ -302,8 +334,21 @@ class Lidar:
     ) -> LidarReading:
         """One noisy scan from the robot at ``robot_pose`` (map frame) with truth labels."""
         true_r, hit = self.cast(robot_pose, geom)
+        return self.reading(true_r, hit, geom, rng)
+
+    def reading(
+        self,
+        true_r: FloatArray,
+        hit: NDArray,
+        geom: GeometryLike,
+        rng: np.random.Generator,
+        ranges_m: NDArray[np.float32] | None = None,
+    ) -> LidarReading:
+        """The scan of noise-free ranges ``true_r`` and hit indices ``hit`` (of
+        :meth:`cast` among ``geom``): noise from ``rng`` (or the noisy ``ranges_m`` already
+        made from ``true_r``) and truth labels."""
         obj, cls = self._label_tables(geom)
-        ranges = self.apply_noise(true_r, rng)
+        ranges = self.apply_noise(true_r, rng) if ranges_m is None else ranges_m
         return LidarReading(ranges, true_r, obj[hit], cls[hit])
 
     def apply_noise(
@@ -311,50 +356,84 @@ class Lidar:
     ) -> NDArray[np.float32]:
         """REP-117 readings from noise-free ranges (see the module docstring for the model).
 
-        ``true_range_m`` has shape ``(..., n_beams)`` (a batch of scans is allowed).
+        ``true_range_m`` has shape ``(..., n_beams)`` (a batch of scans is allowed; its draws
+        all come from ``rng``).
         """
+        r = np.asarray(true_range_m, dtype=np.float64)
+        if r.shape[-1] != self.spec.n_beams:
+            raise ValueError(f"expected (..., {self.spec.n_beams}) ranges, got shape {r.shape}")
+        return self._noise(r.reshape(-1, r.shape[-1]), [rng]).reshape(r.shape)
+
+    def apply_noise_rows(
+        self, true_range_m: FloatArray, rngs: list[np.random.Generator]
+    ) -> NDArray[np.float32]:
+        """:meth:`apply_noise` of each row of ``true_range_m`` ``(S, n_beams)`` with its own
+        generator ``rngs[i]``: row ``i`` reads what ``apply_noise(true_range_m[i], rngs[i])``
+        gives (the same draws in the same order), the arithmetic done once for all rows."""
+        r = np.asarray(true_range_m, dtype=np.float64)
+        if r.ndim != 2 or r.shape != (len(rngs), self.spec.n_beams):
+            raise ValueError(
+                f"expected ({len(rngs)}, {self.spec.n_beams}) ranges, got shape {r.shape}"
+            )
+        return self._noise(r, rngs)
+
+    def _noise(self, r: FloatArray, rngs: list[np.random.Generator]) -> NDArray[np.float32]:
+        """The noise model on ranges ``r`` ``(S, n_beams)`` whose rows fall into
+        ``len(rngs)`` equal groups of consecutive rows, group ``g`` drawing from ``rngs[g]``
+        (in the order one :meth:`apply_noise` of that group alone draws)."""
         nz = self.noise
         spec = self.spec
-        r = np.asarray(true_range_m, dtype=np.float64)
-        if r.shape[-1] != spec.n_beams:
-            raise ValueError(f"expected (..., {spec.n_beams}) ranges, got shape {r.shape}")
         hit = r <= spec.range_max_m
         sigma = (
             np.maximum(nz.sigma_rel * np.where(hit, r, 0.0), nz.sigma_m)
             if nz.sigma_rel
             else nz.sigma_m
         )
-        out = sigma * rng.standard_normal(r.shape)
+        if len(rngs) == 1:
+            out = rngs[0].standard_normal(r.shape)
+        else:
+            out = _row_draws(rngs, r.shape, "standard_normal")
+        out *= sigma
         out += r + self._bias_m if nz.systematic_m else r  # inf stays inf
         flat_out = out.reshape(-1)
         flat_r = r.reshape(-1)
+        group_size = r.size // len(rngs)  # flat beams per group
         if nz.p_mixed > 0.0:
             # depth discontinuities between neighbours i, i+1 (NaN for no-hit beams: no edge)
             # (NaN arithmetic and comparisons are quiet: no errstate needed)
             rn = np.where(hit, r, np.nan)
-            edge = np.abs(rn[..., 1:] - rn[..., :-1]) > nz.mixed_jump_m
+            edge = np.abs(rn[:, 1:] - rn[:, :-1]) > nz.mixed_jump_m
             e = edge.ravel().nonzero()[0]
             if e.size:
                 # flat index of the left beam of each edge (rows are n_beams long)
-                left = e + e // (spec.n_beams - 1) if r.ndim > 1 else e
-                right = left + 1
-                beams = np.concatenate([left, right])
-                others = np.concatenate([right, left])
-                pick = rng.random(beams.size) < nz.p_mixed
-                beams, others = beams[pick], others[pick]
-                w = rng.random(beams.size)
+                left = e + e // (spec.n_beams - 1) if r.shape[0] > 1 else e
+                if len(rngs) == 1:
+                    right = left + 1
+                    beams = np.concatenate([left, right])
+                    others = np.concatenate([right, left])
+                    pick = rngs[0].random(beams.size) < nz.p_mixed
+                    beams, others = beams[pick], others[pick]
+                    w = rngs[0].random(beams.size)
+                else:
+                    beams, others, owner = _edge_beams(left, left // group_size, len(rngs))
+                    pick = _uniforms(rngs, owner) < nz.p_mixed
+                    beams, others = beams[pick], others[pick]
+                    w = _uniforms(rngs, owner[pick])
                 flat_out[beams] = flat_r[beams] + w * (flat_r[others] - flat_r[beams])
         # one uniform per beam picks at most one of the rare events (disjoint intervals)
         p1 = nz.p_dropout
         p2 = p1 + nz.p_short
         p3 = p2 + nz.p_invalid
         if p3 > 0.0:
-            u = rng.random(r.shape)
+            u = rngs[0].random(r.shape) if len(rngs) == 1 else _row_draws(rngs, r.shape, "random")
             rare = ((u < p3) & hit).ravel().nonzero()[0]
             if rare.size:
                 ur = u.reshape(-1)[rare]
                 rmin = spec.range_min_m
-                short = rng.random(rare.size)
+                if len(rngs) == 1:
+                    short = rngs[0].random(rare.size)
+                else:
+                    short = _uniforms(rngs, rare // group_size)
                 flat_out[rare] = np.where(
                     ur < p1,
                     np.inf,
@@ -363,3 +442,46 @@ class Lidar:
         out[out < spec.range_min_m] = -np.inf
         out[out > spec.range_max_m] = np.inf
         return out.astype(np.float32)
+
+
+def _edge_beams(
+    left: NDArray[np.int64], group: NDArray[np.int64], n_groups: int
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
+    """The two beams of each edge (flat index ``left`` of its left beam, ascending, in
+    ``group``): per group its left beams then its right beams, the beam across the edge from
+    each, and the group of each."""
+    right = left + 1
+    counts = np.bincount(group, minlength=n_groups)
+    first = counts.cumsum() - counts  # first edge of each group
+    pos_l = first[group] + np.arange(left.size)  # = 2 first + (index within the group)
+    pos_r = pos_l + counts[group]
+    beams = np.empty(2 * left.size, dtype=np.int64)
+    others = np.empty(2 * left.size, dtype=np.int64)
+    owner = np.empty(2 * left.size, dtype=np.int64)
+    beams[pos_l], beams[pos_r] = left, right
+    others[pos_l], others[pos_r] = right, left
+    owner[pos_l] = owner[pos_r] = group
+    return beams, others, owner
+
+
+def _uniforms(rngs: list[np.random.Generator], owner: NDArray[np.int64]) -> FloatArray:
+    """One uniform in [0, 1) per entry of ``owner`` (ascending group indices) from its
+    group's generator, each group's drawn in one call (as a lone group would draw them)."""
+    out = np.empty(owner.size)
+    counts = np.bincount(owner, minlength=len(rngs)).tolist()
+    at = 0
+    for rng, c in zip(rngs, counts, strict=True):
+        if c:
+            rng.random(out=out[at : at + c])
+            at += c
+    return out
+
+
+def _row_draws(rngs: list[np.random.Generator], shape: tuple[int, ...], kind: str) -> FloatArray:
+    """An array of ``shape`` of ``kind`` draws (``"standard_normal"`` or ``"random"``) whose
+    rows fall into ``len(rngs)`` equal groups, group ``g`` drawn by ``rngs[g]`` in one call."""
+    out = np.empty(shape)
+    rows = shape[0] // len(rngs)
+    for g, rng in enumerate(rngs):
+        getattr(rng, kind)(out=out[g * rows : (g + 1) * rows])
+    return out

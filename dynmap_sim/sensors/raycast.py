@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -125,16 +126,81 @@ def cast_scan(
     The work is a fixed number of numpy calls on arrays of (beam, shape) pairs: for scans of
     a few hundred beams the call overhead, not the arithmetic, sets the cost.
     """
-    ox, oy, heading = float(pose[0]), float(pose[1]), float(pose[2])
-    n_beams = cos_l.shape[0]
     if u_l is None:
         u_l = cos_l + 1j * sin_l
-    inc = float(angle_increment_rad)
+    shapes = _scan_shapes(pose, float(max_range_m), segments, circles)
+    ranges, hit = _cast_shapes(
+        [shapes], angle_min_rad, angle_increment_rad, u_l, float(max_range_m), cos_l.shape[0]
+    )
+    return ranges[0], hit[0]
+
+
+def cast_scans(
+    poses: list[tuple[float, float, float]],
+    angle_min_rad: float,
+    angle_increment_rad: float,
+    cos_l: FloatArray,
+    sin_l: FloatArray,
+    max_range_m: float,
+    segments: list[SegmentCache],
+    circles: list[FloatArray | None],
+    u_l: ComplexArray | None = None,
+) -> tuple[FloatArray, IntArray]:
+    """:func:`cast_scan` of ``S`` scans at once, each from its own pose among its own shapes
+    (``segments[i]``, ``circles[i]``; the same laser): ranges and hit indices ``(S, n_beams)``.
+
+    Each scan's shapes are moved into its sensor frame on their own; the broad phase and
+    the intersections of all scans' (beam, shape) pairs are then one pass, so the numpy call
+    overhead of that part is paid once for all scans. Every number is the one
+    :func:`cast_scan` gives for that scan alone.
+    """
+    if u_l is None:
+        u_l = cos_l + 1j * sin_l
     r_max = float(max_range_m)
+    shapes = [
+        _scan_shapes(pose, r_max, seg, circ)
+        for pose, seg, circ in zip(poses, segments, circles, strict=True)
+    ]
+    return _cast_shapes(shapes, angle_min_rad, angle_increment_rad, u_l, r_max, cos_l.shape[0])
+
+
+class _Shapes(NamedTuple):
+    """The shapes within range of one scan, in its sensor frame: segments (first endpoint
+    ``a``, direction ``d``, ``a x d``, bearing interval ``start``, ``span``, rows ``ids``) and
+    circles (centre ``c``, ``|c|^2 - r^2`` ``c0``, ``inside``, bearing interval ``cstart``,
+    ``cspan``, hit indices ``cids``)."""
+
+    a: ComplexArray
+    d: ComplexArray
+    a_x_d: FloatArray
+    start: FloatArray
+    span: FloatArray
+    ids: IntArray
+    c: ComplexArray
+    c0: FloatArray
+    inside: NDArray[np.bool_]
+    cstart: FloatArray
+    cspan: FloatArray
+    cids: IntArray
+
+
+def _no_circles() -> tuple[NDArray, ...]:
+    """The circle fields of :class:`_Shapes` for a scan with no circle in range (empty)."""
+    f, c = np.zeros(0), np.zeros(0, np.complex128)
+    return c, f, np.zeros(0, bool), f, f, np.zeros(0, np.int64)
+
+
+def _scan_shapes(
+    pose: tuple[float, float, float],
+    r_max: float,
+    segments: SegmentCache,
+    circles: FloatArray | None,
+) -> _Shapes:
+    """The segments near the sensor's cell (memoized) and the circles within range, moved
+    into the frame of the sensor at ``pose``."""
+    ox, oy, heading = float(pose[0]), float(pose[1]), float(pose[2])
     rot = complex(math.cos(heading), -math.sin(heading))  # map -> sensor frame
     o = complex(ox, oy)
-
-    # --- segments near the sensor's cell (memoized), into the sensor frame -----------------
     sidx, p0, d0 = segments.near(ox, oy, r_max)
     a = (p0 - o) * rot  # first endpoint
     d = d0 * rot
@@ -144,10 +210,7 @@ def cast_scan(
     span = np.abs(np.arctan2(a_x_d, ab.real))  # bearing interval of each segment [rad]
     first = np.where(a_x_d >= 0.0, a, b)
     start = np.arctan2(first.imag, first.real)
-    n_s = sidx.shape[0]
-
-    # --- circles within range ------------------------------------------------------------
-    n_c = 0
+    circ: tuple[NDArray, ...] | None = None
     if circles is not None and circles.shape[0] > 0:
         if circles.flags.c_contiguous and circles.dtype == np.float64:
             cw = circles[:, :2].view(np.complex128)[:, 0] - o  # centres, sensor at 0
@@ -156,20 +219,45 @@ def cast_scan(
         cr = circles[:, 2]
         dist = np.abs(cw)
         cnear = (dist <= r_max + cr).nonzero()[0]
-        n_c = cnear.shape[0]
+        if cnear.shape[0]:
+            c = cw[cnear] * rot
+            cr = cr[cnear]
+            dist = dist[cnear]
+            c0 = (dist - cr) * (dist + cr)  # |c|^2 - r^2 (<= 0: the sensor is inside it)
+            inside = c0 <= 0.0
+            half = np.arcsin(cr / np.maximum(dist, cr))  # half the angle the circle subtends
+            half[inside] = np.pi
+            cstart = np.arctan2(c.imag, c.real) - half
+            circ = (c, c0, inside, cstart, 2.0 * half, segments.n + cnear)
+    return _Shapes(a, d, a_x_d, start, span, sidx, *(circ or _no_circles()))
+
+
+def _cast_shapes(
+    scans: list[_Shapes],
+    angle_min_rad: float,
+    angle_increment_rad: float,
+    u_l: ComplexArray,
+    r_max: float,
+    n_beams: int,
+) -> tuple[FloatArray, IntArray]:
+    """Broad phase and intersections of the (beam, shape) pairs of all ``scans``; ranges
+    and hit indices ``(S, n_beams)``. Shapes are laid out as: every scan's segments, their
+    wrap copies, every scan's circles, their wrap copies."""
+    inc = float(angle_increment_rad)
+    n_scans = len(scans)
+
+    if n_scans == 1:
+        a, d, a_x_d, start, span, ids, c, c0, inside, cstart, cspan, cids = scans[0]
+    else:  # field by field, every scan's values end to end
+        a, d, a_x_d, start, span, ids, c, c0, inside, cstart, cspan, cids = (
+            np.concatenate(field) for field in zip(*scans, strict=True)
+        )
+    n_s = a.shape[0]
+    n_c = c.shape[0]
     # runs in the order: segments, their wrap copies, circles, their wrap copies
     if n_c:
-        c = cw[cnear] * rot
-        cr = cr[cnear]
-        dist = dist[cnear]
-        c0 = (dist - cr) * (dist + cr)  # |c|^2 - r^2 (<= 0: the sensor is inside the circle)
-        inside = c0 <= 0.0
-        half = np.arcsin(cr / np.maximum(dist, cr))  # half the angle the circle subtends
-        half[inside] = np.pi
-        half2 = 2.0 * half
-        sb = np.concatenate([start, start, np.arctan2(c.imag, c.real) - half])
-        sb = np.concatenate([sb, sb[2 * n_s :]])
-        sp = np.concatenate([span, span, half2, half2])
+        sb = np.concatenate([start, start, cstart, cstart])
+        sp = np.concatenate([span, span, cspan, cspan])
     else:
         sb = np.concatenate([start, start])
         sp = np.concatenate([span, span])
@@ -215,17 +303,21 @@ def cast_scan(
             okc = (tc >= 0.0) & (tc <= r_max)
             t_all = np.concatenate([t_all, np.where(okc, tc, np.nan)])
 
-    ranges = np.full(n_beams, np.inf)
+    if n_scans > 1:  # the beam of each pair in the scans' beams laid end to end
+        per_scan = np.arange(n_scans) * n_beams
+        lens = [sc.a.shape[0] for sc in scans] + [sc.c.shape[0] for sc in scans]
+        beam += np.repeat(np.concatenate([per_scan, per_scan]), lens)[key]
+    ranges = np.full(n_scans * n_beams, np.inf)
     np.fmin.at(ranges, beam, t_all)  # NaN (no hit) never wins
     win = t_all == ranges[beam]
-    hit_key = np.full(n_beams, -1, dtype=np.int64)
+    hit_key = np.full(n_scans * n_beams, -1, dtype=np.int64)
     hit_key[beam[win]] = key[win]
     # hit index of each shape (segment row or N + circle), and -1 (nothing) at the end
     if n_c:
-        shape_id = np.concatenate([sidx, segments.n + cnear, [-1]])
+        shape_id = np.concatenate([ids, cids, [-1]])
     else:
-        shape_id = np.concatenate([sidx, [-1]])
-    return ranges, shape_id[hit_key]
+        shape_id = np.concatenate([ids, [-1]])
+    return ranges.reshape(n_scans, n_beams), shape_id[hit_key].reshape(n_scans, n_beams)
 
 
 def beam_directions(

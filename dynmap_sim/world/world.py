@@ -217,24 +217,29 @@ class World:
         those whose new or last synced position lies within ``near_m`` of it."""
         crowd = self._crowd
         z = crowd.pos.view(np.complex128)[:, 0]
+        synced = self._synced
         if robot_xy is None:
-            idx = range(crowd.n)
+            idx: Any = slice(None)
             self._stale = False
         else:
-            near = (np.abs(z - robot_xy) < near_m) | (np.abs(self._synced - robot_xy) < near_m)
-            idx = near.nonzero()[0].tolist()
+            near = (np.abs(z - robot_xy) < near_m) | (np.abs(synced - robot_xy) < near_m)
+            idx = near.nonzero()[0]
             self._stale = True  # (cheaper than checking whether all were near)
-        reindex = self._space.reindex_shapes_for_body
+            if not len(idx):
+                return
         bodies = self._people_bodies
-        pos, vel = crowd.pos, crowd.vel
-        synced = self._synced
-        for i in idx:
+        which = range(crowd.n) if robot_xy is None else idx.tolist()
+        # the setters of the bodies' properties, without pymunk's per-attribute wrapper
+        set_pos = pymunk.Body.position.fset
+        set_vel = pymunk.Body.velocity.fset
+        reindex = self._space.reindex_shapes_for_body
+        for i, xy, uv in zip(which, crowd.pos[idx].tolist(), crowd.vel[idx].tolist(), strict=True):
             body = bodies[i]
-            body.position = (float(pos[i, 0]), float(pos[i, 1]))
-            body.velocity = (float(vel[i, 0]), float(vel[i, 1]))
-            synced[i] = z[i]
+            set_pos(body, xy)
+            set_vel(body, uv)
             # the space is never stepped: refresh the shapes' cached positions for queries
             reindex(body)
+        synced[idx] = z[idx]
 
     @property
     def space(self) -> pymunk.Space:

@@ -166,3 +166,27 @@ def test_pickled_lidar_drops_its_cache_and_scans_the_same():
     after = clone.cast(pose, G)
     np.testing.assert_array_equal(before[0], after[0])
     np.testing.assert_array_equal(before[1], after[1])
+
+
+@pytest.mark.parametrize(
+    "sensor,noise",
+    [
+        ("urg-04lx", None),
+        ("lms200", {"p_invalid": 0.01, "p_short": 0.02}),
+        ("urg-04lx", {"p_mixed": 0.0, "p_dropout": 0.0, "p_short": 0.0}),
+    ],
+)
+def test_apply_noise_rows_gives_each_row_its_own_apply_noise(sensor, noise):
+    """Rows noised together, each from its own generator, read what each row noised alone
+    reads (the same draws in the same order), bit for bit."""
+    lidar = make_lidar(sensor, noise=noise)
+    n = lidar.spec.n_beams
+    rng = np.random.default_rng(4)
+    true = rng.uniform(0.5, 7.0, (6, n))
+    true[:, ::7] = np.inf  # no returns, and depth edges next to them
+    true[2] = np.inf  # a row with no hit at all
+    true[3, 100:140] = 1.0  # a flat wall: edges at both ends only
+    rows = lidar.apply_noise_rows(true, [np.random.default_rng(10 + i) for i in range(6)])
+    for i in range(6):
+        alone = lidar.apply_noise(true[i], np.random.default_rng(10 + i))
+        assert np.array_equal(rows[i], alone, equal_nan=True)

@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from dynmap_sim.sensors.raycast import SegmentCache, beam_directions, cast_scan
+from dynmap_sim.sensors.raycast import SegmentCache, beam_directions, cast_scan, cast_scans
 
 URG_INC = 2.0 * np.pi / 1024.0
 
@@ -185,3 +185,26 @@ def test_near_cells_hold_every_segment_in_range(x, y, r_max):
     assert set(np.flatnonzero(dist <= r_max)) <= set(idx.tolist())
     np.testing.assert_array_equal(p0, cache.p0[idx])
     np.testing.assert_array_equal(d, cache.d[idx])
+
+
+def test_cast_scans_gives_each_scan_the_numbers_of_cast_scan():
+    """Scans cast together (each among its own shapes, some without circles or in range of
+    nothing) are bit for bit those cast one at a time."""
+    rng = np.random.default_rng(11)
+    cl, sl = beam_directions(-2.0862, URG_INC, 683)
+    poses, caches, circles = [], [], []
+    for k in range(5):
+        segs, circ = random_geometry(rng, n_seg=60 + 20 * k, n_circ=10)
+        poses.append((*rng.uniform(-4.0, 4.0, 2), rng.uniform(-np.pi, np.pi)))
+        caches.append(SegmentCache.build(segs))
+        circles.append(None if k == 1 else circ)
+    poses.append((100.0, 100.0, 0.0))  # nothing within range
+    caches.append(caches[0])
+    circles.append(circles[0])
+    ranges, hits = cast_scans(poses, -2.0862, URG_INC, cl, sl, 5.6, caches, circles)
+    assert ranges.shape == hits.shape == (len(poses), 683)
+    for i, pose in enumerate(poses):
+        r, h = cast_scan(pose, -2.0862, URG_INC, cl, sl, 5.6, caches[i], circles[i])
+        assert np.array_equal(ranges[i], r)
+        assert np.array_equal(hits[i], h)
+    assert np.isinf(ranges[-1]).all() and (hits[-1] == -1).all()

@@ -62,8 +62,7 @@ class SegmentGrid:
         """Index of the grid cell holding each point ``z`` (clipped to the grid)."""
         ij = ((z - self.origin_c) * (1.0 / CELL_M)).view(np.float64).reshape(-1, 2)
         ij = ij.astype(np.int64)  # truncation: negative cells clip to 0 as with floor
-        np.minimum(np.maximum(ij, 0, out=ij), self.cell_hi, out=ij)
-        return ij @ self.cell_stride
+        return np.ravel_multi_index(ij.T, self.shape, mode="clip")
 
 
 def _cell_lists(s: FloatArray, lo: FloatArray, nx: int, ny: int) -> NDArray[np.int64]:

@@ -19,24 +19,28 @@ def correct(
     rz: complex | None,
     k: StepConstants,
     old: NDArray[np.complex128],
-    pair_gap: float,
-    wall_gap: FloatArray,
-) -> None:
-    """Push bodies out of the robot's comfort disc, each other, then walls (walls win).
+    gaps: tuple[float, FloatArray, float],
+    moved_max_m: float,
+) -> FloatArray:
+    """Push bodies out of the robot's comfort disc, each other, then walls (walls win);
+    return how far each body moved in the step, ``|z - old|`` [m].
 
     ``z``, ``v`` are complex views of positions and velocities (updated in place).
     Distances are 1-Lipschitz in position, so a body that moved less than its gap before
-    the move (``pair_gap``, ``wall_gap`` [m]) cannot overlap: those checks are skipped.
+    the move (``gaps``: between bodies, per body to a segment, to the robot's disc [m];
+    ``moved_max_m`` bounds the move) cannot overlap: those checks are skipped.
     """
-    if rz is not None:
+    pair_gap, wall_gap, robot_gap = gaps
+    if rz is not None and robot_gap <= moved_max_m:
         _clear_robot(z, rz, k)
     disp = np.abs(z - old)
     if crowd.n > 1 and 2.0 * disp.max() >= pair_gap:
         _separate_pairs(z, k)
         disp = np.abs(z - old)
     if not bool((disp >= wall_gap).any()):
-        return
+        return disp
     _push_out_of_walls(crowd, z, v, rows)
+    return np.abs(z - old)
 
 
 def _clear_robot(z: NDArray[np.complex128], rz: complex, k: StepConstants) -> None:

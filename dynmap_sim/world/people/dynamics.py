@@ -49,6 +49,8 @@ class StepConstants:
     robot_radius_m: float
     v0_tau: FloatArray
     vmax: FloatArray
+    vmax_max: float
+    """The largest speed of anyone [m/s] (bounds a step's move)."""
     rsum_masked: FloatArray
     """``r_i + r_j`` with ``-inf`` on the diagonal (a body never overlaps itself)."""
     pair_log_a: FloatArray
@@ -89,6 +91,7 @@ class StepConstants:
             robot_radius_m=robot_radius_m,
             v0_tau=v0 / TAU_S,
             vmax=1.3 * v0,
+            vmax_max=float((1.3 * v0).max()) if n else 0.0,
             rsum_masked=np.where(diag, -np.inf, rsum),
             pair_log_a=pair_log_a,
             wall_log_a=wall_log_a,
@@ -110,9 +113,10 @@ def social_force(
     rows: NDArray[np.complex128],
     rz: complex | None,
     k: StepConstants,
-) -> tuple[NDArray[np.complex128], float, FloatArray]:
+) -> tuple[NDArray[np.complex128], float, FloatArray, float]:
     """The force on each person at positions ``z`` with velocities ``v`` (complex), and the
-    smallest gaps before the move [m]: between two bodies, and per person to a segment.
+    smallest gaps before the move [m]: between two bodies, per person to a segment, and
+    between a body and the robot's comfort disc (``inf`` without a robot).
 
     ``rows`` are the candidate segments of :meth:`Obstacles.rows`, ``rz`` the robot's
     position (None: no robot).
@@ -128,9 +132,10 @@ def social_force(
     pair_gap = float((d[:, :n] - k.rsum_masked).min())
     wall_gap = d[:, n + 1 :].min(axis=1) - crowd.radius
     force += repulsion(diff, d, k)
-    if rz is not None:
-        force += evasion(e, diff[:, n], d[:, n], k)
-    return force, pair_gap, wall_gap
+    if rz is None:
+        return force, pair_gap, wall_gap, np.inf
+    force += evasion(e, diff[:, n], d[:, n], k)
+    return force, pair_gap, wall_gap, float((d[:, n] - k.robot_need).min())
 
 
 def source_vectors(

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -85,12 +87,29 @@ class Obstacles:
         """True where no segment properly crosses the line of sight ``a``-``b``."""
         if len(self.segments) == 0:
             return True
-        # proper crossings of a-b with each segment p0 + s d: the endpoints of each lie on
-        # opposite sides of the other (signs of 2-D cross products, Im(conj(u) w) = u x w)
         za, ab = complex(a[0], a[1]), complex(b[0] - a[0], b[1] - a[1])
+        o1, o2, o3, o4 = self._sides(za, ab)
+        return not bool(((o1 * o2 < 0.0) & (o3 * o4 < 0.0)).any())
+
+    def visible_many(self, a: FloatArray, bs: FloatArray) -> NDArray[np.bool_]:
+        """Per point of ``bs`` ``(M, 2)``: True where no segment properly crosses the line of
+        sight ``a``-``b`` (one pass for all ``M``; the same tests as :meth:`visible`)."""
+        if len(self.segments) == 0:
+            return np.ones(len(bs), dtype=bool)
+        za = complex(a[0], a[1])
+        ab = ((bs[:, 0] - a[0]) + 1j * (bs[:, 1] - a[1]))[:, None]
+        o1, o2, o3, o4 = self._sides(za, ab)
+        return ~((o1 * o2 < 0.0) & (o3 * o4 < 0.0)).any(axis=1)
+
+    def _sides(self, za: complex, ab: Any) -> tuple[FloatArray, ...]:
+        """Proper crossings of ``a``-``b`` (``za``, ``ab = b - a``; a complex scalar, or a
+        column of them) with each segment ``p0 + s d``: the endpoints of each lie on opposite
+        sides of the other. The signs of 2-D cross products (``Im(conj(u) w) = u x w``) of
+        ``p0, p1`` against ``a-b`` and of ``a, b`` against each segment."""
+        abc = ab.conjugate()
         w0 = self._seg_p0 - za  # p0 - a
-        o1 = (ab.conjugate() * w0).imag
-        o2 = (ab.conjugate() * (w0 + self._seg_d)).imag
+        o1 = (abc * w0).imag
+        o2 = (abc * (w0 + self._seg_d)).imag
         o3 = (self._seg_dc * w0).imag  # = -(d x (a - p0))
         o4 = (self._seg_dc * (w0 - ab)).imag  # = -(d x (b - p0))
-        return not bool(((o1 * o2 < 0.0) & (o3 * o4 < 0.0)).any())
+        return o1, o2, o3, o4

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -31,6 +33,20 @@ class SocialForce:
         self.rng = rng
         self.obstacles = Obstacles(segments, broad_phase, outline_starts)
         self._consts: StepConstants | None = None
+        self._views: tuple[NDArray[Any], ...] | None = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickle without the step's caches: the complex views (a pickled view would be a
+        copy, no longer writing through to the crowd's arrays) and the constants; both are
+        made again on the next step."""
+        state = self.__dict__.copy()
+        state["_views"] = state["_consts"] = None
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Restore, dropping the caches of states pickled before they were left out."""
+        self.__dict__.update(state)
+        self._views = self._consts = None
 
     @property
     def segments(self) -> FloatArray:
@@ -82,6 +98,22 @@ class SocialForce:
         self._consts = c
         return c
 
+    def _complex_views(
+        self, crowd: Crowd
+    ) -> tuple[NDArray[np.complex128], NDArray[np.complex128], NDArray[np.complex128]]:
+        """Complex views ``x + iy`` of ``crowd.pos``, ``vel`` and ``goal`` (in-place updates
+        write through), made C-contiguous float64 first; kept while the arrays stay."""
+        c = self._views
+        if c is not None and c[0] is crowd.pos and c[1] is crowd.vel and c[2] is crowd.goal:
+            return c[3], c[4], c[5]
+        for name in ("pos", "vel", "goal"):
+            a = getattr(crowd, name)
+            if not (a.flags.c_contiguous and a.dtype == np.float64):
+                setattr(crowd, name, np.ascontiguousarray(a, dtype=np.float64))
+        views = tuple(getattr(crowd, n).view(np.complex128)[:, 0] for n in ("pos", "vel", "goal"))
+        self._views = (crowd.pos, crowd.vel, crowd.goal, *views)
+        return views[0], views[1], views[2]
+
     def step(
         self,
         crowd: Crowd,
@@ -99,23 +131,21 @@ class SocialForce:
         """
         if crowd.n == 0:
             return
-        for name in ("pos", "vel", "goal"):
-            a = getattr(crowd, name)
-            if not (a.flags.c_contiguous and a.dtype == np.float64):
-                setattr(crowd, name, np.ascontiguousarray(a, dtype=np.float64))
-        z = crowd.pos.view(np.complex128)[:, 0]  # views: in-place updates write through
-        v = crowd.vel.view(np.complex128)[:, 0]
-        goal = crowd.goal.view(np.complex128)[:, 0]
+        z, v, goal = self._complex_views(crowd)
         rows = self.obstacles.rows(z)  # candidate segments (static geometry within REACH_M)
         k = self._constants(crowd, robot_radius_m, rows.shape[1])
         rz = None if robot_xy is None else complex(float(robot_xy[0]), float(robot_xy[1]))
-        force, pair_gap, wall_gap = social_force(crowd, z, v, goal, rows, rz, k)
+        force, pair_gap, wall_gap, robot_gap = social_force(crowd, z, v, goal, rows, rz, k)
         v += dt_s * force
         v *= np.minimum(1.0, k.vmax / np.maximum(np.abs(v), 1e-9))  # H&M eq. 8
         old = z.copy()
         z += dt_s * v
-        correct(crowd, z, v, rows, rz, k, old, pair_gap, wall_gap)
-        crowd.phase += np.abs(z - old) * (2 * np.pi / STRIDE_M)
+        # a move is at most dt * vmax (plus rounding): the robot's disc is checked only when
+        # someone was that close to it
+        moved_max_m = dt_s * k.vmax_max * (1.0 + 1e-9) + 1e-9
+        gaps = (pair_gap, wall_gap, robot_gap)
+        disp = correct(crowd, z, v, rows, rz, k, old, gaps, moved_max_m)
+        crowd.phase += disp * (2 * np.pi / STRIDE_M)
         redo = goals_due(crowd, goal, z, dt_s, rz, k)
         if not redo.any():
             return

@@ -17,6 +17,11 @@ from dynmap_sim.world.people.params import GOAL_TOL_M, PAUSE_S
 from dynmap_sim.world.polygons import FloatArray
 from dynmap_sim.world.spec import PeopleSpec
 
+#: Tries of :func:`pick_goal` before a person gives up (and pauses).
+GOAL_TRIES = 20
+#: Tries of :func:`pick_goal` evaluated in one pass.
+SPECULATE = 4
+
 
 def random_point(
     obstacles: Obstacles, rng: np.random.Generator, pop: PeopleSpec, r: float
@@ -44,20 +49,124 @@ def pick_goal(
     avoid: tuple[FloatArray, float] | None = None,
 ) -> FloatArray:
     """A goal in line of sight of ``frm``: an attraction point or a free point of the areas,
-    not within ``avoid = (centre, radius_m) + r`` (the robot's disc); ``frm`` if none."""
-    for _ in range(20):
-        if pop.goals:
-            g = np.array(pop.goals[int(rng.integers(len(pop.goals)))], dtype=float)
-        else:
-            g = random_point(obstacles, rng, pop, r)
-            if g is None:
-                continue
-        gx, gy = float(g[0]), float(g[1])
+    not within ``avoid = (centre, radius_m) + r`` (the robot's disc); ``frm`` if none.
+
+    Up to ``GOAL_TRIES`` tries, each drawing a goal (see :func:`_try_goal`). Tries for a
+    free point of the areas (after the first, with several areas) are evaluated
+    ``SPECULATE`` at a time: their draws are made in the order one try after another makes
+    them, their candidates tested in one pass, and the generator is then put back to where
+    the first accepted try left it, so the goals and the draws are those of the
+    one-at-a-time loop, number for number.
+    """
+    # every try for attraction points (one draw and one line of sight each: nothing to
+    # gain), and the first alone for several areas (it is often accepted, and speculative
+    # tries there cost a draw of area indices each)
+    left = GOAL_TRIES
+    while left > 0 and (pop.goals or (left == GOAL_TRIES and len(pop.areas) > 1)):
+        left -= 1
+        g = _try_goal(obstacles, rng, pop, r)
+        if g is not None and _accept_one(obstacles, g, frm, r, avoid):
+            return g
+    while left > 0:
+        n = min(SPECULATE, left)
+        state = rng.bit_generator.state
+        goals, done = _draw_tries(obstacles, rng, pop, r, n)
+        ok = _accept(obstacles, goals, frm, r, avoid)
+        if ok.any():
+            s = int(ok.argmax())  # the first accepted try: replay the draws up to it
+            rng.bit_generator.state = state
+            _draw_tries(obstacles, rng, pop, r, s + 1, test=False)
+            return goals[s].copy()
+        left -= done
+        if done < n:  # try ``done`` needs more than one batch of points: one at a time
+            rng.bit_generator.state = state
+            _draw_tries(obstacles, rng, pop, r, done, test=False)
+            left -= 1
+            g = _try_goal(obstacles, rng, pop, r)
+            if g is not None and _accept_one(obstacles, g, frm, r, avoid):
+                return g
+    return frm.copy()
+
+
+def _try_goal(
+    obstacles: Obstacles, rng: np.random.Generator, pop: PeopleSpec, r: float
+) -> FloatArray | None:
+    """One try of :func:`pick_goal`: an attraction point, or a free point of the areas."""
+    if pop.goals:
+        return np.array(pop.goals[int(rng.integers(len(pop.goals)))], dtype=float)
+    return random_point(obstacles, rng, pop, r)
+
+
+def _draw_tries(
+    obstacles: Obstacles,
+    rng: np.random.Generator,
+    pop: PeopleSpec,
+    r: float,
+    n: int,
+    test: bool = True,
+) -> tuple[FloatArray, int]:
+    """The draws of ``n`` tries of :func:`pick_goal` for free points of the areas (no
+    attraction points) in their order, assuming each try's
+    :func:`random_point` finds a free point in its first batch of 8 (``test``: check that
+    with one :meth:`Obstacles.free_mask` of all candidates). Returns the goals ``(m, 2)`` of
+    the first ``m <= n`` tries for which that holds, and ``m``."""
+    boxes = np.array(pop.areas, dtype=np.float64)
+    if n == 0:
+        return np.zeros((0, 2)), 0
+    if len(boxes) == 1:  # integers(1) draws nothing: the uniforms follow one another
+        k = np.zeros(8 * n, dtype=np.int64)
+        u = rng.uniform(0.0, 1.0, size=(8 * n, 2))
+    else:
+        ks, us = [], []
+        for _ in range(n):
+            ks.append(rng.integers(len(boxes), size=8))
+            us.append(rng.uniform(0.0, 1.0, size=(8, 2)))
+        k, u = np.concatenate(ks), np.concatenate(us)
+    if not test:
+        return np.zeros((0, 2)), n
+    cand = boxes[k, :2] + u * (boxes[k, 2:] - boxes[k, :2])
+    if len(obstacles.segments) == 0:
+        return cand[::8].copy(), n
+    free = obstacles.free_mask(cand, r).reshape(n, 8)
+    found = free.any(axis=1)
+    m = n if found.all() else int(found.argmin())
+    first = free[:m].argmax(axis=1)
+    return cand.reshape(n, 8, 2)[np.arange(m), first], m
+
+
+def _accept_one(
+    obstacles: Obstacles,
+    g: FloatArray,
+    frm: FloatArray,
+    r: float,
+    avoid: tuple[FloatArray, float] | None,
+) -> bool:
+    """:func:`_accept` for one goal ``g``."""
+    gx, gy = float(g[0]), float(g[1])
+    if avoid is not None and math.hypot(gx - avoid[0][0], gy - avoid[0][1]) < avoid[1] + r:
+        return False
+    return math.hypot(gx - frm[0], gy - frm[1]) > GOAL_TOL_M and obstacles.visible(frm, g)
+
+
+def _accept(
+    obstacles: Obstacles,
+    goals: FloatArray,
+    frm: FloatArray,
+    r: float,
+    avoid: tuple[FloatArray, float] | None,
+) -> NDArray[np.bool_]:
+    """Per goal ``(m, 2)``: not within ``avoid`` (+ ``r``), farther than ``GOAL_TOL_M`` from
+    ``frm``, and in its line of sight."""
+    near = np.zeros(len(goals), dtype=bool)
+    for i, (gx, gy) in enumerate(goals.tolist()):
         if avoid is not None and math.hypot(gx - avoid[0][0], gy - avoid[0][1]) < avoid[1] + r:
             continue
-        if math.hypot(gx - frm[0], gy - frm[1]) > GOAL_TOL_M and obstacles.visible(frm, g):
-            return g
-    return frm.copy()
+        near[i] = math.hypot(gx - frm[0], gy - frm[1]) > GOAL_TOL_M
+    if not near.any():
+        return near
+    seen = np.zeros(len(goals), dtype=bool)
+    seen[near] = obstacles.visible_many(frm, goals[near])
+    return seen
 
 
 def spawn(
