@@ -503,11 +503,16 @@ class RouteMemory:
         with ``prefer_along_m`` (its last arc length on that route) that route's segments
         within ``continuity_window_m`` of it along the route win unless another is
         ``continuity_m`` nearer (a route that passes a place twice keeps the robot's pass)."""
+        p = np.asarray(pose, float)
+        return self._locate_xy(float(p[0]), float(p[1]), prefer_route, prefer_along_m)
+
+    def _locate_xy(
+        self, px: float, py: float, prefer_route: int | None, prefer_along_m: float | None
+    ) -> RoutePosition | None:
+        """:meth:`locate` at ``(px, py)`` [m]."""
         s = self._segments()
         if not s.rows:
             return None
-        p = np.asarray(pose, float)[:2]
-        px, py = float(p[0]), float(p[1])
         if self.backend != "numpy" and numba_available() and math.isfinite(px + py):
             k, u_k, dist_k, qx, qy = locate_segment(
                 px,
@@ -523,6 +528,7 @@ class RouteMemory:
                 self.params.continuity_m,
             )
         else:
+            p = np.array([px, py])
             k, u_k, dist_k, qx, qy = self._locate_numpy(p, s, prefer_route, prefer_along_m)
         rid, seg, fr, to, ax, ay, bx, by, s0, length, hw = s.rows[k]
         dx, dy = bx - ax, by - ay
@@ -571,7 +577,8 @@ class RouteMemory:
         being recorded is dropped (it was never joined back to the graph)."""
         self._track: _Track | None = None
         self._rec: _Recording | None = None
-        self._last_inside: tuple[RoutePosition, float, float, FloatArray] | None = None
+        #: the last step inside a corridor: position, time, heading, robot (x, y)
+        self._last_inside: tuple[RoutePosition, float, float, tuple[float, float]] | None = None
         self._passed: _Passed | None = None
         #: per waypoint id: the driven lateral offsets' weighted sums ``[Σwx, Σwy, Σw]``
         self._pending: dict[int, list[float]] = {}
@@ -593,11 +600,12 @@ class RouteMemory:
         """
         pose = np.asarray(pose, float)
         xy, heading = pose[:2], float(pose[2]) if pose.size > 2 else 0.0
+        px, py = xy.tolist()
         tr = self._track
         pos = (
-            self.locate(pose)
+            self._locate_xy(px, py, None, None)
             if tr is None
-            else self.locate(pose, prefer_route=tr.route_id, prefer_along_m=tr.s_prev_m)
+            else self._locate_xy(px, py, tr.route_id, tr.s_prev_m)
         )
         if pos is None:
             return None
@@ -605,10 +613,10 @@ class RouteMemory:
             if self._rec is not None:
                 self._finish_recording(pos, xy, t_s)
                 prefer = self._track.route_id if self._track is not None else None
-                pos = self.locate(pose, prefer_route=prefer)
+                pos = self._locate_xy(px, py, prefer, None)
                 assert pos is not None
-            self._track_step(pos, xy, t_s)
-            self._last_inside = (pos, t_s, heading, xy.copy())
+            self._track_step(pos, px, py, t_s)
+            self._last_inside = (pos, t_s, heading, (px, py))
             return pos
         if self._rec is None:
             self._start_recording(xy, heading, t_s)
@@ -616,7 +624,7 @@ class RouteMemory:
         self._last_inside = None
         return pos
 
-    def _track_step(self, pos: RoutePosition, xy: FloatArray, t_s: float) -> None:
+    def _track_step(self, pos: RoutePosition, px: float, py: float, t_s: float) -> None:
         r = self.routes[pos.route_id]
         tr = self._track
         if tr is None or tr.route_id != pos.route_id:
@@ -630,7 +638,7 @@ class RouteMemory:
             # a jump along the route much longer than the robot moved is no drive past the
             # waypoints between: a loop route's end meets its start (H&W's), or a pose jumped
             last = self._last_inside
-            moved = math.hypot(*(xy - last[3])) if last is not None else math.inf
+            moved = math.hypot(px - last[3][0], py - last[3][1]) if last is not None else math.inf
             if s1 - s0 > moved + self.params.join_distance_m:
                 s0 = s1
             if s1 > s0:
@@ -660,8 +668,8 @@ class RouteMemory:
                         self._pass(r, wid, tc)
             tr.s_prev_m, tr.t_prev_s = s1, t_s
         if 0.0 < pos.progress < 1.0:  # perpendicular offset only
-            ox = float(xy[0]) - pos.projection_xy[0]
-            oy = float(xy[1]) - pos.projection_xy[1]
+            ox = px - pos.projection_xy[0]
+            oy = py - pos.projection_xy[1]
             for wid, w in ((pos.from_id, 1.0 - pos.progress), (pos.to_id, pos.progress)):
                 acc = self._pending.get(wid)
                 if acc is None:
