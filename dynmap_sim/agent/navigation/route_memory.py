@@ -531,19 +531,10 @@ class RouteMemory:
             p = np.array([px, py])
             k, u_k, dist_k, qx, qy = self._locate_numpy(p, s, prefer_route, prefer_along_m)
         rid, seg, fr, to, ax, ay, bx, by, s0, length, hw = s.rows[k]
-        dx, dy = bx - ax, by - ay
+        lateral = ((bx - ax) * (py - ay) - (by - ay) * (px - ax)) / length if length > 0 else 0.0
+        # RoutePosition's fields in order (positional: this runs every step)
         return RoutePosition(
-            route_id=rid,
-            segment=seg,
-            from_id=fr,
-            to_id=to,
-            progress=u_k,
-            along_m=s0 + u_k * length,
-            distance_m=dist_k,
-            lateral_m=(dx * (py - ay) - dy * (px - ax)) / length if length > 0 else 0.0,
-            half_width_m=hw,
-            inside=dist_k <= hw,
-            projection_xy=(qx, qy),
+            rid, seg, fr, to, u_k, s0 + u_k * length, dist_k, lateral, hw, dist_k <= hw, (qx, qy)
         )
 
     def _locate_numpy(
@@ -599,8 +590,10 @@ class RouteMemory:
         split). With an empty memory, nothing is learned (there is nothing to join to).
         """
         pose = np.asarray(pose, float)
-        xy, heading = pose[:2], float(pose[2]) if pose.size > 2 else 0.0
-        px, py = xy.tolist()
+        values = pose.tolist()
+        px, py = values[0], values[1]
+        heading = float(values[2]) if len(values) > 2 else 0.0
+        xy = pose[:2]
         tr = self._track
         pos = (
             self._locate_xy(px, py, None, None)

@@ -1,20 +1,24 @@
-"""Optional numba kernel of the route memory's per-scan work (extra ``fast``).
+"""Optional numba kernels of the route memory's and the stack's per-scan work (extra ``fast``).
 
 * :func:`locate_segment`: :meth:`~.route_memory.RouteMemory.locate`'s search (H&W §5.1) —
   the robot projected onto every segment of every route, the nearest segment, the nearest of
   the tracked route and the nearest within the continuity window — in one loop instead of
   ~25 numpy operations on arrays of a few dozen segments.
+* :func:`cut_probe`: :meth:`~.stack.NavigationStack._cut_ahead`'s corridor check (H&W §6.3)
+  — samples along the path ahead (:func:`~dynmap_sim.agent.planning.costmap.samples_along`'s
+  arithmetic), their summed steps, and each kept sample's lateral offsets looked up in the
+  clearance grid (:meth:`~dynmap_sim.agent.planning.clearance_grid.ClearanceGrid.
+  clearance_at`'s ``rint`` and clip) — in one loop instead of ~30 numpy operations.
 
 The arithmetic is the numpy code's, operation for operation (``b - a``, the two-term dot
-products, the clip as numpy's ``max`` then ``min``, ``hypot`` from the C library as numpy's),
-and a minimum is the first one as ``argmin``'s, so the results are identical. The kernel is
-plain Python (what the tests run against the numpy code), compiled with
+products, the clip as numpy's ``max`` then ``min``, ``ceil`` and ``rint``, sums in order as
+``cumsum``'s, and ``np.hypot``, which is the C library's in numba as in numpy, while Python's
+``math.hypot`` is not), and a minimum is the first one as ``argmin``'s, so the results are
+identical. Each kernel is plain Python (what the tests run against the numpy code), compiled with
 :func:`dynmap_sim.jit.compiled` when numba is installed.
 """
 
 from __future__ import annotations
-
-import math
 
 import numpy as np
 from numpy.typing import NDArray
@@ -52,7 +56,7 @@ def _locate_py(  # type: ignore[no-untyped-def]
         t = ((px - ax) * dx + (py - ay) * dy) / (len2 if len2 > 1e-18 else 1e-18)
         u = t if t > 0.0 else 0.0  # numpy's clip: max(t, 0), then min(., 1)
         u = u if u < 1.0 else 1.0
-        dist = math.hypot(px - (ax + u * dx), py - (ay + u * dy))
+        dist = np.hypot(px - (ax + u * dx), py - (ay + u * dy))
         if k < 0 or dist < best:
             k, best, u_k = i, dist, u
         if use_prefer and rid[i] == prefer_route:
@@ -107,3 +111,66 @@ def locate_segment(
         continuity_m,
     )
     return int(k), float(u), float(dist), float(qx), float(qy)
+
+
+def _cut_probe_py(  # type: ignore[no-untyped-def]
+    verts, hw_seg, step_m, max_along_m, lin, clearance, ox, oy, res, min_clearance_m
+):
+    """Samples every ``step_m`` along the polyline ``verts (S+1, 2)`` (each segment from its
+    start, end excluded) whose summed steps are within ``max_along_m``: their points
+    ``(K, 2)`` and whether every lateral offset ``lin * l`` (``l = hw_seg`` of the segment,
+    along its left normal) has less than ``min_clearance_m`` in the grid ``clearance``
+    (cell ``(0, 0)`` centred at ``(ox, oy)``, ``res`` [m])."""
+    n_seg = verts.shape[0] - 1
+    counts = np.empty(n_seg, np.int64)
+    lengths = np.empty(n_seg)
+    total = 0
+    for i in range(n_seg):
+        lengths[i] = np.hypot(verts[i + 1, 0] - verts[i, 0], verts[i + 1, 1] - verts[i, 1])
+        c = np.int64(np.ceil(lengths[i] / step_m))
+        counts[i] = c if c > 1 else 1
+        total += counts[i]
+    pts = np.empty((total, 2))
+    cut = np.zeros(total, np.bool_)
+    h, w = clearance.shape
+    k = 0
+    along = 0.0
+    px, py = 0.0, 0.0
+    for i in range(n_seg):
+        ax, ay = verts[i, 0], verts[i, 1]
+        dx, dy = verts[i + 1, 0] - ax, verts[i + 1, 1] - ay
+        length = lengths[i]
+        nrm = length if length > 1e-12 else 1e-12
+        nx, ny = -(dy / nrm), dx / nrm
+        for m in range(counts[i]):
+            t = m * step_m
+            u = t / length if length > 0 else 0.0
+            x, y = ax + u * dx, ay + u * dy
+            if k > 0:
+                along += np.hypot(x - px, y - py)
+                if not along <= max_along_m:
+                    return pts[:k], cut[:k]
+            px, py = x, y
+            pts[k, 0], pts[k, 1] = x, y
+            all_cut = True
+            for j in range(lin.shape[0]):
+                off = lin[j] * hw_seg[i]
+                r = np.int64(np.rint((y + off * ny - oy) / res))
+                col = np.int64(np.rint((x + off * nx - ox) / res))
+                r = min(max(r, 0), h - 1)
+                col = min(max(col, 0), w - 1)
+                if not clearance[r, col] < min_clearance_m:
+                    all_cut = False
+                    break
+            cut[k] = all_cut
+            k += 1
+    return pts[:k], cut[:k]
+
+
+_cut_probe_nb = compiled(_cut_probe_py)
+
+
+def cut_probe(*args: object, python: bool = False) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """:func:`_cut_probe_py` compiled (its arguments; ``python``: the uncompiled one)."""
+    fn = _cut_probe_py if python or _cut_probe_nb is None else _cut_probe_nb
+    return fn(*args)  # type: ignore[no-any-return]

@@ -75,6 +75,7 @@ from dynmap_sim.agent.navigation.route_memory import (
     RouteMemoryParams,
     RoutePosition,
 )
+from dynmap_sim.agent.navigation.route_numba import cut_probe, numba_available
 from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
 from dynmap_sim.agent.planning.costmap import Costmap, CostmapParams, samples_along
 from dynmap_sim.agent.planning.grid_astar import GridAStar, plan_around
@@ -225,6 +226,10 @@ class NavigationStack:
     (:attr:`replans`, :attr:`recoveries`, :attr:`stuck_s`, :attr:`monitor_stops`,
     :attr:`monitor_slowdowns`), :attr:`events`, :meth:`planned_path`, :attr:`route_memory`.
     """
+
+    #: ``"auto"``: the corridor cut check in the numba kernel of :mod:`.route_numba` when
+    #: numba is installed (the same numbers); ``"numpy"``: always in numpy
+    backend: str = "auto"
 
     def __init__(
         self, laser: LaserSpec, robot_radius_m: float, params: StackParams | None = None
@@ -782,19 +787,34 @@ class NavigationStack:
         end_m = np.cumsum(np.hypot(*np.diff(verts, axis=0).T))  # arc length at segment ends
         n_seg = int(np.searchsorted(end_m, p.cut_check_m + 1.0, side="right")) + 1
         verts = verts[: n_seg + 1]
-        pts, seg = samples_along(verts[:-1], verts[1:], grid.resolution_m, False)
-        if len(pts) == 0:
-            return None
-        step = np.hypot(*np.diff(pts, axis=0).T)
-        along = np.concatenate([[0.0], np.cumsum(step)])
-        keep = along <= p.cut_check_m
-        pts, seg = pts[keep], seg[keep]
-        d = verts[1:] - verts[:-1]
-        t = d / np.maximum(np.hypot(*d.T), 1e-12)[:, None]
-        normal = np.stack([-t[:, 1], t[:, 0]], axis=1)[seg]
-        offsets = np.linspace(-1.0, 1.0, p.cut_offsets)[None, :] * hw_seg[seg][:, None]
-        probe = pts[:, None, :] + offsets[..., None] * normal[:, None, :]
-        cut = np.all(grid.clearance_at(probe) < self.min_clearance_m, axis=1)
+        lin = np.linspace(-1.0, 1.0, p.cut_offsets)
+        if self.backend != "numpy" and numba_available():
+            pts, cut = cut_probe(
+                verts,
+                hw_seg,
+                float(grid.resolution_m),
+                float(p.cut_check_m),
+                lin,
+                grid.clearance_m,
+                float(grid.origin[0]),
+                float(grid.origin[1]),
+                float(grid.resolution_m),
+                float(self.min_clearance_m),
+            )
+        else:
+            pts, seg = samples_along(verts[:-1], verts[1:], grid.resolution_m, False)
+            if len(pts) == 0:
+                return None
+            step = np.hypot(*np.diff(pts, axis=0).T)
+            along = np.concatenate([[0.0], np.cumsum(step)])
+            keep = along <= p.cut_check_m
+            pts, seg = pts[keep], seg[keep]
+            d = verts[1:] - verts[:-1]
+            t = d / np.maximum(np.hypot(*d.T), 1e-12)[:, None]
+            normal = np.stack([-t[:, 1], t[:, 0]], axis=1)[seg]
+            offsets = lin[None, :] * hw_seg[seg][:, None]
+            probe = pts[:, None, :] + offsets[..., None] * normal[:, None, :]
+            cut = np.all(grid.clearance_at(probe) < self.min_clearance_m, axis=1)
         idx = np.flatnonzero(cut)
         if idx.size == 0:
             return None

@@ -1,12 +1,15 @@
 """The corridor cut check (H&W §6.3) looks only at the path's first ``cut_check_m``: samples
-beyond it are not generated, and what it finds is what the check of the whole path finds."""
+beyond it are not generated, and what it finds (numpy or the numba kernel) is what the check
+of the whole path finds."""
 
 from __future__ import annotations
 
 import math
 
 import numpy as np
+import pytest
 
+from dynmap_sim.agent.navigation.route_numba import cut_probe
 from dynmap_sim.agent.navigation.stack import NavigationStack, _clamped_projection
 from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
 from dynmap_sim.agent.planning.costmap import samples_along
@@ -42,11 +45,13 @@ def cut_whole_path(stack, path, hw, grid, pose, seg0):
     return pts[idx[0] : end + 1]
 
 
-def test_the_cut_check_equals_the_check_of_the_whole_path():
+@pytest.mark.parametrize("backend", ["numpy", "auto"])
+def test_the_cut_check_equals_the_check_of_the_whole_path(backend):
     stack = NavigationStack(LASER, 0.17)
+    stack.backend = backend
     rng = np.random.default_rng(7)
     found = 0
-    for trial in range(150):
+    for _ in range(150):
         clearance = rng.uniform(0.0, 1.0, (120, 120))
         clearance[rng.random((120, 120)) < 0.5] = 0.0
         grid = ClearanceGrid(np.array([-3.0, -3.0]), 0.05, clearance)
@@ -63,3 +68,15 @@ def test_the_cut_check_equals_the_check_of_the_whole_path():
             np.testing.assert_array_equal(got, want)
             found += 1
     assert found > 20  # cuts were found, not only free corridors
+
+
+def test_the_cut_kernel_uncompiled_equals_compiled():
+    rng = np.random.default_rng(1)
+    clearance = rng.uniform(0.0, 0.5, (60, 80))
+    for _ in range(30):
+        verts = np.cumsum(rng.normal(0.0, 0.5, (int(rng.integers(2, 12)), 2)), axis=0)
+        hw = rng.uniform(0.05, 0.4, len(verts) - 1)
+        args = (verts, hw, 0.05, 2.0, np.linspace(-1, 1, 9), clearance, -1.0, -1.5, 0.05, 0.2)
+        (p1, c1), (p2, c2) = cut_probe(*args, python=True), cut_probe(*args)
+        np.testing.assert_array_equal(p1, p2)
+        np.testing.assert_array_equal(c1, c2)
