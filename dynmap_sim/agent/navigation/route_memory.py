@@ -232,7 +232,7 @@ class RouteGraph:
     out: dict[int, list[Edge]] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        nodes = self.node_ids.tolist()
+        nodes = np.asarray(self.node_ids).tolist()  # (a list of ids works too)
         self.index = {n: i for i, n in enumerate(nodes)}
         self.out = {n: [] for n in nodes}
         for e in self.edges:
