@@ -32,6 +32,7 @@ for figures and storage (the short-term state of a run in progress is not part o
 from __future__ import annotations
 
 import math
+from bisect import bisect_right
 from collections import deque
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field
@@ -39,6 +40,8 @@ from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+
+from dynmap_sim.agent.navigation.route_numba import locate_segment, numba_available
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -229,8 +232,9 @@ class RouteGraph:
     out: dict[int, list[Edge]] = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
-        self.index = {int(n): i for i, n in enumerate(self.node_ids)}
-        self.out = {int(n): [] for n in self.node_ids}
+        nodes = np.asarray(self.node_ids).tolist()  # (a list of ids works too)
+        self.index = {n: i for i, n in enumerate(nodes)}
+        self.out = {n: [] for n in nodes}
         for e in self.edges:
             self.out[e.u].append(e)
 
@@ -254,7 +258,7 @@ class RouteGraph:
             (
                 e
                 for e in self.out.get(int(u), [])
-                if e.v == int(v) and e.route_id != JOIN and np.isfinite(e.travel_time_s)
+                if e.v == int(v) and e.route_id != JOIN and math.isfinite(e.travel_time_s)
             ),
             None,
         )
@@ -273,7 +277,7 @@ class RouteGraph:
         segs = [
             e
             for e in self.edges
-            if e.route_id != JOIN and np.isfinite(e.travel_time_s) and e.v != exclude_to
+            if e.route_id != JOIN and math.isfinite(e.travel_time_s) and e.v != exclude_to
         ]
         if not segs:
             return None
@@ -325,6 +329,28 @@ class _Recording:
     robot_start_xy: tuple[float, float]
 
 
+@dataclass
+class _Segments:
+    """All segments of all routes as flat arrays, and per route its arc lengths: what
+    :meth:`RouteMemory.locate` and the tracking read every step, built once per geometry
+    (see :meth:`RouteMemory._segments`)."""
+
+    a: FloatArray  # (S, 2) segment starts [m]
+    b: FloatArray  # (S, 2) segment ends [m]
+    l: FloatArray  # (S,) half-widths [m]
+    rid: IntArray  # (S,) route ids
+    seg: IntArray  # (S,) index of the end waypoint in its route
+    fr: IntArray  # (S,) start waypoint ids
+    to: IntArray  # (S,) end waypoint ids
+    s0: FloatArray  # (S,) arc length of the start waypoint on its route [m]
+    length: FloatArray  # (S,) segment lengths [m]
+    #: per route id: ``Route.cumulative_m()`` as an array and as a list of floats
+    cum: dict[int, FloatArray]
+    cum_list: dict[int, list[float]]
+    #: per segment: ``(rid, seg, from, to, ax, ay, bx, by, s0, length, l)`` as Python numbers
+    rows: list[tuple[Any, ...]]
+
+
 class RouteMemory:
     """Routes, their learning and forgetting (H&W §5), and the graph for planning (§6.2).
 
@@ -333,14 +359,23 @@ class RouteMemory:
     :meth:`forget` at each long-term update (e.g. the end of a run), :meth:`graph` to plan.
     """
 
-    def __init__(self, params: RouteMemoryParams | None = None) -> None:
+    def __init__(self, params: RouteMemoryParams | None = None, backend: str = "auto") -> None:
+        if backend not in ("auto", "numba", "numpy"):
+            raise ValueError(f"backend must be auto, numba or numpy, got {backend!r}")
         self.params = params or RouteMemoryParams()
+        #: :meth:`locate`'s search: "auto" the numba kernel of :mod:`.route_numba` when numba
+        #: is installed (the same numbers), "numpy" the vectorized numpy code
+        self.backend = backend
         self.routes: dict[int, Route] = {}
         #: Blocked edges ``(from_id, to_id)``: infinite cost until seen free (§6.3).
         self.blocked: set[tuple[int, int]] = set()
         self._next_route_id = 0
         self._next_waypoint_id = 0
-        self._segs: dict[str, np.ndarray] | None = None
+        #: the geometry cache: every change of a waypoint's position, a route's half-width or
+        #: the set of routes sets it to None (code that edits ``routes`` must do so as well)
+        self._segs: _Segments | None = None
+        #: the last graph with the state it was built from (:meth:`graph`)
+        self._graph: tuple[tuple[Any, ...], RouteGraph] | None = None
         self.reset_run()
 
     # ------------------------------------------------------------------ building
@@ -414,12 +449,15 @@ class RouteMemory:
         return self._next_route_id - 1
 
     # ------------------------------------------------------------------ §5.1 locate
-    def _segments(self) -> dict[str, np.ndarray]:
+    def _segments(self) -> _Segments:
         """All segments of all routes as flat arrays (cached until the geometry changes)."""
         if self._segs is None:
             a, b, hw, rid, seg, fr, to, s0 = [], [], [], [], [], [], [], []
+            cum: dict[int, FloatArray] = {}
             for r in self.routes.values():
                 m = len(r.ids)
+                c = r.cumulative_m()
+                cum[r.route_id] = c
                 a.append(r.xy[:-1])
                 b.append(r.xy[1:])
                 hw.append(r.wp[1:, L])
@@ -427,19 +465,31 @@ class RouteMemory:
                 seg.append(np.arange(1, m))
                 fr.append(r.ids[:-1])
                 to.append(r.ids[1:])
-                s0.append(r.cumulative_m()[:-1])
+                s0.append(c[:-1])
             cat = lambda x, k: np.concatenate(x) if x else np.zeros(k)  # noqa: E731
-            self._segs = {
-                "a": cat(a, (0, 2)),
-                "b": cat(b, (0, 2)),
-                "l": cat(hw, 0),
-                "rid": cat(rid, 0).astype(np.int64),
-                "seg": cat(seg, 0).astype(np.int64),
-                "from": cat(fr, 0).astype(np.int64),
-                "to": cat(to, 0).astype(np.int64),
-                "s0": cat(s0, 0),
-            }
+            aa, bb = cat(a, (0, 2)), cat(b, (0, 2))
+            sg = _Segments(
+                a=aa,
+                b=bb,
+                l=cat(hw, 0),
+                rid=cat(rid, 0).astype(np.int64),
+                seg=cat(seg, 0).astype(np.int64),
+                fr=cat(fr, 0).astype(np.int64),
+                to=cat(to, 0).astype(np.int64),
+                s0=cat(s0, 0),
+                length=np.hypot(*(bb - aa).T),
+                cum=cum,
+                cum_list={k: c.tolist() for k, c in cum.items()},
+                rows=[],
+            )
+            cols = (sg.rid, sg.seg, sg.fr, sg.to, aa[:, 0], aa[:, 1], bb[:, 0], bb[:, 1])
+            sg.rows = list(zip(*(c.tolist() for c in (*cols, sg.s0, sg.length, sg.l)), strict=True))
+            self._segs = sg
         return self._segs
+
+    def _cumulative(self, route_id: int) -> FloatArray:
+        """``Route.cumulative_m()`` of a route, from the geometry cache (do not modify)."""
+        return self._segments().cum[route_id]
 
     def locate(
         self,
@@ -453,46 +503,64 @@ class RouteMemory:
         with ``prefer_along_m`` (its last arc length on that route) that route's segments
         within ``continuity_window_m`` of it along the route win unless another is
         ``continuity_m`` nearer (a route that passes a place twice keeps the robot's pass)."""
+        p = np.asarray(pose, float)
+        return self._locate_xy(float(p[0]), float(p[1]), prefer_route, prefer_along_m)
+
+    def _locate_xy(
+        self, px: float, py: float, prefer_route: int | None, prefer_along_m: float | None
+    ) -> RoutePosition | None:
+        """:meth:`locate` at ``(px, py)`` [m]."""
         s = self._segments()
-        if s["a"].shape[0] == 0:
+        if not s.rows:
             return None
-        p = np.asarray(pose, float)[:2]
-        u, proj, dist = _project(p, s["a"], s["b"])
+        if self.backend != "numpy" and numba_available() and math.isfinite(px + py):
+            k, u_k, dist_k, qx, qy = locate_segment(
+                px,
+                py,
+                s.a,
+                s.b,
+                s.rid,
+                s.s0,
+                s.length,
+                prefer_route,
+                prefer_along_m,
+                self.params.continuity_window_m,
+                self.params.continuity_m,
+            )
+        else:
+            p = np.array([px, py])
+            k, u_k, dist_k, qx, qy = self._locate_numpy(p, s, prefer_route, prefer_along_m)
+        rid, seg, fr, to, ax, ay, bx, by, s0, length, hw = s.rows[k]
+        lateral = ((bx - ax) * (py - ay) - (by - ay) * (px - ax)) / length if length > 0 else 0.0
+        # RoutePosition's fields in order (positional: this runs every step)
+        return RoutePosition(
+            rid, seg, fr, to, u_k, s0 + u_k * length, dist_k, lateral, hw, dist_k <= hw, (qx, qy)
+        )
+
+    def _locate_numpy(
+        self,
+        p: FloatArray,
+        s: _Segments,
+        prefer_route: int | None,
+        prefer_along_m: float | None,
+    ) -> tuple[int, float, float, float, float]:
+        """:meth:`locate`'s search vectorized: ``(k, u, distance, qx, qy)`` of the segment."""
+        u, proj, dist = _project(p, s.a, s.b)
         k = int(np.argmin(dist))
-        seg_len = np.hypot(*(s["b"] - s["a"]).T)
         if prefer_route is not None:
-            mine = np.flatnonzero(s["rid"] == prefer_route)
+            mine = np.flatnonzero(s.rid == prefer_route)
             if mine.size:
                 k2 = int(mine[np.argmin(dist[mine])])
                 if dist[k2] <= dist[k] + 1e-9:
                     k = k2
                 if prefer_along_m is not None:
-                    along = s["s0"][mine] + u[mine] * seg_len[mine]
+                    along = s.s0[mine] + u[mine] * s.length[mine]
                     cont = mine[np.abs(along - prefer_along_m) <= self.params.continuity_window_m]
                     if cont.size:
                         k3 = int(cont[np.argmin(dist[cont])])
                         if dist[k3] <= dist[k] + self.params.continuity_m:
                             k = k3
-        d = s["b"][k] - s["a"][k]
-        length = float(np.hypot(*d))
-        lateral = (
-            float(d[0] * (p[1] - s["a"][k][1]) - d[1] * (p[0] - s["a"][k][0])) / length
-            if length > 0
-            else 0.0
-        )
-        return RoutePosition(
-            route_id=int(s["rid"][k]),
-            segment=int(s["seg"][k]),
-            from_id=int(s["from"][k]),
-            to_id=int(s["to"][k]),
-            progress=float(u[k]),
-            along_m=float(s["s0"][k] + u[k] * length),
-            distance_m=float(dist[k]),
-            lateral_m=lateral,
-            half_width_m=float(s["l"][k]),
-            inside=bool(dist[k] <= s["l"][k]),
-            projection_xy=(float(proj[k][0]), float(proj[k][1])),
-        )
+        return k, float(u[k]), float(dist[k]), float(proj[k][0]), float(proj[k][1])
 
     # ------------------------------------------------------------------ §5.2 learning
     def reset_run(self) -> None:
@@ -500,9 +568,11 @@ class RouteMemory:
         being recorded is dropped (it was never joined back to the graph)."""
         self._track: _Track | None = None
         self._rec: _Recording | None = None
-        self._last_inside: tuple[RoutePosition, float, float, FloatArray] | None = None
+        #: the last step inside a corridor: position, time, heading, robot (x, y)
+        self._last_inside: tuple[RoutePosition, float, float, tuple[float, float]] | None = None
         self._passed: _Passed | None = None
-        self._pending: dict[int, FloatArray] = {}
+        #: per waypoint id: the driven lateral offsets' weighted sums ``[Σwx, Σwy, Σw]``
+        self._pending: dict[int, list[float]] = {}
 
     @property
     def recording(self) -> bool:
@@ -520,12 +590,15 @@ class RouteMemory:
         split). With an empty memory, nothing is learned (there is nothing to join to).
         """
         pose = np.asarray(pose, float)
-        xy, heading = pose[:2], float(pose[2]) if pose.size > 2 else 0.0
+        values = pose.tolist()
+        px, py = values[0], values[1]
+        heading = float(values[2]) if len(values) > 2 else 0.0
+        xy = pose[:2]
         tr = self._track
         pos = (
-            self.locate(pose)
+            self._locate_xy(px, py, None, None)
             if tr is None
-            else self.locate(pose, prefer_route=tr.route_id, prefer_along_m=tr.s_prev_m)
+            else self._locate_xy(px, py, tr.route_id, tr.s_prev_m)
         )
         if pos is None:
             return None
@@ -533,10 +606,10 @@ class RouteMemory:
             if self._rec is not None:
                 self._finish_recording(pos, xy, t_s)
                 prefer = self._track.route_id if self._track is not None else None
-                pos = self.locate(pose, prefer_route=prefer)
+                pos = self._locate_xy(px, py, prefer, None)
                 assert pos is not None
-            self._track_step(pos, xy, t_s)
-            self._last_inside = (pos, t_s, heading, xy.copy())
+            self._track_step(pos, px, py, t_s)
+            self._last_inside = (pos, t_s, heading, (px, py))
             return pos
         if self._rec is None:
             self._start_recording(xy, heading, t_s)
@@ -544,7 +617,7 @@ class RouteMemory:
         self._last_inside = None
         return pos
 
-    def _track_step(self, pos: RoutePosition, xy: FloatArray, t_s: float) -> None:
+    def _track_step(self, pos: RoutePosition, px: float, py: float, t_s: float) -> None:
         r = self.routes[pos.route_id]
         tr = self._track
         if tr is None or tr.route_id != pos.route_id:
@@ -558,29 +631,45 @@ class RouteMemory:
             # a jump along the route much longer than the robot moved is no drive past the
             # waypoints between: a loop route's end meets its start (H&W's), or a pose jumped
             last = self._last_inside
-            moved = math.hypot(*(xy - last[3])) if last is not None else math.inf
+            moved = math.hypot(px - last[3][0], py - last[3][1]) if last is not None else math.inf
             if s1 - s0 > moved + self.params.join_distance_m:
                 s0 = s1
             if s1 > s0:
-                cum = r.cumulative_m()
-                # the route's end counts as passed pass_tolerance_m before it (a robot stops
-                # at its goal within a tolerance), timed as if it drove on at its speed
+                # the waypoints whose arc length lies in (s0, s1]: the route's end counts as
+                # passed pass_tolerance_m before it (a robot stops at its goal within a
+                # tolerance), timed as if it drove on at its speed; the marks ascend, so the
+                # others are a range found by bisection
+                cum = self._segments().cum_list[r.route_id]
+                n = len(cum)
                 early = min(self.params.pass_tolerance_m, 0.5 * (cum[-1] - cum[-2]))
-                mark = cum.copy()
-                mark[-1] -= early
-                crossed = np.flatnonzero((mark > s0) & (mark <= s1))
-                speed = (s1 - s0) / max(t_s - tr.t_prev_s, 1e-9)
-                times = tr.t_prev_s + (mark[crossed] - s0) / speed
-                times[crossed == len(cum) - 1] += early / speed
-                ids = r.ids[crossed].tolist()
-                for wid, tc in zip(ids, times.tolist(), strict=True):
-                    self._pass(r, wid, tc)
+                end_mark = cum[-1] - early
+                crossed = list(
+                    range(bisect_right(cum, s0, 0, n - 1), bisect_right(cum, s1, 0, n - 1))
+                )
+                if s0 < end_mark <= s1:
+                    crossed.append(n - 1)
+                if crossed:
+                    speed = (s1 - s0) / max(t_s - tr.t_prev_s, 1e-9)
+                    ids = r.ids.tolist()
+                    passes = []
+                    for j in crossed:
+                        tc = tr.t_prev_s + ((end_mark if j == n - 1 else cum[j]) - s0) / speed
+                        if j == n - 1:
+                            tc += early / speed
+                        passes.append((ids[j], tc))
+                    for wid, tc in passes:
+                        self._pass(r, wid, tc)
             tr.s_prev_m, tr.t_prev_s = s1, t_s
         if 0.0 < pos.progress < 1.0:  # perpendicular offset only
-            off = xy - np.asarray(pos.projection_xy)
+            ox = px - pos.projection_xy[0]
+            oy = py - pos.projection_xy[1]
             for wid, w in ((pos.from_id, 1.0 - pos.progress), (pos.to_id, pos.progress)):
-                acc = self._pending.setdefault(wid, np.zeros(3))
-                acc += (w * off[0], w * off[1], w)
+                acc = self._pending.get(wid)
+                if acc is None:
+                    acc = self._pending[wid] = [0.0, 0.0, 0.0]
+                acc[0] += w * ox
+                acc[1] += w * oy
+                acc[2] += w
 
     def _leave(self, tr: _Track) -> None:
         """The robot switched from route ``tr.route_id`` to another one (inside both
@@ -614,7 +703,10 @@ class RouteMemory:
             and math.hypot(last.x_m - start[0], last.y_m - start[1]) <= self.params.join_distance_m
         ):
             self._passed = _Passed(pos.from_id, float(start[0]), float(start[1]), last.t_s)
-        elif pos.along_m - r.cumulative_m()[pos.segment - 1] <= self.params.pass_tolerance_m:
+        elif (
+            pos.along_m - self._cumulative(r.route_id)[pos.segment - 1]
+            <= self.params.pass_tolerance_m
+        ):
             self._passed = _Passed(pos.from_id, float(start[0]), float(start[1]), t_s)
 
     def _pass(self, r: Route, waypoint_id: int, t_s: float) -> None:
@@ -651,7 +743,7 @@ class RouteMemory:
                 np.hypot(*(other.xy - r.xy[j]).T) <= self.params.join_distance_m
             ):
                 return
-        r.wp[j, :2] += self.params.coord_alpha * acc[:2] / acc[2]
+        r.wp[j, :2] += self.params.coord_alpha * np.array(acc[:2]) / acc[2]
         r.wp[j, T] = t_s
         self._segs = None
 
@@ -913,34 +1005,54 @@ class RouteMemory:
         """The directed route graph (§6.2): nodes are waypoints, edges the segments (cost:
         learned travel time, else length / ``v`` of the end waypoint; ``inf`` if blocked) and
         joins both ways between waypoints of different routes within ``join_distance_m``
-        (cost: distance / the largest ``v`` of the memory)."""
+        (cost: distance / the largest ``v`` of the memory).
+
+        The graph is a function of the routes' ids and rows, their order, the blocks and
+        the join distance: while those are the same (byte for byte) as at the last call,
+        the last graph is returned (treat it as read-only)."""
+        key = (
+            tuple(
+                (r.route_id, r.prior, r.ids.tobytes(), r.wp.tobytes()) for r in self.routes.values()
+            ),
+            frozenset(self.blocked),
+            self.params.join_distance_m,
+        )
+        if self._graph is not None and self._graph[0] == key:
+            return self._graph[1]
+        g = self._build_graph()
+        self._graph = (key, g)
+        return g
+
+    def _build_graph(self) -> RouteGraph:
+        """:meth:`graph` built anew."""
         routes = list(self.routes.values())
         if not routes:
             z = np.zeros(0)
             return RouteGraph(np.zeros(0, np.int64), np.zeros((0, 2)), z, z, [])
         ids = np.concatenate([r.ids for r in routes])
         wp = np.concatenate([r.wp for r in routes])
-        owner = np.concatenate([np.full(len(r.ids), r.route_id) for r in routes])
+        blocked = self.blocked
         edges: list[Edge] = []
         for r in routes:
-            lengths = r.segment_lengths_m()
-            for j in range(1, len(r.ids)):
-                u, v = int(r.ids[j - 1]), int(r.ids[j])
-                length = float(lengths[j - 1])
-                learned = bool(np.isfinite(r.wp[j, DT]))
-                cost = float(r.wp[j, DT]) if learned else length / max(r.wp[j, V], 1e-9)
-                if (u, v) in self.blocked:
+            rids, rows, lengths = r.ids.tolist(), r.wp.tolist(), r.segment_lengths_m().tolist()
+            for j in range(1, len(rids)):
+                u, v, row, length = rids[j - 1], rids[j], rows[j], lengths[j - 1]
+                learned = math.isfinite(row[DT])
+                cost = row[DT] if learned else length / max(row[V], 1e-9)
+                if (u, v) in blocked:
                     cost = math.inf
-                edges.append(Edge(u, v, length, cost, learned, float(r.wp[j, L]), r.route_id))
-        v_join = max(float(np.max(wp[:, V])), 1e-9)
-        diff = wp[:, None, :2] - wp[None, :, :2]
-        dist = np.hypot(diff[..., 0], diff[..., 1])
-        near = (dist <= self.params.join_distance_m) & (owner[:, None] != owner[None, :])
-        for i, k in zip(*np.nonzero(near), strict=True):
-            u, v = int(ids[i]), int(ids[k])
-            cost = math.inf if (u, v) in self.blocked else float(dist[i, k]) / v_join
-            hw = float(min(wp[i, L], wp[k, L]))
-            edges.append(Edge(u, v, float(dist[i, k]), cost, False, hw, JOIN))
+                edges.append(Edge(u, v, length, cost, learned, row[L], r.route_id))
+        if len(routes) > 1:  # joins between waypoints of different routes
+            owner = np.concatenate([np.full(len(r.ids), r.route_id) for r in routes])
+            v_join = max(float(np.max(wp[:, V])), 1e-9)
+            diff = wp[:, None, :2] - wp[None, :, :2]
+            dist = np.hypot(diff[..., 0], diff[..., 1])
+            near = (dist <= self.params.join_distance_m) & (owner[:, None] != owner[None, :])
+            for i, k in zip(*np.nonzero(near), strict=True):
+                u, v = int(ids[i]), int(ids[k])
+                cost = math.inf if (u, v) in blocked else float(dist[i, k]) / v_join
+                hw = float(min(wp[i, L], wp[k, L]))
+                edges.append(Edge(u, v, float(dist[i, k]), cost, False, hw, JOIN))
         return RouteGraph(ids, wp[:, :2].copy(), wp[:, V].copy(), wp[:, L].copy(), edges)
 
     # ------------------------------------------------------------------ storage
@@ -979,8 +1091,17 @@ class RouteMemory:
 
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
-        state["_segs"] = None  # a cache
+        state["_segs"] = None  # caches
+        state["_graph"] = None
         return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self.__dict__.setdefault("backend", "auto")  # pickled before there was a choice
+        self._segs = None  # caches (older pickles held the segments' dict form)
+        self._graph = None
+        if any(isinstance(acc, np.ndarray) for acc in self._pending.values()):
+            self._pending = {k: [float(x) for x in acc] for k, acc in self._pending.items()}
 
 
 def _reaching(g: RouteGraph, target: int) -> set[int]:

@@ -75,6 +75,7 @@ from dynmap_sim.agent.navigation.route_memory import (
     RouteMemoryParams,
     RoutePosition,
 )
+from dynmap_sim.agent.navigation.route_numba import cut_probe, numba_available
 from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
 from dynmap_sim.agent.planning.costmap import Costmap, CostmapParams, samples_along
 from dynmap_sim.agent.planning.grid_astar import GridAStar, plan_around
@@ -226,6 +227,10 @@ class NavigationStack:
     :attr:`monitor_slowdowns`), :attr:`events`, :meth:`planned_path`, :attr:`route_memory`.
     """
 
+    #: ``"auto"``: the corridor cut check in the numba kernel of :mod:`.route_numba` when
+    #: numba is installed (the same numbers); ``"numpy"``: always in numpy
+    backend: str = "auto"
+
     def __init__(
         self, laser: LaserSpec, robot_radius_m: float, params: StackParams | None = None
     ) -> None:
@@ -290,7 +295,7 @@ class NavigationStack:
         self._day_s = 0.0
         self._costmap_t: float | None = None
         self._global: ClearanceGrid | None = None  # the costmap's clearance at the last plan
-        self._local: tuple[FloatArray, ClearanceGrid] | None = None  # (centre, grid)
+        self._local: tuple[tuple[float, float], ClearanceGrid] | None = None  # (centre, grid)
         self._last_t = 0.0
 
     def begin_run(self, prior: Prior) -> None:
@@ -353,8 +358,10 @@ class NavigationStack:
         (a detour round a block rejoined after them; never the whole loop when its end is seen
         at its start)."""
         k, n = self._via_k, len(self._vias)
-        if k < n and np.hypot(*(pose[:2] - self._vias[k][0])) <= self.params.via_tolerance_m:
-            k += 1
+        if k < n:
+            vx, vy = self._vias[k][0].tolist()
+            if np.hypot(float(pose[0]) - vx, float(pose[1]) - vy) <= self.params.via_tolerance_m:
+                k += 1
         pos = self._route_pos
         if k < n and self._armed and pos is not None and pos.inside:
             here = pos.from_id
@@ -477,7 +484,8 @@ class NavigationStack:
         self.steps += 1
         pose = np.asarray(estimate.mean, dtype=np.float64).reshape(3)
         stop = np.zeros(2, dtype=np.float32)
-        if not np.all(np.isfinite(pose)):
+        px, py, pth = pose.tolist()
+        if not (math.isfinite(px) and math.isfinite(py) and math.isfinite(pth)):
             self._event(t_s, "bad_estimate", "non-finite pose estimate: stop")
             return self.monitor.filter(stop, scan, t_s)
         p = self.params
@@ -487,7 +495,8 @@ class NavigationStack:
             self._local = None
         self._route_pos = self.route_memory.observe(pose, self._day_s + t_s)
         assert self.goal_xy is not None
-        to_goal = float(np.hypot(*(pose[:2] - self.goal_xy)))
+        gx, gy = self.goal_xy.tolist()
+        to_goal = float(np.hypot(px - gx, py - gy))
         if not self._armed and to_goal > self.params.goal_arm_m:
             self._armed = True
         self._pass_vias(t_s, pose)
@@ -536,12 +545,14 @@ class NavigationStack:
         recomputed from the costmap's current layers (module doc of the params)."""
         assert self.costmap is not None and self._global is not None
         p = self.params
-        if self._local is not None and np.hypot(*(self._local[0] - pose[:2])) < 0.25:
-            return self._local[1]
+        if self._local is not None:
+            (cx, cy), grid = self._local
+            if np.hypot(cx - float(pose[0]), cy - float(pose[1])) < 0.25:
+                return grid
         grid = self.costmap.window_clearance(
             self._global, pose[:2], p.local_window_m, p.local_margin_m
         )
-        self._local = (pose[:2].copy(), grid)
+        self._local = ((float(pose[0]), float(pose[1])), grid)
         return grid
 
     def _may_replan(self, t_s: float) -> bool:
@@ -770,19 +781,40 @@ class NavigationStack:
         a = verts[0] + _clamped_projection(verts[0], verts[1], pose[:2])
         verts = np.concatenate([a[None], verts[1:]])
         hw_seg = np.minimum(hw[seg0:-1], hw[seg0 + 1 :])
-        pts, seg = samples_along(verts[:-1], verts[1:], grid.resolution_m, False)
-        if len(pts) == 0:
-            return None
-        step = np.hypot(*np.diff(pts, axis=0).T)
-        along = np.concatenate([[0.0], np.cumsum(step)])
-        keep = along <= p.cut_check_m
-        pts, seg = pts[keep], seg[keep]
-        d = verts[1:] - verts[:-1]
-        t = d / np.maximum(np.hypot(*d.T), 1e-12)[:, None]
-        normal = np.stack([-t[:, 1], t[:, 0]], axis=1)[seg]
-        offsets = np.linspace(-1.0, 1.0, p.cut_offsets)[None, :] * hw_seg[seg][:, None]
-        probe = pts[:, None, :] + offsets[..., None] * normal[:, None, :]
-        cut = np.all(grid.clearance_at(probe) < self.min_clearance_m, axis=1)
+        # only the segments that start within cut_check_m (+ 1 m, far above rounding) of the
+        # path's arc length: the samples' summed steps below equal the arc length, so no
+        # later sample is within cut_check_m, and the kept samples are the same
+        end_m = np.cumsum(np.hypot(*np.diff(verts, axis=0).T))  # arc length at segment ends
+        n_seg = int(np.searchsorted(end_m, p.cut_check_m + 1.0, side="right")) + 1
+        verts = verts[: n_seg + 1]
+        lin = np.linspace(-1.0, 1.0, p.cut_offsets)
+        if self.backend != "numpy" and numba_available():
+            pts, cut = cut_probe(
+                verts,
+                hw_seg,
+                float(grid.resolution_m),
+                float(p.cut_check_m),
+                lin,
+                grid.clearance_m,
+                float(grid.origin[0]),
+                float(grid.origin[1]),
+                float(grid.resolution_m),
+                float(self.min_clearance_m),
+            )
+        else:
+            pts, seg = samples_along(verts[:-1], verts[1:], grid.resolution_m, False)
+            if len(pts) == 0:
+                return None
+            step = np.hypot(*np.diff(pts, axis=0).T)
+            along = np.concatenate([[0.0], np.cumsum(step)])
+            keep = along <= p.cut_check_m
+            pts, seg = pts[keep], seg[keep]
+            d = verts[1:] - verts[:-1]
+            t = d / np.maximum(np.hypot(*d.T), 1e-12)[:, None]
+            normal = np.stack([-t[:, 1], t[:, 0]], axis=1)[seg]
+            offsets = lin[None, :] * hw_seg[seg][:, None]
+            probe = pts[:, None, :] + offsets[..., None] * normal[:, None, :]
+            cut = np.all(grid.clearance_at(probe) < self.min_clearance_m, axis=1)
         idx = np.flatnonzero(cut)
         if idx.size == 0:
             return None

@@ -75,6 +75,7 @@ def astar(
     start_edges: list[Edge] | None = None,
     start_xy: ArrayLike | None = None,
     leave_goal_m: float = 0.0,
+    v_h: float | None = None,
 ) -> tuple[float, list[int], list[Edge]] | None:
     """Least-travel-time path from node ``start`` to node ``goal`` (H&W §6.2): ``(cost [s],
     node ids, edges taken)``, or None when the goal is unreachable (blocked edges never are
@@ -83,26 +84,24 @@ def astar(
     With ``leave_goal_m > 0`` the path must first reach a node farther than that from the
     goal (or start there) before it may end at the goal: A* runs on the graph's nodes paired
     with a flag "has left the goal" (a node is expanded at most once per flag). ``h`` is the
-    same for both, so it stays admissible and consistent."""
-    v_h = heuristic_speed_mps(graph, v_max_mps)
+    same for both, so it stays admissible and consistent. ``v_h``: the graph's
+    :func:`heuristic_speed_mps` when the caller has it already."""
+    if v_h is None:
+        v_h = heuristic_speed_mps(graph, v_max_mps)
     goal_xy = graph.position(goal)
+    # per node: h, and whether it is farther than leave_goal_m from the goal
+    to_goal = np.hypot(*(graph.xy - goal_xy).T).tolist()
+    dist_m = dict(zip(graph.node_ids.tolist(), to_goal, strict=True))
+    if start == START and start_xy is not None:
+        dist_m[START] = float(np.hypot(*(np.asarray(start_xy, float)[:2] - goal_xy)))
+    h_of = {n: 0.0 if math.isinf(v_h) else d / v_h for n, d in dist_m.items()}
+    away = {n: leave_goal_m <= 0.0 or d > leave_goal_m for n, d in dist_m.items()}
 
-    def xy_of(n: int) -> FloatArray:
-        return np.asarray(start_xy, float)[:2] if n == START else graph.position(n)
-
-    def h(n: int) -> float:
-        if math.isinf(v_h):
-            return 0.0
-        return float(np.hypot(*(xy_of(n) - goal_xy))) / v_h
-
-    def away(n: int) -> bool:
-        return leave_goal_m <= 0.0 or float(np.hypot(*(xy_of(n) - goal_xy))) > leave_goal_m
-
-    s0 = (start, away(start))
+    s0 = (start, away[start])
     g: dict[tuple[int, bool], float] = {s0: 0.0}
     came: dict[tuple[int, bool], tuple[Edge, tuple[int, bool]]] = {}
     done: set[tuple[int, bool]] = set()
-    heap: list[tuple[float, int, tuple[int, bool]]] = [(h(start), 0, s0)]
+    heap: list[tuple[float, int, tuple[int, bool]]] = [(h_of[start], 0, s0)]
     tie = 1
     while heap:
         _, _, state = heapq.heappop(heap)
@@ -118,15 +117,16 @@ def astar(
             return g[(goal, True)], nodes[::-1], edges[::-1]
         done.add(state)
         out = start_edges if (n == START and start_edges is not None) else graph.out.get(n, [])
+        g_n = g[state]
         for e in out:
-            nxt = (e.v, left or away(e.v))
+            nxt = (e.v, left or away[e.v])
             if not math.isfinite(e.travel_time_s) or nxt in done:
                 continue
-            cand = g[state] + e.travel_time_s
+            cand = g_n + e.travel_time_s
             if cand < g.get(nxt, math.inf):
                 g[nxt] = cand
                 came[nxt] = (e, state)
-                heapq.heappush(heap, (cand + h(e.v), tie, nxt))
+                heapq.heappush(heap, (cand + h_of[e.v], tie, nxt))
                 tie += 1
     return None
 
@@ -182,13 +182,33 @@ def plan_route(
         rest_m, rest_s = (1.0 - u) * e.length_m, (1.0 - u) * e.travel_time_s
         starts.append(Edge(START, e.v, rest_m, rest_s, e.learned, e.half_width_m, e.route_id))
     found = astar(
-        graph, START, goal, v_max_mps, start_edges=starts, start_xy=p, leave_goal_m=leave_goal_m
+        graph,
+        START,
+        goal,
+        v_max_mps,
+        start_edges=starts,
+        start_xy=p,
+        leave_goal_m=leave_goal_m,
+        v_h=v_h,
     )
     if found is None:
         return None
     cost, nodes, edges = found
     if hit is not None and edges[0] is starts[-1]:
         start_point = proj
+    taken = tuple((e.u, e.v) for e in edges if e.u != START)
+    rows = [graph.index[e.v] for e in edges]
+    q = graph.xy[rows]
+    step = np.hypot(*(q - np.concatenate([np.asarray(start_point)[None], q[:-1]])).T)
+    if not np.any(step < 1e-9):  # no join of coincident waypoints: a point per edge
+        return PlannedPath(
+            (START, *(e.v for e in edges)),
+            np.concatenate([np.asarray(start_point)[None], q]),
+            np.array([edges[0].half_width_m, *(e.half_width_m for e in edges)]),
+            graph.v_max_mps[[rows[0], *rows]],
+            float(cost),
+            taken,
+        )
     xy = [start_point]
     hw = [edges[0].half_width_m]
     v = [float(graph.v_max_mps[graph.index[edges[0].v]])]
@@ -202,5 +222,4 @@ def plan_route(
         hw.append(e.half_width_m)
         v.append(float(graph.v_max_mps[graph.index[e.v]]))
         ids.append(e.v)
-    taken = tuple((e.u, e.v) for e in edges if e.u != START)
     return PlannedPath(tuple(ids), np.array(xy), np.array(hw), np.array(v), float(cost), taken)

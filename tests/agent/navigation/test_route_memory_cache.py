@@ -1,0 +1,141 @@
+"""The route memory's caches and kernel give what recomputation and numpy give.
+
+The geometry cache (segments, arc lengths) must be dropped wherever a waypoint moves or a
+route is added, split, cut or forgotten; the numba search of ``locate`` must pick the same
+segment with the same numbers as the numpy one.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+
+import numpy as np
+import pytest
+
+from dynmap_sim.agent.navigation import RouteMemory
+from dynmap_sim.agent.navigation.route_memory import _project
+from dynmap_sim.agent.navigation.route_numba import locate_segment, numba_available
+
+DAY_S = 86_400.0
+DETOUR = [(0.0, 0.0), (3.0, 0.0), (3.0, 1.2), (7.0, 1.2), (7.0, 0.0), (10.0, 0.0)]
+
+
+def straight(now_s: float = 0.0) -> RouteMemory:
+    return RouteMemory.from_prior([[0.0, 0.0], [10.0, 0.0]], 0.2, 0.35, now_s)
+
+
+def assert_cache_fresh(mem: RouteMemory) -> None:
+    """The cached geometry equals a rebuild from the routes, bit for bit, and the graph one
+    of a copy that never had a cache."""
+    cached = mem._segments()
+    fresh = copy.deepcopy(mem)
+    fresh._segs = None
+    rebuilt = fresh._segments()
+    for name in ("a", "b", "l", "rid", "seg", "fr", "to", "s0", "length"):
+        np.testing.assert_array_equal(getattr(cached, name), getattr(rebuilt, name), name)
+    assert cached.cum.keys() == mem.routes.keys()
+    for rid, r in mem.routes.items():
+        np.testing.assert_array_equal(cached.cum[rid], r.cumulative_m())
+        assert cached.cum_list[rid] == r.cumulative_m().tolist()
+        k = cached.rid == rid
+        np.testing.assert_array_equal(cached.length[k], r.segment_lengths_m())
+    assert mem.graph().edges == fresh.graph().edges
+
+
+def test_the_cache_follows_adaptation_recording_splits_and_forgetting(drive_fn):
+    mem = straight()
+    assert_cache_fresh(mem)
+    t = drive_fn(mem, [(0, 0.2), (10.3, 0.2)], 0.25, 10.0)  # waypoints adapt (move)
+    assert mem.routes[0].xy[3, 1] > 0.0
+    assert_cache_fresh(mem)
+    mem.reset_run()
+    drive_fn(mem, DETOUR, 0.25, t + 10.0)  # a new route, the prior split at both ends
+    assert len(mem.routes) == 2
+    assert_cache_fresh(mem)
+    for day in range(1, 5):
+        mem.reset_run()
+        drive_fn(mem, DETOUR, 0.25, day * DAY_S)
+        assert_cache_fresh(mem)
+    assert mem.forget(4 * DAY_S + 1000.0) > 0  # the prior's middle is cut out
+    assert len(mem.routes) == 3
+    assert_cache_fresh(mem)
+    mem.add_route([(1.0, 1.0), (2.0, 2.0)], 0.2, 0.35, 5 * DAY_S)
+    assert_cache_fresh(mem)
+
+
+def test_tracking_with_the_cache_learns_what_recomputation_learns(drive_fn):
+    """Observing with the cache kept equals observing with it dropped before every step."""
+    kept, dropped = straight(), straight()
+    for t0, line in ((0.0, [(0, 0.2), (10.3, 0.2)]), (100.0, DETOUR), (200.0, DETOUR)):
+        for mem in (kept, dropped):
+            mem.reset_run()
+        pts = np.asarray(line, float)
+        for k, xy in enumerate(
+            np.concatenate([np.linspace(pts[j], pts[j + 1], 40) for j in range(len(pts) - 1)])
+        ):
+            pose = [xy[0], xy[1], 0.0]
+            dropped._segs = None
+            assert kept.observe(pose, t0 + 0.1 * k) == dropped.observe(pose, t0 + 0.1 * k)
+    assert json.dumps(kept.to_dict()) == json.dumps(dropped.to_dict())  # NaN as text
+    for r, q in zip(kept.routes.values(), dropped.routes.values(), strict=True):
+        np.testing.assert_array_equal(r.wp, q.wp)
+
+
+@pytest.mark.parametrize("python", [True, False])
+def test_the_locate_kernel_equals_numpy(python):
+    if not python and not numba_available():
+        pytest.skip("numba not installed")
+    rng = np.random.default_rng(3)
+    for trial in range(200):
+        n = int(rng.integers(1, 60))
+        a = rng.uniform(-5, 5, (n, 2))
+        b = a + rng.normal(0, 1, (n, 2)) * (rng.random((n, 1)) > 0.05)  # some zero-length
+        b[: n // 4] = np.roll(a, -1, axis=0)[: n // 4]  # shared waypoints: exact ties
+        rid = rng.integers(0, 3, n).astype(np.int64)
+        s0 = rng.uniform(0, 20, n)
+        length = np.hypot(*(b - a).T)
+        p = a[int(rng.integers(n))] if trial % 3 == 0 else rng.uniform(-5, 5, 2)
+        prefer = None if trial % 4 == 0 else int(rng.integers(0, 3))
+        along = None if trial % 5 == 0 else float(rng.uniform(0, 20))
+        mem = RouteMemory(backend="numpy")
+        s = type("S", (), {"a": a, "b": b, "rid": rid, "s0": s0, "length": length})()
+        want = mem._locate_numpy(p, s, prefer, along)
+        got = locate_segment(p[0], p[1], a, b, rid, s0, length, prefer, along, 2.0, 0.35, python)
+        assert got == want
+        u, proj, dist = _project(p, a, b)
+        k = got[0]
+        assert (got[1], got[2], got[3], got[4]) == (u[k], dist[k], proj[k][0], proj[k][1])
+
+
+def test_both_backends_locate_alike(drive_fn):
+    mem = straight()
+    drive_fn(mem, DETOUR, 0.25, 100.0)
+    other = copy.deepcopy(mem)
+    other.backend = "numpy"
+    rng = np.random.default_rng(0)
+    for xy in rng.uniform([-1, -1], [11, 2], (300, 2)):
+        for rid, along in ((None, None), (0, None), (1, float(rng.uniform(0, 6)))):
+            assert mem.locate([*xy, 0.0], rid, along) == other.locate([*xy, 0.0], rid, along)
+    assert math.isfinite(mem.locate([1.0, 0.1]).along_m)
+    with pytest.raises(ValueError, match="backend"):
+        RouteMemory(backend="gpu")
+
+
+def test_the_graph_is_reused_only_while_its_inputs_are_the_same(drive_fn):
+    mem = straight()
+    g = mem.graph()
+    assert mem.graph() is g  # nothing changed
+    ids = mem.routes[0].ids
+    mem.block((int(ids[3]), int(ids[4])))
+    assert mem.graph() is not g and mem.graph().edges == mem._build_graph().edges
+    assert math.isinf(next(e for e in mem.graph().edges if e.u == ids[3]).travel_time_s)
+    mem.unblock((int(ids[3]), int(ids[4])))
+    assert mem.graph().edges == g.edges
+    mem.routes[0].wp[1:, 5] = 1.0  # edited in place: travel times learned elsewhere
+    assert mem.graph().edges == mem._build_graph().edges
+    assert all(e.learned for e in mem.graph().edges)
+    drive_fn(mem, DETOUR, 0.25, 100.0)  # a new route, splits, learned times
+    assert mem.graph().edges == mem._build_graph().edges
+    assert any(e.route_id == 1 for e in mem.graph().edges)
