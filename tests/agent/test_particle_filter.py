@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from synthetic_scans import LASER, raycast
+from synthetic_scans import LASER, box, raycast
 from synthetic_scans import room_segments as room
 
 from dynmap_sim import se2
@@ -22,8 +22,10 @@ from dynmap_sim.agent.localization.likelihood_field import (
 )
 from dynmap_sim.agent.localization.motion_model import decompose_odometry, sample_odometry_motion
 from dynmap_sim.agent.localization.particle_filter import (
+    CONFIGS,
     NAV2_DEFAULT,
     TUNED,
+    WALLS_ONLY,
     AMCLFilter,
     StaticMCL,
     information_lambda_min,
@@ -207,6 +209,78 @@ def test_tracking_on_prior_walls(config):
     assert errs.mean() < 0.05 and errs.max() < 0.2
     assert np.isfinite(est.extras["scan_loglik"])
     assert np.all(np.linalg.eigvalsh(est.cov) > 0)
+
+
+def furnished_room() -> tuple[np.ndarray, np.ndarray]:
+    """The walls of :func:`room` (the map) and the walls plus furniture the map lacks
+    (shelves 0.4 m deep along walls, free-standing boxes; about 64 % of the returns along
+    :func:`path`), like the apartment on its walls-only prior."""
+    walls = room(cupboard=False)[:6]
+    furniture = [
+        box(2.0, 2.0, 2.4, 2.4),
+        box(0.3, 0.0, 3.0, 0.4),
+        box(0.0, 1.5, 0.4, 3.3),
+        box(1.5, 5.5, 4.0, 6.0),
+        box(2.2, 2.8, 3.2, 3.2),
+        box(4.6, 1.5, 5.0, 2.5),
+        box(4.6, 4.2, 5.0, 5.6),
+        box(6.5, 0.0, 7.3, 0.6),
+    ]
+    return walls, np.concatenate([walls, *furniture])
+
+
+def test_walls_only_is_tuned_for_a_map_without_the_furniture():
+    assert CONFIGS["walls-only"] is WALLS_ONLY
+    changed = {k for k in vars(TUNED) if getattr(TUNED, k) != getattr(WALLS_ONLY, k)}
+    assert changed == {"z_hit", "z_rand", "beam_skip_distance", "recovery_floor_loglik"}
+    assert (WALLS_ONLY.z_hit, WALLS_ONLY.z_rand) == (NAV2_DEFAULT.z_hit, NAV2_DEFAULT.z_rand)
+    # AMCL's default beam_skip_distance / sigma_hit (0.5 / 0.2) at tuned's sigma_hit
+    ratio = NAV2_DEFAULT.beam_skip_distance / NAV2_DEFAULT.sigma_hit
+    assert WALLS_ONLY.beam_skip_distance == pytest.approx(ratio * TUNED.sigma_hit)
+    assert WALLS_ONLY.do_beamskip and WALLS_ONLY.recovery_floor_loglik == float("-inf")
+
+
+def test_tuned_floor_takes_a_furnished_room_for_lost_and_walls_only_does_not():
+    """At the true pose, most returns hit furniture the walls map lacks: the per-beam
+    likelihood sits below tuned's floor, so tuned's global recovery injects random poses
+    while the filter is right; walls-only (no floor) injects none."""
+    walls, segs = furnished_room()
+    grid = OccupancyGrid.from_segments(walls, free_seed_xy_m=(1, 1))
+    pose = np.array([1.0, 1.0, 0.0])
+    scan = raycast(pose, LASER.angles(), segs, LASER.range_max_m)
+    probs = {}
+    for name in ("tuned", "walls-only"):
+        rng = np.random.default_rng(7)
+        f = AMCLFilter(grid, LASER, CONFIGS[name])
+        f.init_gaussian(pose, np.diag([0.02**2, 0.02**2, 0.01**2]), rng)
+        _track(f, scan, rng, TUNED.recovery_min_updates + 2)
+        assert np.log(f.w_fast) < TUNED.recovery_floor_loglik  # right, but "unlikely"
+        est, _ = f.estimate()
+        probs[name] = (f.injection_probability(), float(np.hypot(*(est[:2] - pose[:2]))))
+    assert probs["tuned"][0] > 0.0 and probs["walls-only"][0] == 0.0
+    assert probs["walls-only"][1] < 0.1
+
+
+def test_walls_only_tracks_in_a_furnished_room_on_its_walls():
+    walls, segs = furnished_room()
+    truth = path(laps=1)
+    results = {}
+    for config in ("tuned", "walls-only"):
+        rng = np.random.default_rng(5)
+        odo = odometry(truth, rng)
+        loc = make_localizer(
+            "static-mcl",
+            laser=LASER,
+            rng=np.random.default_rng(0),
+            config=config,
+            map_source="prior-walls",
+        )
+        loc.begin_run(Prior(initial_pose=truth[0], walls=walls))
+        errs, _ = _run(loc, truth, odo, segs, rng)
+        results[config] = (errs, loc.filter.n_random_injected)
+    errs, injected = results["walls-only"]
+    assert errs.mean() < 0.3 and errs.max() < 1.0 and injected == 0
+    assert results["tuned"][1] > 0  # tuned's floor injected random poses on the way
 
 
 def test_first_run_map_then_localize_and_pickle():

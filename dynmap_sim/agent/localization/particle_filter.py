@@ -275,7 +275,44 @@ TUNED = MCLConfig(
 #: pose" as loudly as "crowd".
 MIN_RECOVERY_BEAM_SHARE = 0.5
 
-CONFIGS: dict[str, MCLConfig] = {"nav2-default": NAV2_DEFAULT, "tuned": TUNED}
+#: ``tuned`` for a map that lacks the furniture: the walls-only prior (H&W Fig. 4, their
+#: static MCL of §7.3). Measured on ``apartment-28d-hw`` days 1-3 (seed 0, 60 beams at the
+#: true pose): 52 % of the valid beams hit furniture the walls map lacks, 83 % of those end
+#: >= 0.5 m from any wall, 10 % 0.3-0.5 m; 99 % of the wall beams end within 0.1 m. There
+#: ``tuned`` was lost on 63-81 % of the scans, 4-7 s into every run. Three changes, each
+#: measured alone on those days (replayed offline, two filter seeds):
+#:
+#: * ``recovery_floor_loglik`` -inf (nav2: no floor). The floor assumes a correctly localized
+#:   filter explains most beams (per-beam log-likelihood >= -0.5); on the walls map the true
+#:   pose scores -1.86, so the gate counted every update as "lost" and injected up to 35 %
+#:   random poses per update (1.9 million in 3 days): lost within 4-7 s. Without the floor
+#:   the recovery compares with ``w_slow`` as Table 8.3 does: no longer lost in the first
+#:   minutes, but still on 25-28 % (furniture dominates the right side, 38 of 49 beams).
+#:   The floor served global localization; the walls scenarios start from a known pose.
+#: * ``z_hit`` / ``z_rand`` 0.5 / 0.5 (nav2's defaults): about half of the beams are "random"
+#:   to this map (the 52 % above), and the mixture should say so; with tuned's 0.9 / 0.1 a
+#:   beam 0.3 m off a wall costs log 37 = 3.6 against log 5 = 1.6 here. Alone (with the
+#:   floor off): 0.17-0.19 m mean, never lost.
+#: * ``beam_skip_distance`` 0.3 m: AMCL's default ratio to ``sigma_hit`` (0.5 m / 0.2 m =
+#:   2.5) at tuned's ``sigma_hit`` 0.12 m. AMCL's 0.5 m keeps the furniture standing in front
+#:   of walls (the 10 % at 0.3-0.5 m), which drags the pose off by its depth; 0.3 m keeps
+#:   all but 0.2 % of the wall beams. Alone (floor off): 0.14-0.16 m, never lost.
+#:
+#: Together: 0.105-0.133 m mean a day, never lost, no random pose injected (days 1-3, two
+#: filter seeds). The rest is ``tuned`` (sensor noise, odometry alphas, particles).
+WALLS_ONLY = replace(
+    TUNED,
+    z_hit=0.5,
+    z_rand=0.5,
+    beam_skip_distance=0.3,
+    recovery_floor_loglik=float("-inf"),
+)
+
+CONFIGS: dict[str, MCLConfig] = {
+    "nav2-default": NAV2_DEFAULT,
+    "tuned": TUNED,
+    "walls-only": WALLS_ONLY,
+}
 
 
 #: Smallest variance [m^2 / rad^2] kept in a reported covariance: a particle set collapsed onto
@@ -610,10 +647,11 @@ class AMCLFilter:
 class StaticMCL(Localizer, MapUser):
     """AMCL-faithful MCL on a map that never changes (the baseline of every comparison).
 
-    ``config``: ``"tuned"`` or ``"nav2-default"``; ``map_source``: where the map comes from,
-    a :class:`~dynmap_sim.agent.maps.map_source.MapSource` or its name: ``"first-run"``
-    (built by static SLAM on the experiment's first run) or ``"prior-walls"`` (the walls the
-    prior grants); ``overrides``: individual :class:`MCLConfig` fields to change;
+    ``config``: ``"tuned"``, ``"nav2-default"`` or ``"walls-only"`` (``tuned`` for a map that
+    lacks the furniture, e.g. the walls-only prior: :data:`WALLS_ONLY`); ``map_source``: where
+    the map comes from, a :class:`~dynmap_sim.agent.maps.map_source.MapSource` or its name:
+    ``"first-run"`` (built by static SLAM on the experiment's first run) or ``"prior-walls"``
+    (the walls the prior grants); ``overrides``: individual :class:`MCLConfig` fields to change;
     ``global_localization``: start every run from particles spread over the free space;
     ``mapper_params``: fields of the first-run SLAM's
     :class:`~dynmap_sim.agent.mapping.first_run.FirstRunConfig` (flat names).

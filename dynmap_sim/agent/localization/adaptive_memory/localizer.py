@@ -211,7 +211,8 @@ class AdaptiveMemoryConfig:
     confirm_steps: int = 2
     max_misses: int = 2
     # -- localization (§6.1) -----------------------------------------------------------------
-    #: The project's AMCL configuration (``tuned`` | ``nav2-default``) and field overrides.
+    #: The project's AMCL configuration (``tuned`` | ``nav2-default`` | ``walls-only``) and
+    #: field overrides.
     mcl_config: str = "tuned"
     mcl_overrides: dict[str, Any] = field(default_factory=dict)
     #: Below this many static points, the explained unknown ones join (ours).
