@@ -463,6 +463,24 @@ def test_floor_makes_a_filter_that_started_wrong_inject():
     assert probs[TUNED.recovery_floor_loglik] == pytest.approx(TUNED.recovery_max_fraction)
 
 
+def test_alphas_zero_turn_the_global_recovery_off_even_with_a_floor():
+    """nav2: with recovery_alpha_slow = recovery_alpha_fast = 0 no random pose is ever
+    injected; the per-beam floor of the case above must not inject either."""
+    segs = room()
+    grid = OccupancyGrid.from_segments(segs, free_seed_xy_m=(1, 1))
+    rng = np.random.default_rng(6)
+    pose = np.array([2.0, 2.0, 0.3])
+    far = raycast(np.array([3.7, 3.5, 2.5]), LASER.angles(), segs, LASER.range_max_m)
+    cfg = replace(TUNED, recovery_alpha_slow=0.0, recovery_alpha_fast=0.0)
+    f = AMCLFilter(grid, LASER, cfg)
+    f.init_gaussian(pose, np.diag([0.02**2, 0.02**2, 0.01**2]), rng)
+    for _ in range(TUNED.recovery_min_updates + 3):
+        f.correct(far)
+        assert f.injection_probability() == 0.0
+        f.resample(rng)
+    assert f.n_random_injected == 0
+
+
 def _track(f, scan, rng, n, center=True):
     """``n`` updates on ``scan`` without motion, resampling around the estimate."""
     est = None

@@ -529,8 +529,13 @@ class AMCLFilter:
     def injection_probability(self) -> float:
         """Probability that a resampling draw is a random pose (Table 8.3 line 13), gated:
         0 unless ``w_fast / w_ref`` stayed below ``recovery_ratio_threshold`` for
-        ``recovery_min_updates`` consecutive updates."""
+        ``recovery_min_updates`` consecutive updates; always 0 with both recovery alphas 0
+        (recovery off, as in nav2's AMCL)."""
         c = self.config
+        if c.recovery_alpha_slow == 0.0 and c.recovery_alpha_fast == 0.0:
+            # nav2's pf.c: both averages stay at their first value, w_fast / w_slow = 1,
+            # no random poses; the per-beam floor must not turn that into a recovery
+            return 0.0
         w_ref = self.reference_weight()
         if w_ref <= 0 or self.n_low_updates < max(1, c.recovery_min_updates):
             return 0.0
