@@ -191,19 +191,24 @@ def _run(loc, truth, odo, segs, rng, t0=0, kidnap_at=None):
     return np.array(errs), est
 
 
-@pytest.mark.parametrize("config", ["tuned", "nav2-default"])
-def test_tracking_on_prior_walls(config):
-    segs = room()
-    rng = np.random.default_rng(5)
-    truth = path(laps=1)
-    odo = odometry(truth, rng)
-    loc = make_localizer(
+def walls_localizer(config: str):
+    """``static-mcl`` with ``config`` on the map of the prior's walls."""
+    return make_localizer(
         "static-mcl",
         laser=LASER,
         rng=np.random.default_rng(0),
         config=config,
         map_source="prior-walls",
     )
+
+
+@pytest.mark.parametrize("config", ["tuned", "nav2-default"])
+def test_tracking_on_prior_walls(config):
+    segs = room()
+    rng = np.random.default_rng(5)
+    truth = path(laps=1)
+    odo = odometry(truth, rng)
+    loc = walls_localizer(config)
     loc.begin_run(Prior(initial_pose=truth[0], walls=segs))
     errs, est = _run(loc, truth, odo, segs, rng)
     assert errs.mean() < 0.05 and errs.max() < 0.2
@@ -268,13 +273,7 @@ def test_walls_only_tracks_in_a_furnished_room_on_its_walls():
     for config in ("tuned", "walls-only"):
         rng = np.random.default_rng(5)
         odo = odometry(truth, rng)
-        loc = make_localizer(
-            "static-mcl",
-            laser=LASER,
-            rng=np.random.default_rng(0),
-            config=config,
-            map_source="prior-walls",
-        )
+        loc = walls_localizer(config)
         loc.begin_run(Prior(initial_pose=truth[0], walls=walls))
         errs, _ = _run(loc, truth, odo, segs, rng)
         results[config] = (errs, loc.filter.n_random_injected)

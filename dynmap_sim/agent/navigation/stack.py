@@ -802,25 +802,8 @@ class NavigationStack:
                 float(self.min_clearance_m),
             )
         else:
-            pts, seg = samples_along(verts[:-1], verts[1:], grid.resolution_m, False)
-            if len(pts) == 0:
-                return None
-            step = np.hypot(*np.diff(pts, axis=0).T)
-            along = np.concatenate([[0.0], np.cumsum(step)])
-            keep = along <= p.cut_check_m
-            pts, seg = pts[keep], seg[keep]
-            d = verts[1:] - verts[:-1]
-            t = d / np.maximum(np.hypot(*d.T), 1e-12)[:, None]
-            normal = np.stack([-t[:, 1], t[:, 0]], axis=1)[seg]
-            offsets = lin[None, :] * hw_seg[seg][:, None]
-            probe = pts[:, None, :] + offsets[..., None] * normal[:, None, :]
-            cut = np.all(grid.clearance_at(probe) < self.min_clearance_m, axis=1)
-        idx = np.flatnonzero(cut)
-        if idx.size == 0:
-            return None
-        gaps = np.flatnonzero(np.diff(idx) > 1)
-        end = idx[gaps[0]] if gaps.size else idx[-1]
-        return pts[idx[0] : end + 1]
+            pts, cut = cut_stations(verts, hw_seg, grid, p.cut_check_m, lin, self.min_clearance_m)
+        return first_cut_stretch(pts, cut)
 
     def _go_around(self, t_s: float, pose: FloatArray, grid: ClearanceGrid) -> bool:
         """H&W §6.3 global replanning; True when a new path is being followed."""
@@ -976,6 +959,44 @@ class NavigationStack:
         state["_global"] = None
         state["_local"] = None
         return state
+
+
+def cut_stations(
+    verts: FloatArray,
+    hw_seg: FloatArray,
+    grid: ClearanceGrid,
+    cut_check_m: float,
+    lin: FloatArray,
+    min_clearance_m: float,
+) -> tuple[FloatArray, NDArray[np.bool_]]:
+    """The cut check's stations in numpy (the numba kernel
+    :func:`~.route_numba.cut_probe` computes the same): centre-line samples of the polyline
+    ``verts (K, 2)`` [m] every grid cell up to ``cut_check_m`` along it, and whether each is
+    cut (every lateral offset ``lin * l`` of its segment's half-width ``hw_seg`` has less
+    than ``min_clearance_m``)."""
+    pts, seg = samples_along(verts[:-1], verts[1:], grid.resolution_m, False)
+    if len(pts) == 0:
+        return pts, np.zeros(0, dtype=bool)
+    step = np.hypot(*np.diff(pts, axis=0).T)
+    along = np.concatenate([[0.0], np.cumsum(step)])
+    keep = along <= cut_check_m
+    pts, seg = pts[keep], seg[keep]
+    d = verts[1:] - verts[:-1]
+    t = d / np.maximum(np.hypot(*d.T), 1e-12)[:, None]
+    normal = np.stack([-t[:, 1], t[:, 0]], axis=1)[seg]
+    offsets = lin[None, :] * hw_seg[seg][:, None]
+    probe = pts[:, None, :] + offsets[..., None] * normal[:, None, :]
+    return pts, np.all(grid.clearance_at(probe) < min_clearance_m, axis=1)
+
+
+def first_cut_stretch(pts: FloatArray, cut: NDArray[np.bool_]) -> FloatArray | None:
+    """The first run of consecutive cut stations of ``pts``, None when none is cut."""
+    idx = np.flatnonzero(cut)
+    if idx.size == 0:
+        return None
+    gaps = np.flatnonzero(np.diff(idx) > 1)
+    end = idx[gaps[0]] if gaps.size else idx[-1]
+    return pts[idx[0] : end + 1]
 
 
 def _clamped_projection(a: FloatArray, b: FloatArray, xy: ArrayLike) -> FloatArray:

@@ -10,39 +10,30 @@ import numpy as np
 import pytest
 
 from dynmap_sim.agent.navigation.route_numba import cut_probe
-from dynmap_sim.agent.navigation.stack import NavigationStack, _clamped_projection
+from dynmap_sim.agent.navigation.stack import (
+    NavigationStack,
+    _clamped_projection,
+    cut_stations,
+    first_cut_stretch,
+)
 from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
-from dynmap_sim.agent.planning.costmap import samples_along
 from dynmap_sim.types import LaserSpec
 
 LASER = LaserSpec("test", 181, -math.pi / 2, math.pi / 180, 0.05, 8.0, 0.1, 0.0)
 
 
 def cut_whole_path(stack, path, hw, grid, pose, seg0):
-    """The check sampling the whole remaining path (the code before the cut-off)."""
+    """The check sampling the whole remaining path (the code before the cut-off): the same
+    stations, on every segment of the path."""
     p = stack.params
     seg0 = min(seg0, len(path) - 2)
     verts = path[seg0:]
     a = verts[0] + _clamped_projection(verts[0], verts[1], pose[:2])
     verts = np.concatenate([a[None], verts[1:]])
     hw_seg = np.minimum(hw[seg0:-1], hw[seg0 + 1 :])
-    pts, seg = samples_along(verts[:-1], verts[1:], grid.resolution_m, False)
-    step = np.hypot(*np.diff(pts, axis=0).T)
-    along = np.concatenate([[0.0], np.cumsum(step)])
-    keep = along <= p.cut_check_m
-    pts, seg = pts[keep], seg[keep]
-    d = verts[1:] - verts[:-1]
-    t = d / np.maximum(np.hypot(*d.T), 1e-12)[:, None]
-    normal = np.stack([-t[:, 1], t[:, 0]], axis=1)[seg]
-    offsets = np.linspace(-1.0, 1.0, p.cut_offsets)[None, :] * hw_seg[seg][:, None]
-    probe = pts[:, None, :] + offsets[..., None] * normal[:, None, :]
-    cut = np.all(grid.clearance_at(probe) < stack.min_clearance_m, axis=1)
-    idx = np.flatnonzero(cut)
-    if idx.size == 0:
-        return None
-    gaps = np.flatnonzero(np.diff(idx) > 1)
-    end = idx[gaps[0]] if gaps.size else idx[-1]
-    return pts[idx[0] : end + 1]
+    lin = np.linspace(-1.0, 1.0, p.cut_offsets)
+    pts, cut = cut_stations(verts, hw_seg, grid, p.cut_check_m, lin, stack.min_clearance_m)
+    return first_cut_stretch(pts, cut)
 
 
 @pytest.mark.parametrize("backend", ["numpy", "auto"])
