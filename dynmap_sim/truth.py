@@ -14,7 +14,7 @@ import datetime as dt
 from dataclasses import dataclass, field
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from dynmap_sim.types import Prior
 
@@ -60,18 +60,23 @@ class WorldFacts:
         sigma_xy_m: float = 0.05,
         sigma_theta_rad: float = 0.05,
         walls: bool = True,
+        known_pose: bool = True,
+        route: ArrayLike | None = None,
     ) -> Prior:
-        """The prior a scenario with ``[prior] map = "walls"`` (``walls``) and a known
-        initial pose grants for run ``run`` of ``day``: the start pose with a Gaussian of
-        ``sigma_xy_m`` / ``sigma_theta_rad``, the static walls (H&W Fig. 4), the bounds and
-        the route; ``first_run`` defaults to day 1 run 1. For a plain Gymnasium loop that
-        drives an agent without the experiment engine."""
+        """The prior a scenario grants for run ``run`` of ``day``: with ``known_pose`` the start
+        pose with a Gaussian of ``sigma_xy_m`` / ``sigma_theta_rad`` (``[prior] initial_pose =
+        "known"``), with ``walls`` the static walls (H&W Fig. 4, ``[prior] map = "walls"``),
+        the bounds, and ``route`` (default: the world's; a scenario may give its own);
+        ``first_run`` defaults to day 1 run 1. The experiment engine's episodes take their
+        prior from here, and so can a plain Gymnasium loop that drives an agent without it."""
         return Prior(
-            initial_pose=np.array(self.start_pose, dtype=float),
-            initial_pose_cov=np.diag([sigma_xy_m**2, sigma_xy_m**2, sigma_theta_rad**2]),
+            initial_pose=np.array(self.start_pose, dtype=float) if known_pose else None,
+            initial_pose_cov=(
+                np.diag([sigma_xy_m**2, sigma_xy_m**2, sigma_theta_rad**2]) if known_pose else None
+            ),
             walls=np.array(self.wall_segments, dtype=float) if walls else None,
             bounds=self.bounds,
-            route=np.array(self.route, dtype=float),
+            route=np.array(self.route if route is None else route, dtype=float),
             day=day,
             run=run,
             first_run=(day, run) == (1, 1) if first_run is None else first_run,

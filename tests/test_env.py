@@ -405,3 +405,14 @@ def test_world_facts_prior_is_what_a_walls_scenario_grants():
     np.testing.assert_array_equal(p.route, f.route)
     assert (p.day, p.run, p.first_run, p.bounds) == (2, 1, False, f.bounds)
     assert f.prior(day=1).first_run and f.prior(day=1, walls=False).walls is None
+
+
+def test_world_facts_prior_without_a_pose_and_with_a_scenarios_route():
+    """An unknown start grants no pose and no covariance; a scenario's own route replaces the
+    world's (the experiment engine's episodes take their prior from here)."""
+    f = DynMapEnv(world="apartment").world_facts()
+    route = [[0.0, 0.0], [1.0, 2.0]]
+    p = f.prior(day=3, run=2, known_pose=False, route=route)
+    assert p.initial_pose is None and p.initial_pose_cov is None
+    np.testing.assert_array_equal(p.route, route)
+    assert (p.day, p.run, p.first_run) == (3, 2, False)

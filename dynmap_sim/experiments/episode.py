@@ -155,17 +155,15 @@ class EpisodeLoop:
     def prior(self, i: int, facts: WorldFacts) -> Prior:
         """The prior of run ``i`` (of :attr:`slots`): what the scenario grants the agent."""
         pc, slot = self.config.prior, self.slots[i]
-        known = pc.initial_pose == "known"
-        sxy, sth = pc.initial_pose_sigma_xy_m, pc.initial_pose_sigma_theta_rad
-        return Prior(
-            initial_pose=np.array(facts.start_pose, dtype=float) if known else None,
-            initial_pose_cov=np.diag([sxy**2, sxy**2, sth**2]) if known else None,
-            walls=np.array(facts.wall_segments, dtype=float) if pc.map == "walls" else None,
-            bounds=facts.bounds,
-            route=np.array(self.config.route, dtype=float),
-            day=slot.day,
-            run=slot.run,
+        return facts.prior(
+            slot.day,
+            slot.run,
             first_run=i == 0,
+            sigma_xy_m=pc.initial_pose_sigma_xy_m,
+            sigma_theta_rad=pc.initial_pose_sigma_theta_rad,
+            walls=pc.map == "walls",
+            known_pose=pc.initial_pose == "known",
+            route=self.config.route,
         )
 
     def _kidnaps(self, slot: RunSlot, rng: np.random.Generator) -> list[_Kidnap]:
