@@ -476,6 +476,23 @@ def _cmd_check(args: argparse.Namespace) -> int:
     return 0 if result.passed else 1
 
 
+#: ``--odometry`` choices: :data:`dynmap_sim.io.carmen.ODOMETRY_SOURCES` (not imported here, so
+#: the CLI starts without numpy; a test keeps the two equal).
+ODOMETRY_CHOICES = ("auto", "odom-lines", "laser-lines")
+
+
+def _odometry_option(s: argparse.ArgumentParser) -> None:
+    """``--odometry`` for the subcommands that read a CARMEN log."""
+    s.add_argument(
+        "--odometry",
+        choices=ODOMETRY_CHOICES,
+        default="auto",
+        help="the log's odometry: the ODOM lines where they agree with the laser lines' "
+        "odometry fields, else those fields, with a warning (auto, default); or always the "
+        "odom-lines or the laser-lines",
+    )
+
+
 def _cmd_replay(args: argparse.Namespace) -> int:
     from dynmap_sim.errors import FileError, InputError, regular_file_size
     from dynmap_sim.experiments.reference import REFERENCE_TOLERANCE_S
@@ -496,6 +513,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         reference=Path(args.reference) if args.reference is not None else None,
         reference_offset_s=args.reference_offset,
         reference_tolerance_s=args.reference_tolerance or REFERENCE_TOLERANCE_S,
+        odometry=args.odometry,
     )
     print(f"results in {out}")
     for line in _headline(out, timing=True):
@@ -535,6 +553,7 @@ def _cmd_slam_eval(args: argparse.Namespace) -> int:
         config=config,
         progress=not args.quiet,
         note=lambda text: print(text, file=sys.stderr),
+        odometry=args.odometry,
     )
     for line in res.table():
         print(line)
@@ -878,6 +897,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="largest time difference between a scan and the reference pose it takes "
         "(default: REFERENCE_TOLERANCE_S, 0.1 s)",
     )
+    _odometry_option(s)
     s.add_argument("--out", required=True, help="results folder")
     s.add_argument(
         "--force", action="store_true", help="replace earlier results in --out (else refused)"
@@ -897,6 +917,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="KEY=VALUE",
         help="a first-run mapper parameter (mapper_params), e.g. seed_window=[0.3,0.4]; repeat",
     )
+    _odometry_option(s)
     s.add_argument("--force", action="store_true", help="replace existing --tum/--json files")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_cmd_slam_eval)

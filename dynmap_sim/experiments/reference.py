@@ -18,6 +18,7 @@ Passing the replayed log itself as its reference scores against its own laser-li
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -26,7 +27,7 @@ from numpy.typing import NDArray
 
 from dynmap_sim import se2
 from dynmap_sim.errors import InputError
-from dynmap_sim.io.carmen import CarmenLog, read_carmen
+from dynmap_sim.io.carmen import CarmenLog, CarmenOdometryWarning, read_carmen
 
 FloatArray = NDArray[np.float64]
 
@@ -146,7 +147,12 @@ def load_reference(
     p = Path(path)
     if not tolerance_s > 0:
         raise InputError(f"--reference-tolerance must be > 0 s, not {tolerance_s}")
-    ref = log if p.resolve() == Path(log.path).resolve() else read_carmen(p)
+    if p.resolve() == Path(log.path).resolve():
+        ref = log
+    else:
+        with warnings.catch_warnings():  # a reference's odometry is not used
+            warnings.simplefilter("ignore", CarmenOdometryWarning)
+            ref = read_carmen(p)
     if ref.reference is None:
         raise InputError(
             f"{p}: its {ref.message} lines carry no poses; a reference needs laser lines with "

@@ -211,14 +211,16 @@ def replay_log(
     reference: Path | None = None,
     reference_offset_s: float | None = None,
     reference_tolerance_s: float = REFERENCE_TOLERANCE_S,
+    odometry: str = "auto",
 ) -> Path:
     """Replay CARMEN ``log`` through ``localizers`` into a results store in ``out_dir``;
     ``note`` gets what the user should know (which localizers took the log's map, how the
     reference matched). ``reference``: a CARMEN log with the true poses on its laser lines,
     matched by time stamp (:func:`~dynmap_sim.experiments.reference.load_reference`, with
     ``reference_offset_s`` ``None`` = estimated, and ``reference_tolerance_s``); ``None``:
-    the log has no ground truth and no errors are stored."""
-    data = read_carmen(log)
+    the log has no ground truth and no errors are stored. ``odometry``: which of the log's
+    odometry records the localizers get (:func:`~dynmap_sim.io.carmen.read_carmen`)."""
+    data = read_carmen(log, odometry=odometry)
     if len(data) < 2:
         raise InputError(f"{log}: the log has fewer than 2 scans")
     ref: ReferenceMatch | None = None

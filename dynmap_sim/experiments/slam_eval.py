@@ -101,11 +101,13 @@ def slam_eval(
     config: FirstRunConfig | None = None,
     progress: bool = False,
     note: Callable[[str], None] | None = None,
+    odometry: str = "auto",
 ) -> SlamEval:
-    """Map ``log`` with the first-run mapper and score it against ``relations``."""
+    """Map ``log`` with the first-run mapper and score it against ``relations``; ``odometry``
+    which of the log's odometry records to use (:func:`~dynmap_sim.io.carmen.read_carmen`)."""
     from tqdm.auto import tqdm
 
-    data = read_carmen(log)
+    data = read_carmen(log, odometry=odometry)
     if len(data) < 2:
         raise InputError(f"{log}: the log has fewer than 2 scans")
     try:

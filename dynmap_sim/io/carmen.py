@@ -19,9 +19,29 @@ Old ``FLASER`` lines state no maximum range: it is the reading the scanner repea
 return" (:func:`saturation_range`; 80 m when none repeats). Time stamps that go back are an
 error, equal consecutive ones a warning. Ranges at or beyond the maximum range become
 ``+inf`` (no return), non-positive ones
-``NaN`` (REP-117). Odometry is linearly interpolated (heading unwrapped) to each scan's
-timestamp from the ``ODOM`` lines, or taken from the laser lines' odometry when the log has
-none. When laser lines carry poses, the robot poses they imply are the **reference**.
+``NaN`` (REP-117). When laser lines carry poses, the robot poses they imply are the
+**reference**.
+
+Odometry (:data:`ODOMETRY_SOURCES`, ``read_carmen(odometry=...)``, ``--odometry``). CARMEN's
+logger writes ``ODOM`` (the base's odometry: ``x y theta tv rv accel``) and, on each laser
+line, the laser's and the robot's pose (``carmen_robot_laser_message``: ``laser_pose``
+"position of the center of the laser", ``robot_pose`` "of the center of the robot"; the old
+``FLASER`` line prints them as ``x y theta odom_x odom_y odom_theta``; CARMEN logger and
+playback, https://carmen.sourceforge.net/logger_playback.html; robot messages,
+https://carmen.sourceforge.net/doc/structcarmen__robot__laser__message.html). In a raw log
+both come from the base's odometry at the scan's time, so the two records are one stream:
+the ``ODOM`` lines interpolated to a scan's time stamp give its laser line's odometry (FR079
+and CSAIL raw: to 1e-6 m), and the laser pose is that odometry plus the fixed laser mount.
+A log rewritten by a SLAM (Radish "-corrected") puts its poses on the laser lines, in the
+pose and often also in the odometry fields, and its ``ODOM`` lines are whatever the writer
+left (FR079 corrected: 2.7 cm median from the scans' poses, every other one repeating a
+scan's pose with time stamp 0). ``"auto"`` (:func:`choose_odometry`) therefore takes the
+``ODOM`` lines, interpolated (heading unwrapped) to the scan times, only where they are shown to be
+the laser lines' odometry (:data:`ODOM_AGREEMENT_SHARE` of the scans within
+:data:`ODOM_AGREEMENT_M` and :data:`ODOM_AGREEMENT_RAD`), and otherwise the laser lines' own
+odometry fields, warning (:class:`CarmenOdometryWarning`) with the measured disagreement and
+whether the laser lines carry one trajectory in both fields (a corrected log: its odometry
+is not raw wheel odometry). A log with only one of the two takes that one.
 """
 
 from __future__ import annotations
@@ -50,8 +70,34 @@ LASER_TYPES: dict[int, tuple[str, ...]] = {
 }
 
 
+#: Where a log's odometry comes from (``read_carmen(odometry=...)``): ``"auto"`` the ``ODOM``
+#: lines where they agree with the laser lines' odometry fields, else those fields (warned);
+#: ``"odom-lines"`` the ``ODOM`` lines interpolated to the scan times; ``"laser-lines"`` the
+#: laser lines' odometry fields (``odom_*`` of ``FLASER``, ``robot_*`` of ``ROBOTLASER``).
+ODOMETRY_SOURCES = ("auto", "odom-lines", "laser-lines")
+
+#: Largest translation [m] and rotation [rad] between the interpolated ``ODOM`` lines and a
+#: laser line's odometry for the two to count as one stream at that scan: the print precision
+#: of a raw log (1e-6) plus interpolation against extrapolation between odometry samples
+#: (1 m/s over 10 ms). FR079 corrected: 0.027 m median apart.
+ODOM_AGREEMENT_M = 0.01
+ODOM_AGREEMENT_RAD = 0.01
+
+#: Share of the scans (within the ``ODOM`` lines' time span) that must agree for ``"auto"``
+#: to take the ``ODOM`` lines as the raw odometry.
+ODOM_AGREEMENT_SHARE = 0.95
+
+#: Largest spread [m, rad] of the laser pose seen from the laser line's odometry for the
+#: two fields to be one trajectory (a fixed mount, zero in FR079 and CSAIL).
+ONE_TRAJECTORY_TOL = 1e-3
+
+
 class CarmenLogError(FileError):
     """A CARMEN log that cannot be read; names the file and ``line N.field``."""
+
+
+class CarmenOdometryWarning(UserWarning):
+    """A log whose odometry is not shown to be raw: what was used and why."""
 
 
 @dataclass
@@ -60,7 +106,8 @@ class CarmenLog:
 
     ``ranges_m`` ``(T, n_beams)`` float32 (REP-117); ``stamps_s`` ``(T,)``; ``odometry``
     ``(T, 3)`` in the odom frame; ``reference`` ``(T, 3)`` robot poses from the laser lines
-    (corrected in "-corrected" logs) or ``None``; ``message`` the laser line type used.
+    (corrected in "-corrected" logs) or ``None``; ``message`` the laser line type used;
+    ``odometry_source`` ``"odom-lines"`` or ``"laser-lines"`` (:func:`choose_odometry`).
     """
 
     path: Path
@@ -70,6 +117,7 @@ class CarmenLog:
     odometry: FloatArray
     reference: FloatArray | None
     message: str
+    odometry_source: str
 
     def __len__(self) -> int:
         return len(self.stamps_s)
@@ -188,11 +236,128 @@ def interpolate_poses(t_src: FloatArray, poses: FloatArray, t: FloatArray) -> Fl
     return out
 
 
-def read_carmen(path: str | Path, laser_id: int = 1, max_errors: int = 20) -> CarmenLog:
-    """Read one laser (``laser_id`` 1 = front, 2 = rear, 3/4 raw) of a CARMEN log."""
+@dataclass(frozen=True)
+class OdometryAgreement:
+    """How the ``ODOM`` lines, interpolated to the scan times, compare with the laser lines'
+    odometry over the ``n_compared`` scans within the ``ODOM`` lines' time span: ``share``
+    within :data:`ODOM_AGREEMENT_M` and :data:`ODOM_AGREEMENT_RAD`, translation median and
+    max [m], rotation median and max [rad]; ``n_back`` ``ODOM`` time stamps that go back."""
+
+    n_compared: int
+    share: float
+    median_m: float
+    max_m: float
+    median_rad: float
+    max_rad: float
+    n_back: int
+
+    @property
+    def agrees(self) -> bool:
+        """The ``ODOM`` lines are the laser lines' odometry stream."""
+        return self.n_compared > 0 and self.share >= ODOM_AGREEMENT_SHARE
+
+    def describe(self) -> str:
+        """The figures, for a message."""
+        if self.n_compared == 0:
+            return "no scan lies within the ODOM lines' time span"
+        text = (
+            f"they differ by {self.median_m:.3g} m median, {self.max_m:.3g} m max "
+            f"({self.median_rad:.3g} / {self.max_rad:.3g} rad); "
+            f"{100 * self.share:.0f} % of {self.n_compared} scans agree to "
+            f"{ODOM_AGREEMENT_M:g} m and {ODOM_AGREEMENT_RAD:g} rad"
+        )
+        return text + (f"; {self.n_back} ODOM time stamps go back" if self.n_back else "")
+
+
+def odometry_agreement(
+    odom_t: FloatArray, odom_p: FloatArray, stamps: FloatArray, laser_odo: FloatArray
+) -> OdometryAgreement:
+    """Compare the ``ODOM`` lines ``(odom_t, odom_p)`` with the laser lines' odometry
+    ``laser_odo`` ``(T, 3)`` at the scan ``stamps`` (see :class:`OdometryAgreement`)."""
+    inside = (stamps >= odom_t.min()) & (stamps <= odom_t.max())
+    n_back = int(np.sum(np.diff(odom_t) < 0))
+    if not inside.any():
+        return OdometryAgreement(0, 0.0, math.nan, math.nan, math.nan, math.nan, n_back)
+    d = interpolate_poses(odom_t, odom_p, stamps[inside]) - laser_odo[inside]
+    trans = np.hypot(d[:, 0], d[:, 1])
+    rot = np.abs(se2.wrap_angle(d[:, 2]))
+    ok = (trans <= ODOM_AGREEMENT_M) & (rot <= ODOM_AGREEMENT_RAD)
+    return OdometryAgreement(
+        int(inside.sum()),
+        float(ok.mean()),
+        float(np.median(trans)),
+        float(trans.max()),
+        float(np.median(rot)),
+        float(rot.max()),
+        n_back,
+    )
+
+
+def one_trajectory(laser_pose: FloatArray, laser_odo: FloatArray) -> bool:
+    """Whether the laser lines' pose is their odometry plus a fixed mount (a raw log, or a
+    corrected one that wrote its poses into both fields), to :data:`ONE_TRAJECTORY_TOL`."""
+    rel = se2.between(laser_odo, laser_pose)
+    d = rel - rel[0]
+    d[:, 2] = se2.wrap_angle(d[:, 2])
+    return bool(np.abs(d).max() <= ONE_TRAJECTORY_TOL)
+
+
+def choose_odometry(
+    path: Path,
+    kind: str,
+    mode: str,
+    odom_t: FloatArray,
+    odom_p: FloatArray,
+    stamps: FloatArray,
+    laser_odo: FloatArray | None,
+    laser_pose: FloatArray | None,
+) -> tuple[FloatArray, str, str | None]:
+    """The odometry at the scan ``stamps``, its source and, when ``mode`` is ``"auto"`` and
+    the ``ODOM`` lines are not shown to be raw, the warning to give (module docstring).
+
+    ``odom_t``/``odom_p`` the ``ODOM`` lines (may be empty), ``laser_odo``/``laser_pose`` the
+    ``kind`` lines' odometry and pose fields (``None``: the lines carry none).
+    """
+    have_odom = len(odom_t) > 0
+    if mode == "odom-lines" or (mode == "auto" and laser_odo is None and have_odom):
+        if not have_odom:
+            raise CarmenLogError(path, [("odometry", "odom-lines: the log has no ODOM lines")])
+        return interpolate_poses(odom_t, odom_p, stamps), "odom-lines", None
+    if laser_odo is None:
+        why = "no ODOM lines and " if mode == "auto" else "laser-lines: "
+        raise CarmenLogError(path, [("odometry", f"{why}{kind} lines carry no odometry")])
+    if mode == "laser-lines" or not have_odom:
+        return laser_odo, "laser-lines", None
+    agreement = odometry_agreement(odom_t, odom_p, stamps, laser_odo)
+    if agreement.agrees:  # one raw stream: the ODOM lines, as CARMEN's logger wrote them
+        return interpolate_poses(odom_t, odom_p, stamps), "odom-lines", None
+    note = (
+        f"{path}: odometry from the {kind} lines' odometry fields, not the ODOM lines: "
+        f"interpolated to the scan times, the ODOM lines are not the laser lines' odometry "
+        f"({agreement.describe()}), so they are not the raw odometry the scans were logged with."
+    )
+    if laser_pose is not None and one_trajectory(laser_pose, laser_odo):
+        note += (
+            f" The {kind} lines' pose and odometry fields are identical (up to a fixed mount): "
+            "this looks like a corrected log; its odometry is not raw wheel odometry (it "
+            "follows the log's own poses)."
+        )
+    note += " odometry='odom-lines' (--odometry odom-lines) takes the ODOM lines instead."
+    return laser_odo, "laser-lines", note
+
+
+def read_carmen(
+    path: str | Path, laser_id: int = 1, max_errors: int = 20, odometry: str = "auto"
+) -> CarmenLog:
+    """Read one laser (``laser_id`` 1 = front, 2 = rear, 3/4 raw) of a CARMEN log, its
+    odometry from ``odometry`` (one of :data:`ODOMETRY_SOURCES`, :func:`choose_odometry`)."""
     p = Path(path)
     if laser_id not in LASER_TYPES:
         raise CarmenLogError(p, [("laser_id", f"must be one of {sorted(LASER_TYPES)}")])
+    if odometry not in ODOMETRY_SOURCES:
+        raise CarmenLogError(
+            p, [("odometry", f"must be one of {', '.join(ODOMETRY_SOURCES)}, not {odometry!r}")]
+        )
     lines = _open_text(p)
     errs: list[tuple[str, str]] = []
     odom_t: list[float] = []
@@ -265,14 +430,14 @@ def read_carmen(path: str | Path, laser_id: int = 1, max_errors: int = 20) -> Ca
     ranges = np.array([m.ranges for m in msgs], dtype=np.float64)
     ranges = np.where(ranges >= max_range, np.inf, ranges)
     ranges = np.where(ranges <= 0.0, np.nan, ranges).astype(np.float32)
-    if odom_t:
-        odo = interpolate_poses(np.array(odom_t), np.array(odom_p), stamps)
-    elif all(m.odom_pose is not None for m in msgs):
-        odo = np.array([m.odom_pose for m in msgs])
-    else:
-        raise CarmenLogError(p, [("ODOM", f"no ODOM lines and {kind} lines carry no odometry")])
+    laser_odo = np.array([m.odom_pose for m in msgs]) if msgs[0].odom_pose is not None else None
+    lp = np.array([m.laser_pose for m in msgs]) if msgs[0].laser_pose is not None else None
+    odo, source, note = choose_odometry(
+        p, kind, odometry, np.array(odom_t), np.array(odom_p), stamps, laser_odo, lp
+    )
+    if note is not None:
+        warnings.warn(note, CarmenOdometryWarning, stacklevel=2)
     reference = None
-    if all(m.laser_pose is not None for m in msgs):
-        lp = np.array([m.laser_pose for m in msgs])
+    if lp is not None:
         reference = se2.compose(lp, np.broadcast_to(se2.inverse(np.array(mount)), lp.shape))
-    return CarmenLog(p, laser, stamps, ranges, odo, reference, kind)
+    return CarmenLog(p, laser, stamps, ranges, odo, reference, kind, source)

@@ -12,7 +12,12 @@ from synthetic_scans import raycast, room_segments
 from dynmap_sim import se2
 from dynmap_sim.cli import main
 from dynmap_sim.errors import InputError
-from dynmap_sim.io.carmen import CarmenLogError, interpolate_poses, read_carmen
+from dynmap_sim.io.carmen import (
+    CarmenLogError,
+    CarmenOdometryWarning,
+    interpolate_poses,
+    read_carmen,
+)
 
 
 def trajectory(n=240):
@@ -99,8 +104,10 @@ def test_flaser_with_interpolated_odometry(tmp_path):
 def test_robotlaser_gzip_mount_and_rawlaser(tmp_path):
     p = tmp_path / "b.log.gz"
     truth, _, _ = write_log(p, kind="ROBOTLASER1", gz=True)
-    log = read_carmen(p)
-    assert log.message == "ROBOTLASER1"
+    # its robot poses are the truth, its ODOM lines drifting odometry: a corrected log
+    with pytest.warns(CarmenOdometryWarning, match="this looks like a corrected log"):
+        log = read_carmen(p)
+    assert log.message == "ROBOTLASER1" and log.odometry_source == "laser-lines"
     assert log.laser.mount_pose == pytest.approx((0.1, 0.0, 0.0), abs=1e-6)
     assert_poses_close(log.reference, truth, 1e-5)
     p2 = tmp_path / "c.log"
