@@ -180,6 +180,7 @@ class Costmap:
         self._occupied: NDArray[np.bool_] | None = None
         #: the last window_clearance: (its base, its window a0, a1, b0, b1, its array)
         self._window: tuple[ClearanceGrid, tuple[int, int, int, int], FloatArray] | None = None
+        self._seen: NDArray[np.uint8] | None = None  # the scan kernel's scratch
 
     @classmethod
     def for_prior(cls, prior: Prior, params: CostmapParams | None = None) -> Costmap:
@@ -287,6 +288,7 @@ class Costmap:
                 float(pose[0]),
                 float(pose[1]),
                 self._footprint,
+                self._seen_scratch(),
             )
             if changed:
                 self._changed()
@@ -318,6 +320,13 @@ class Costmap:
         if changed:
             self._changed()
         return changed
+
+    def _seen_scratch(self) -> NDArray[np.uint8]:
+        """The scan kernel's per-cell scratch (zero between calls)."""
+        seen = getattr(self, "_seen", None)  # (a costmap pickled before it had one)
+        if seen is None or seen.size != self.marks.size:
+            seen = self._seen = np.zeros(self.marks.size, dtype=np.uint8)
+        return seen
 
     def _ray_keys(
         self, origin_xy: FloatArray, direction: FloatArray, length_m: FloatArray, end_key: IntArray
@@ -452,4 +461,5 @@ class Costmap:
             "_occupied": None,
             "_beams": None,
             "_window": None,
+            "_seen": None,
         }
