@@ -11,7 +11,9 @@ leave out each run's first scan, whose time (printed apart) includes one-off cos
 the numba kernels of both from numba's on-disk cache (or compiling them), ~0.1-1 s a process.
 A second line gives the same from the thread's CPU time (``time.thread_time``): on a shared
 machine it leaves out the time the process waited for a core, which the wall-clock times
-(the target's measure) include.
+(the target's measure) include. After the runs (``--days N``, days 1..N), a last line gives
+the aggregate over all of them: the total time of the stack over the total time of
+dynamic-map (first scans left out, as above), wall clock and thread CPU time.
 """
 
 from __future__ import annotations
@@ -64,6 +66,7 @@ def main() -> None:
     t_loc, t_stack = _Timed(loc, "update"), _Timed(stack, "step")
     policy.localizer, policy.stack = t_loc, t_stack  # type: ignore[assignment]
     print("navigation stack vs lock-stepped dynamic-map, apartment, per scan (mean)")
+    totals = np.zeros(4)  # seconds: dynamic-map, stack (wall); dynamic-map, stack (CPU)
     for day in range(1, args.days + 1):
         obs, info = env.reset(seed=0, options={"day": day})
         policy.reset(u.world_facts().prior(day))  # what a scenario grants
@@ -88,6 +91,15 @@ def main() -> None:
         )
         a, b = 1e3 * np.mean(t_loc.cpu_times[1:]), 1e3 * np.mean(t_stack.cpu_times[1:])
         print(f"       thread CPU time: dynamic-map {a:.2f} ms, stack {b:.2f} ms, {b / a:.1%}")
+        timings = (t_loc.times, t_stack.times, t_loc.cpu_times, t_stack.cpu_times)
+        totals += [sum(t[1:]) for t in timings]
+    loc_s, stack_s, loc_cpu_s, stack_cpu_s = totals.tolist()
+    runs = "day 1" if args.days == 1 else f"days 1-{args.days}"
+    print(
+        f"{runs}, all scans: stack / dynamic-map {stack_s / loc_s:.1%} (total {stack_s:.2f} s / "
+        f"{loc_s:.2f} s), thread CPU time {stack_cpu_s / loc_cpu_s:.1%} "
+        f"({stack_cpu_s:.2f} s / {loc_cpu_s:.2f} s)"
+    )
 
 
 if __name__ == "__main__":

@@ -189,6 +189,22 @@ class CorridorFollower(Controller):
         self._cum = np.concatenate([[0.0], np.cumsum(length)])
         self._seg_hw = np.minimum(hw[:-1], hw[1:])
         self._path, self._n_seg = verts, len(verts) - 1
+        self._cache_floats()
+
+    def _cache_floats(self) -> None:
+        """The path's arrays as floats for the per-command scalar arithmetic (the same numbers
+        without numpy scalars)."""
+        assert self._path is not None
+        self._path_list: list[list[float]] = self._path.tolist()
+        self._cum_list: list[float] = self._cum.tolist()
+        self._seg_hw_list: list[float] = self._seg_hw.tolist()
+        self._seg_len_list: list[float] = self._seg_len.tolist()
+        self._normal_list: list[list[float]] = self._normal.tolist()
+
+    def __setstate__(self, state: dict[str, object]) -> None:
+        self.__dict__.update(state)
+        if self._path is not None and "_path_list" not in state:  # pickled before the floats
+            self._cache_floats()
 
     @property
     def segment(self) -> int:
@@ -220,11 +236,11 @@ class CorridorFollower(Controller):
     def _along(self, x: float, y: float) -> tuple[float, float]:
         """Arc length of the robot's projection on the current segment and its signed lateral
         distance (+ left) from it [m]."""
-        a = self._path[self._seg]  # type: ignore[index]
-        t, n = self._tangent[self._seg], self._normal[self._seg]
-        rel = np.array([x - a[0], y - a[1]])
-        u = min(max(float(rel @ t), 0.0), float(self._seg_len[self._seg]))
-        return float(self._cum[self._seg]) + u, float(rel @ n)
+        seg = self._seg
+        ax, ay = self._path_list[seg]
+        rel = np.array([x - ax, y - ay])
+        u = min(max(float(rel @ self._tangent[seg]), 0.0), self._seg_len_list[seg])
+        return self._cum_list[seg] + u, float(rel @ self._normal[seg])
 
     def _half_width_at(self, s_m: FloatArray, seg: NDArray[np.int64]) -> FloatArray:
         """The corridor half-width at arc lengths ``s_m`` on segments ``seg``, narrowing to
@@ -326,45 +342,45 @@ class CorridorFollower(Controller):
         """The command ``[v_mps, omega_radps]`` at ``pose`` (map frame); zero when done or
         :attr:`blocked`."""
         p = self.params
-        stop = np.zeros(2, dtype=np.float32)
         if self.done:
             self._blocked = False
-            return stop
-        verts = self._path
-        assert verts is not None
+            return np.zeros(2, dtype=np.float32)
+        verts = self._path_list  # the path's floats (set_path)
         x, y, th = float(pose[0]), float(pose[1]), float(pose[2])
         n_seg = self._n_seg
+        cum, seg_hw = self._cum_list, self._seg_hw_list
         while True:
             self._seg = advance_segment(verts, self._seg, x, y, p.goal_tolerance_m)
             if self.done:
                 self._blocked = False
-                return stop
+                return np.zeros(2, dtype=np.float32)
             # with an offset the robot passes a vertex beside it: past the end of an inner
             # segment and inside its corridor is reached, too
             s_robot, lat = self._along(x, y)
-            at_end = s_robot >= self._cum[self._seg + 1] - p.goal_tolerance_m
-            inside = abs(lat) <= self._seg_hw[self._seg] + p.goal_tolerance_m
+            at_end = s_robot >= cum[self._seg + 1] - p.goal_tolerance_m
+            inside = abs(lat) <= seg_hw[self._seg] + p.goal_tolerance_m
             if self._seg < n_seg - 1 and at_end and inside:
                 self._seg += 1
                 continue
             break
-        cx, cy = carrot_on_segment(verts[self._seg], verts[self._seg + 1], x, y, p.lookahead_m)
+        seg = self._seg
+        cx, cy = carrot_on_segment(verts[seg], verts[seg + 1], x, y, p.lookahead_m)
         carrot = np.array([cx, cy])
-        a = verts[self._seg]
-        s_carrot = float(self._cum[self._seg]) + float(np.hypot(cx - a[0], cy - a[1]))
+        ax, ay = verts[seg]
+        s_carrot = cum[seg] + float(np.hypot(cx - ax, cy - ay))
         xy = np.array([x, y])
         best, offsets, clear_near, here = self._choose_offset(xy, s_robot, carrot, s_carrot, grid)
         if best is None:
             self._blocked = True
             self._clearance_ahead_m = float(clear_near.max())
-            return stop
+            return np.zeros(2, dtype=np.float32)
         self._blocked = False
         self._offset_m = float(offsets[best])
         # _half_width_at(s_carrot) on scalars
-        hw_c = min(float(self._seg_hw[self._seg]), max(float(self._cum[-1]) - s_carrot, 0.0))
+        hw_c = min(seg_hw[seg], max(cum[-1] - s_carrot, 0.0))
         d_c = min(max(self._offset_m, -hw_c), hw_c)
-        nx, ny = self._normal[self._seg]
-        tx, ty = cx + d_c * float(nx), cy + d_c * float(ny)
+        nx, ny = self._normal_list[seg]
+        tx, ty = cx + d_c * nx, cy + d_c * ny
         # the shifted carrot in the robot frame
         c, sn = math.cos(th), math.sin(th)
         dx, dy = tx - x, ty - y
@@ -384,11 +400,11 @@ class CorridorFollower(Controller):
         if kappa * p.regulated_min_radius_m > 1.0:  # RPP curvature regulation: v * R / R_min
             v = max(v / (kappa * p.regulated_min_radius_m), min(v, p.min_speed_mps))
         if self._seg == n_seg - 1:  # RPP approach regulation
-            to_end = math.hypot(verts[-1, 0] - x, verts[-1, 1] - y)
+            to_end = math.hypot(verts[-1][0] - x, verts[-1][1] - y)
             v = min(v, max(p.speed_mps * to_end / p.approach_dist_m, p.approach_min_speed_mps))
         if speed_limit is not None:
             v *= speed_limit()
         if v <= 0.0:
-            return stop
+            return np.zeros(2, dtype=np.float32)
         omega = pursuit_turn_rate(alpha, dist, max(v, p.min_steering_speed_mps), p.max_omega_radps)
         return np.array([v, omega], dtype=np.float32)

@@ -112,17 +112,20 @@ class PurePursuit(Controller):
         return np.array([v, omega], dtype=np.float32)
 
 
-def advance_segment(verts: FloatArray, seg: int, x: float, y: float, tolerance_m: float) -> int:
+def advance_segment(
+    verts: FloatArray | list[list[float]], seg: int, x: float, y: float, tolerance_m: float
+) -> int:
     """The segment to follow from ``seg`` on: past every segment whose end vertex is within
-    ``tolerance_m`` of ``(x, y)`` (returns ``len(verts) - 1`` when the path's end is reached)."""
+    ``tolerance_m`` of ``(x, y)`` (returns ``len(verts) - 1`` when the path's end is reached).
+    ``verts``: ``(K, 2)`` [m], an array or its ``tolist()``."""
     n_seg = len(verts) - 1
-    while seg < n_seg and math.hypot(verts[seg + 1, 0] - x, verts[seg + 1, 1] - y) < tolerance_m:
+    while seg < n_seg and math.hypot(verts[seg + 1][0] - x, verts[seg + 1][1] - y) < tolerance_m:
         seg += 1
     return seg
 
 
 def carrot_on_segment(
-    a: FloatArray, b: FloatArray, x: float, y: float, lookahead_m: float
+    a: FloatArray | list[float], b: FloatArray | list[float], x: float, y: float, lookahead_m: float
 ) -> tuple[float, float]:
     """The pure-pursuit carrot: ``lookahead_m`` along segment ``a -> b`` beyond the projection
     of ``(x, y)`` on it, clamped to the segment (never past ``b``: corners are not cut)."""

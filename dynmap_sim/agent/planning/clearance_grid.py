@@ -35,6 +35,15 @@ class ClearanceGrid:
         ij = np.rint((xy[..., ::-1] - self.origin[::-1]) / self.resolution_m).astype(np.int64)
         return np.clip(ij, 0, np.array(self.shape) - 1)
 
+    def cell_index(self, x_m: float, y_m: float) -> tuple[int, int]:
+        """:meth:`cell_of` of one point ``(x_m, y_m)`` as ``(row, col)`` ints (the same
+        arithmetic on floats: round half to even, clipped to the grid)."""
+        h, w = self.clearance_m.shape
+        ox, oy = self.origin.tolist()
+        row = round((float(y_m) - oy) / self.resolution_m)
+        col = round((float(x_m) - ox) / self.resolution_m)
+        return min(max(row, 0), h - 1), min(max(col, 0), w - 1)
+
     def center_of(self, ij: NDArray[np.int64]) -> FloatArray:
         """Cell indices ``(..., 2)`` -> cell centres ``(..., 2)`` in metres (x, y)."""
         return self.origin + np.asarray(ij, dtype=np.float64)[..., ::-1] * self.resolution_m

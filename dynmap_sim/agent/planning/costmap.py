@@ -139,6 +139,19 @@ def samples_along(
     return pts, seg
 
 
+def laser_pose(
+    pose: FloatArray, mount_pose: tuple[float, float, float]
+) -> tuple[float, float, float]:
+    """:func:`dynmap_sim.se2.compose` of one robot pose ``(3,)`` and the laser's mount pose,
+    as floats: the same numpy operations on scalars instead of arrays (bit for bit)."""
+    ax, ay, ath = pose.tolist()
+    bx, by, bth = (float(v) for v in mount_pose)
+    c, s = np.cos(ath), np.sin(ath)
+    x = ax + c * bx - s * by
+    y = ay + s * bx + c * by
+    return float(x), float(y), float(se2.wrap_angle(ath + bth))
+
+
 class Costmap:
     """Static + obstacle layers over a fixed window, inflated to a :class:`ClearanceGrid`.
 
@@ -180,6 +193,7 @@ class Costmap:
         self._occupied: NDArray[np.bool_] | None = None
         #: the last window_clearance: (its base, its window a0, a1, b0, b1, its array)
         self._window: tuple[ClearanceGrid, tuple[int, int, int, int], FloatArray] | None = None
+        self._seen: NDArray[np.uint8] | None = None  # the scan kernel's scratch
 
     @classmethod
     def for_prior(cls, prior: Prior, params: CostmapParams | None = None) -> Costmap:
@@ -265,16 +279,16 @@ class Costmap:
         p = self.params
         ranges = np.asarray(scan.ranges_m if isinstance(scan, Scan) else scan, dtype=np.float64)
         pose = np.asarray(pose, dtype=np.float64)
-        lp = se2.compose(pose, np.asarray(laser.mount_pose, float))
-        th = lp[2] + self._angles(laser)
         if self._compiled():
+            lx, ly, lth = laser_pose(pose, laser.mount_pose)
+            th = lth + self._angles(laser)
             changed = mark_scan(
                 self.marks,
                 float(self.origin[0]),
                 float(self.origin[1]),
                 self.resolution_m,
-                float(lp[0]),
-                float(lp[1]),
+                lx,
+                ly,
                 np.cos(th),
                 np.sin(th),
                 ranges,
@@ -287,10 +301,13 @@ class Costmap:
                 float(pose[0]),
                 float(pose[1]),
                 self._footprint,
+                self._seen_scratch(),
             )
             if changed:
                 self._changed()
             return changed
+        lp = se2.compose(pose, np.asarray(laser.mount_pose, float))
+        th = lp[2] + self._angles(laser)
         direction = np.stack([np.cos(th), np.sin(th)], axis=1)
         with np.errstate(invalid="ignore"):
             valid = np.isfinite(ranges) & (ranges >= laser.range_min_m)
@@ -318,6 +335,13 @@ class Costmap:
         if changed:
             self._changed()
         return changed
+
+    def _seen_scratch(self) -> NDArray[np.uint8]:
+        """The scan kernel's per-cell scratch (zero between calls)."""
+        seen = getattr(self, "_seen", None)  # (a costmap pickled before it had one)
+        if seen is None or seen.size != self.marks.size:
+            seen = self._seen = np.zeros(self.marks.size, dtype=np.uint8)
+        return seen
 
     def _ray_keys(
         self, origin_xy: FloatArray, direction: FloatArray, length_m: FloatArray, end_key: IntArray
@@ -421,10 +445,16 @@ class Costmap:
         ``margin_m`` (``base``'s value when larger). ``base`` is not changed. With the numba
         kernels the grid's array is reused by the next call with the same ``base`` (only the
         last window is restored from ``base``, no copy of the whole grid): use the grid before
-        calling again."""
+        calling again.
+
+        When ``base`` is this costmap's :meth:`clearance` and no obstacle cell changed since,
+        ``base`` itself is returned: it is the answer (where the exact distance is below
+        ``margin_m`` the window has it; elsewhere ``base`` is at least ``margin_m``)."""
+        if base is self._clearance:
+            return base
         res = base.resolution_m
         h, w = base.shape
-        i, j = base.cell_of(centre_xy)
+        i, j = base.cell_index(float(centre_xy[0]), float(centre_xy[1]))
         k_in = int(math.ceil(window_m / res))
         k_out = k_in + int(math.ceil(margin_m / res))
         r0, r1 = max(i - k_out, 0), min(i + k_out + 1, h)
@@ -452,4 +482,5 @@ class Costmap:
             "_occupied": None,
             "_beams": None,
             "_window": None,
+            "_seen": None,
         }

@@ -3,6 +3,7 @@ passing a box by a lateral offset inside the corridor, stopping and reporting ``
 speed law."""
 
 import math
+import pickle
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -152,3 +153,21 @@ def test_bad_params_are_refused():
         follower(n_offsets=4)
     with pytest.raises(TypeError):
         follower(no_such_param=1.0)
+
+
+def test_a_follower_pickled_before_its_float_caches_commands_the_same():
+    """A checkpoint of an older follower (its path's arrays, no float copies) unpickles to a
+    follower that commands as the fresh one."""
+    grid = grid_of(corridor())
+    fresh = follower()
+    fresh.set_path(np.array([[0.5, 1.0], [3.0, 1.0], [5.0, 2.0]]), np.full(3, 0.3))
+    state = dict(fresh.__dict__)
+    for name in ("_path_list", "_cum_list", "_seg_hw_list", "_seg_len_list", "_normal_list"):
+        del state[name]
+    old = CorridorFollower.__new__(CorridorFollower)
+    old.__dict__.update(state)
+    restored = pickle.loads(pickle.dumps(old))
+    for pose in ([0.6, 1.1, 0.1], [2.0, 0.9, -0.2], [3.5, 1.3, 0.4]):
+        np.testing.assert_array_equal(
+            restored.command(np.array(pose), grid), fresh.command(np.array(pose), grid)
+        )

@@ -11,7 +11,8 @@ from synthetic_scans import LASER, box, raycast
 
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import OccupancyGrid
-from dynmap_sim.agent.planning.costmap import Costmap, CostmapParams, samples_along
+from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
+from dynmap_sim.agent.planning.costmap import Costmap, CostmapParams, laser_pose, samples_along
 from dynmap_sim.types import Prior, Scan
 
 ROOM = box(0.0, 0.0, 6.0, 4.0)
@@ -186,3 +187,44 @@ def test_for_prior() -> None:
     assert not bare.occupied_mask().any() and bare.shape == (441, 441)
     with pytest.raises(ValueError):
         Costmap.for_prior(Prior(initial_pose=None))
+
+
+def test_laser_pose_is_se2_compose_bit_for_bit() -> None:
+    """The scan update's laser pose on floats equals :func:`se2.compose` exactly."""
+    rng = np.random.default_rng(2)
+    poses = np.concatenate([rng.uniform(-20.0, 20.0, (3000, 3)), rng.uniform(-4, 4, (3000, 3))])
+    for mount in ((0.1, 0.05, 0.2), (0.0, 0.0, 0.0), (-0.13, 0.02, np.pi)):
+        for pose in poses:
+            want = se2.compose(pose, np.asarray(mount, dtype=np.float64))
+            assert laser_pose(pose, mount) == tuple(want.tolist())
+
+
+def test_cell_index_is_cell_of() -> None:
+    """The one-point cell index equals :meth:`ClearanceGrid.cell_of` (ties, outside points)."""
+    rng = np.random.default_rng(3)
+    grid = ClearanceGrid(np.array([-1.3, 2.7]), 0.05, np.zeros((50, 70)))
+    pts = np.concatenate(
+        [rng.uniform(-5.0, 8.0, (3000, 2)), np.round(rng.uniform(-3.0, 8.0, (3000, 2)) * 40) / 40]
+    )
+    got = np.array([grid.cell_index(x, y) for x, y in pts.tolist()])
+    np.testing.assert_array_equal(got, grid.cell_of(pts))
+
+
+@pytest.mark.parametrize("backend", ["numpy", "auto"])
+def test_window_of_an_unchanged_costmap_is_its_clearance(backend: str) -> None:
+    """On the costmap's own clearance with no change since, the window clearance is that
+    clearance (returned as is), as computed on a copy of it."""
+    rng = np.random.default_rng(4)
+    cm = Costmap(CostmapParams(), (0.0, 0.0, 6.0, 4.0))
+    cm.backend = backend
+    cm.set_static_segments(box(0.0, 0.0, 6.0, 4.0))
+    for _ in range(20):
+        cm.marks = (rng.random(cm.shape) < rng.choice([0.0, 0.002, 0.02])).astype(np.int8)
+        cm._changed()
+        base = cm.clearance()
+        copy = ClearanceGrid(base.origin, base.resolution_m, base.clearance_m.copy())
+        centre = rng.uniform(-0.5, [6.5, 4.5])
+        window_m, margin_m = rng.uniform(0.05, 2.0), rng.uniform(0.05, 1.2)
+        assert cm.window_clearance(base, centre, window_m, margin_m) is base
+        got = cm.window_clearance(copy, centre, window_m, margin_m)
+        np.testing.assert_array_equal(got.clearance_m, base.clearance_m)

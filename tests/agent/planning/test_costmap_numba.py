@@ -88,6 +88,7 @@ def test_python_kernel_of_the_scan_update_equals_numpy() -> None:
     segs = random_world(rng)
     (ref,) = costmaps(("numpy",))
     marks = ref.marks.copy()
+    seen = np.zeros(marks.size, np.uint8)
     for _ in range(3):
         pose = np.array([rng.uniform(0.5, 5.5), rng.uniform(0.5, 3.5), rng.uniform(-4, 4)])
         scan = random_scan(rng, segs, pose)
@@ -110,10 +111,12 @@ def test_python_kernel_of_the_scan_update_equals_numpy() -> None:
             p.max_persistence_scans,
             *pose[:2].tolist(),
             ref._footprint,
+            seen,
             python=True,
         )
         assert changed == ref.update(pose, scan, MOUNTED)
         np.testing.assert_array_equal(marks, ref.marks)
+        assert not seen.any()  # the scratch is left zero
 
 
 @pytest.mark.parametrize("python", [False, True])
@@ -170,14 +173,39 @@ def test_window_clearance_of_numba_equals_numpy_on_random_layers() -> None:
         np.testing.assert_array_equal(base.clearance_m, kept)  # the base is not changed
 
 
+@pytest.mark.parametrize("python", [False, True])
+def test_chessboard_distance_is_the_brute_force_minimum(python: bool) -> None:
+    """The block distances the scan kernel skips by: ``min_q dist[q] + chessboard(p, q)``
+    for random starts (zeros, a border ramp, large values), as a brute force finds."""
+    if not python and not costmap_numba.numba_available():
+        pytest.skip("numba (extra 'fast') not installed")
+    fn = costmap_numba._chessboard_distance_py if python else costmap_numba._chessboard_distance
+    rng = np.random.default_rng(5)
+    for _ in range(60):
+        h, w = (int(v) for v in rng.integers(1, 14, 2))
+        start = rng.integers(0, 2 * max(h, w), (h, w))
+        start[rng.random((h, w)) < rng.choice([0.0, 0.05, 0.3])] = 0
+        ii, jj = np.mgrid[:h, :w]
+        cheb = np.maximum(
+            np.abs(ii.reshape(-1, 1) - ii.reshape(1, -1)),
+            np.abs(jj.reshape(-1, 1) - jj.reshape(1, -1)),
+        )
+        want = (start.reshape(1, -1) + cheb).min(axis=1).reshape(h, w)
+        got = start.astype(np.int64)
+        fn(got)
+        np.testing.assert_array_equal(got, want)
+
+
 @needs_numba
-def test_rays_along_cell_and_block_edges_update_as_numpy() -> None:
+@pytest.mark.parametrize("density", [0.03, 0.002])
+def test_rays_along_cell_and_block_edges_update_as_numpy(density: float) -> None:
     """Axis-aligned and diagonal beams from laser poses on cell edges (where a ray grazes
-    the blocks the kernel skips), in dense marks: identical marks."""
+    the blocks the kernel skips), in dense marks and in sparse ones (long skips across
+    squares of free blocks): identical marks."""
     rng = np.random.default_rng(4)
     segs = random_world(rng)
     fast, ref = costmaps(("numba", "numpy"))
-    marks = (rng.random(fast.shape) < 0.03).astype(np.int8)
+    marks = (rng.random(fast.shape) < density).astype(np.int8)
     fast.marks, ref.marks = marks, marks.copy()
     res = fast.resolution_m
     angles = MOUNTED.angles()
