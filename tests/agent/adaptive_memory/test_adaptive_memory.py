@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from synthetic_scans import LASER, box, drifting_stream, polyline_path, raycast, room_segments
 
+from dynmap_sim.agent.grid import OCCUPIED
 from dynmap_sim.agent.localization.adaptive_memory.localizer import (
     AdaptiveMemoryConfig,
     AdaptiveMemoryLocalizer,
@@ -34,6 +35,7 @@ from dynmap_sim.agent.localization.adaptive_memory.object_tracker import (
     segment_scan,
 )
 from dynmap_sim.agent.localization.particle_filter import (
+    AMCLFilter,
     information_lambda_min,
     regularized_covariance,
 )
@@ -378,3 +380,22 @@ def test_held_beams_and_the_cached_covariance_change_no_estimate(monkeypatch):
         )
         assert a.extras["lambda_min"] == b.extras["lambda_min"]
         assert a.extras["static_points_used"] == b.extras["static_points_used"]
+
+
+def test_the_mcl_grid_is_rebuilt_only_when_the_map_cells_change():
+    loc = make_localizer("adaptive-memory", laser=LASER, rng=np.random.default_rng(0))
+    loc.begin_run(Prior(initial_pose=np.array([1.0, 1.0, 0.0]), walls=WALLS, day=1, run=1))
+    f, slot = loc.filter, loc.used_slot
+    grid, table = f.grid, f.table
+    loc._use_map(slot)  # same cells: the same grid and likelihood field stay
+    assert f.grid is grid and f.table is table
+    m = loc.ltm.map(slot)
+    ix, iy = m.cells(np.array([2.0, 2.0]))  # a new obstacle in the room
+    assert m.ternary(loc.lp)[iy, ix] != OCCUPIED
+    m.logodds[iy, ix] = loc.lp.l_max
+    loc._use_map(slot)
+    assert f.grid is not grid
+    np.testing.assert_array_equal(f.grid.occupancy, m.ternary(loc.lp))
+    fresh = m.occupancy_grid(loc.lp)
+    assert f.grid.dist_m.tobytes() == fresh.dist_m.tobytes()
+    np.testing.assert_array_equal(f.table.logp, AMCLFilter(fresh, LASER, loc.mcl).table.logp)

@@ -243,11 +243,23 @@ class LTMMap:
         return out
 
     # -- for MCL and map selection (§6.1) ------------------------------------------------
-    def occupancy_grid(self, params: LTMParams, max_dist_m: float = 2.0) -> OccupancyGrid:
-        """The map as a ternary :class:`OccupancyGrid` for the MCL core."""
+    def ternary(self, params: LTMParams) -> NDArray[np.int8]:
+        """The cells as :class:`OccupancyGrid` codes: occupied from ``l_occupied``, free where
+        the prior says so or the log-odds are negative, unknown elsewhere."""
         occ = np.full(self.shape, UNKNOWN, dtype=np.int8)
         occ[self.prior_free | (self.logodds < 0)] = FREE
         occ[self.occupied(params)] = OCCUPIED
+        return occ
+
+    def occupancy_grid(
+        self,
+        params: LTMParams,
+        max_dist_m: float = 2.0,
+        ternary: NDArray[np.int8] | None = None,
+    ) -> OccupancyGrid:
+        """The map as a ternary :class:`OccupancyGrid` for the MCL core (``ternary``: this
+        map's :meth:`ternary`, if already at hand)."""
+        occ = self.ternary(params) if ternary is None else ternary
         return OccupancyGrid(occ, self.origin, self.resolution, max_dist_m)
 
     def expected_ranges(
