@@ -27,6 +27,7 @@ from dynmap_sim.agent.localization.particle_filter import (
     TUNED,
     WALLS_ONLY,
     AMCLFilter,
+    MCLConfig,
     StaticMCL,
     information_lambda_min,
     regularized_covariance,
@@ -112,6 +113,23 @@ def test_kld_bound_closed_form():
     assert kld_prefix_size(np.r_[0, np.ones(999, np.int64)], eps, z, 100, 1000) == 101
     # Many distinct bins: needs more particles.
     assert kld_prefix_size(np.arange(1000), eps, z, 50, 1000) > 200
+
+
+def test_kld_one_bin_fox_stops_at_the_minimum():
+    # Fox 2003 Table 1 / Probabilistic Robotics Table 8.4: the bound counts from k = 2 on, so
+    # draws that all fall into one bin stop at the minimum (+1: the loop stops once the count
+    # exceeds the bound, as above); more bins are as nav2's.
+    eps, z = 0.05, 2.326
+    assert kld_sample_count(1, eps, z, 5, 100, one_bin="min") == 5
+    assert kld_prefix_size(np.zeros(1000, np.int64), eps, z, 50, 1000, one_bin="min") == 51
+    two = np.r_[0, np.ones(999, np.int64)]
+    assert kld_prefix_size(two, eps, z, 50, 1000, one_bin="min") == 67
+    many = np.arange(1000)
+    assert kld_prefix_size(many, eps, z, 50, 1000, "min") == kld_prefix_size(many, eps, z, 50, 1000)
+    with pytest.raises(ValueError, match="one_bin must be one of"):
+        kld_sample_count(1, eps, z, 5, 100, one_bin="fox")
+    with pytest.raises(ValueError, match="kld_one_bin must be one of"):
+        MCLConfig(kld_one_bin="fox")
 
 
 # -- likelihood field --------------------------------------------------------------------

@@ -7,6 +7,13 @@ particles bound the K-L divergence between the sample-based and the true posteri
 bins are 0.5 m x 0.5 m x 10 degrees. Note: nav2 passes ``pf_z`` (0.99 by default) to this
 formula as ``z`` itself, not as a probability (ros-navigation/navigation2#4190); we do the
 same so that ``nav2-default`` behaves like nav2.
+
+One occupied bin (``k = 1``, the bound's ``k - 1 = 0`` degrees of freedom): nav2's
+``pf_resample_limit`` returns ``max_samples`` (``one_bin = "max"``, the default), so a
+cloud narrower than a bin that happens to lie inside one is resampled to the maximum and one
+that straddles a bin border to the minimum. Fox 2003's algorithm (Table 1) and *Probabilistic
+Robotics* Table 8.4 compute the bound only once ``k > 1`` (``M_χ`` stays 0), so the loop
+stops at the minimum (``one_bin = "min"``).
 """
 
 from __future__ import annotations
@@ -14,17 +21,28 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+#: Values of ``one_bin``: the count for a single occupied bin (module doc).
+ONE_BIN_RULES = ("max", "min")
+
 
 def kld_sample_count(
-    k_bins: ArrayLike, pf_err: float, pf_z: float, min_particles: int, max_particles: int
+    k_bins: ArrayLike,
+    pf_err: float,
+    pf_z: float,
+    min_particles: int,
+    max_particles: int,
+    one_bin: str = "max",
 ) -> NDArray[np.int64]:
-    """KLD bound for ``k_bins`` occupied bins (vectorized), clamped to ``[min, max]``."""
+    """KLD bound for ``k_bins`` occupied bins (vectorized), clamped to ``[min, max]``; one
+    bin gives ``max_particles`` (nav2) or ``min_particles`` (Fox 2003), see ``one_bin``."""
+    if one_bin not in ONE_BIN_RULES:
+        raise ValueError(f"one_bin must be one of {ONE_BIN_RULES}, got {one_bin!r}")
     k = np.asarray(k_bins, dtype=np.float64)
     km1 = np.maximum(k - 1.0, 1.0)
     b = 2.0 / (9.0 * km1)
     x = 1.0 - b + np.sqrt(b) * pf_z
     n = np.ceil(km1 / (2.0 * pf_err) * x**3)
-    n = np.where(k <= 1, max_particles, n)
+    n = np.where(k <= 1, max_particles if one_bin == "max" else min_particles, n)
     return np.clip(n, min_particles, max_particles).astype(np.int64)
 
 
@@ -45,12 +63,14 @@ def kld_prefix_size(
     pf_z: float,
     min_particles: int,
     max_particles: int,
+    one_bin: str = "max",
 ) -> int:
     """Number of draws AMCL's sequential KLD loop keeps (``pf_update_resample``).
 
     Samples are drawn one at a time and the loop stops as soon as the count exceeds the
     bound for the bins occupied so far. ``keys_in_draw_order`` are the bin keys of a
-    candidate sequence of ``max_particles`` draws in random order.
+    candidate sequence of ``max_particles`` draws in random order; ``one_bin``: the bound
+    while they all fall into one bin (:func:`kld_sample_count`).
     """
     keys = np.asarray(keys_in_draw_order)
     if len(keys) == 0:
@@ -60,7 +80,7 @@ def kld_prefix_size(
     new_bin[first] = 1
     k = np.cumsum(new_bin)
     count = np.arange(1, len(keys) + 1)
-    limit = kld_sample_count(k, pf_err, pf_z, min_particles, max_particles)
+    limit = kld_sample_count(k, pf_err, pf_z, min_particles, max_particles, one_bin)
     stop = np.nonzero(count > limit)[0]
     n = int(stop[0] + 1) if len(stop) else len(keys)
     return int(np.clip(n, min(min_particles, len(keys)), max_particles))

@@ -62,7 +62,7 @@ from scipy.sparse.csgraph import connected_components
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import OccupancyGrid
 from dynmap_sim.agent.localization.distance_filter import expected_ranges, short_readings
-from dynmap_sim.agent.localization.kld_sampling import bin_keys, kld_prefix_size
+from dynmap_sim.agent.localization.kld_sampling import ONE_BIN_RULES, bin_keys, kld_prefix_size
 from dynmap_sim.agent.localization.likelihood_field import (
     LikelihoodFieldParams,
     LikelihoodTable,
@@ -117,6 +117,18 @@ class MCLConfig:
     pf_z: float = 0.99
     kld_cell_m: float = 0.5
     kld_angle_rad: float = float(np.deg2rad(10.0))
+    #: Particles when every draw falls into one KLD bin: ``max`` (nav2's
+    #: ``pf_resample_limit``) or ``min`` (Fox 2003 Table 1, *Probabilistic Robotics* Table
+    #: 8.4: the bound counts from two bins on); :mod:`.kld_sampling`. With ``max`` a cloud
+    #: narrower than a bin gets ``max_particles`` or ``min_particles`` depending on whether
+    #: it straddles a bin border: adaptive-memory's filter on the static points (``tuned``,
+    #: 8000 at most) had 41 of 282 updates at 8000, the rest at 501-927, and those 41 took
+    #: 70 % of its sensor-update time (benchmarks/bench_adaptive_memory.py). ``min`` there,
+    #: seeds 0/1/2: 419/419/392 -> 543/542/563 scans/s of CPU, mean error 0.039/0.035/0.037
+    #: -> 0.040/0.033/0.035 m, max 0.063/0.059/0.072 -> 0.082/0.056/0.063 m; apartment-28d-hw
+    #: days 1-3 with adaptive-memory (steering) on ``min``: its mean error a day
+    #: 0.038/0.040/0.039 -> 0.038/0.041/0.040 m, never lost (the route changes with it).
+    kld_one_bin: str = "max"
     recovery_alpha_slow: float = 0.0
     recovery_alpha_fast: float = 0.0
     #: ``pf.c`` resets w_slow and w_fast to 0 after injecting random poses; Table 8.3 does not.
@@ -216,6 +228,10 @@ class MCLConfig:
             raise ValueError(
                 f"static-mcl: min_particles ({self.min_particles}) must be <= max_particles "
                 f"({self.max_particles})"
+            )
+        if self.kld_one_bin not in ONE_BIN_RULES:
+            raise ValueError(
+                f"static-mcl: kld_one_bin must be one of {ONE_BIN_RULES}, got {self.kld_one_bin!r}"
             )
         if self.laser_model_type not in LASER_MODELS:
             raise ValueError(
@@ -588,7 +604,8 @@ class AMCLFilter:
             is_new = is_rand | is_local
             self.n_local_updates += 1
         keys = bin_keys(cand, c.kld_cell_m, c.kld_angle_rad)
-        n = kld_prefix_size(keys, c.pf_err, c.pf_z, c.min_particles, c.max_particles)
+        n = kld_prefix_size(keys, c.pf_err, c.pf_z, c.min_particles, c.max_particles,
+                            c.kld_one_bin)  # fmt: skip
         n_new = int(is_new[:n].sum())
         idx = low_variance_resample(self.weights, n - n_new, rng)
         parts = [self.particles[idx]]

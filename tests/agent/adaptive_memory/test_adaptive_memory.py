@@ -10,9 +10,11 @@ import numpy as np
 import pytest
 from synthetic_scans import LASER, box, drifting_stream, polyline_path, raycast, room_segments
 
+from dynmap_sim.agent.grid import OCCUPIED
 from dynmap_sim.agent.localization.adaptive_memory.localizer import (
     AdaptiveMemoryConfig,
     AdaptiveMemoryLocalizer,
+    StaticPointFilter,
 )
 from dynmap_sim.agent.localization.adaptive_memory.ltm_map import (
     LTMMap,
@@ -31,6 +33,11 @@ from dynmap_sim.agent.localization.adaptive_memory.object_tracker import (
     TrackerParams,
     point_classes_of,
     segment_scan,
+)
+from dynmap_sim.agent.localization.particle_filter import (
+    AMCLFilter,
+    information_lambda_min,
+    regularized_covariance,
 )
 from dynmap_sim.agent.localizer import LOCALIZERS, make_localizer
 from dynmap_sim.types import Prior
@@ -347,3 +354,48 @@ def test_a_walking_person_is_dynamic_and_the_room_is_not():
     assert on_person > 100
     assert dyn_person / on_person > 0.7
     assert dyn_room / on_room < 0.005
+
+
+def test_held_beams_and_the_cached_covariance_change_no_estimate(monkeypatch):
+    """The beams picked once a scan (``hold_beams``) and the reported covariance computed once
+    per filter estimate give the estimates of picking and computing them at every use."""
+    corners = np.array([[1.0, 1.0], [4.2, 1.0], [4.0, 3.8]])
+    truth = polyline_path(corners, step_m=0.05, turn_step_rad=0.15)
+    segs = room_segments(cupboard=True)
+    runs = []
+    for cached in (True, False):
+        if not cached:
+            monkeypatch.setattr(StaticPointFilter, "hold_beams", lambda self, r: None)
+            monkeypatch.setattr(
+                AdaptiveMemoryLocalizer,
+                "_reported_cov",
+                lambda self: (rc := regularized_covariance(self._cov), information_lambda_min(rc)),
+            )
+        loc = make_localizer("adaptive-memory", laser=LASER, rng=np.random.default_rng(1))
+        runs.append(_run(loc, truth, segs, np.random.default_rng(0), day=1)[0])
+    for a, b in zip(*runs, strict=True):
+        assert a.mean.tobytes() == b.mean.tobytes() and a.cov.tobytes() == b.cov.tobytes()
+        assert a.extras["scan_loglik"] == b.extras["scan_loglik"] or np.isnan(
+            a.extras["scan_loglik"]
+        )
+        assert a.extras["lambda_min"] == b.extras["lambda_min"]
+        assert a.extras["static_points_used"] == b.extras["static_points_used"]
+
+
+def test_the_mcl_grid_is_rebuilt_only_when_the_map_cells_change():
+    loc = make_localizer("adaptive-memory", laser=LASER, rng=np.random.default_rng(0))
+    loc.begin_run(Prior(initial_pose=np.array([1.0, 1.0, 0.0]), walls=WALLS, day=1, run=1))
+    f, slot = loc.filter, loc.used_slot
+    grid, table = f.grid, f.table
+    loc._use_map(slot)  # same cells: the same grid and likelihood field stay
+    assert f.grid is grid and f.table is table
+    m = loc.ltm.map(slot)
+    ix, iy = m.cells(np.array([2.0, 2.0]))  # a new obstacle in the room
+    assert m.ternary(loc.lp)[iy, ix] != OCCUPIED
+    m.logodds[iy, ix] = loc.lp.l_max
+    loc._use_map(slot)
+    assert f.grid is not grid
+    np.testing.assert_array_equal(f.grid.occupancy, m.ternary(loc.lp))
+    fresh = m.occupancy_grid(loc.lp)
+    assert f.grid.dist_m.tobytes() == fresh.dist_m.tobytes()
+    np.testing.assert_array_equal(f.table.logp, AMCLFilter(fresh, LASER, loc.mcl).table.logp)

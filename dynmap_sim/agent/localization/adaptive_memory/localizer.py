@@ -294,11 +294,16 @@ class AdaptiveMemoryConfig:
 
 class StaticPointFilter(AMCLFilter):
     """The AMCL core fed only the beams of ``point_mask`` (the static points, §6.1): up to
-    ``max_beams`` of them, evenly spread over the masked beams."""
+    ``max_beams`` of them, evenly spread over the masked beams. Between :meth:`hold_beams`
+    and :meth:`release_beams` (one scan) the beams of that scan are picked once."""
 
     point_mask: NDArray[np.bool_] | None = None
+    _held: tuple[Any, NDArray[np.bool_] | None, FloatArray, FloatArray] | None = None
 
     def _beams_of(self, ranges_m: Any) -> tuple[FloatArray, FloatArray]:
+        held = self._held
+        if held is not None and held[0] is ranges_m and held[1] is self.point_mask:
+            return held[2], held[3]
         r = np.asarray(ranges_m, dtype=np.float64)
         ok = np.isfinite(r) & (r > 0) & (r < self.range_max) & (r >= self.range_min)
         if self.point_mask is not None:
@@ -307,6 +312,15 @@ class StaticPointFilter(AMCLFilter):
         if len(idx) > self.config.max_beams > 0:
             idx = idx[select_beams(len(idx), self.config.max_beams)]
         return r[idx], self.all_angles[idx]
+
+    def hold_beams(self, ranges_m: Any) -> None:
+        """Pick the beams of ``ranges_m`` (with the current ``point_mask``) once, for every
+        use until :meth:`release_beams` (neither may change meanwhile)."""
+        self._held = None
+        self._held = (ranges_m, self.point_mask, *self._beams_of(ranges_m))
+
+    def release_beams(self) -> None:
+        self._held = None
 
     def set_grid(self, grid: Any) -> None:
         """Localize on ``grid`` from now on, keeping the particles."""
@@ -358,6 +372,7 @@ class AdaptiveMemoryLocalizer(Localizer):
         self._t0 = 0.0
         self._est = np.zeros(3)
         self._cov = np.eye(3)
+        self._cov_reported: tuple[FloatArray, FloatArray, float] | None = None
         self._odom_prev: FloatArray | None = None
         self._odom_at_update: FloatArray | None = None
         self._est_at_update = np.zeros(3)
@@ -459,18 +474,19 @@ class AdaptiveMemoryLocalizer(Localizer):
         if self._n_scans % c.select_every_scans == 0:
             self._select_map(pred, ranges)
         elif self._n_scans % c.map_refresh_scans == 0:
-            f.set_grid(ltm.map(self.used_slot).occupancy_grid(self.lp))
+            self._use_map(self.used_slot)
         use = classes == STATIC
         if c.mcl_points == "non-dynamic":
             use = valid & (classes != DYNAMIC)
         elif int(use.sum()) < c.min_static_points:
             use |= classes == UNKNOWN
         f.point_mask = use
+        f.hold_beams(ranges)  # this scan's beams, picked once (released below)
         self._mcl_step(pose_odom, ranges)
         self._n_scans += 1
         mean = se2.compose(self._est_at_update, se2.between(self._odom_at_update, pose_odom))
         self._est = mean
-        cov = regularized_covariance(self._cov)
+        cov, lambda_min = self._reported_cov()
         if n_take and c.ltm_update_pose == "estimate":
             ti = vi[take]
             p2, c2 = point_covariances(mean, cov, self.mount, ranges[ti], self.angles[ti],
@@ -486,9 +502,18 @@ class AdaptiveMemoryLocalizer(Localizer):
             "static_points_used": len(r_used),
             "scan_loglik": f.mean_beam_loglik(mean, ranges),
             "n_tracked_objects": self.tracker.n_tracks,
-            "lambda_min": information_lambda_min(cov),
+            "lambda_min": lambda_min,
         }
+        f.release_beams()
         return PoseEstimate(mean=mean, cov=cov, extras=extras)
+
+    def _reported_cov(self) -> tuple[FloatArray, float]:
+        """The reported covariance (regularized) and its information's smallest eigenvalue,
+        computed once per filter estimate: ``_cov`` changes only with one."""
+        if self._cov_reported is None or self._cov_reported[0] is not self._cov:
+            cov = regularized_covariance(self._cov)
+            self._cov_reported = (self._cov, cov, information_lambda_min(cov))
+        return self._cov_reported[1].copy(), self._cov_reported[2]
 
     def _hits(self, points: FloatArray, covs: FloatArray) -> NDArray[np.bool_] | None:
         """The sampled points that add occupied evidence (``ltm_learn_prior_walls``): all,
@@ -544,7 +569,25 @@ class AdaptiveMemoryLocalizer(Localizer):
         if self.used_slot not in slots:
             best = ltm.current
         self.used_slot = best
-        self.filter.set_grid(ltm.map(best).occupancy_grid(self.lp))
+        self._use_map(best)
+
+    def _use_map(self, slot: int) -> None:
+        """MCL on long-term slot ``slot``'s map from now on. The grid and its likelihood field
+        are rebuilt only when the map's cells differ from the filter's grid (the same cells
+        make the same grid; apartment-28d-hw days 1-3: a third of the rebuilds)."""
+        f, ltm = self.filter, self.ltm
+        assert f is not None and ltm is not None
+        m = ltm.map(slot)
+        occ = m.ternary(self.lp)
+        g = f.grid
+        same = (
+            g.occupancy.shape == occ.shape
+            and g.resolution_m == m.resolution
+            and np.array_equal(g.origin_xy_m, m.origin)
+            and np.array_equal(g.occupancy, occ)
+        )
+        if not same:
+            f.set_grid(m.occupancy_grid(self.lp, ternary=occ))
 
     # -- day ------------------------------------------------------------------------------
     def day_artifacts(self) -> dict[str, dict[str, np.ndarray]]:

@@ -26,13 +26,39 @@ semistatic, "not yet in long-term memory".
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
 
 from dynmap_sim.agent.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
+from dynmap_sim.agent.localization.adaptive_memory import ltm_numba
 
 FloatArray = NDArray[np.float64]
+#: Values of the ``backend`` arguments: ``numba`` (extra ``fast``; ``auto`` when installed)
+#: runs :mod:`.ltm_numba`'s kernels, identical in result to ``numpy``; ``python`` the same
+#: kernels uncompiled (slow: for the tests).
+BACKENDS = ("auto", "numpy", "numba", "python")
+
+
+def _kernel_backend(backend: str) -> str | None:
+    """``"numba"``, ``"python"`` or None (numpy) for a ``backend`` argument."""
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
+    if backend == "auto":
+        return "numba" if ltm_numba.numba_available() else None
+    return None if backend == "numpy" else backend
+
+
+@lru_cache(maxsize=16)
+def _stencil(k: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+    """Offsets ``(ox, oy)`` of the ``(2k+1)^2`` cells around a cell, raveled row by row
+    (read-only: cached)."""
+    off = np.arange(-k, k + 1)
+    ox, oy = (g.ravel() for g in np.meshgrid(off, off))
+    ox.setflags(write=False)
+    oy.setflags(write=False)
+    return ox, oy
 
 
 def logit(p: float) -> float:
@@ -108,10 +134,12 @@ class LTMMap:
         covs: FloatArray,
         params: LTMParams,
         occupied: NDArray[np.bool_] | None = None,
+        backend: str = "auto",
     ) -> None:
         """Fuse points ``(n, 2)`` with covariances ``(n, 2, 2)`` seen from ``laser_xy``;
         ``occupied`` (default all): the points that add occupied evidence (the others add
-        only the free space along their beams)."""
+        only the free space along their beams). ``backend``: :data:`BACKENDS`."""
+        kernel = _kernel_backend(backend)
         if len(points) == 0:
             return
         h, w = self.shape
@@ -119,10 +147,7 @@ class LTMMap:
         flat_all = []
         add_all = []
         # Occupied: peak-normalized Gaussian on a (2k+1)^2 stencil around each point.
-        k = params.stencil_cells
-        off = np.arange(-k, k + 1)
-        ox, oy = np.meshgrid(off, off)
-        ox, oy = ox.ravel(), oy.ravel()
+        ox, oy = _stencil(params.stencil_cells)
         ix, iy = self.cells(points)
         cx = ix[:, None] + ox[None, :]
         cy = iy[:, None] + oy[None, :]
@@ -138,6 +163,7 @@ class LTMMap:
             ok &= np.asarray(occupied, dtype=bool)[:, None]
         flat_all.append((cy * w + cx)[ok])
         add_all.append(np.log(p / (1.0 - p))[ok])
+        free = None
         if params.free_space:
             d = points - laser_xy[None, :]
             r = np.hypot(d[:, 0], d[:, 1])
@@ -147,7 +173,11 @@ class LTMMap:
             stop = r - np.maximum(params.free_stop_sigma * sig, res)
             step = 0.5 * res
             t = np.arange(0.0, float(stop.max(initial=0.0)), step)
-            if len(t):
+            if len(t) and kernel:
+                u = d / np.maximum(r, 1e-9)[:, None]
+                free = (float(laser_xy[0]), float(laser_xy[1]), np.ascontiguousarray(u[:, 0]),
+                        np.ascontiguousarray(u[:, 1]), stop, t)  # fmt: skip
+            elif len(t):
                 u = d / np.maximum(r, 1e-9)[:, None]
                 fx = laser_xy[0] + u[:, 0:1] * t[None, :]
                 fy = laser_xy[1] + u[:, 1:2] * t[None, :]
@@ -157,23 +187,28 @@ class LTMMap:
                 key = np.unique(ray[okf] * (h * w) + (fiy * w + fix)[okf])  # once per beam
                 flat_all.append(key % (h * w))
                 add_all.append(np.full(len(key), params.l_free))
-        flat = np.concatenate(flat_all)
-        add = np.concatenate(add_all)
         lo = self.logodds.ravel()
-        np.add.at(lo, flat, add.astype(np.float32))
+        if kernel:
+            ltm_numba.fuse(self.logodds, flat_all[0], add_all[0].astype(np.float32), free,
+                           self.origin, res, params.l_free, python=kernel == "python")  # fmt: skip
+        else:
+            flat = np.concatenate(flat_all)
+            add = np.concatenate(add_all)
+            np.add.at(lo, flat, add.astype(np.float32))
         np.clip(lo, params.l_min, params.l_max, out=lo)
         self.logodds[self.pinned] = params.l_max
 
     # -- §4.4 ---------------------------------------------------------------------------
     def explained(
-        self, points: FloatArray, covs: FloatArray, params: LTMParams
+        self, points: FloatArray, covs: FloatArray, params: LTMParams, backend: str = "auto"
     ) -> NDArray[np.bool_]:
         """Points with an occupied cell within their uncertainty (the complement of §4.4's
         semistatic test): a cell centre within ``semistatic_sigma`` standard deviations
         along the point's widest axis (largest eigenvalue of ``Σ''``, a circle that holds
         the Mahalanobis ellipse), at least 1.5 cells, at most ``semistatic_max_cells``.
         Two stages: the 3 x 3 cells around each point decide most points (a return on a
-        known wall); the rest search their whole circle."""
+        known wall); the rest search their whole circle. ``backend``: :data:`BACKENDS`."""
+        kernel = _kernel_backend(backend)
         n = len(points)
         if n == 0:
             return np.zeros(0, bool)
@@ -185,18 +220,20 @@ class LTMMap:
         lam = 0.5 * (a + c) + np.sqrt(0.25 * (a - c) ** 2 + b * b)
         rho = np.clip(params.semistatic_sigma * np.sqrt(lam), 1.5 * res,
                       params.semistatic_max_cells * res)  # fmt: skip
-        occ = (self.logodds >= params.l_occupied).ravel()
         ix, iy = self.cells(points)
         fx = (points[:, 0] - self.origin[0]) / res - ix - 0.5  # offset from the cell centre
         fy = (points[:, 1] - self.origin[1]) / res - iy - 0.5
+        k_max = int(np.ceil(rho.max() / res))
+        if kernel:
+            return ltm_numba.explained(self.logodds, params.l_occupied, ix, iy, fx, fy, rho,
+                                       res, k_max, python=kernel == "python")  # fmt: skip
+        occ = (self.logodds >= params.l_occupied).ravel()
         out = np.zeros(n, bool)
         todo = np.arange(n)
-        k_max = int(np.ceil(rho.max() / res))
         for k in (1, k_max) if k_max > 1 else (1,):
             if len(todo) == 0:
                 break
-            off = np.arange(-k, k + 1)
-            ox, oy = (g.ravel() for g in np.meshgrid(off, off))
+            ox, oy = _stencil(k)
             cx = np.clip(ix[todo, None] + ox[None, :], 0, w - 1)
             cy = np.clip(iy[todo, None] + oy[None, :], 0, h - 1)
             d2 = (ox[None, :] - fx[todo, None]) ** 2 + (oy[None, :] - fy[todo, None]) ** 2
@@ -206,11 +243,23 @@ class LTMMap:
         return out
 
     # -- for MCL and map selection (§6.1) ------------------------------------------------
-    def occupancy_grid(self, params: LTMParams, max_dist_m: float = 2.0) -> OccupancyGrid:
-        """The map as a ternary :class:`OccupancyGrid` for the MCL core."""
+    def ternary(self, params: LTMParams) -> NDArray[np.int8]:
+        """The cells as :class:`OccupancyGrid` codes: occupied from ``l_occupied``, free where
+        the prior says so or the log-odds are negative, unknown elsewhere."""
         occ = np.full(self.shape, UNKNOWN, dtype=np.int8)
         occ[self.prior_free | (self.logodds < 0)] = FREE
         occ[self.occupied(params)] = OCCUPIED
+        return occ
+
+    def occupancy_grid(
+        self,
+        params: LTMParams,
+        max_dist_m: float = 2.0,
+        ternary: NDArray[np.int8] | None = None,
+    ) -> OccupancyGrid:
+        """The map as a ternary :class:`OccupancyGrid` for the MCL core (``ternary``: this
+        map's :meth:`ternary`, if already at hand)."""
+        occ = self.ternary(params) if ternary is None else ternary
         return OccupancyGrid(occ, self.origin, self.resolution, max_dist_m)
 
     def expected_ranges(

@@ -1,0 +1,157 @@
+"""Optional numba kernels of :class:`.ltm_map.LTMMap` (extra ``fast``).
+
+* :func:`explained`: §4.4's test (the complement of "semistatic") one point at a time, the
+  3 x 3 cells around it first, then its whole search square, stopping at the first occupied
+  cell within its circle; the numpy code builds ``(points x cells)`` arrays instead.
+* :func:`fuse`: the end of eq. 15's update: the occupied log-odds of the stencils added in
+  the numpy code's order, then ``l_free`` once per cell along each sampled beam (the free
+  space before the point, walked sample by sample); the numpy code collects every ray
+  sample, keeps one per (beam, cell) with ``np.unique`` and adds with ``np.add.at``.
+
+The arithmetic is the numpy code's, operation for operation (the same float64 ray samples and
+cell truncation, float32 sums, the threshold compared in float32 as numpy does with a float32
+grid), so the results are identical; the tests check the plain-Python kernels (what numba
+compiles) and the compiled ones against the numpy code. Transcendental functions (the
+stencil's ``exp``/``log``, ``hypot``, ``sqrt``) stay in numpy, whose results the kernels take.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dynmap_sim.jit import compiled, require_numba
+from dynmap_sim.jit import numba_available as numba_available  # re-exported
+
+FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+
+
+def _explained_py(  # type: ignore[no-untyped-def]
+    logodds, l_occupied32, ix, iy, fx, fy, rho_m, res_m, k_max, out
+):
+    """``out[j]``: an occupied cell (``logodds >= l_occupied32``) of the ``(2 k + 1)^2``
+    cells around point ``j`` (``k = max(k_max, 1)``; indices clipped to the grid, as the
+    numpy code does) has its centre within ``rho_m[j]`` of the point (offset ``fx, fy``
+    [cells] from its cell's centre)."""
+    h, w = logodds.shape
+    k1 = 1
+    for j in range(ix.shape[0]):
+        r2 = rho_m[j] * rho_m[j]
+        hit = False
+        # the 3 x 3 cells first (a return on a mapped wall), then the rest of the square
+        for ring in range(2):
+            k = k1 if ring == 0 else k_max
+            if ring == 1 and k_max <= k1:
+                break
+            for oy in range(-k, k + 1):
+                cy = min(max(iy[j] + oy, 0), h - 1)
+                dy = oy - fy[j]
+                for ox in range(-k, k + 1):
+                    if ring == 1 and -k1 <= ox <= k1 and -k1 <= oy <= k1:
+                        continue
+                    cx = min(max(ix[j] + ox, 0), w - 1)
+                    if logodds[cy, cx] >= l_occupied32:
+                        dx = ox - fx[j]
+                        d2 = dx * dx + dy * dy
+                        if d2 * res_m * res_m <= r2:
+                            hit = True
+                            break
+                if hit:
+                    break
+            if hit:
+                break
+        out[j] = hit
+
+
+def _fuse_py(  # type: ignore[no-untyped-def]
+    logodds,
+    occ_flat,
+    occ_add32,
+    do_free,
+    laser_x_m,
+    laser_y_m,
+    ux,
+    uy,
+    stop_m,
+    t_m,
+    origin_x_m,
+    origin_y_m,
+    res_m,
+    l_free32,
+):
+    """Add ``occ_add32`` at the flat cells ``occ_flat`` in order, then (``do_free``)
+    ``l_free32`` to every cell that beam ``j``'s samples ``laser + u_j t`` with
+    ``t < stop_m[j]`` fall in, once per beam (a ray's samples in a cell are consecutive: the
+    cell indices along a ray are monotone)."""
+    h, w = logodds.shape
+    flat = logodds.reshape(-1)
+    for i in range(occ_flat.shape[0]):
+        flat[occ_flat[i]] += occ_add32[i]
+    if not do_free:
+        return
+    for j in range(ux.shape[0]):
+        prev = -1
+        for i in range(t_m.shape[0]):
+            t = t_m[i]
+            if not t < stop_m[j]:
+                break
+            fx = laser_x_m + ux[j] * t
+            fy = laser_y_m + uy[j] * t
+            cx = int(math.floor((fx - origin_x_m) / res_m))
+            cy = int(math.floor((fy - origin_y_m) / res_m))
+            if 0 <= cx < w and 0 <= cy < h:
+                c = cy * w + cx
+                if c != prev:
+                    flat[c] += l_free32
+                    prev = c
+
+
+_explained = compiled(_explained_py)
+_fuse = compiled(_fuse_py)
+
+
+def explained(
+    logodds: NDArray[np.float32],
+    l_occupied: float,
+    ix: IntArray,
+    iy: IntArray,
+    fx: FloatArray,
+    fy: FloatArray,
+    rho_m: FloatArray,
+    res_m: float,
+    k_max: int,
+    python: bool = False,
+) -> NDArray[np.bool_]:
+    """:func:`_explained_py` compiled (needs numba; ``python``: the plain kernel)."""
+    kernel = _explained_py if python else _explained
+    if kernel is None:
+        require_numba("long-term map")
+    out = np.zeros(len(ix), dtype=np.bool_)
+    kernel(logodds, np.float32(l_occupied), ix, iy, fx, fy, rho_m, float(res_m), int(k_max),
+           out)  # fmt: skip
+    return out
+
+
+def fuse(
+    logodds: NDArray[np.float32],
+    occ_flat: IntArray,
+    occ_add32: NDArray[np.float32],
+    free: tuple[float, float, FloatArray, FloatArray, FloatArray, FloatArray] | None,
+    origin_m: FloatArray,
+    res_m: float,
+    l_free: float,
+    python: bool = False,
+) -> None:
+    """:func:`_fuse_py` compiled (needs numba; ``python``: the plain kernel), in place on
+    ``logodds`` (C-contiguous); ``free``: ``(laser_x_m, laser_y_m, ux, uy, stop_m, t_m)`` or
+    None."""
+    kernel = _fuse_py if python else _fuse
+    if kernel is None:
+        require_numba("long-term map")
+    lx, ly, ux, uy, stop, t = free if free is not None else (0.0, 0.0, *([np.zeros(0)] * 4))
+    kernel(logodds, occ_flat, occ_add32, free is not None, float(lx), float(ly), ux, uy, stop,
+           t, float(origin_m[0]), float(origin_m[1]), float(res_m),
+           np.float32(l_free))  # fmt: skip

@@ -1,0 +1,80 @@
+"""The long-term map's kernels (:mod:`.ltm_numba`) give the numpy code's numbers exactly:
+§4.4's test and eq. 15's update, on random grids, points and covariances."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dynmap_sim.agent.localization.adaptive_memory import ltm_numba
+from dynmap_sim.agent.localization.adaptive_memory.ltm_map import LTMMap, LTMParams
+
+needs_numba = pytest.mark.skipif(
+    not ltm_numba.numba_available(), reason="numba (extra 'fast') not installed"
+)
+KERNELS = ["python", pytest.param("numba", marks=needs_numba)]
+
+
+def random_map(rng: np.random.Generator, h: int, w: int, res_m: float = 0.05) -> LTMMap:
+    """A grid of log-odds around ``l_occupied`` (many exactly at the clamps), a few pinned."""
+    lo = rng.choice([-2.0, 0.0, 1.4, 2.5, 3.5], size=(h, w)).astype(np.float32)
+    lo += (rng.random((h, w)) < 0.3) * rng.normal(0, 0.5, (h, w)).astype(np.float32)
+    pinned = rng.random((h, w)) < 0.05
+    lo[pinned] = 3.5
+    origin = rng.uniform(-2, 2, 2)
+    return LTMMap(lo, origin, res_m, pinned, rng.random((h, w)) < 0.5)
+
+
+def random_points(rng: np.random.Generator, m: LTMMap, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Points over the grid and up to half a metre beyond it, with random covariances."""
+    h, w = m.shape
+    lo_xy = m.origin - 0.5
+    hi_xy = m.origin + np.array([w, h]) * m.resolution + 0.5
+    pts = rng.uniform(lo_xy, hi_xy, (n, 2))
+    a = rng.normal(0, rng.choice([0.005, 0.02, 0.08]), (n, 2, 2))
+    return pts, a @ a.transpose(0, 2, 1)
+
+
+def random_params(rng: np.random.Generator) -> LTMParams:
+    return LTMParams(
+        free_space=bool(rng.random() < 0.8),
+        l_free=float(rng.choice([-0.4, -0.3])),
+        l_occupied=float(rng.choice([2.5, 1.4, 0.7])),  # 1.4, 0.7: not float32 numbers
+        stencil_cells=int(rng.integers(1, 4)),
+        semistatic_sigma=float(rng.uniform(1, 3)),
+        semistatic_max_cells=int(rng.integers(1, 6)),
+    )
+
+
+@pytest.mark.parametrize("kernel", KERNELS)
+def test_explained_of_the_kernel_equals_numpy(kernel: str) -> None:
+    rng = np.random.default_rng(11)
+    for _ in range(60 if kernel == "python" else 300):
+        m = random_map(rng, *(int(v) for v in rng.integers(3, 40, 2)))
+        p = random_params(rng)
+        pts, covs = random_points(rng, m, int(rng.integers(1, 80)))
+        ref = m.explained(pts, covs, p, backend="numpy")
+        np.testing.assert_array_equal(m.explained(pts, covs, p, backend=kernel), ref)
+
+
+@pytest.mark.parametrize("kernel", KERNELS)
+def test_update_of_the_kernel_equals_numpy_bit_for_bit(kernel: str) -> None:
+    rng = np.random.default_rng(12)
+    for _ in range(40 if kernel == "python" else 200):
+        ref = random_map(rng, *(int(v) for v in rng.integers(3, 60, 2)))
+        fast = ref.copy()
+        p = random_params(rng)
+        for _ in range(int(rng.integers(1, 6))):
+            pts, covs = random_points(rng, ref, int(rng.integers(1, 40)))
+            h, w = ref.shape
+            laser = ref.origin + rng.uniform(-0.3, 1.1, 2) * np.array([w, h]) * ref.resolution
+            occ = None if rng.random() < 0.5 else rng.random(len(pts)) < 0.6
+            ref.update(laser, pts, covs, p, occ, backend="numpy")
+            fast.update(laser, pts, covs, p, occ, backend=kernel)
+            assert fast.logodds.tobytes() == ref.logodds.tobytes()
+
+
+def test_an_unknown_backend_is_refused() -> None:
+    m = random_map(np.random.default_rng(0), 5, 5)
+    with pytest.raises(ValueError, match="backend must be one of"):
+        m.explained(np.zeros((1, 2)), np.zeros((1, 2, 2)), LTMParams(), backend="cuda")
