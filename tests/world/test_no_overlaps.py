@@ -9,7 +9,7 @@ from dynmap_sim.world.polygons import sat_separation
 TOL_M = 0.01
 
 
-@pytest.mark.parametrize("name", ["lab", "apartment", "apartment-hw", "office"])
+@pytest.mark.parametrize("name", ["lab", "apartment", "apartment-hw", "office", "corridor", "hall"])
 def test_no_two_objects_overlap_at_any_run(name):
     w = World(load_world(name), seed=0)
     for slot in w.calendar.slots:

@@ -13,7 +13,14 @@ from dynmap_sim.world.route import (
 
 @pytest.mark.parametrize(
     "name,seeds",
-    [("lab", (0,)), ("apartment", (0, 1)), ("apartment-hw", (0, 1)), ("office", (0, 1))],
+    [
+        ("lab", (0,)),
+        ("apartment", (0, 1)),
+        ("apartment-hw", (0, 1)),
+        ("office", (0, 1)),
+        ("corridor", (0, 1)),
+        ("hall", (0, 1)),
+    ],
 )
 def test_route_clearance_over_the_whole_calendar(name, seeds):
     spec = load_world(name)
@@ -50,8 +57,25 @@ def test_office_corridor_blocked_on_purpose_day_5_run_2_to_6_and_day_9_run_2_to_
     assert route_clearances(w.snapshot(10, 1), spec.robot.route)["old_cabinets"] == 0.0
 
 
+@pytest.mark.parametrize(
+    "name,blocker,blocked",
+    [
+        ("corridor", "corridor_bed", {(5, 2), (6, 1), (6, 2)}),
+        ("hall", "book_pallet_1", {(6, 2), (7, 1), (7, 2)}),
+    ],
+)
+def test_corridor_and_hall_blocked_on_purpose_only_when_said(name, blocker, blocked):
+    spec = load_world(name)
+    w = World(spec, seed=0)
+    for slot in w.calendar.slots:
+        snap = w.snapshot(slot.day, slot.run)
+        assert route_blocked(snap) == ((slot.day, slot.run) in blocked), (slot.day, slot.run)
+        if (slot.day, slot.run) in blocked:
+            assert route_clearances(snap, spec.robot.route)[blocker] < ROUTE_CLEARANCE_M
+
+
 def test_start_pose_is_on_the_route():
-    for name in ("lab", "apartment", "office"):
+    for name in ("lab", "apartment", "office", "corridor", "hall"):
         spec = load_world(name)
         assert tuple(spec.robot.route[0]) == pytest.approx(spec.robot.start[:2])
 

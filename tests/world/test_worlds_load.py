@@ -1,5 +1,6 @@
 """The shipped worlds load and keep their promises (calendar, route, API shape)."""
 
+from datetime import date
 from pathlib import Path
 
 import numpy as np
@@ -8,6 +9,7 @@ import pytest
 from dynmap_sim.types import BeamClass
 from dynmap_sim.world import World, load_world, resolve_world_path
 from dynmap_sim.world.render import render_snapshot
+from dynmap_sim.world.route import route_clearances
 
 WORLDS = Path(__file__).resolve().parents[2] / "worlds"
 SHIPPED = sorted(p.stem for p in WORLDS.glob("*.toml"))
@@ -32,7 +34,7 @@ def test_apartment_calendar_has_28_days_one_run():
     assert x1 - x0 >= 8.0 and y1 - y0 >= 10.0
 
 
-@pytest.mark.parametrize("name", ["lab", "apartment", "office"])
+@pytest.mark.parametrize("name", ["lab", "apartment", "office", "corridor", "hall"])
 def test_world_api_shapes(name):
     spec = load_world(name)
     w = World(spec, seed=1)
@@ -56,7 +58,7 @@ def test_world_api_shapes(name):
 
 def test_every_shipped_world_is_tested_validates_loads_and_renders(tmp_path):
     # a new world: add it to the lists here
-    assert SHIPPED == ["apartment", "apartment-hw", "lab", "office"]
+    assert SHIPPED == ["apartment", "apartment-hw", "corridor", "hall", "lab", "office"]
     for name in SHIPPED:
         spec = load_world(name)  # validates: raises on any problem of the file
         w = World(spec, seed=0)
@@ -75,6 +77,47 @@ def test_office_calendar_has_10_days_two_runs_and_a_long_corridor_route():
     assert 19.0 <= x1 - x0 <= 22.0 and 11.0 <= y1 - y0 <= 14.0
     assert 40.0 <= spec.robot.route_length_m <= 70.0
     assert spec.people and max(p.count for p in spec.people) >= 5
+
+
+def test_corridor_is_a_28_m_corridor_of_look_alike_rooms_driven_both_ways():
+    spec = load_world("corridor")
+    w = World(spec, seed=0)
+    assert w.calendar.n_days == 10 and w.calendar.runs_per_day == 2
+    assert {s.date.weekday() for s in w.calendar.slots} >= {5, 6}  # a ward works weekends
+    walls = {wall.id: wall.points for wall in spec.walls}
+    (x0, y0), (x1, _) = walls["corridor_s_0"][0], walls["corridor_s_7"][-1]
+    assert x1 - x0 == pytest.approx(28.0)
+    assert walls["corridor_n_0"][0][1] - y0 == pytest.approx(2.4)
+    beds = [o for o in spec.objects if o.id[1:] in {f"{k}_bed" for k in range(1, 8)}]
+    assert len(beds) == 11 and len({tuple(o.size) for o in beds}) == 1
+    xs = spec.robot.route[:, 0]
+    assert xs.max() - xs.min() >= 28.0 and 80.0 <= spec.robot.route_length_m <= 100.0
+    assert sum(p.count for p in spec.people) >= 8  # nurses, visitors, a patient, a cleaner
+
+
+def test_hall_is_open_in_the_middle_with_two_study_rooms_turned_by_180_degrees():
+    spec = load_world("hall")
+    w = World(spec, seed=0)
+    assert w.calendar.n_days == 10 and w.calendar.runs_per_day == 2
+    assert date(2024, 5, 9) not in {s.date for s in w.calendar.slots}  # closed on a holiday
+    # from the hall's centre no wall is within the URG-04LX's 5.6 m but the pillars
+    snap = w.snapshot(1, 1)
+    near = route_clearances(snap, np.array([[12.0, 6.0], [12.0, 6.001]]))
+    kinds = {o.id: o.kind for o in snap.objects}
+    walls = {k for k, d in near.items() if kinds[k] == "wall" and d < 5.6}
+    assert walls and all(k.startswith("pillar") for k in walls), walls
+    # the east study room is the west one turned by 180 degrees about the centre (the south
+    # piece of one is the north piece of the other)
+    objs = {o.id: o.polygon for o in snap.objects if o.id.startswith(("west_", "east_"))}
+    west = [k for k in objs if k.startswith("west_") and "chair" not in k]
+    assert len(west) >= 8
+    for k in west:
+        turned = 24.0 - objs[k][:, 0] + 1j * (12.0 - objs[k][:, 1])
+        twin = "east_" + k[5:-2] + {"_s": "_n", "_n": "_s"}.get(k[-2:], k[-2:])
+        east = objs[twin][:, 0] + 1j * objs[twin][:, 1]
+        d = np.abs(turned[:, None] - east[None, :]).min(axis=1)
+        assert d.max() < 1e-3, (k, twin)
+    assert 55.0 <= spec.robot.route_length_m <= 70.0
 
 
 def test_static_version_changes_only_when_the_geometry_does():
