@@ -707,7 +707,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=_cmd_schema)
 
     s = sub.add_parser("render-world", help="draw a world at a day and run (or a sheet)")
-    s.add_argument("world", help="a world file, or a shipped world's name (apartment, lab)")
+    s.add_argument(
+        "world",
+        help=f"a world file, or a shipped world's name ({', '.join(_shipped_worlds())})",
+    )
     s.add_argument("--day", type=_positive, help="working day of the calendar (default: 1)")
     s.add_argument("--run", type=_positive, help="run of that day (default: 1)")
     s.add_argument("--seed", type=_seed, default=0, help=seed_help + " (default: 0)")
