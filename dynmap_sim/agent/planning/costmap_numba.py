@@ -67,6 +67,22 @@ def _chessboard_distance_py(dist):  # type: ignore[no-untyped-def]
 _chessboard_distance = compiled(_chessboard_distance_py) or _chessboard_distance_py
 
 
+def _slab_clip_py(s_lo, s_hi, p, d, inv_d, lo, hi):  # type: ignore[no-untyped-def]
+    """The travel interval ``[s_lo, s_hi]`` of a ray along one axis (position ``p``,
+    direction ``d``, ``inv_d = 1 / d``) clipped to the slab ``lo <= p + s * d <= hi``; a ray
+    parallel to the slab outside it gets ``s_hi = -1`` (no travel)."""
+    if d > 0.0:
+        return max(s_lo, (lo - p) * inv_d), min(s_hi, (hi - p) * inv_d)
+    if d < 0.0:
+        return max(s_lo, (hi - p) * inv_d), min(s_hi, (lo - p) * inv_d)
+    if not lo <= p <= hi:
+        return s_lo, -1.0
+    return s_lo, s_hi
+
+
+_slab_clip = compiled(_slab_clip_py) or _slab_clip_py
+
+
 def _mark_scan_py(  # type: ignore[no-untyped-def]
     marks,
     origin_x_m,
@@ -192,19 +208,10 @@ def _mark_scan_py(  # type: ignore[no-untyped-def]
                 hi_x = (bc0 + bj + k) * BLOCK - BLOCK_MARGIN_CELLS
                 lo_y = (br0 + bi - k + 1) * BLOCK + BLOCK_MARGIN_CELLS
                 hi_y = (br0 + bi + k) * BLOCK - BLOCK_MARGIN_CELLS
-                s_lo, s_hi = -math.inf, 2.0 * BLOCK * (2 * k - 1)
-                if dx32 > 0.0:
-                    s_lo, s_hi = max(s_lo, (lo_x - x) * inv_dx), min(s_hi, (hi_x - x) * inv_dx)
-                elif dx32 < 0.0:
-                    s_lo, s_hi = max(s_lo, (hi_x - x) * inv_dx), min(s_hi, (lo_x - x) * inv_dx)
-                elif not lo_x <= x <= hi_x:
-                    s_hi = -1.0
-                if dy32 > 0.0:
-                    s_lo, s_hi = max(s_lo, (lo_y - y) * inv_dy), min(s_hi, (hi_y - y) * inv_dy)
-                elif dy32 < 0.0:
-                    s_lo, s_hi = max(s_lo, (hi_y - y) * inv_dy), min(s_hi, (lo_y - y) * inv_dy)
-                elif not lo_y <= y <= hi_y:
-                    s_hi = -1.0
+                s_lo, s_hi = _slab_clip(
+                    -math.inf, 2.0 * BLOCK * (2 * k - 1), x, dx32, inv_dx, lo_x, hi_x
+                )
+                s_lo, s_hi = _slab_clip(s_lo, s_hi, y, dy32, inv_dy, lo_y, hi_y)
                 if s_lo <= 0.49 and s_hi >= 0.5:  # the next sample and those up to s_hi
                     i += int(1.99 * s_hi)
                 continue
