@@ -155,7 +155,9 @@ def make_lidar(
     ``mode`` (``"mm"``: 8.19 m, ``"cm"``: 81.9 m) select the variant. Any
     :class:`~dynmap_sim.types.LaserSpec` field (``n_beams``, ``range_max_m``, ...) may be
     overridden by keyword; ``noise`` is a :class:`LidarNoise` or a dict of fields to change in
-    the preset's noise model. ``backend`` is ``"numpy"`` or ``"numba"`` (extra ``fast``).
+    the preset's noise model. ``backend`` is ``"numpy"`` or ``"numba"`` (extra ``fast``:
+    compiled ray casting, and the noise model of :mod:`~dynmap_sim.sensors.noise_numba`,
+    whose readings are numpy's bit for bit).
     """
     variant = {k: overrides.pop(k) for k in ("beams", "mode") if k in overrides}
     if sensor == "urg-04lx":
@@ -227,9 +229,11 @@ class Lidar:
     def __init__(
         self, spec: LaserSpec, noise: LidarNoise, bias_seed: int = 0, backend: str = "numpy"
     ) -> None:
+        self._noise_scan: Any = None  # compiled noise of one scan (numba backend)
         if backend == "numpy":
             self._cast = cast_scan
         elif backend == "numba":
+            from dynmap_sim.sensors.noise_numba import noise_scan
             from dynmap_sim.sensors.raycast_numba import cast_scan_numba, numba_available
 
             if not numba_available():
@@ -237,6 +241,7 @@ class Lidar:
                     'lidar backend "numba" needs numba: pip install "dynmap-sim[fast]"'
                 )
             self._cast = cast_scan_numba
+            self._noise_scan = noise_scan
         else:
             raise ValueError(f'lidar backend must be "numpy" or "numba", got {backend!r}')
         self.backend = backend
@@ -271,6 +276,12 @@ class Lidar:
         state["_cache"] = None
         state["_cache_key"] = None
         return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Restore; a lidar pickled before the compiled noise existed uses numpy's (the
+        same numbers)."""
+        self.__dict__.update(state)
+        self.__dict__.setdefault("_noise_scan", None)
 
     def _segments(self, geom: GeometryLike) -> SegmentCache:
         """Broad-phase data of the segments, rebuilt when the geometry changes.
@@ -362,6 +373,17 @@ class Lidar:
         r = np.asarray(true_range_m, dtype=np.float64)
         if r.shape[-1] != self.spec.n_beams:
             raise ValueError(f"expected (..., {self.spec.n_beams}) ranges, got shape {r.shape}")
+        if self._noise_scan is not None and r.ndim == 1:
+            # the numba backend: the same model in compiled loops (the same numbers)
+            spec = self.spec
+            return self._noise_scan(
+                np.ascontiguousarray(r),
+                rng,
+                self._bias_m,
+                self.noise,
+                spec.range_min_m,
+                spec.range_max_m,
+            )
         return self._noise(r.reshape(-1, r.shape[-1]), [rng]).reshape(r.shape)
 
     def apply_noise_rows(
