@@ -18,6 +18,8 @@ import pymunk
 from dynmap_sim.world.calendar import Calendar, RunSlot
 from dynmap_sim.world.geometry import GeometryView, StaticGeometry, build_static
 from dynmap_sim.world.people import Crowd, SocialForce
+from dynmap_sim.world.people.legs import leg_centres_into
+from dynmap_sim.world.people.params import LEG_RADIUS_M
 from dynmap_sim.world.polygons import FloatArray, polygon_edges
 from dynmap_sim.world.schedule import ObjectState, Schedule, Snapshot
 from dynmap_sim.world.spec import WorldSpec
@@ -154,7 +156,23 @@ class World:
             [self._static.circle_class, np.full(nl, 5, dtype=np.int8)]
         ).astype(np.int8)
         self._object_ids = self._static.object_ids + self._people_ids
+        self._circles_template = self._circles_start()
         self._refresh_people()
+
+    def _circles_start(self) -> FloatArray:
+        """The circles of a step before the legs' centres are written: the static ones,
+        then one row per leg with its radius."""
+        ns = self._static.circles.shape[0]
+        out = np.empty((ns + 2 * self._crowd.n, 3))
+        out[:ns] = self._static.circles
+        out[ns:, 2] = LEG_RADIUS_M
+        return out
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Restore (a world pickled before the circles' template existed gets one)."""
+        self.__dict__.update(state)
+        if "_circles_template" not in state:
+            self._circles_template = self._circles_start()
 
     def _spawn(self, day: int, run: int, objects: tuple[ObjectState, ...]):
         edges = [polygon_edges(o.polygon) for o in objects]  # circles as their 16-gons
@@ -173,10 +191,9 @@ class World:
 
     def _refresh_people(self) -> None:
         if self._crowd.n:
+            circles = self._circles_template.copy()
             ns = self._static.circles.shape[0]
-            circles = np.empty((ns + 2 * self._crowd.n, 3))
-            circles[:ns] = self._static.circles
-            SocialForce.legs_into(self._crowd, circles[ns:])
+            leg_centres_into(self._crowd, circles[ns:, :2].view(np.complex128)[:, 0])
         else:
             circles = self._static.circles
         self._geometry = GeometryView(

@@ -54,10 +54,15 @@ def _clear_robot(z: NDArray[np.complex128], rz: complex, k: StepConstants) -> No
 
 
 def _separate_pairs(z: NDArray[np.complex128], k: StepConstants) -> None:
-    """Move each overlapping pair of bodies apart, half the overlap each."""
+    """Move each overlapping pair of bodies apart, half the overlap each.
+
+    Without an overlapping pair nothing moves (the push would add only zeros).
+    """
     diff = z[:, None] - z[None, :]
     d = np.abs(diff)
     over = np.maximum(k.rsum_masked - d, 0.0)
+    if not over.any():
+        return
     z += 0.5 * ((over / np.maximum(d, 1e-9)) * diff).sum(axis=1)
 
 

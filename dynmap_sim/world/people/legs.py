@@ -26,6 +26,13 @@ def legs_into(crowd: Crowd, out: FloatArray) -> None:
     """
     if crowd.n == 0:
         return
+    leg_centres_into(crowd, out[:, :2].view(np.complex128)[:, 0])
+    out[:, 2] = LEG_RADIUS_M
+
+
+def leg_centres_into(crowd: Crowd, out: NDArray[np.complex128]) -> None:
+    """Write the centres ``x + iy`` of the two legs of each person into ``out`` ``(2P,)``
+    (the legs of :func:`legs_into`, without their radii)."""
     vel = np.ascontiguousarray(crowd.vel, dtype=np.float64)
     pos = np.ascontiguousarray(crowd.pos, dtype=np.float64)
     v = vel.view(np.complex128)[:, 0]
@@ -35,10 +42,8 @@ def legs_into(crowd: Crowd, out: FloatArray) -> None:
     swing = np.sin(crowd.phase)
     swing *= np.minimum(sp * (LEG_SWING_M / 0.5), LEG_SWING_M)
     off = h * (swing + 1j * LEG_SPREAD_M)
-    out_legs = out[:, :2].view(np.complex128)[:, 0]
-    np.add(z, off, out=out_legs[0::2])
-    np.subtract(z, off, out=out_legs[1::2])
-    out[:, 2] = LEG_RADIUS_M
+    np.add(z, off, out=out[0::2])
+    np.subtract(z, off, out=out[1::2])
 
 
 def poses(crowd: Crowd) -> FloatArray:

@@ -34,7 +34,22 @@ class Obstacles:
         self._seg_p0 = s[:, 0] + 1j * s[:, 1]
         self._seg_d = (s[:, 2] - s[:, 0]) + 1j * (s[:, 3] - s[:, 1])
         self._seg_dc = self._seg_d.conjugate()
+        self._crossing_constants()
         self.grid = SegmentGrid(s)
+
+    def _crossing_constants(self) -> None:
+        """Per segment, for the crossing test of :meth:`inside_any` (fixed with the
+        segments): ``y1 - y0`` (1 where 0) and ``x1 - x0``."""
+        s = self.segments
+        y0, y1 = s[:, 1], s[:, 3]
+        self._cross_den = np.where(y1 == y0, 1.0, y1 - y0)
+        self._cross_dx = s[:, 2] - s[:, 0]
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Restore (states pickled before the crossing constants existed get them)."""
+        self.__dict__.update(state)
+        if "_cross_den" not in state:
+            self._crossing_constants()
 
     def rows(self, z: NDArray[np.complex128]) -> NDArray[np.complex128]:
         """Candidate segments near each person as ``(P, K, 3)`` complex rows
@@ -52,14 +67,15 @@ class Obstacles:
         if self.outline_starts is None or len(self.segments) == 0:
             return np.zeros(len(points), dtype=bool)
         s = self.segments
-        y0, y1 = s[None, :, 1], s[None, :, 3]
+        y0, y1 = s[:, 1], s[:, 3]
         py = points[:, 1:2]
         straddle = (y0 > py) != (y1 > py)
-        t = (py - y0) / np.where(y1 == y0, 1.0, y1 - y0)
-        x_cross = s[None, :, 0] + t * (s[None, :, 2] - s[None, :, 0])
-        hits = (straddle & (x_cross > points[:, 0:1])).astype(np.int64)
-        per_outline = np.add.reduceat(hits, self.outline_starts, axis=1)
-        return np.any(per_outline % 2 == 1, axis=1)
+        t = (py - y0) / self._cross_den
+        x_cross = s[:, 0] + t * self._cross_dx
+        hits = straddle & (x_cross > points[:, 0:1])
+        # parity of the crossings of each outline
+        odd = np.logical_xor.reduceat(hits, self.outline_starts, axis=1)
+        return odd.any(axis=1)
 
     def free_mask(self, points: FloatArray, r: float) -> NDArray[np.bool_]:
         """True where a body of radius ``r`` fits at ``points`` ``(P, 2)`` (clear of outlines

@@ -7,6 +7,7 @@ people and the same goals).
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import numpy as np
 from numpy.typing import NDArray
@@ -23,15 +24,28 @@ GOAL_TRIES = 20
 SPECULATE = 4
 
 
+@lru_cache(maxsize=64)
+def _boxes(areas: tuple[tuple[float, float, float, float], ...]) -> tuple[FloatArray, FloatArray]:
+    """Lower corners ``(B, 2)`` and sizes ``(B, 2)`` of the areas (read-only; a point of box
+    ``k`` is ``lo[k] + u * span[k]``, the same numbers as ``box[:2] + u * (box[2:] -
+    box[:2])``)."""
+    boxes = np.array(areas, dtype=np.float64).reshape(-1, 4)
+    lo = boxes[:, :2].copy()
+    span = boxes[:, 2:] - boxes[:, :2]
+    lo.setflags(write=False)
+    span.setflags(write=False)
+    return lo, span
+
+
 def random_point(
     obstacles: Obstacles, rng: np.random.Generator, pop: PeopleSpec, r: float
 ) -> FloatArray | None:
     """A uniformly drawn free point of the population's areas (up to 8 batches of 8)."""
-    boxes = np.array(pop.areas, dtype=np.float64)
+    lo, span = _boxes(pop.areas)
     for _ in range(8):
-        k = rng.integers(len(boxes), size=8)
+        k = rng.integers(len(lo), size=8)
         u = rng.uniform(0.0, 1.0, size=(8, 2))
-        cand = boxes[k, :2] + u * (boxes[k, 2:] - boxes[k, :2])
+        cand = lo[k] + u * span[k]
         if len(obstacles.segments) == 0:
             return cand[0]
         idx = np.flatnonzero(obstacles.free_mask(cand, r))
@@ -110,21 +124,23 @@ def _draw_tries(
     :func:`random_point` finds a free point in its first batch of 8 (``test``: check that
     with one :meth:`Obstacles.free_mask` of all candidates). Returns the goals ``(m, 2)`` of
     the first ``m <= n`` tries for which that holds, and ``m``."""
-    boxes = np.array(pop.areas, dtype=np.float64)
+    lo, span = _boxes(pop.areas)
     if n == 0:
         return np.zeros((0, 2)), 0
-    if len(boxes) == 1:  # integers(1) draws nothing: the uniforms follow one another
-        k = np.zeros(8 * n, dtype=np.int64)
+    if len(lo) == 1:  # integers(1) draws nothing: the uniforms follow one another
         u = rng.uniform(0.0, 1.0, size=(8 * n, 2))
+        if not test:
+            return np.zeros((0, 2)), n
+        cand = lo[0] + u * span[0]
     else:
         ks, us = [], []
         for _ in range(n):
-            ks.append(rng.integers(len(boxes), size=8))
+            ks.append(rng.integers(len(lo), size=8))
             us.append(rng.uniform(0.0, 1.0, size=(8, 2)))
+        if not test:
+            return np.zeros((0, 2)), n
         k, u = np.concatenate(ks), np.concatenate(us)
-    if not test:
-        return np.zeros((0, 2)), n
-    cand = boxes[k, :2] + u * (boxes[k, 2:] - boxes[k, :2])
+        cand = lo[k] + u * span[k]
     if len(obstacles.segments) == 0:
         return cand[::8].copy(), n
     free = obstacles.free_mask(cand, r).reshape(n, 8)
