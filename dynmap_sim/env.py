@@ -140,7 +140,8 @@ class DynMapEnv(gymnasium.Env):
     ``world``: ``"lab"``, ``"apartment"``, a path to a world TOML file, or a ``WorldSpec``.
     ``sensor``: ``"urg-04lx"`` or ``"lms200"``; ``sensor_options``: preset overrides passed to
     ``make_lidar`` (e.g. ``{"beams": 181, "mode": "cm", "mount_pose": (0.1, 0, 0)}``, or
-    ``{"backend": "numba"}`` for the compiled ray caster of the ``fast`` extra);
+    ``{"backend": "numba"}`` for the compiled ray caster, noise model and people's step of
+    the ``fast`` extra; the noise and the people are numpy's bit for bit);
     ``lidar_noise``: a ``LidarNoise``. ``people``: False removes all people. ``robot``:
     ``RobotParams`` (limits, wheel geometry with UMBmark errors ``E_d``/``E_b``, slip);
     ``encoder``: ``EncoderNoise``. ``dt_s``: step period (default the scan period).
@@ -244,7 +245,8 @@ class DynMapEnv(gymnasium.Env):
         self._act_bounds = (tuple(self._act_lo.tolist()), tuple(self._act_hi.tolist()))
 
         self.world_seed = 0
-        self.world = World(spec, seed=0)
+        # the fast extra's lidar also steps people with its kernels (numpy's numbers)
+        self.world = World(spec, seed=0, people_backend=self.lidar.backend)
         self.robot = DiffDriveRobot(self.world.space, p, tuple(spec.robot.start))
         self.odometry = WheelOdometry(p.wheels, self.encoder)
         self._slot = -1  # index of the current run in the calendar (-1: none yet)
@@ -264,7 +266,9 @@ class DynMapEnv(gymnasium.Env):
             seed = int(self.np_random.integers(2**31))
         if seed is not None and int(seed) != self.world_seed:
             self.world_seed = int(seed)
-            self.world = World(self.spec_world, seed=self.world_seed)
+            self.world = World(
+                self.spec_world, seed=self.world_seed, people_backend=self.lidar.backend
+            )
             self.robot.attach(self.world.space)
         cal = self.world.calendar
         if asked_slot is not None:

@@ -20,6 +20,7 @@ from dynmap_sim.world.geometry import GeometryView, StaticGeometry, build_static
 from dynmap_sim.world.people import Crowd, SocialForce
 from dynmap_sim.world.people.legs import leg_centres_into
 from dynmap_sim.world.people.params import LEG_RADIUS_M
+from dynmap_sim.world.people.social_force import check_backend
 from dynmap_sim.world.polygons import FloatArray, polygon_edges
 from dynmap_sim.world.schedule import ObjectState, Schedule, Snapshot
 from dynmap_sim.world.spec import WorldSpec
@@ -62,11 +63,13 @@ class World:
     from ``SeedSequence((seed, tag, day, run))``, so any run is reproducible on its own.
     """
 
-    def __init__(self, spec: WorldSpec, seed: int = 0) -> None:
+    def __init__(self, spec: WorldSpec, seed: int = 0, people_backend: str = "numpy") -> None:
         if int(seed) < 0:
             raise ValueError(f"seed must be a non-negative integer, not {seed!r}")
         self.spec = spec
         self.seed = int(seed)
+        #: how people are stepped: "numpy", or "numba" (extra ``fast``; the same numbers)
+        self.people_backend = check_backend(people_backend)
         self.calendar = Calendar(spec.calendar)
         self.schedule = Schedule(spec, self.calendar)
         self._space = pymunk.Space()
@@ -173,13 +176,16 @@ class World:
         self.__dict__.update(state)
         if "_circles_template" not in state:
             self._circles_template = self._circles_start()
+        self.__dict__.setdefault("people_backend", "numpy")
 
     def _spawn(self, day: int, run: int, objects: tuple[ObjectState, ...]):
         edges = [polygon_edges(o.polygon) for o in objects]  # circles as their 16-gons
         segments = np.concatenate(edges) if edges else np.zeros((0, 4))
         starts = np.cumsum([0] + [len(e) for e in edges[:-1]]).astype(np.int64)
         rng = np.random.default_rng(np.random.SeedSequence((self.seed, _PEOPLE_TAG, day, run)))
-        forces = SocialForce(self.spec.people, segments, rng, outline_starts=starts)
+        forces = SocialForce(
+            self.spec.people, segments, rng, outline_starts=starts, backend=self.people_backend
+        )
         active = []
         for p in self.spec.people:
             d0 = 1 if p.start is None else self.calendar.day_of(p.start) or 1

@@ -28,12 +28,14 @@ class SocialForce:
         rng: np.random.Generator,
         broad_phase: bool = True,
         outline_starts: NDArray[np.int64] | None = None,
+        backend: str = "numpy",
     ) -> None:
         self.populations = populations
         self.rng = rng
         self.obstacles = Obstacles(segments, broad_phase, outline_starts)
         self._consts: StepConstants | None = None
         self._views: tuple[NDArray[Any], ...] | None = None
+        self.backend = check_backend(backend)
 
     def __getstate__(self) -> dict[str, Any]:
         """Pickle without the step's caches: the complex views (a pickled view would be a
@@ -47,6 +49,7 @@ class SocialForce:
         """Restore, dropping the caches of states pickled before they were left out."""
         self.__dict__.update(state)
         self._views = self._consts = None
+        self.__dict__.setdefault("backend", "numpy")
 
     @property
     def segments(self) -> FloatArray:
@@ -135,6 +138,9 @@ class SocialForce:
         rows = self.obstacles.rows(z)  # candidate segments (static geometry within REACH_M)
         k = self._constants(crowd, robot_radius_m, rows.shape[1])
         rz = None if robot_xy is None else complex(float(robot_xy[0]), float(robot_xy[1]))
+        if self.backend == "numba":
+            self._step_compiled(crowd, dt_s, robot_xy, robot_radius_m, z, v, goal, rows, rz, k)
+            return
         force, pair_gap, wall_gap, robot_gap = social_force(crowd, z, v, goal, rows, rz, k)
         v += dt_s * force
         v *= np.minimum(1.0, k.vmax / np.maximum(np.abs(v), 1e-9))  # H&M eq. 8
@@ -148,6 +154,38 @@ class SocialForce:
         crowd.phase += disp * (2 * np.pi / STRIDE_M)
         redo = goals_due(crowd, goal, z, dt_s, rz, k)
         if not redo.any():
+            return
+        avoid = None if rz is None else (robot_xy, robot_radius_m + ROBOT_GAP_M + 0.1)
+        spawning.renew_goals(crowd, redo, self.populations, self.obstacles, self.rng, avoid)
+
+    def _step_compiled(
+        self,
+        crowd: Crowd,
+        dt_s: float,
+        robot_xy: FloatArray | None,
+        robot_radius_m: float,
+        z: NDArray[np.complex128],
+        v: NDArray[np.complex128],
+        goal: NDArray[np.complex128],
+        rows: NDArray[np.complex128],
+        rz: complex | None,
+        k: StepConstants,
+    ) -> None:
+        """:meth:`step` with the kernels of :mod:`.dynamics_numba` (the same numbers)."""
+        from dynmap_sim.world.people import dynamics_numba as dn
+
+        kern = _kernels()
+        force, pair_gap, wall_gap, robot_gap = dn.social_force(kern, crowd, z, v, goal, rows, rz, k)
+        v += dt_s * force
+        v *= dn.speed_factor(kern, v, k)  # H&M eq. 8
+        old = z.copy()
+        z += dt_s * v
+        moved_max_m = dt_s * k.vmax_max * (1.0 + 1e-9) + 1e-9
+        gaps = (pair_gap, wall_gap, robot_gap)
+        disp = correct(crowd, z, v, rows, rz, k, old, gaps, moved_max_m)
+        crowd.phase += disp * (2 * np.pi / STRIDE_M)
+        redo = dn.goals_due(kern, crowd, goal, z, dt_s, rz, k)
+        if redo is None:
             return
         avoid = None if rz is None else (robot_xy, robot_radius_m + ROBOT_GAP_M + 0.1)
         spawning.renew_goals(crowd, redo, self.populations, self.obstacles, self.rng, avoid)
@@ -166,3 +204,32 @@ class SocialForce:
     def poses(crowd: Crowd) -> FloatArray:
         """People poses ``(P, 3)``: position and heading of motion [m, rad]."""
         return _legs.poses(crowd)
+
+
+#: People backends: numpy, or numba (extra ``fast``; the same numbers).
+BACKENDS = ("numpy", "numba")
+
+
+def check_backend(backend: str) -> str:
+    """``backend`` if it is one of :data:`BACKENDS` and usable; ValueError otherwise."""
+    if backend not in BACKENDS:
+        raise ValueError(f'people backend must be "numpy" or "numba", got {backend!r}')
+    if backend == "numba":
+        from dynmap_sim.jit import numba_available
+
+        if not numba_available():
+            raise ValueError('people backend "numba" needs numba: pip install "dynmap-sim[fast]"')
+    return backend
+
+
+_KERNELS: Any = None
+
+
+def _kernels() -> Any:
+    """The compiled kernels of :mod:`.dynamics_numba` (imported on first use)."""
+    global _KERNELS
+    if _KERNELS is None:
+        from dynmap_sim.world.people.dynamics_numba import Kernels
+
+        _KERNELS = Kernels()
+    return _KERNELS

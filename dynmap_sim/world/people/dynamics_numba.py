@@ -1,0 +1,229 @@
+"""Optional numba kernels of the people's step (extra ``fast``): the real-valued arithmetic
+between numpy's calls, fused, with numpy's numbers bit for bit.
+
+A step of :class:`~dynmap_sim.world.people.SocialForce` is about ninety numpy calls on
+arrays of a few hundred entries (:mod:`.dynamics`), so its cost is call overhead. Every
+operation whose result is one correctly rounded IEEE double or a comparison — ``+``, ``-``,
+``*``, ``/`` on reals, ``min``/``max`` (NaN-propagating, as numpy's), comparisons, picking —
+has the same result in a compiled loop as in numpy, whatever numpy's SIMD path. These
+kernels take over those operations: the smallest gaps, the exponents of the repulsions,
+the weights' division and reach cut, the evasion's sideways factor, the speed cap's factor
+and the goal bookkeeping. What stays numpy's, called on the same operands: complex
+products and quotients (numpy may fuse a multiply and an add there, depending on the
+CPU), ``abs`` of complex numbers, ``exp`` and the sums. So the people's trajectories are
+numpy's, bit for bit (the tests compare both steps); the step is a few dozen calls fewer.
+
+Each kernel is plain Python (what the tests also run), compiled with
+:func:`dynmap_sim.jit.compiled` when numba is installed.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dynmap_sim.jit import compiled
+from dynmap_sim.jit import numba_available as numba_available  # re-exported
+from dynmap_sim.world.people.crowd import Crowd
+from dynmap_sim.world.people.dynamics import StepConstants, source_vectors
+from dynmap_sim.world.people.params import (
+    B_EVADE,
+    GOAL_TOL_M,
+    KEEP_RIGHT_M,
+    PROGRESS_M,
+    REACH_M,
+    STUCK_S,
+    TAU_S,
+)
+from dynmap_sim.world.polygons import FloatArray
+
+
+def _gaps_py(  # type: ignore[no-untyped-def]
+    d,
+    n,
+    log_a,
+    inv_b,
+    rsum_masked,
+    radius,
+    robot,
+    robot_need,
+    evade_log_a,
+    inv_b_evade,
+    arg,
+    earg,
+    wall_gap,
+):
+    """From the distances ``d`` ``(P, P + 1 + K)`` of :func:`.source_vectors`: the
+    repulsions' exponents ``arg = log_a - d inv_b``, the smallest gap between two bodies
+    (returned), per person to a segment (``wall_gap``), and with a ``robot`` the smallest
+    gap to its disc (returned, else inf) and the evasion's exponents ``earg``."""
+    p, m = d.shape
+    pair_gap = math.inf
+    robot_gap = math.inf
+    for i in range(p):
+        for j in range(m):
+            arg[i, j] = log_a[i, j] - d[i, j] * inv_b[i, j]
+        for j in range(n):
+            g = d[i, j] - rsum_masked[i, j]
+            if g < pair_gap or g != g:  # numpy's min propagates NaN
+                pair_gap = g
+        w = d[i, n + 1]
+        for j in range(n + 2, m):
+            v = d[i, j]
+            if v < w or v != v:
+                w = v
+        wall_gap[i] = w - radius[i]
+        if robot:
+            dr = d[i, n]
+            g = dr - robot_need[i]
+            if g < robot_gap or g != g:
+                robot_gap = g
+            if dr < 1e-9:  # np.maximum(d, 1e-9) (NaN stays)
+                dr = 1e-9
+            earg[i] = evade_log_a[i] - dr * inv_b_evade
+    return pair_gap, robot_gap
+
+
+def _weights_py(w, d, n, reach):  # type: ignore[no-untyped-def]
+    """The repulsions' weights in place: ``w / max(d, 1e-9)``, 0 for segments beyond
+    ``reach``."""
+    p, m = d.shape
+    for i in range(p):
+        for j in range(m):
+            dj = d[i, j]
+            w[i, j] = w[i, j] / (1e-9 if dj < 1e-9 else dj)
+            if j > n and dj > reach:
+                w[i, j] = 0.0
+
+
+def _evasion_factor_py(ex, er, keep, out):  # type: ignore[no-untyped-def]
+    """``out = (ex (er.real < 0)) * (1j if er.imag > keep else -1j)``: numpy's complex
+    product of a real and ``+-1j`` is ``(+0, +-mag + 0)`` exactly, with or without a fused
+    multiply-add."""
+    for i in range(ex.shape[0]):
+        z = er[i]
+        mag = ex[i] * (1.0 if z.real < 0.0 else 0.0)
+        out[i] = complex(0.0, (mag if z.imag > keep else -mag) + 0.0)
+
+
+def _speed_factor_py(sp, vmax, out):  # type: ignore[no-untyped-def]
+    """``out = min(1, vmax / max(sp, 1e-9))`` (H&M eq. 8), NaN-propagating as numpy."""
+    for i in range(sp.shape[0]):
+        s = sp[i]
+        f = vmax[i] / (1e-9 if s < 1e-9 else s)
+        out[i] = 1.0 if f > 1.0 else f
+
+
+def _goals_py(  # type: ignore[no-untyped-def]
+    gd, best, stuck, dt, robot, gr, reach, redo
+):
+    """:func:`.goals_due`'s bookkeeping in place (``best``, ``stuck``) from the distances to
+    the goals ``gd`` and between goals and robot ``gr``; ``redo`` and whether any is due."""
+    anyone = False
+    for i in range(gd.shape[0]):
+        g = gd[i]
+        progress = g < best[i] - PROGRESS_M
+        if progress:
+            best[i] = g
+            stuck[i] = 0.0
+        else:
+            stuck[i] = stuck[i] + dt
+        s = stuck[i]
+        due = g < GOAL_TOL_M or s > STUCK_S
+        if robot and gr[i] < reach[i]:
+            due = True
+        due = due and s >= 0.0
+        redo[i] = due
+        anyone = anyone or due
+    return anyone
+
+
+_gaps = compiled(_gaps_py)
+_weights = compiled(_weights_py)
+_evasion_factor = compiled(_evasion_factor_py)
+_speed_factor = compiled(_speed_factor_py)
+_goals = compiled(_goals_py)
+
+_INV_B_EVADE = 1.0 / B_EVADE
+
+
+class Kernels:
+    """The compiled kernels (``python=True``: the plain-Python ones)."""
+
+    def __init__(self, python: bool = False) -> None:
+        self.gaps, self.weights, self.evasion_factor, self.speed_factor, self.goals = (
+            (_gaps_py, _weights_py, _evasion_factor_py, _speed_factor_py, _goals_py)
+            if python
+            else (_gaps, _weights, _evasion_factor, _speed_factor, _goals)
+        )
+
+
+def social_force(
+    kern: Kernels,
+    crowd: Crowd,
+    z: NDArray[np.complex128],
+    v: NDArray[np.complex128],
+    goal: NDArray[np.complex128],
+    rows: NDArray[np.complex128],
+    rz: complex | None,
+    k: StepConstants,
+) -> tuple[NDArray[np.complex128], float, FloatArray, float]:
+    """:func:`.dynamics.social_force`, with the kernels: the same force and gaps."""
+    n = crowd.n
+    to_goal = goal - z
+    e = to_goal / np.maximum(np.abs(to_goal), 1e-9)
+    force = k.v0_tau * e - v * (1.0 / TAU_S)
+    diff = source_vectors(z, rows, rz)
+    d = np.abs(diff)
+    arg = np.empty_like(d)
+    earg = np.empty(n)
+    wall_gap = np.empty(n)
+    robot = rz is not None
+    pair_gap, robot_gap = kern.gaps(
+        d, n, k.log_a, k.inv_b, k.rsum_masked, k.radius, robot, k.robot_need,
+        k.evade_log_a, _INV_B_EVADE, arg, earg, wall_gap,
+    )  # fmt: skip
+    w = np.exp(arg)
+    kern.weights(w, d, n, REACH_M)
+    force += (w * diff).sum(axis=1)
+    if not robot:
+        return force, pair_gap, wall_gap, np.inf
+    er = e.conjugate() * diff[:, n]
+    side = np.empty(n, dtype=np.complex128)
+    kern.evasion_factor(np.exp(earg), er, KEEP_RIGHT_M, side)
+    force += side * e
+    return force, pair_gap, wall_gap, robot_gap
+
+
+def speed_factor(kern: Kernels, v: NDArray[np.complex128], k: StepConstants) -> FloatArray:
+    """The speed cap's factor ``min(1, vmax / max(|v|, 1e-9))`` (H&M eq. 8)."""
+    out = np.empty(len(v))
+    kern.speed_factor(np.abs(v), k.vmax, out)
+    return out
+
+
+def goals_due(
+    kern: Kernels,
+    crowd: Crowd,
+    goal: NDArray[np.complex128],
+    z: NDArray[np.complex128],
+    dt_s: float,
+    rz: complex | None,
+    k: StepConstants,
+) -> NDArray[np.bool_] | None:
+    """:func:`.dynamics.goals_due` with the kernel (``best_goal_m`` and ``stuck_s`` updated
+    in place): who needs a new goal, or None when nobody does."""
+    for name in ("best_goal_m", "stuck_s"):
+        a = getattr(crowd, name)
+        if not (a.flags.writeable and a.flags.c_contiguous and a.dtype == np.float64):
+            setattr(crowd, name, np.array(a, dtype=np.float64))
+    gd = np.abs(goal - z)
+    gr = gd if rz is None else np.abs(goal - rz)
+    redo = np.empty(crowd.n, dtype=bool)
+    due = kern.goals(
+        gd, crowd.best_goal_m, crowd.stuck_s, float(dt_s), rz is not None, gr,
+        k.robot_goal_reach, redo,
+    )  # fmt: skip
+    return redo if due else None

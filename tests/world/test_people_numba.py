@@ -1,0 +1,85 @@
+"""The people's step with the kernels of ``dynamics_numba`` (the numba backend) moves
+everyone exactly as the numpy step does, bit for bit, with and without a robot."""
+
+import numpy as np
+import pytest
+
+from dynmap_sim.world import World, load_world, resolve_world_path
+from dynmap_sim.world.people import social_force as sf_module
+from dynmap_sim.world.people.dynamics_numba import Kernels, numba_available
+
+
+def _state(world: World) -> list[bytes]:
+    c = world.crowd
+    arrays = [c.pos, c.vel, c.goal, c.phase, c.stuck_s, c.best_goal_m, c.waypoint]
+    return [np.ascontiguousarray(a).tobytes() for a in arrays] + [
+        repr(world._forces.rng.bit_generator.state).encode(),
+        world.geometry.circles.tobytes(),
+    ]
+
+
+def _robot_path(n: int, start: np.ndarray) -> list[np.ndarray]:
+    """A robot that wanders through the crowd (evasion, comfort disc, goals it stands on)."""
+    t = np.arange(n) * 0.1
+    x = start[0] + 2.0 * np.sin(0.05 * t) + 0.02 * t
+    y = start[1] + 1.5 * np.sin(0.07 * t)
+    return [np.array([a, b, 0.0]) for a, b in zip(x, y, strict=True)]
+
+
+def _compare(world_name: str, day: int, run: int, steps: int, python: bool, robot: bool):
+    spec = load_world(resolve_world_path(world_name))
+    ref = World(spec, seed=0)
+    fast = World(spec, seed=0)
+    for w in (ref, fast):
+        w.reset(day, run)
+    fast.people_backend = "numba"  # the kernels (the check for numba is bypassed)
+    fast._forces.backend = "numba"
+    assert fast.crowd.n > 0
+    saved = sf_module._KERNELS
+    sf_module._KERNELS = Kernels(python=python)
+    try:
+        start = ref.crowd.pos[0]  # among the people: their goals, comfort discs, evasion
+        for i, pose in enumerate(_robot_path(steps, start)):
+            rp = pose if robot else None
+            ref.step(0.1, robot_pose=rp)
+            fast.step(0.1, robot_pose=rp)
+            assert _state(fast) == _state(ref), f"step {i}"
+    finally:
+        sf_module._KERNELS = saved
+
+
+@pytest.mark.parametrize("robot", [True, False])
+def test_python_kernels_step_people_as_numpy(robot):
+    _compare("lab", 1, 2, 60, python=True, robot=robot)
+
+
+@pytest.mark.skipif(not numba_available(), reason="numba (extra 'fast') not installed")
+@pytest.mark.parametrize(
+    ("world", "day", "run", "robot"),
+    [("lab", 1, 2, True), ("lab", 1, 2, False), ("lab", 3, 1, True), ("apartment", 15, 1, True)],
+)
+def test_compiled_kernels_step_people_as_numpy(world, day, run, robot):
+    _compare(world, day, run, 600, python=False, robot=robot)
+
+
+@pytest.mark.skipif(not numba_available(), reason="numba (extra 'fast') not installed")
+def test_numba_env_moves_people_as_the_numpy_env():
+    """The env with the fast extra's backend: people, legs and poses are the numpy env's."""
+    from dynmap_sim.env import DynMapEnv
+
+    envs = [DynMapEnv(world="lab", sensor_options={"backend": b}) for b in ("numpy", "numba")]
+    assert envs[1].world.people_backend == "numba"
+    for env in envs:
+        env.reset(seed=0, options={"day": 1, "run": 2})
+    for i in range(150):
+        a = np.array([0.4, 0.6 * np.sin(0.05 * i)])
+        infos = [env.step(a)[4] for env in envs]
+        assert envs[0].world.crowd.pos.tobytes() == envs[1].world.crowd.pos.tobytes()
+        p0, p1 = (info["truth"]["people"] for info in infos)
+        assert p0.tobytes() == p1.tobytes()
+
+
+def test_unknown_people_backend_is_refused():
+    spec = load_world(resolve_world_path("lab"))
+    with pytest.raises(ValueError, match="people backend"):
+        World(spec, seed=0, people_backend="cuda")
