@@ -7,8 +7,8 @@ operation whose result is one correctly rounded IEEE double or a comparison — 
 ``*``, ``/`` on reals, ``min``/``max`` (NaN-propagating, as numpy's), comparisons, picking —
 has the same result in a compiled loop as in numpy, whatever numpy's SIMD path. These
 kernels take over those operations: the smallest gaps, the exponents of the repulsions,
-the weights' division and reach cut, the evasion's sideways factor, the speed cap's factor
-and the goal bookkeeping. What stays numpy's, called on the same operands: complex
+the weights' division and reach cut, the evasion's sideways factor, the speed cap's factor,
+the pair separation's weights and the goal bookkeeping. What stays numpy's, called on the same operands: complex
 products and quotients (numpy may fuse a multiply and an add there, depending on the
 CPU), ``abs`` of complex numbers, ``exp`` and the sums. So the people's trajectories are
 numpy's, bit for bit (the tests compare both steps); the step is a few dozen calls fewer.
@@ -116,6 +116,23 @@ def _speed_factor_py(sp, vmax, out):  # type: ignore[no-untyped-def]
         out[i] = 1.0 if f > 1.0 else f
 
 
+def _pair_push_py(d, rsum_masked, out):  # type: ignore[no-untyped-def]
+    """The pair separation's weights ``out = max(rsum - d, 0) / max(d, 1e-9)`` (numpy's
+    ``np.maximum``: the first operand when equal, NaN kept); True if any is nonzero."""
+    anyone = False
+    p, m = d.shape
+    for i in range(p):
+        for j in range(m):
+            dj = d[i, j]
+            o = rsum_masked[i, j] - dj
+            if not (o >= 0.0 or o != o):
+                o = 0.0
+            if o != 0.0:
+                anyone = True
+            out[i, j] = o / (1e-9 if dj < 1e-9 else dj)
+    return anyone
+
+
 def _goals_py(  # type: ignore[no-untyped-def]
     gd, best, stuck, dt, robot, gr, reach, redo
 ):
@@ -145,6 +162,7 @@ _weights = compiled(_weights_py)
 _evasion_factor = compiled(_evasion_factor_py)
 _speed_factor = compiled(_speed_factor_py)
 _goals = compiled(_goals_py)
+_pair_push = compiled(_pair_push_py)
 
 _INV_B_EVADE = 1.0 / B_EVADE
 
@@ -153,11 +171,13 @@ class Kernels:
     """The compiled kernels (``python=True``: the plain-Python ones)."""
 
     def __init__(self, python: bool = False) -> None:
-        self.gaps, self.weights, self.evasion_factor, self.speed_factor, self.goals = (
-            (_gaps_py, _weights_py, _evasion_factor_py, _speed_factor_py, _goals_py)
+        fns = (
+            (_gaps_py, _weights_py, _evasion_factor_py, _speed_factor_py, _goals_py, _pair_push_py)
             if python
-            else (_gaps, _weights, _evasion_factor, _speed_factor, _goals)
+            else (_gaps, _weights, _evasion_factor, _speed_factor, _goals, _pair_push)
         )
+        self.gaps, self.weights, self.evasion_factor, self.speed_factor, self.goals = fns[:5]
+        self.pair_push = fns[5]
 
 
 def social_force(

@@ -182,7 +182,7 @@ class SocialForce:
         z += dt_s * v
         moved_max_m = dt_s * k.vmax_max * (1.0 + 1e-9) + 1e-9
         gaps = (pair_gap, wall_gap, robot_gap)
-        disp = correct(crowd, z, v, rows, rz, k, old, gaps, moved_max_m)
+        disp = correct(crowd, z, v, rows, rz, k, old, gaps, moved_max_m, kern.pair_push)
         crowd.phase += disp * (2 * np.pi / STRIDE_M)
         redo = dn.goals_due(kern, crowd, goal, z, dt_s, rz, k)
         if redo is None:
