@@ -6,12 +6,13 @@ arrays of a few hundred entries (:mod:`.dynamics`), so its cost is call overhead
 operation whose result is one correctly rounded IEEE double or a comparison — ``+``, ``-``,
 ``*``, ``/`` on reals, ``min``/``max`` (NaN-propagating, as numpy's), comparisons, picking —
 has the same result in a compiled loop as in numpy, whatever numpy's SIMD path. These
-kernels take over those operations: the smallest gaps, the exponents of the repulsions,
-the weights' division and reach cut, the evasion's sideways factor, the speed cap's factor,
-the pair separation's weights and the goal bookkeeping. What stays numpy's, called on the same operands: complex
-products and quotients (numpy may fuse a multiply and an add there, depending on the
-CPU), ``abs`` of complex numbers, ``exp`` and the sums. So the people's trajectories are
-numpy's, bit for bit (the tests compare both steps); the step is a few dozen calls fewer.
+kernels take over those operations: the smallest gaps, the exponents of the repulsions, the
+weights' division and reach cut, the evasion's sideways factor, the speed cap's factor, the
+pair separation's weights, the goal bookkeeping and the legs' heading and swing. What stays
+numpy's, called on the same operands: complex products and quotients (numpy may fuse a
+multiply and an add there, depending on the CPU), ``abs`` of complex numbers, ``exp`` and
+the sums. So the people's trajectories are numpy's, bit for bit (the tests compare both
+steps); the step is a few dozen calls fewer.
 
 Each kernel is plain Python (what the tests also run), compiled with
 :func:`dynmap_sim.jit.compiled` when numba is installed.
@@ -133,6 +134,21 @@ def _pair_push_py(d, rsum_masked, out):  # type: ignore[no-untyped-def]
     return anyone
 
 
+def _legs_py(  # type: ignore[no-untyped-def]
+    sp, q, swing, gain, cap, spread_re, spread_im, h, side
+):
+    """The legs' heading ``h = q`` where the speed ``sp > 1e-3`` (else 1) and their offset
+    factor ``side = swing min(sp gain, cap) + 1j spread`` (numpy's ``swing + 1j spread``:
+    ``(swing + spread_re, 0 + spread_im)``)."""
+    for i in range(sp.shape[0]):
+        s = sp[i]
+        h[i] = q[i] if s > 1e-3 else complex(1.0, 0.0)
+        g = s * gain
+        if not (g <= cap or g != g):  # np.minimum(g, cap)
+            g = cap
+        side[i] = complex(swing[i] * g + spread_re, 0.0 + spread_im)
+
+
 def _goals_py(  # type: ignore[no-untyped-def]
     gd, best, stuck, dt, robot, gr, reach, redo
 ):
@@ -163,6 +179,7 @@ _evasion_factor = compiled(_evasion_factor_py)
 _speed_factor = compiled(_speed_factor_py)
 _goals = compiled(_goals_py)
 _pair_push = compiled(_pair_push_py)
+_legs = compiled(_legs_py)
 
 _INV_B_EVADE = 1.0 / B_EVADE
 
@@ -172,12 +189,13 @@ class Kernels:
 
     def __init__(self, python: bool = False) -> None:
         fns = (
-            (_gaps_py, _weights_py, _evasion_factor_py, _speed_factor_py, _goals_py, _pair_push_py)
+            (_gaps_py, _weights_py, _evasion_factor_py, _speed_factor_py, _goals_py)
+            + (_pair_push_py, _legs_py)
             if python
-            else (_gaps, _weights, _evasion_factor, _speed_factor, _goals, _pair_push)
+            else (_gaps, _weights, _evasion_factor, _speed_factor, _goals, _pair_push, _legs)
         )
         self.gaps, self.weights, self.evasion_factor, self.speed_factor, self.goals = fns[:5]
-        self.pair_push = fns[5]
+        self.pair_push, self.legs = fns[5:]
 
 
 def social_force(

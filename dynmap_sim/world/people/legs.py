@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -30,20 +32,37 @@ def legs_into(crowd: Crowd, out: FloatArray) -> None:
     out[:, 2] = LEG_RADIUS_M
 
 
-def leg_centres_into(crowd: Crowd, out: NDArray[np.complex128]) -> None:
+def leg_centres_into(
+    crowd: Crowd, out: NDArray[np.complex128], kernel: Callable[..., None] | None = None
+) -> None:
     """Write the centres ``x + iy`` of the two legs of each person into ``out`` ``(2P,)``
-    (the legs of :func:`legs_into`, without their radii)."""
+    (the legs of :func:`legs_into`, without their radii).
+
+    ``kernel``: the compiled heading and swing of the numba backend
+    (:func:`~dynmap_sim.world.people.dynamics_numba._legs_py`; the same numbers).
+    """
     vel = np.ascontiguousarray(crowd.vel, dtype=np.float64)
     pos = np.ascontiguousarray(crowd.pos, dtype=np.float64)
     v = vel.view(np.complex128)[:, 0]
     z = pos.view(np.complex128)[:, 0]
     sp = np.abs(v)
-    h = np.where(sp > 1e-3, v / np.maximum(sp, 1e-9), 1.0)
-    swing = np.sin(crowd.phase)
-    swing *= np.minimum(sp * (LEG_SWING_M / 0.5), LEG_SWING_M)
-    off = h * (swing + 1j * LEG_SPREAD_M)
+    if kernel is None:
+        h = np.where(sp > 1e-3, v / np.maximum(sp, 1e-9), 1.0)
+        swing = np.sin(crowd.phase)
+        swing *= np.minimum(sp * (LEG_SWING_M / 0.5), LEG_SWING_M)
+        off = h * (swing + 1j * LEG_SPREAD_M)
+    else:
+        n = len(sp)
+        h = np.empty(n, dtype=np.complex128)
+        side = np.empty(n, dtype=np.complex128)
+        kernel(sp, v / np.maximum(sp, 1e-9), np.sin(crowd.phase), *_SWING, h, side)
+        off = h * side
     np.add(z, off, out=out[0::2])
     np.subtract(z, off, out=out[1::2])
+
+
+#: The constants of the swing: gain, cap, and ``1j * LEG_SPREAD_M`` (real, imaginary part).
+_SWING = (LEG_SWING_M / 0.5, LEG_SWING_M, (1j * LEG_SPREAD_M).real, (1j * LEG_SPREAD_M).imag)
 
 
 def poses(crowd: Crowd) -> FloatArray:

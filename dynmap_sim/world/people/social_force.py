@@ -174,7 +174,7 @@ class SocialForce:
         """:meth:`step` with the kernels of :mod:`.dynamics_numba` (the same numbers)."""
         from dynmap_sim.world.people import dynamics_numba as dn
 
-        kern = _kernels()
+        kern = kernels()
         force, pair_gap, wall_gap, robot_gap = dn.social_force(kern, crowd, z, v, goal, rows, rz, k)
         v += dt_s * force
         v *= dn.speed_factor(kern, v, k)  # H&M eq. 8
@@ -225,7 +225,7 @@ def check_backend(backend: str) -> str:
 _KERNELS: Any = None
 
 
-def _kernels() -> Any:
+def kernels() -> Any:
     """The compiled kernels of :mod:`.dynamics_numba` (imported on first use)."""
     global _KERNELS
     if _KERNELS is None:
