@@ -441,7 +441,8 @@ class Lidar:
                     pick = _uniforms(rngs, owner) < nz.p_mixed
                     beams, others = beams[pick], others[pick]
                     w = _uniforms(rngs, owner[pick])
-                flat_out[beams] = flat_r[beams] + w * (flat_r[others] - flat_r[beams])
+                r_beams = flat_r[beams]
+                flat_out[beams] = r_beams + w * (flat_r[others] - r_beams)
         # one uniform per beam picks at most one of the rare events (disjoint intervals)
         p1 = nz.p_dropout
         p2 = p1 + nz.p_short

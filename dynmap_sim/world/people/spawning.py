@@ -279,6 +279,7 @@ def renew_goals(
         else:
             crowd.goal[i] = pick_goal(obstacles, rng, pop, pos[i], float(crowd.radius[i]), avoid)
         crowd.stuck_s[i] = 0.0
-        if np.array_equal(crowd.goal[i], pos[i]):  # no goal found: pause, then retry
+        (gx, gy), (px, py) = crowd.goal[i].tolist(), pos[i].tolist()
+        if gx == px and gy == py:  # no goal found: pause, then retry
             crowd.stuck_s[i] = -PAUSE_S
         crowd.best_goal_m[i] = float(np.hypot(*(crowd.goal[i] - pos[i])))
