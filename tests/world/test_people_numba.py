@@ -83,3 +83,21 @@ def test_unknown_people_backend_is_refused():
     spec = load_world(resolve_world_path("lab"))
     with pytest.raises(ValueError, match="people backend"):
         World(spec, seed=0, people_backend="cuda")
+
+
+@pytest.mark.parametrize("python", [True, False])
+def test_rows_kernel_lists_the_grids_rows(python):
+    """The broad phase's kernel gives SegmentGrid.rows, for points off the grid too."""
+    if not python and not numba_available():
+        pytest.skip("numba (extra 'fast') not installed")
+    from dynmap_sim.world.people import Obstacles
+    from dynmap_sim.world.people.dynamics_numba import candidate_rows
+
+    rng = np.random.default_rng(4)
+    kern = Kernels(python=python)
+    for segs in (np.zeros((0, 4)), np.hstack([a := rng.uniform(0, 9, (30, 2)), a + 1.0])):
+        obstacles = Obstacles(segs)
+        pts = rng.uniform(-4.0, 14.0, (200, 2))
+        z = np.ascontiguousarray(pts).view(np.complex128)[:, 0]
+        got = candidate_rows(kern, obstacles, z)
+        np.testing.assert_array_equal(got, obstacles.rows(z))

@@ -28,9 +28,11 @@ from numpy.typing import NDArray
 from dynmap_sim.jit import compiled
 from dynmap_sim.jit import numba_available as numba_available  # re-exported
 from dynmap_sim.world.people.crowd import Crowd
-from dynmap_sim.world.people.dynamics import StepConstants, source_vectors
+from dynmap_sim.world.people.dynamics import _FAR, StepConstants
+from dynmap_sim.world.people.obstacles import Obstacles
 from dynmap_sim.world.people.params import (
     B_EVADE,
+    CELL_M,
     GOAL_TOL_M,
     KEEP_RIGHT_M,
     PROGRESS_M,
@@ -149,6 +151,53 @@ def _legs_py(  # type: ignore[no-untyped-def]
         side[i] = complex(swing[i] * g + spread_re, 0.0 + spread_im)
 
 
+def _rows_py(  # type: ignore[no-untyped-def]
+    z, origin_re, origin_im, inv_cell, nx, ny, cells, segrows, rows
+):
+    """The broad phase's candidate rows of :meth:`.SegmentGrid.rows` into ``rows``
+    ``(P, K, 3)``: the cell of each point (numpy's ``(z - origin) * inv_cell``, truncated,
+    clipped to the grid) and its listed segments' rows."""
+    k_cols = cells.shape[1]
+    for i in range(z.shape[0]):
+        ci = int((z[i].real - origin_re) * inv_cell)
+        cj = int((z[i].imag - origin_im) * inv_cell)
+        ci = min(max(ci, 0), nx - 1)
+        cj = min(max(cj, 0), ny - 1)
+        cell = ci * ny + cj
+        for j in range(k_cols):
+            seg = cells[cell, j]
+            for c in range(3):
+                rows[i, j, c] = segrows[seg, c]
+
+
+def _sources_py(z, rz, p0, diff, a):  # type: ignore[no-untyped-def]
+    """Of :func:`.source_vectors`: the vectors person -> person and robot -> person into
+    ``diff[:, :P + 1]`` and the vectors from the candidate segments' starts ``a = z - p0``
+    (complex differences: two exact real subtractions each)."""
+    p = z.shape[0]
+    for i in range(p):
+        zi = z[i]
+        for j in range(p):
+            diff[i, j] = zi - z[j]
+        diff[i, p] = zi - rz
+        for j in range(p0.shape[1]):
+            a[i, j] = zi - p0[i, j]
+
+
+def _clamp_py(prod, inv, t):  # type: ignore[no-untyped-def]
+    """``t = clip(prod.real * inv, 0, 1)`` (numpy's ``np.maximum`` then ``np.minimum``: the
+    first operand when equal, NaN kept)."""
+    p, m = inv.shape
+    for i in range(p):
+        for j in range(m):
+            v = prod[i, j].real * inv[i, j]
+            if not (v >= 0.0 or v != v):
+                v = 0.0
+            if not (v <= 1.0 or v != v):
+                v = 1.0
+            t[i, j] = v
+
+
 def _goals_py(  # type: ignore[no-untyped-def]
     gd, best, stuck, dt, robot, gr, reach, redo
 ):
@@ -180,6 +229,9 @@ _speed_factor = compiled(_speed_factor_py)
 _goals = compiled(_goals_py)
 _pair_push = compiled(_pair_push_py)
 _legs = compiled(_legs_py)
+_rows = compiled(_rows_py)
+_sources = compiled(_sources_py)
+_clamp = compiled(_clamp_py)
 
 _INV_B_EVADE = 1.0 / B_EVADE
 
@@ -190,12 +242,45 @@ class Kernels:
     def __init__(self, python: bool = False) -> None:
         fns = (
             (_gaps_py, _weights_py, _evasion_factor_py, _speed_factor_py, _goals_py)
-            + (_pair_push_py, _legs_py)
+            + (_pair_push_py, _legs_py, _rows_py, _sources_py, _clamp_py)
             if python
-            else (_gaps, _weights, _evasion_factor, _speed_factor, _goals, _pair_push, _legs)
+            else (_gaps, _weights, _evasion_factor, _speed_factor, _goals)
+            + (_pair_push, _legs, _rows, _sources, _clamp)
         )
         self.gaps, self.weights, self.evasion_factor, self.speed_factor, self.goals = fns[:5]
-        self.pair_push, self.legs = fns[5:]
+        self.pair_push, self.legs, self.rows, self.sources, self.clamp = fns[5:]
+
+
+def candidate_rows(
+    kern: Kernels, obstacles: Obstacles, z: NDArray[np.complex128]
+) -> NDArray[np.complex128]:
+    """:meth:`.Obstacles.rows` with the kernel (the same rows)."""
+    if not obstacles.broad_phase:
+        return obstacles.rows(z)
+    g = obstacles.grid
+    rows = np.empty((len(z), g.cells.shape[1], 3), dtype=np.complex128)
+    nx, ny = g.shape
+    kern.rows(z, g.origin_c.real, g.origin_c.imag, 1.0 / CELL_M, nx, ny, g.cells, g.segrows, rows)
+    return rows
+
+
+def source_vectors(
+    kern: Kernels,
+    z: NDArray[np.complex128],
+    rows: NDArray[np.complex128],
+    rz: complex | None,
+) -> NDArray[np.complex128]:
+    """:func:`.dynamics.source_vectors` with the kernels (the same vectors)."""
+    n = len(z)
+    k_cols = rows.shape[1]
+    diff = np.empty((n, n + 1 + k_cols), dtype=np.complex128)
+    a = np.empty((n, k_cols), dtype=np.complex128)
+    kern.sources(z, _FAR if rz is None else rz, rows[..., 0], diff, a)
+    cd = rows[..., 1]  # conj(d)
+    t = np.empty((n, k_cols))
+    kern.clamp(a * cd, rows[..., 2].real, t)
+    np.subtract(a, t * cd.conjugate(), out=diff[:, n + 1 :])  # closest point -> person
+    return diff
 
 
 def social_force(
@@ -213,7 +298,7 @@ def social_force(
     to_goal = goal - z
     e = to_goal / np.maximum(np.abs(to_goal), 1e-9)
     force = k.v0_tau * e - v * (1.0 / TAU_S)
-    diff = source_vectors(z, rows, rz)
+    diff = source_vectors(kern, z, rows, rz)
     d = np.abs(diff)
     arg = np.empty_like(d)
     earg = np.empty(n)

@@ -135,12 +135,12 @@ class SocialForce:
         if crowd.n == 0:
             return
         z, v, goal = self._complex_views(crowd)
+        if self.backend == "numba":
+            self._step_compiled(crowd, dt_s, robot_xy, robot_radius_m, z, v, goal)
+            return
         rows = self.obstacles.rows(z)  # candidate segments (static geometry within REACH_M)
         k = self._constants(crowd, robot_radius_m, rows.shape[1])
         rz = None if robot_xy is None else complex(float(robot_xy[0]), float(robot_xy[1]))
-        if self.backend == "numba":
-            self._step_compiled(crowd, dt_s, robot_xy, robot_radius_m, z, v, goal, rows, rz, k)
-            return
         force, pair_gap, wall_gap, robot_gap = social_force(crowd, z, v, goal, rows, rz, k)
         v += dt_s * force
         v *= np.minimum(1.0, k.vmax / np.maximum(np.abs(v), 1e-9))  # H&M eq. 8
@@ -167,14 +167,14 @@ class SocialForce:
         z: NDArray[np.complex128],
         v: NDArray[np.complex128],
         goal: NDArray[np.complex128],
-        rows: NDArray[np.complex128],
-        rz: complex | None,
-        k: StepConstants,
     ) -> None:
         """:meth:`step` with the kernels of :mod:`.dynamics_numba` (the same numbers)."""
         from dynmap_sim.world.people import dynamics_numba as dn
 
         kern = kernels()
+        rows = dn.candidate_rows(kern, self.obstacles, z)
+        k = self._constants(crowd, robot_radius_m, rows.shape[1])
+        rz = None if robot_xy is None else complex(float(robot_xy[0]), float(robot_xy[1]))
         force, pair_gap, wall_gap, robot_gap = dn.social_force(kern, crowd, z, v, goal, rows, rz, k)
         v += dt_s * force
         v *= dn.speed_factor(kern, v, k)  # H&M eq. 8
