@@ -47,6 +47,10 @@ COLLISION_ROBOT = 7
 CATEGORY_ROBOT = 0b1000
 #: Gap [m] kept between the robot and an obstacle it stops at.
 _SKIN_M = 1e-4
+_SET_POSITION = pymunk.Body.position.fset
+_SET_ANGLE = pymunk.Body.angle.fset
+_SET_VELOCITY = pymunk.Body.velocity.fset
+_SET_ANGULAR_VELOCITY = pymunk.Body.angular_velocity.fset
 
 
 #: Sensible ranges of the robot's parameters: (name, smallest, largest).
@@ -220,10 +224,11 @@ class DiffDriveRobot:
             th += wb * h
         self._th = math.remainder(th, 2.0 * math.pi)
         body = self.body
-        body.position = (self._x, self._y)
-        body.angle = self._th
-        body.velocity = (vb * math.cos(th), vb * math.sin(th))
-        body.angular_velocity = wb
+        # the property setters themselves, without pymunk's per-attribute __setattr__ wrapper
+        _SET_POSITION(body, (self._x, self._y))
+        _SET_ANGLE(body, self._th)
+        _SET_VELOCITY(body, (vb * math.cos(th), vb * math.sin(th)))
+        _SET_ANGULAR_VELOCITY(body, wb)
         self.space.reindex_shapes_for_body(body)
         return StepResult(wl * dt_s, wr * dt_s, contact, vb, wb)
 
