@@ -88,6 +88,14 @@ def _lookup(table: FloatArray, ix: NDArray[np.intp], iy: NDArray[np.intp]) -> Fl
     return table[np.clip(iy, 0, h - 1), np.clip(ix, 0, w - 1)]
 
 
+def angular_step(points_base: ArrayLike, resolution_m: float) -> float:
+    """The rotation step [rad] that moves the farthest of ``points_base`` ``(N, 2)`` by one
+    cell of side ``resolution_m`` (Olson 2009 §IV-A): :func:`correlative_match`'s default."""
+    pts = np.asarray(points_base, dtype=np.float64).reshape(-1, 2)
+    r_max = max(float(np.max(np.hypot(pts[:, 0], pts[:, 1]))) if len(pts) else 0.0, resolution_m)
+    return float(np.arccos(max(1.0 - resolution_m**2 / (2.0 * r_max**2), -1.0)))
+
+
 def correlative_match(
     points_base: ArrayLike,
     target: LikelihoodTable,
@@ -110,9 +118,8 @@ def correlative_match(
     if len(pts) == 0:
         return CorrelativeResult(init.copy(), 0.0, 0)
     res = target.resolution_m
-    r_max = max(float(np.max(np.hypot(pts[:, 0], pts[:, 1]))), res)
     if theta_step_rad is None:
-        theta_step_rad = float(np.arccos(max(1.0 - res**2 / (2.0 * r_max**2), -1.0)))
+        theta_step_rad = angular_step(pts, res)
     n_th = int(np.ceil(window_theta_rad / theta_step_rad))
     thetas = init[2] + theta_step_rad * np.arange(-n_th, n_th + 1)
     n_xy = int(np.ceil(window_xy_m / res))
