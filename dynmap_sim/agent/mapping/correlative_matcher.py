@@ -136,14 +136,11 @@ def correlative_match(
     iy0 = np.floor((wy - target.origin[1]) / res).astype(np.intp) + start
     # Upper bounds of every (rotation, block_y, block_x): sum over points of M.
     boff = np.arange(n_blocks) * block
-    bounds = np.empty((len(thetas), n_blocks, n_blocks))
-    for t in range(len(thetas)):
-        vals = _lookup(
-            coarse,
-            ix0[t][:, None, None] + boff[None, None, :],
-            iy0[t][:, None, None] + boff[None, :, None],
-        )
-        bounds[t] = vals.sum(axis=0)
+    bounds = _lookup(
+        coarse,
+        ix0[:, :, None, None] + boff[None, None, None, :],
+        iy0[:, :, None, None] + boff[None, None, :, None],
+    ).sum(axis=1)  # (T, block_y, block_x): all rotations in one lookup
     order = np.argsort(bounds, axis=None)[::-1]
     best_score, best = -1.0, (0, 0, 0)
     n_eval = 0
