@@ -53,7 +53,7 @@ def main() -> None:
         "--mapper-params",
         type=json.loads,
         default={},
-        help="first-run mapper parameters as JSON, e.g. '{\"seed_window\": [0.3, 0.4]}'",
+        help="first-run mapper parameters as JSON, e.g. '{\"seed_window\": [0, 0]}' (seed off)",
     )
     args = ap.parse_args()
     for world in args.worlds:

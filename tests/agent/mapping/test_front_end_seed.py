@@ -1,4 +1,4 @@
-"""The front end's correlative seed (``seed_window``) and its checks (``seed_verify``)."""
+"""The front end's correlative seed (``seed_window``) and its check (``seed_verify``)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,9 @@ from dynmap_sim.agent.mapping.correlative_matcher import (
 from dynmap_sim.agent.mapping.first_run import FirstRunConfig, FirstRunMapper
 from dynmap_sim.types import Odometry, Scan
 
-SEED = {"seed_window": [0.3, 0.4]}
+OFF = {"seed_window": [0, 0]}
+SEED = {"seed_window": [0.3, 0.4], "seed_verify": False}
+CHECKED = {"seed_window": [0.3, 0.4], "seed_verify": True}
 
 
 def _front_end(laser, cast, segs, truth, odo, rng, **params):
@@ -61,9 +63,9 @@ def test_seed_recovers_a_late_odometry_jump(segments, laser, cast, path_fn):
     odo = _odometry(truth, np.random.default_rng(0), jump_at=60, jump_rad=0.25)
     err = {}
     for name, params in {
-        "off": {},
+        "off": OFF,
         "seed": SEED,
-        "verified": {**SEED, "seed_verify": True},
+        "verified": CHECKED,
     }.items():
         est, mapper = _front_end(
             laser, cast, segments, truth, odo, np.random.default_rng(1), **params
@@ -86,13 +88,19 @@ def test_verified_seed_keeps_odometry_along_a_corridor(laser, cast):
     )
     truth = polyline_path(np.array([[1.0, 1.0], [12.0, 1.0]]), 0.05, 0.1)
     odo = _odometry(truth, np.random.default_rng(0))
-    off, _ = _front_end(laser, cast, segs, truth, odo, np.random.default_rng(1))
+    off, _ = _front_end(laser, cast, segs, truth, odo, np.random.default_rng(1), **OFF)
     seeded, m_seed = _front_end(laser, cast, segs, truth, odo, np.random.default_rng(1), **SEED)
     checked, m_checked = _front_end(
-        laser, cast, segs, truth, odo, np.random.default_rng(1), **SEED, seed_verify=True
+        laser, cast, segs, truth, odo, np.random.default_rng(1), **CHECKED
     )
     e_off = np.max(np.hypot(*(off[:, :2] - truth[:, :2]).T))
     e_seed = np.max(np.hypot(*(seeded[:, :2] - truth[:, :2]).T))
     assert m_seed.slam.n_seeded > 0 and e_seed > e_off + 0.15
     assert m_checked.slam.n_seeded == m_checked.slam.n_seed_refuted
     assert np.allclose(checked, off)
+
+
+def test_the_default_seed_is_checked():
+    """The default first-run mapper seeds ICP correlatively and checks the seed (issue 16)."""
+    cfg = FirstRunConfig().slam
+    assert cfg.seed_window == (0.3, 0.4) and cfg.seed_verify
