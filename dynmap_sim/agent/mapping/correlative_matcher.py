@@ -149,8 +149,10 @@ def correlative_match(
         t, by, bx = np.unravel_index(flat, bounds.shape)
         if bounds[t, by, bx] <= best_score:
             break
-        ox = boff[bx] + foff
-        oy = boff[by] + foff
+        # The last block of a row may reach past the window: its cells beyond are left out
+        # (the block's bound, over all its cells, stays an upper bound).
+        ox = boff[bx] + foff[boff[bx] + foff <= 2 * n_xy]
+        oy = boff[by] + foff[boff[by] + foff <= 2 * n_xy]
         vals = _lookup(
             fine,
             ix0[t][:, None, None] + ox[None, None, :],
@@ -160,7 +162,7 @@ def correlative_match(
         k = int(np.argmax(vals))
         if vals.flat[k] > best_score:
             best_score = float(vals.flat[k])
-            best = (int(t), int(oy[k // block]), int(ox[k % block]))
+            best = (int(t), int(oy[k // len(ox)]), int(ox[k % len(ox)]))
     t, oy_c, ox_c = best
     pose = np.array(
         [init[0] + (start + ox_c) * res, init[1] + (start + oy_c) * res, thetas[t]],
