@@ -11,7 +11,7 @@ The logs are read from ``../shared/data/slam-benchmark`` (next to the repository
 ``--data DIR``; without them the script says so and exits 0 (a clean clone has none).
 
     nice python benchmarks/bench_slam_logs.py [--data DIR] [--logs fr079 csail] \
-        [--mapper-params '{"seed_window": [0.3, 0.4]}']
+        [--mapper-params '{"seed_verify": false}']
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ def main() -> int:
         "--mapper-params",
         type=json.loads,
         default={},
-        help="first-run mapper parameters as JSON, e.g. '{\"seed_window\": [0.3, 0.4]}'",
+        help="first-run mapper parameters as JSON, e.g. '{\"seed_window\": [0, 0]}' (seed off)",
     )
     args = ap.parse_args()
     config = FirstRunConfig.from_params(**args.mapper_params)

@@ -918,7 +918,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--mapper-param",
         action="append",
         metavar="KEY=VALUE",
-        help="a first-run mapper parameter (mapper_params), e.g. seed_window=[0.3,0.4]; repeat",
+        help="a first-run mapper parameter (mapper_params), e.g. seed_window=[0,0]; repeat",
     )
     _odometry_option(s)
     s.add_argument("--force", action="store_true", help="replace existing --tum/--json files")

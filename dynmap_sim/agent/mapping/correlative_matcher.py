@@ -88,6 +88,14 @@ def _lookup(table: FloatArray, ix: NDArray[np.intp], iy: NDArray[np.intp]) -> Fl
     return table[np.clip(iy, 0, h - 1), np.clip(ix, 0, w - 1)]
 
 
+def angular_step(points_base: ArrayLike, resolution_m: float) -> float:
+    """The rotation step [rad] that moves the farthest of ``points_base`` ``(N, 2)`` by one
+    cell of side ``resolution_m`` (Olson 2009 §IV-A): :func:`correlative_match`'s default."""
+    pts = np.asarray(points_base, dtype=np.float64).reshape(-1, 2)
+    r_max = max(float(np.max(np.hypot(pts[:, 0], pts[:, 1]))) if len(pts) else 0.0, resolution_m)
+    return float(np.arccos(max(1.0 - resolution_m**2 / (2.0 * r_max**2), -1.0)))
+
+
 def correlative_match(
     points_base: ArrayLike,
     target: LikelihoodTable,
@@ -110,9 +118,8 @@ def correlative_match(
     if len(pts) == 0:
         return CorrelativeResult(init.copy(), 0.0, 0)
     res = target.resolution_m
-    r_max = max(float(np.max(np.hypot(pts[:, 0], pts[:, 1]))), res)
     if theta_step_rad is None:
-        theta_step_rad = float(np.arccos(max(1.0 - res**2 / (2.0 * r_max**2), -1.0)))
+        theta_step_rad = angular_step(pts, res)
     n_th = int(np.ceil(window_theta_rad / theta_step_rad))
     thetas = init[2] + theta_step_rad * np.arange(-n_th, n_th + 1)
     n_xy = int(np.ceil(window_xy_m / res))
@@ -129,14 +136,11 @@ def correlative_match(
     iy0 = np.floor((wy - target.origin[1]) / res).astype(np.intp) + start
     # Upper bounds of every (rotation, block_y, block_x): sum over points of M.
     boff = np.arange(n_blocks) * block
-    bounds = np.empty((len(thetas), n_blocks, n_blocks))
-    for t in range(len(thetas)):
-        vals = _lookup(
-            coarse,
-            ix0[t][:, None, None] + boff[None, None, :],
-            iy0[t][:, None, None] + boff[None, :, None],
-        )
-        bounds[t] = vals.sum(axis=0)
+    bounds = _lookup(
+        coarse,
+        ix0[:, :, None, None] + boff[None, None, None, :],
+        iy0[:, :, None, None] + boff[None, None, :, None],
+    ).sum(axis=1)  # (T, block_y, block_x): all rotations in one lookup
     order = np.argsort(bounds, axis=None)[::-1]
     best_score, best = -1.0, (0, 0, 0)
     n_eval = 0
@@ -145,8 +149,10 @@ def correlative_match(
         t, by, bx = np.unravel_index(flat, bounds.shape)
         if bounds[t, by, bx] <= best_score:
             break
-        ox = boff[bx] + foff
-        oy = boff[by] + foff
+        # The last block of a row may reach past the window: its cells beyond are left out
+        # (the block's bound, over all its cells, stays an upper bound).
+        ox = boff[bx] + foff[boff[bx] + foff <= 2 * n_xy]
+        oy = boff[by] + foff[boff[by] + foff <= 2 * n_xy]
         vals = _lookup(
             fine,
             ix0[t][:, None, None] + ox[None, None, :],
@@ -156,7 +162,7 @@ def correlative_match(
         k = int(np.argmax(vals))
         if vals.flat[k] > best_score:
             best_score = float(vals.flat[k])
-            best = (int(t), int(oy[k // block]), int(ox[k % block]))
+            best = (int(t), int(oy[k // len(ox)]), int(ox[k % len(ox)]))
     t, oy_c, ox_c = best
     pose = np.array(
         [init[0] + (start + ox_c) * res, init[1] + (start + oy_c) * res, thetas[t]],

@@ -62,3 +62,20 @@ def test_branch_and_bound_equals_brute_force() -> None:
     assert bnb.score == pytest.approx(brute.score, abs=1e-12)
     n_poses = (2 * 5 + 1) ** 2 * len(np.arange(-0.15, 0.15 + 1e-9, 0.01))
     assert bnb.n_evaluated < n_poses
+
+
+def test_search_stays_inside_its_window_on_both_sides():
+    """The branch-and-bound blocks tile more than the window (2 n + 1 cells in blocks of
+    8): a best pose outside the window, on either side, is not returned."""
+    rng = np.random.default_rng(0)
+    pts = rng.uniform(-3, 3, (300, 2))
+    table = LikelihoodTable(pts, 0.1, 0.1, margin_m=2.0)
+    for shift in ([1.0, 0.0], [-1.0, 0.0], [0.0, 0.9], [0.0, -0.9]):
+        res = correlative_match(
+            pts - np.array(shift), table, np.zeros(3), window_xy_m=0.4, window_theta_rad=0.0
+        )
+        assert np.all(np.abs(res.pose[:2]) <= 0.4 + 1e-9)
+    inside = correlative_match(
+        pts - np.array([0.3, -0.2]), table, np.zeros(3), window_xy_m=0.4, window_theta_rad=0.0
+    )
+    assert np.allclose(inside.pose, [0.3, -0.2, 0.0]) and inside.score > 0.99
