@@ -4,24 +4,21 @@ Augmented MCL (*Probabilistic Robotics* Table 8.3) puts random poses into the on
 when the fit drops; the heaviest cluster is then the estimate, so a random pose that fits
 *less badly* than a tracked cloud fitting badly wins, wherever it is. Here the random poses
 go into a second particle set, the **challenger**: a global localization filter of its own
-(uniform start over the free space, Table 8.3 inside it with the tracked set's ``w_slow`` as
-its reference, drawing random poses while its fit is below the acceptance level), run beside the tracked set only
-while the tracked set's recovery gate is open (``AMCLFilter.gate_open``). It replaces the
-tracked set only once it is *verified*: for ``recovery_accept_updates`` consecutive filter
-updates its scan fits at its estimate
+(uniform start over the free space; Table 8.3 inside it, against the tracked set's
+``w_slow`` and gated at the acceptance level, so it keeps drawing random poses until it
+fits well enough to be adopted). It runs only while the tracked set's recovery gate is
+open (``AMCLFilter.gate_open``) and replaces the tracked set only once it is *verified*:
+for ``recovery_accept_updates`` consecutive filter updates its scan fits at its estimate
 
 * at least ``recovery_accept_ratio * w_ref`` per beam (``w_ref`` the tracked set's reference,
   the fit a correctly localized filter has had: a kidnapped robot's true pose reaches it, a
   stranger on a stale map does not), and
 * better than the tracked set's fit at the tracked estimate.
 
-The challenger lives until the tracked set's own fit is back at ``w_ref`` (this update's
-per-beam average, as local resetting ends), not merely until the gate closes: local resetting
-can lift ``w_fast`` above the gate's threshold for a few updates after a kidnapping, and a
-challenger dropped then would start from scratch each time. Hypothesis
-verification before a new hypothesis is believed is the rule of multi-hypothesis
-localization (Jensfelt & Kristensen 2001, IEEE T-RA 17(5), §IV); Lenser & Veloso's sensor
-resetting (2000) and Table 8.3 both adopt new poses without it.
+When the gate closes (the tracked set fits again) the challenger is dropped. Verifying a
+new hypothesis before believing it is the rule of multi-hypothesis localization (Jensfelt
+& Kristensen 2001, IEEE T-RA 17(5)); Lenser & Veloso's sensor resetting (2000) and Table
+8.3 both adopt new poses without it.
 """
 
 from __future__ import annotations
@@ -66,12 +63,10 @@ class VerifiedRecovery:
         challenger, and adopt it into ``tracked`` when verified (returns True then; the
         caller re-takes the estimate). ``odom_old``: the odometry at the previous update
         (None at the first update of a run)."""
+        if not tracked.gate_open():
+            self.reset()  # the tracked set fits again (or never stopped)
+            return False
         ch = self.challenger
-        if ch is None and not tracked.gate_open():
-            return False
-        if ch is not None and tracked.w_last >= tracked.reference_weight():
-            self.reset()  # the tracked set fits as well as it did before: no longer lost
-            return False
         if ch is None:
             ch = copy.copy(tracked)  # shares the map, likelihood table and free cells
             # Table 8.3 inside the challenger, gated at the acceptance level: it keeps
