@@ -17,6 +17,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import pickle
 import tempfile
 import time
@@ -29,6 +30,14 @@ from dynmap_sim.agent.localization.particle_filter import StaticMCL
 from dynmap_sim.experiments.runner import ExperimentRunner
 from dynmap_sim.experiments.scenario import parse_scenario
 from dynmap_sim.types import Odometry, Prior, Scan
+
+
+def _value(text: str) -> object:
+    """An ``--override`` value: JSON where it parses (numbers, true/false), else the text."""
+    try:
+        return json.loads(text)
+    except ValueError:
+        return text
 
 
 def record(world: str, days: int, seed: int) -> tuple[object, list[dict[str, np.ndarray]]]:
@@ -77,12 +86,14 @@ def main() -> None:
     ap.add_argument("--days", type=int, default=4)
     ap.add_argument("--trials", type=int, default=20)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--override", action="append", default=[], help="MCLConfig field=value")
+    ap.add_argument(
+        "--override",
+        action="append",
+        default=[],
+        help="MCLConfig field=value (repeatable; the value as JSON, else as text)",
+    )
     args = ap.parse_args()
-    overrides = {k: float(v) for k, _, v in (o.partition("=") for o in args.override)}
-    for k in ("min_particles", "max_particles", "max_beams"):
-        if k in overrides:
-            overrides[k] = int(overrides[k])
+    overrides = {k: _value(v) for k, _, v in (o.partition("=") for o in args.override)}
     t0 = time.perf_counter()
     laser, runs = record("apartment", args.days, args.seed)
     print(

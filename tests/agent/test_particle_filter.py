@@ -23,6 +23,7 @@ from dynmap_sim.agent.localization.likelihood_field import (
 from dynmap_sim.agent.localization.motion_model import decompose_odometry, sample_odometry_motion
 from dynmap_sim.agent.localization.particle_filter import (
     CONFIGS,
+    GLOBAL_RECOVERY_MODES,
     NAV2_DEFAULT,
     TUNED,
     WALLS_ONLY,
@@ -34,6 +35,7 @@ from dynmap_sim.agent.localization.particle_filter import (
     weighted_pose_stats,
 )
 from dynmap_sim.agent.localization.resampling import low_variance_resample
+from dynmap_sim.agent.localization.verified_recovery import VerifiedRecovery
 from dynmap_sim.agent.localizer import MapUser, make_localizer
 from dynmap_sim.agent.maps.map_source import FirstRunMap, PriorWallsMap, make_map_source
 from dynmap_sim.types import Odometry, Prior, Scan
@@ -567,3 +569,85 @@ def test_local_resetting_yields_to_the_global_recovery():
     assert 1 <= local_updates <= TUNED.recovery_local_max_updates
     assert f.n_random_injected > 0  # ... then global
     assert NAV2_DEFAULT.recovery_local_ratio == 0.0
+
+
+# -- global recovery by a verified challenger (recovery_global = "verify") ---------------
+VERIFY = replace(TUNED, recovery_global="verify")  # tuned itself injects (Table 8.3)
+
+
+def test_verify_recovers_a_kidnapping_through_the_challenger():
+    """The kidnapped robot's true pose fits as well as tracking did: the challenger set finds
+    it and is adopted; no random pose ever enters the tracked set."""
+    segs = room()
+    rng = np.random.default_rng(11)
+    truth = path(laps=1)
+    odo = odometry(truth, rng)
+    loc = StaticMCL(
+        LASER,
+        np.random.default_rng(2),
+        config="tuned",
+        map_source="prior-walls",
+        overrides={"recovery_global": "verify"},
+    )
+    loc.begin_run(Prior(initial_pose=truth[0], walls=segs))
+    errs, _ = _run(loc, truth, odo, segs, rng)
+    assert errs.max() < 0.2 and loc.recovery.n_started == 0
+    truth2 = path(laps=1, start=2)
+    odo2 = odometry(truth2, rng)
+    odo2 = np.array([se2.compose(odo[-1], se2.between(odo2[0], o)) for o in odo2])
+    errs2, _ = _run(loc, truth2, odo2, segs, rng, t0=len(truth))
+    assert errs2[0] > 2.0  # it really was kidnapped
+    recovered = np.nonzero(errs2 < 0.2)[0]
+    assert len(recovered) and recovered[0] < 300  # within 30 s
+    assert np.all(errs2[recovered[0] + 50 :] < 0.2)
+    assert loc.recovery.n_adopted >= 1 and loc.recovery.challenger is None
+    assert loc.filter.n_random_injected == 0
+    clone = pickle.loads(pickle.dumps(loc))
+    assert clone.recovery.n_adopted == loc.recovery.n_adopted
+
+
+def test_verify_keeps_the_tracked_set_when_no_stranger_fits_well():
+    """Scans that fit nowhere (a map gone stale, a crowd) open the gate; the challenger then
+    fits better than the tracked set somewhere but not as well as tracking did, so it is
+    never adopted and the estimate stays; ``inject`` puts the random poses into the tracked
+    set instead. Good scans close the gate and drop the challenger."""
+    segs = room()
+    grid = OccupancyGrid.from_segments(segs, free_seed_xy_m=(1, 1))
+    pose = np.array([2.0, 2.0, 0.3])
+    good = raycast(pose, LASER.angles(), segs, LASER.range_max_m)
+    junk = np.random.default_rng(4).uniform(0.3, 2.0, len(good))
+    cov = np.diag([0.02**2, 0.02**2, 0.01**2])
+    for cfg in (VERIFY, TUNED):
+        rng = np.random.default_rng(9)
+        f = AMCLFilter(grid, LASER, cfg)
+        f.init_gaussian(pose, cov, rng)
+        rec = VerifiedRecovery()
+        est, off_m = None, 0.0
+        for scan in [good] * 10 + [junk] * 40:
+            f.correct(scan)
+            est, _ = f.estimate()
+            if cfg.recovery_global == "verify":
+                rec.step(f, est, scan, pose, pose, rng)
+            f.resample(rng, center=est)
+            off_m = max(off_m, float(np.hypot(*(est[:2] - pose[:2]))))
+        if cfg.recovery_global == "verify":
+            assert rec.n_started >= 1 and rec.n_adopted == 0
+            assert f.n_random_injected == 0
+            assert off_m < 1.0  # local resetting wanders a little
+            for _ in range(10):
+                f.correct(good)
+                est, _ = f.estimate()
+                rec.step(f, est, good, pose, pose, rng)
+                f.resample(rng, center=est)
+            assert rec.challenger is None and np.hypot(*(est[:2] - pose[:2])) < 0.3
+        else:  # the random poses go into the tracked set (and may win there)
+            assert f.n_random_injected > 0
+
+
+def test_recovery_global_is_validated():
+    with pytest.raises(ValueError, match="recovery_global"):
+        replace(TUNED, recovery_global="challenge")
+    with pytest.raises(ValueError, match="recovery_w_avg_per_beam"):
+        replace(NAV2_DEFAULT, recovery_global="verify")
+    assert TUNED.recovery_global in GLOBAL_RECOVERY_MODES
+    assert NAV2_DEFAULT.recovery_global == "inject"
