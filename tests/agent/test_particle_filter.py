@@ -353,31 +353,37 @@ def test_map_sources_by_name_and_as_objects():
     assert "n_particles" in est.extras
 
 
+def tuned_on_walls(**params) -> StaticMCL:
+    """``static-mcl`` tuned on the prior's walls, filter seed 2, with ``params``."""
+    return StaticMCL(
+        LASER, np.random.default_rng(2), config="tuned", map_source="prior-walls", **params
+    )
+
+
+def kidnap_and_recover(loc, odo_now, t0, segs, rng) -> None:
+    """Carry the robot to the opposite corner (odometry, at ``odo_now``, does not notice) and
+    check that ``loc`` finds it within 30 s and stays there."""
+    truth2 = path(laps=1, start=2)
+    odo2 = odometry(truth2, rng)
+    odo2 = np.array([se2.compose(odo_now, se2.between(odo2[0], o)) for o in odo2])
+    errs2, _ = _run(loc, truth2, odo2, segs, rng, t0=t0)
+    assert errs2[0] > 2.0  # it really was kidnapped
+    recovered = np.nonzero(errs2 < 0.2)[0]
+    assert len(recovered) and recovered[0] < 300  # within 30 s
+    assert np.all(errs2[recovered[0] + 50 :] < 0.2)
+
+
 def test_global_localization_and_kidnap_recovery():
     segs = room()
     rng = np.random.default_rng(11)
     truth = path(laps=2)
     odo = odometry(truth, rng)
-    loc = StaticMCL(
-        LASER,
-        np.random.default_rng(2),
-        config="tuned",
-        map_source="prior-walls",
-        global_localization=True,
-    )
+    loc = tuned_on_walls(global_localization=True)
     loc.begin_run(Prior(initial_pose=truth[0], walls=segs))
     errs, _ = _run(loc, truth, odo, segs, rng)
     n_lap = len(path(laps=1))
     assert np.all(errs[n_lap:] < 0.2)  # converged within the first lap
-    # Kidnapping: the robot is carried to the opposite corner; odometry does not notice.
-    truth2 = path(laps=1, start=2)
-    odo2 = odometry(truth2, rng)
-    odo2 = np.array([se2.compose(odo[-1], se2.between(odo2[0], o)) for o in odo2])
-    errs2, _ = _run(loc, truth2, odo2, segs, rng, t0=len(truth))
-    assert errs2[0] > 2.0  # it really was kidnapped
-    recovered = np.nonzero(errs2 < 0.2)[0]
-    assert len(recovered) and recovered[0] < 300  # within 30 s
-    assert np.all(errs2[recovered[0] + 50 :] < 0.2)
+    kidnap_and_recover(loc, odo[-1], len(truth), segs, rng)
 
 
 def test_nav2_default_values():
@@ -582,24 +588,11 @@ def test_verify_recovers_a_kidnapping_through_the_challenger():
     rng = np.random.default_rng(11)
     truth = path(laps=1)
     odo = odometry(truth, rng)
-    loc = StaticMCL(
-        LASER,
-        np.random.default_rng(2),
-        config="tuned",
-        map_source="prior-walls",
-        overrides={"recovery_global": "verify"},
-    )
+    loc = tuned_on_walls(overrides={"recovery_global": "verify"})
     loc.begin_run(Prior(initial_pose=truth[0], walls=segs))
     errs, _ = _run(loc, truth, odo, segs, rng)
     assert errs.max() < 0.2 and loc.recovery.n_started == 0
-    truth2 = path(laps=1, start=2)
-    odo2 = odometry(truth2, rng)
-    odo2 = np.array([se2.compose(odo[-1], se2.between(odo2[0], o)) for o in odo2])
-    errs2, _ = _run(loc, truth2, odo2, segs, rng, t0=len(truth))
-    assert errs2[0] > 2.0  # it really was kidnapped
-    recovered = np.nonzero(errs2 < 0.2)[0]
-    assert len(recovered) and recovered[0] < 300  # within 30 s
-    assert np.all(errs2[recovered[0] + 50 :] < 0.2)
+    kidnap_and_recover(loc, odo[-1], len(truth), segs, rng)
     assert loc.recovery.n_adopted >= 1 and loc.recovery.challenger is None
     assert loc.filter.n_random_injected == 0
     clone = pickle.loads(pickle.dumps(loc))
