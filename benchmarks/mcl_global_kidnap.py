@@ -17,7 +17,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 import pickle
 import tempfile
 import time
@@ -27,17 +26,10 @@ import numpy as np
 
 from dynmap_sim import se2
 from dynmap_sim.agent.localization.particle_filter import StaticMCL
+from dynmap_sim.experiments.replay import json_or_text
 from dynmap_sim.experiments.runner import ExperimentRunner
 from dynmap_sim.experiments.scenario import parse_scenario
 from dynmap_sim.types import Odometry, Prior, Scan
-
-
-def _value(text: str) -> object:
-    """An ``--override`` value: JSON where it parses (numbers, true/false), else the text."""
-    try:
-        return json.loads(text)
-    except ValueError:
-        return text
 
 
 def record(world: str, days: int, seed: int) -> tuple[object, list[dict[str, np.ndarray]]]:
@@ -93,7 +85,7 @@ def main() -> None:
         help="MCLConfig field=value (repeatable; the value as JSON, else as text)",
     )
     args = ap.parse_args()
-    overrides = {k: _value(v) for k, _, v in (o.partition("=") for o in args.override)}
+    overrides = {k: json_or_text(v) for k, _, v in (o.partition("=") for o in args.override)}
     t0 = time.perf_counter()
     laser, runs = record("apartment", args.days, args.seed)
     print(

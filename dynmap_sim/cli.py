@@ -533,16 +533,14 @@ def _cmd_slam_eval(args: argparse.Namespace) -> int:
         if p.exists() and not args.force:
             raise InputError(f"{opt} {p}: exists; pass --force to replace it or choose another")
     from dynmap_sim.agent.mapping.first_run import FirstRunConfig
+    from dynmap_sim.experiments.replay import json_or_text
 
     params: dict = {}
     for item in args.mapper_param or []:
         key, sep, val = item.partition("=")
         if not sep or not key.strip():
             raise InputError(f"--mapper-param {item!r}: expected KEY=VALUE")
-        try:
-            params[key.strip()] = json.loads(val)
-        except json.JSONDecodeError:
-            params[key.strip()] = val
+        params[key.strip()] = json_or_text(val)
     try:
         config = FirstRunConfig.from_params(**params)
     except (TypeError, ValueError) as exc:

@@ -62,6 +62,15 @@ from dynmap_sim.io.carmen import CarmenLog, read_carmen
 from dynmap_sim.types import Prior
 
 
+def json_or_text(text: str) -> Any:
+    """A command-line parameter value: JSON where it parses (numbers, true/false, lists),
+    else the text itself."""
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        return text
+
+
 def parse_localizer_arg(arg: str) -> tuple[str, dict[str, Any]]:
     """``"name,key=value,..."`` -> ``(name, params)``; values parsed as JSON when possible."""
     name, *rest = [s.strip() for s in arg.split(",") if s.strip()]
@@ -70,10 +79,7 @@ def parse_localizer_arg(arg: str) -> tuple[str, dict[str, Any]]:
         key, sep, val = item.partition("=")
         if not sep or not key:
             raise InputError(f"--localizer {arg!r}: expected name,key=value,... got {item!r}")
-        try:
-            params[key] = json.loads(val)
-        except json.JSONDecodeError:
-            params[key] = val
+        params[key] = json_or_text(val)
     return name, params
 
 
