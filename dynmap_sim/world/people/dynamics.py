@@ -122,10 +122,7 @@ def social_force(
     position (None: no robot).
     """
     n = crowd.n
-    to_goal = goal - z
-    e = to_goal / np.maximum(np.abs(to_goal), 1e-9)
-    # driving term (H&M eq. 2)
-    force = k.v0_tau * e - v * (1.0 / TAU_S)
+    e, force = driving_force(z, v, goal, k)
     diff = source_vectors(z, rows, rz)
     d = np.abs(diff)
     # smallest gaps before the move [m]: between two bodies, and per person to a segment
@@ -136,6 +133,19 @@ def social_force(
         return force, pair_gap, wall_gap, np.inf
     force += evasion(e, diff[:, n], d[:, n], k)
     return force, pair_gap, wall_gap, float((d[:, n] - k.robot_need).min())
+
+
+def driving_force(
+    z: NDArray[np.complex128],
+    v: NDArray[np.complex128],
+    goal: NDArray[np.complex128],
+    k: StepConstants,
+) -> tuple[NDArray[np.complex128], NDArray[np.complex128]]:
+    """The unit vectors ``e`` toward the goals and the driving term ``v0 e / tau - v / tau``
+    (H&M eq. 2) of people at ``z`` with velocities ``v``."""
+    to_goal = goal - z
+    e = to_goal / np.maximum(np.abs(to_goal), 1e-9)
+    return e, k.v0_tau * e - v * (1.0 / TAU_S)
 
 
 def source_vectors(

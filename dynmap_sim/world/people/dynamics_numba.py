@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 from dynmap_sim.jit import compiled
 from dynmap_sim.jit import numba_available as numba_available  # re-exported
 from dynmap_sim.world.people.crowd import Crowd
-from dynmap_sim.world.people.dynamics import _FAR, StepConstants
+from dynmap_sim.world.people.dynamics import _FAR, StepConstants, driving_force
 from dynmap_sim.world.people.obstacles import Obstacles
 from dynmap_sim.world.people.params import (
     B_EVADE,
@@ -38,7 +38,6 @@ from dynmap_sim.world.people.params import (
     PROGRESS_M,
     REACH_M,
     STUCK_S,
-    TAU_S,
 )
 from dynmap_sim.world.polygons import FloatArray
 
@@ -295,9 +294,7 @@ def social_force(
 ) -> tuple[NDArray[np.complex128], float, FloatArray, float]:
     """:func:`.dynamics.social_force`, with the kernels: the same force and gaps."""
     n = crowd.n
-    to_goal = goal - z
-    e = to_goal / np.maximum(np.abs(to_goal), 1e-9)
-    force = k.v0_tau * e - v * (1.0 / TAU_S)
+    e, force = driving_force(z, v, goal, k)
     diff = source_vectors(kern, z, rows, rz)
     d = np.abs(diff)
     arg = np.empty_like(d)
