@@ -372,8 +372,7 @@ class KeyframeSLAM:
                     if not res.rmse_m < alt.rmse_m * margin:
                         res = alt
                         self.n_seed_refuted += 1
-                n_used = len(pts[:: max(1, len(pts) // 400)])
-                if res.n_matched >= max(15, 0.3 * n_used) and res.rmse_m < 0.08:
+                if res.n_matched >= max(15, 0.3 * len(sub)) and res.rmse_m < 0.08:
                     self.pose = res.pose
                     self.cov = res.cov
                     accepted = True
