@@ -21,7 +21,6 @@ from dynmap_sim.world.people import Crowd, SocialForce
 from dynmap_sim.world.people.legs import leg_centres_into
 from dynmap_sim.world.people.params import LEG_RADIUS_M
 from dynmap_sim.world.people.social_force import check_backend
-from dynmap_sim.world.people.social_force import kernels as people_kernels
 from dynmap_sim.world.polygons import FloatArray, polygon_edges
 from dynmap_sim.world.schedule import ObjectState, Schedule, Snapshot
 from dynmap_sim.world.spec import WorldSpec
@@ -200,8 +199,8 @@ class World:
         if self._crowd.n:
             circles = self._circles_template.copy()
             ns = self._static.circles.shape[0]
-            kernel = None if self.people_backend == "numpy" else people_kernels().legs
-            leg_centres_into(self._crowd, circles[ns:, :2].view(np.complex128)[:, 0], kernel)
+            legs = self._forces.backend_ops().legs
+            leg_centres_into(self._crowd, circles[ns:, :2].view(np.complex128)[:, 0], legs)
         else:
             circles = self._static.circles
         self._geometry = GeometryView(

@@ -34,18 +34,14 @@ def _compare(world_name: str, day: int, run: int, steps: int, python: bool, robo
         w.reset(day, run)
     fast.people_backend = "numba"  # the kernels (the check for numba is bypassed)
     fast._forces.backend = "numba"
+    fast._forces._ops = sf_module.compiled_ops(python=python)
     assert fast.crowd.n > 0
-    saved = sf_module._KERNELS
-    sf_module._KERNELS = Kernels(python=python)
-    try:
-        start = ref.crowd.pos[0]  # among the people: their goals, comfort discs, evasion
-        for i, pose in enumerate(_robot_path(steps, start)):
-            rp = pose if robot else None
-            ref.step(0.1, robot_pose=rp)
-            fast.step(0.1, robot_pose=rp)
-            assert _state(fast) == _state(ref), f"step {i}"
-    finally:
-        sf_module._KERNELS = saved
+    start = ref.crowd.pos[0]  # among the people: their goals, comfort discs, evasion
+    for i, pose in enumerate(_robot_path(steps, start)):
+        rp = pose if robot else None
+        ref.step(0.1, robot_pose=rp)
+        fast.step(0.1, robot_pose=rp)
+        assert _state(fast) == _state(ref), f"step {i}"
 
 
 @pytest.mark.parametrize("robot", [True, False])

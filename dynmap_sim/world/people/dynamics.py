@@ -194,6 +194,11 @@ def evasion(
     return mag * np.where(er.imag > KEEP_RIGHT_M, 1j, -1j) * e
 
 
+def speed_factor(v: NDArray[np.complex128], k: StepConstants) -> FloatArray:
+    """The speed cap's factor ``min(1, vmax / max(|v|, 1e-9))`` (H&M eq. 8)."""
+    return np.minimum(1.0, k.vmax / np.maximum(np.abs(v), 1e-9))
+
+
 def goals_due(
     crowd: Crowd,
     goal: NDArray[np.complex128],

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from typing import Any
+from collections.abc import Callable
+from functools import partial
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -11,7 +13,12 @@ from dynmap_sim.world.people import legs as _legs
 from dynmap_sim.world.people import spawning
 from dynmap_sim.world.people.correction import correct
 from dynmap_sim.world.people.crowd import Crowd
-from dynmap_sim.world.people.dynamics import StepConstants, goals_due, social_force
+from dynmap_sim.world.people.dynamics import (
+    StepConstants,
+    goals_due,
+    social_force,
+    speed_factor,
+)
 from dynmap_sim.world.people.obstacles import Obstacles
 from dynmap_sim.world.people.params import ROBOT_GAP_M, STRIDE_M
 from dynmap_sim.world.polygons import FloatArray
@@ -35,20 +42,21 @@ class SocialForce:
         self.obstacles = Obstacles(segments, broad_phase, outline_starts)
         self._consts: StepConstants | None = None
         self._views: tuple[NDArray[Any], ...] | None = None
+        self._ops: StepOps | None = None
         self.backend = check_backend(backend)
 
     def __getstate__(self) -> dict[str, Any]:
         """Pickle without the step's caches: the complex views (a pickled view would be a
         copy, no longer writing through to the crowd's arrays) and the constants; both are
-        made again on the next step."""
+        made again on the next step (and the backend's operations)."""
         state = self.__dict__.copy()
-        state["_views"] = state["_consts"] = None
+        state["_views"] = state["_consts"] = state["_ops"] = None
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         """Restore, dropping the caches of states pickled before they were left out."""
         self.__dict__.update(state)
-        self._views = self._consts = None
+        self._views = self._consts = self._ops = None
         self.__dict__.setdefault("backend", "numpy")
 
     @property
@@ -135,60 +143,33 @@ class SocialForce:
         if crowd.n == 0:
             return
         z, v, goal = self._complex_views(crowd)
-        if self.backend == "numba":
-            self._step_compiled(crowd, dt_s, robot_xy, robot_radius_m, z, v, goal)
-            return
-        rows = self.obstacles.rows(z)  # candidate segments (static geometry within REACH_M)
+        ops = self.backend_ops()
+        rows = ops.rows(self.obstacles, z)  # candidate segments (static geometry within REACH_M)
         k = self._constants(crowd, robot_radius_m, rows.shape[1])
         rz = None if robot_xy is None else complex(float(robot_xy[0]), float(robot_xy[1]))
-        force, pair_gap, wall_gap, robot_gap = social_force(crowd, z, v, goal, rows, rz, k)
+        force, pair_gap, wall_gap, robot_gap = ops.social_force(crowd, z, v, goal, rows, rz, k)
         v += dt_s * force
-        v *= np.minimum(1.0, k.vmax / np.maximum(np.abs(v), 1e-9))  # H&M eq. 8
+        v *= ops.speed_factor(v, k)  # H&M eq. 8
         old = z.copy()
         z += dt_s * v
         # a move is at most dt * vmax (plus rounding): the robot's disc is checked only when
         # someone was that close to it
         moved_max_m = dt_s * k.vmax_max * (1.0 + 1e-9) + 1e-9
         gaps = (pair_gap, wall_gap, robot_gap)
-        disp = correct(crowd, z, v, rows, rz, k, old, gaps, moved_max_m)
+        disp = correct(crowd, z, v, rows, rz, k, old, gaps, moved_max_m, ops.pair_push)
         crowd.phase += disp * (2 * np.pi / STRIDE_M)
-        redo = goals_due(crowd, goal, z, dt_s, rz, k)
-        if not redo.any():
+        redo = ops.goals_due(crowd, goal, z, dt_s, rz, k)
+        if redo is None or not redo.any():
             return
         avoid = None if rz is None else (robot_xy, robot_radius_m + ROBOT_GAP_M + 0.1)
         spawning.renew_goals(crowd, redo, self.populations, self.obstacles, self.rng, avoid)
 
-    def _step_compiled(
-        self,
-        crowd: Crowd,
-        dt_s: float,
-        robot_xy: FloatArray | None,
-        robot_radius_m: float,
-        z: NDArray[np.complex128],
-        v: NDArray[np.complex128],
-        goal: NDArray[np.complex128],
-    ) -> None:
-        """:meth:`step` with the kernels of :mod:`.dynamics_numba` (the same numbers)."""
-        from dynmap_sim.world.people import dynamics_numba as dn
-
-        kern = kernels()
-        rows = dn.candidate_rows(kern, self.obstacles, z)
-        k = self._constants(crowd, robot_radius_m, rows.shape[1])
-        rz = None if robot_xy is None else complex(float(robot_xy[0]), float(robot_xy[1]))
-        force, pair_gap, wall_gap, robot_gap = dn.social_force(kern, crowd, z, v, goal, rows, rz, k)
-        v += dt_s * force
-        v *= dn.speed_factor(kern, v, k)  # H&M eq. 8
-        old = z.copy()
-        z += dt_s * v
-        moved_max_m = dt_s * k.vmax_max * (1.0 + 1e-9) + 1e-9
-        gaps = (pair_gap, wall_gap, robot_gap)
-        disp = correct(crowd, z, v, rows, rz, k, old, gaps, moved_max_m, kern.pair_push)
-        crowd.phase += disp * (2 * np.pi / STRIDE_M)
-        redo = dn.goals_due(kern, crowd, goal, z, dt_s, rz, k)
-        if redo is None:
-            return
-        avoid = None if rz is None else (robot_xy, robot_radius_m + ROBOT_GAP_M + 0.1)
-        spawning.renew_goals(crowd, redo, self.populations, self.obstacles, self.rng, avoid)
+    def backend_ops(self) -> StepOps:
+        """The backend's operations: numpy's (:mod:`.dynamics`) or, with the numba backend,
+        the kernels of :mod:`.dynamics_numba` (the same numbers)."""
+        if self._ops is None:
+            self._ops = NUMPY_OPS if self.backend == "numpy" else compiled_ops()
+        return self._ops
 
     @staticmethod
     def legs(crowd: Crowd) -> tuple[FloatArray, NDArray[np.int32]]:
@@ -222,14 +203,37 @@ def check_backend(backend: str) -> str:
     return backend
 
 
-_KERNELS: Any = None
+class StepOps(NamedTuple):
+    """What differs between the backends in a step of :meth:`SocialForce.step` and in
+    placing the legs."""
+
+    rows: Callable[[Obstacles, NDArray[np.complex128]], NDArray[np.complex128]]
+    social_force: Callable[..., tuple[NDArray[np.complex128], float, FloatArray, float]]
+    speed_factor: Callable[[NDArray[np.complex128], StepConstants], FloatArray]
+    #: who needs a new goal (a mask, or None when nobody does)
+    goals_due: Callable[..., NDArray[np.bool_] | None]
+    #: the compiled weights of the pair separation (None: numpy's)
+    pair_push: Callable[..., bool] | None
+    #: the compiled heading and swing of the legs (None: numpy's;
+    #: :func:`.legs.leg_centres_into`)
+    legs: Callable[..., None] | None
 
 
-def kernels() -> Any:
-    """The compiled kernels of :mod:`.dynamics_numba` (imported on first use)."""
-    global _KERNELS
-    if _KERNELS is None:
-        from dynmap_sim.world.people.dynamics_numba import Kernels
+NUMPY_OPS = StepOps(Obstacles.rows, social_force, speed_factor, goals_due, None, None)
 
-        _KERNELS = Kernels()
-    return _KERNELS
+
+def compiled_ops(python: bool = False) -> StepOps:
+    """:class:`StepOps` of the numba backend: :mod:`.dynamics_numba`'s functions with its
+    compiled kernels (imported on first use; ``python=True``: the plain-Python kernels, for
+    tests)."""
+    from dynmap_sim.world.people import dynamics_numba as dn
+
+    kern = dn.Kernels(python=python)
+    return StepOps(
+        partial(dn.candidate_rows, kern),
+        partial(dn.social_force, kern),
+        partial(dn.speed_factor, kern),
+        partial(dn.goals_due, kern),
+        kern.pair_push,
+        kern.legs,
+    )
