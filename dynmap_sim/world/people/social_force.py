@@ -177,11 +177,6 @@ class SocialForce:
         return _legs.legs(crowd)
 
     @staticmethod
-    def legs_into(crowd: Crowd, out: FloatArray) -> None:
-        """Write the two leg circles of each person into rows of ``out`` ``(2P, 3)``."""
-        _legs.legs_into(crowd, out)
-
-    @staticmethod
     def poses(crowd: Crowd) -> FloatArray:
         """People poses ``(P, 3)``: position and heading of motion [m, rad]."""
         return _legs.poses(crowd)
