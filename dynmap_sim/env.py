@@ -333,6 +333,14 @@ class DynMapEnv(gymnasium.Env):
     def _advance(self, action: Any) -> tuple[FloatArray, bool, float, bool, bool]:
         """Everything of :meth:`step` but the observation: the robot's new pose, the
         collision flag, reward, terminated and truncated."""
+        pose, collision = self._drive(action)
+        self.world.step(self.dt_s, robot_pose=pose, robot_radius_m=self.robot_params.radius_m)
+        return self._score(pose, collision)
+
+    def _drive(self, action: Any) -> tuple[FloatArray, bool]:
+        """The first part of a step: check ``action``, move the robot and count the
+        odometry; the robot's new pose and the collision flag (then the world steps, then
+        :meth:`_score`)."""
         if not self._started:
             raise RuntimeError("call reset() before step()")
         kind = np.asarray(action).dtype.kind
@@ -352,15 +360,20 @@ class DynMapEnv(gymnasium.Env):
         w = min(max(w, lo[1]), hi[1])
         res = self.robot.step(v, w, self.dt_s, self._rng_slip)
         self.odometry.update(res.dphi_left_rad, res.dphi_right_rad, self._rng_odom)
-        pose = self.robot.pose
-        self.world.step(self.dt_s, robot_pose=pose, robot_radius_m=self.robot_params.radius_m)
+        return self.robot.pose, res.collision
+
+    def _score(
+        self, pose: FloatArray, collision: bool
+    ) -> tuple[FloatArray, bool, float, bool, bool]:
+        """The last part of a step (after the world stepped): route progress, reward,
+        terminated and truncated."""
         self._steps += 1
         x, y = float(pose[0]), float(pose[1])
         gained = self.route.update(x, y)
-        reward = gained - (self.collision_penalty if res.collision else 0.0)
+        reward = gained - (self.collision_penalty if collision else 0.0)
         terminated = self.route.done(x, y)
         truncated = self._steps >= self.max_episode_steps and not terminated
-        return pose, res.collision, float(reward), terminated, truncated
+        return pose, collision, float(reward), terminated, truncated
 
     def _observe(
         self,

@@ -20,9 +20,12 @@ Batched: the scans of all sub-envs are cast in one pass
 their own, then the broad phase and intersections of every env's (beam, shape) pairs are one
 set of numpy calls), and their noise is one pass too (:meth:`Lidar.apply_noise_rows`: each
 env's draws from its own generator, in its own order, the arithmetic once), with the same
-numbers as one env at a time. Not batched: each sub-env's robot and world (people, pymunk
-bodies) run one after another; the gain over ``SyncVectorEnv`` is the copies and layers it
-skips plus the shared cast and noise (measured in ``benchmarks/bench_peers.py``).
+numbers as one env at a time. The worlds step together too
+(:class:`~dynmap_sim.world.world.WorldBatch`): the people of all sub-envs on the numpy
+backend move in one social-force step (:class:`~dynmap_sim.world.people.batch.CrowdBatch`)
+and their legs are placed in one pass. Not batched: each sub-env's robot (pymunk contacts,
+odometry) and its people's pymunk bodies near the robot run one after another (measured
+in ``benchmarks/bench_peers.py``).
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ from gymnasium.vector.utils import batch_space
 
 from dynmap_sim.env import DynMapEnv
 from dynmap_sim.sensors.lidar import cast_many
+from dynmap_sim.world.world import WorldBatch
 
 
 class DynMapVectorEnv(VectorEnv):
@@ -62,6 +66,8 @@ class DynMapVectorEnv(VectorEnv):
         self._terminations = np.zeros(num_envs, dtype=np.bool_)
         self._truncations = np.zeros(num_envs, dtype=np.bool_)
         self._autoreset = np.zeros(num_envs, dtype=np.bool_)
+        self._worlds = WorldBatch()  # steps the sub-envs' worlds together
+        self._dt_s = first.dt_s  # the same for all (the same arguments)
         # one noise pass for all scans needs the same laser, noise model and per-beam bias
         lid = first.lidar
         self._same_lidars = all(
@@ -138,7 +144,7 @@ class DynMapVectorEnv(VectorEnv):
         if a.shape != (self.num_envs, 2):
             raise ValueError(f"actions must have shape ({self.num_envs}, 2), got {a.shape}")
         infos: list[dict[str, Any]] = [{}] * self.num_envs
-        moved: list[tuple[int, np.ndarray, bool]] = []  # (env, pose, collision) to observe
+        driven: list[tuple[int, np.ndarray, bool]] = []  # (env, pose, collision)
         for i, env in enumerate(self.envs):
             if self._autoreset[i]:
                 obs, info = env.reset()
@@ -148,11 +154,23 @@ class DynMapVectorEnv(VectorEnv):
                 self._put(i, obs)
                 infos[i] = info
             else:
-                pose, collision, r, term, trunc = env._advance(a[i])
-                self._rewards[i] = r
-                self._terminations[i] = term
-                self._truncations[i] = trunc
-                moved.append((i, pose, collision))
+                pose, collision = env._drive(a[i])
+                driven.append((i, pose, collision))
+        # the worlds of all envs that moved, stepped together (people in one batch)
+        stepping = [self.envs[i] for i, _, _ in driven]
+        self._worlds.step(
+            [e.world for e in stepping],
+            self._dt_s,
+            [p for _, p, _ in driven],
+            [e.robot_params.radius_m for e in stepping],
+        )
+        moved: list[tuple[int, np.ndarray, bool]] = []  # (env, pose, collision) to observe
+        for env, (i, pose, collision) in zip(stepping, driven, strict=True):
+            _, _, r, term, trunc = env._score(pose, collision)
+            self._rewards[i] = r
+            self._terminations[i] = term
+            self._truncations[i] = trunc
+            moved.append((i, pose, collision))
         # the scans of all envs that moved, cast in one pass; noise and infos per env
         if moved:
             envs = [self.envs[i] for i, _, _ in moved]
