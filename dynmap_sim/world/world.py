@@ -249,8 +249,7 @@ class World:
 
     def _sync_near(self, dt_s: float, rxy: FloatArray, robot_radius_m: float) -> None:
         """After the people moved: bring the bodies near the robot at ``rxy`` up to date."""
-        near_m = robot_radius_m + SYNC_MARGIN_M + SYNC_SPEED_MPS * dt_s
-        self._sync_bodies(complex(rxy[0], rxy[1]), near_m)
+        self._sync_bodies(complex(rxy[0], rxy[1]), _near_m(dt_s, robot_radius_m))
 
     def _sync_bodies(self, robot_xy: complex | None, near_m: float = 0.0) -> None:
         """Move people's pymunk bodies to the crowd's state: all of them, or (with a robot)
@@ -267,8 +266,15 @@ class World:
             self._stale = True  # (cheaper than checking whether all were near)
             if not len(idx):
                 return
+        self._move_bodies(idx)
+
+    def _move_bodies(self, idx: Any) -> None:
+        """Move the pymunk bodies of the people ``idx`` (indices, or ``slice(None)``: all)
+        to the crowd's state."""
+        crowd = self._crowd
+        z = crowd.pos.view(np.complex128)[:, 0]
         bodies = self._people_bodies
-        which = range(crowd.n) if robot_xy is None else idx.tolist()
+        which = range(crowd.n) if isinstance(idx, slice) else idx.tolist()
         # the setters of the bodies' properties, without pymunk's per-attribute wrapper
         set_pos = pymunk.Body.position.fset
         set_vel = pymunk.Body.velocity.fset
@@ -279,7 +285,7 @@ class World:
             set_vel(body, uv)
             # the space is never stepped: refresh the shapes' cached positions for queries
             reindex(body)
-        synced[idx] = z[idx]
+        self._synced[idx] = z[idx]
 
     @property
     def space(self) -> pymunk.Space:
@@ -347,6 +353,11 @@ class World:
         return snap
 
 
+def _near_m(dt_s: float, robot_radius_m: float) -> float:
+    """How near the robot a person's body is kept up to date [m] (``SYNC_MARGIN_M``)."""
+    return robot_radius_m + SYNC_MARGIN_M + SYNC_SPEED_MPS * dt_s
+
+
 def _robot_xy(robot_pose: tuple[float, float, float] | FloatArray) -> FloatArray:
     """The robot's position ``(2,)`` from its pose."""
     return np.array((float(robot_pose[0]), float(robot_pose[1])))
@@ -387,10 +398,20 @@ class WorldBatch:
             [xy for _, xy, _ in batch],
             [rr for _, _, rr in batch],
         )
+        # the bodies near each robot (World._sync_bodies), tested for all people at once
+        z = self._crowds.positions()
+        counts = [w._crowd.n for w, _, _ in batch]
+        rz = np.repeat(np.array([complex(xy[0], xy[1]) for _, xy, _ in batch]), counts)
+        near_m = np.repeat(np.array([_near_m(dt_s, rr) for _, _, rr in batch]), counts)
+        synced = np.concatenate([w._synced for w, _, _ in batch])
+        near = (np.abs(z - rz) < near_m) | (np.abs(synced - rz) < near_m)
         legs = self._crowds.leg_centres()
         at = 0
-        for w, xy, rr in batch:
-            w._sync_near(dt_s, xy, rr)
-            n_legs = 2 * w._crowd.n
-            w._refresh_people(legs[at : at + n_legs])
-            at += n_legs
+        for w, _, _ in batch:
+            n = w._crowd.n
+            w._stale = True  # (as World._sync_bodies with a robot)
+            idx = near[at : at + n].nonzero()[0]
+            if len(idx):
+                w._move_bodies(idx)
+            w._refresh_people(legs[2 * at : 2 * (at + n)])
+            at += n

@@ -191,10 +191,17 @@ class CrowdBatch:
             s = slice(rows_at[i], rows_at[i + 1])
             spawning.renew_goals(crowds[i], redo[s], f.populations, f.obstacles, f.rng, avoid)
 
+    def positions(self) -> NDArray[np.complex128]:
+        """The positions ``x + iy`` of every person after the last :meth:`step`, crowd
+        after crowd."""
+        assert self._moved is not None
+        return self._moved.pos.view(np.complex128)[:, 0]
+
     def leg_centres(self) -> NDArray[np.complex128]:
         """The centres ``x + iy`` of the legs of every person after the last :meth:`step`,
         crowd after crowd (:func:`~.legs.leg_centres_into` of each crowd, in one pass)."""
         m = self._moved
+        assert m is not None
         out = np.empty(2 * m.pos.shape[0], dtype=np.complex128)
         leg_centres_into(m, out)  # type: ignore[arg-type]
         return out
