@@ -355,6 +355,10 @@ class DynMapEnv(gymnasium.Env):
         v, w = float(a[0]), float(a[1])
         if not (math.isfinite(v) and math.isfinite(w)):
             raise ValueError(f"action must be finite (v_mps, omega_radps), got {a.tolist()}")
+        return self._drive_vw(v, w)
+
+    def _drive_vw(self, v: float, w: float) -> tuple[FloatArray, bool]:
+        """:meth:`_drive` of a checked action: finite ``v`` [m/s], ``w`` [rad/s]."""
         lo, hi = self._act_bounds
         v = min(max(v, lo[0]), hi[0])
         w = min(max(w, lo[1]), hi[1])

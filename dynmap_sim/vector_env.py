@@ -106,6 +106,20 @@ class DynMapVectorEnv(VectorEnv):
         a = np.asarray(actions)
         if a.shape != (self.num_envs, 2):
             raise ValueError(f"actions must have shape ({self.num_envs}, 2), got {a.shape}")
+        # the checks of DynMapEnv._drive, for all actions at once (those of envs that reset
+        # are ignored, as SyncVectorEnv ignores them)
+        if a.dtype.kind not in "iuf" and not self._autoreset.all():
+            raise ValueError(
+                f"actions must be real numbers (v_mps, omega_radps), got {a.dtype} values {a!r}"
+            )
+        a = a.astype(np.float64) if a.dtype.kind in "iuf" else np.zeros((self.num_envs, 2))
+        bad = ~np.isfinite(a).all(axis=1) & ~self._autoreset
+        if bad.any():
+            i = int(bad.argmax())
+            raise ValueError(
+                f"action of env {i} must be finite (v_mps, omega_radps), got {a[i].tolist()}"
+            )
+        vw = a.tolist()
         driven: list[tuple[int, np.ndarray, bool]] = []  # (env, pose, collision)
         for i, env in enumerate(self.envs):
             if self._autoreset[i]:
@@ -114,7 +128,9 @@ class DynMapVectorEnv(VectorEnv):
                 self._terminations[i] = False
                 self._truncations[i] = False
             else:
-                pose, collision = env._drive(a[i])
+                if not env._started:
+                    raise RuntimeError("call reset() before step()")
+                pose, collision = env._drive_vw(*vw[i])
                 driven.append((i, pose, collision))
         # the worlds of all envs that moved, stepped together (people in one batch)
         stepping = [self.envs[i] for i, _, _ in driven]

@@ -122,6 +122,10 @@ def test_bad_arguments() -> None:
     v.reset(seed=0)
     with pytest.raises(ValueError, match="shape"):
         v.step(np.zeros((3, 2)))
+    with pytest.raises(ValueError, match="env 1 must be finite"):
+        v.step(np.array([[0.1, 0.0], [np.nan, 0.0]]))
+    with pytest.raises(ValueError, match="real numbers"):
+        v.step(np.array([["a", "b"], ["c", "d"]]))
     with pytest.raises(ValueError, match="seeds"):
         v.reset(seed=[1, 2, 3])
     with pytest.raises(ValueError, match="World-v0"):
