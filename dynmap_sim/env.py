@@ -333,6 +333,14 @@ class DynMapEnv(gymnasium.Env):
     def _advance(self, action: Any) -> tuple[FloatArray, bool, float, bool, bool]:
         """Everything of :meth:`step` but the observation: the robot's new pose, the
         collision flag, reward, terminated and truncated."""
+        pose, collision = self._drive(action)
+        self.world.step(self.dt_s, robot_pose=pose, robot_radius_m=self.robot_params.radius_m)
+        return self._score(pose, collision)
+
+    def _drive(self, action: Any) -> tuple[FloatArray, bool]:
+        """The first part of a step: check ``action``, move the robot and count the
+        odometry; the robot's new pose and the collision flag (then the world steps, then
+        :meth:`_score`)."""
         if not self._started:
             raise RuntimeError("call reset() before step()")
         kind = np.asarray(action).dtype.kind
@@ -347,20 +355,29 @@ class DynMapEnv(gymnasium.Env):
         v, w = float(a[0]), float(a[1])
         if not (math.isfinite(v) and math.isfinite(w)):
             raise ValueError(f"action must be finite (v_mps, omega_radps), got {a.tolist()}")
+        return self._drive_vw(v, w)
+
+    def _drive_vw(self, v: float, w: float) -> tuple[FloatArray, bool]:
+        """:meth:`_drive` of a checked action: finite ``v`` [m/s], ``w`` [rad/s]."""
         lo, hi = self._act_bounds
         v = min(max(v, lo[0]), hi[0])
         w = min(max(w, lo[1]), hi[1])
         res = self.robot.step(v, w, self.dt_s, self._rng_slip)
         self.odometry.update(res.dphi_left_rad, res.dphi_right_rad, self._rng_odom)
-        pose = self.robot.pose
-        self.world.step(self.dt_s, robot_pose=pose, robot_radius_m=self.robot_params.radius_m)
+        return self.robot.pose, res.collision
+
+    def _score(
+        self, pose: FloatArray, collision: bool
+    ) -> tuple[FloatArray, bool, float, bool, bool]:
+        """The last part of a step (after the world stepped): route progress, reward,
+        terminated and truncated."""
         self._steps += 1
         x, y = float(pose[0]), float(pose[1])
         gained = self.route.update(x, y)
-        reward = gained - (self.collision_penalty if res.collision else 0.0)
+        reward = gained - (self.collision_penalty if collision else 0.0)
         terminated = self.route.done(x, y)
         truncated = self._steps >= self.max_episode_steps and not terminated
-        return pose, res.collision, float(reward), terminated, truncated
+        return pose, collision, float(reward), terminated, truncated
 
     def _observe(
         self,
@@ -401,6 +418,33 @@ class DynMapEnv(gymnasium.Env):
             self._show()
         return obs, info
 
+    def _observe_into(
+        self,
+        rows: InfoRows,
+        i: int,
+        pose: FloatArray,
+        collision: bool,
+        cast: tuple[FloatArray, NDArray[np.int64]],
+        ranges_m: NDArray[np.float32],
+    ) -> None:
+        """:meth:`_observe` written into row ``i`` of a vector env's batch arrays ``rows``
+        instead of dicts (the same values): ``cast`` the scan's noise-free ranges and hit
+        indices, ``ranges_m`` its noisy readings (from this env's lidar generator)."""
+        reading = self.lidar.reading(*cast, self.world.geometry, self._rng_lidar, ranges_m)
+        rows.scan[i] = ranges_m
+        rows.odom[i] = self.odometry._pose
+        rows.pose[i] = pose
+        rows.beam_class[i] = reading.beam_class
+        rows.beam_object[i] = reading.beam_object
+        rows.range_m[i] = reading.true_range_m
+        rows.n_people[i] = self._people_into(rows.people[i])
+        slot = self.world.slot
+        rows.time[i] = (slot.day, slot.run, self.world.time_s)
+        rows.collision[i] = collision
+        rows.route_progress[i] = self.route.fraction
+        rows.stamp_s[i] = self.world.elapsed_s
+        self._last = {"pose": pose, "reading": reading}
+
     def _show(self) -> None:
         """``render_mode="human"``: the frame in the window (opened at the first frame)."""
         if self._window is None:
@@ -413,14 +457,20 @@ class DynMapEnv(gymnasium.Env):
 
     def _people(self) -> tuple[FloatArray, int]:
         """People poses padded to ``max_people`` rows ``(inf, inf, 0)``, and their number."""
-        out = self._no_people.copy()
+        out = np.empty_like(self._no_people)
+        return out, self._people_into(out)
+
+    def _people_into(self, out: FloatArray) -> int:
+        """Write the people poses into ``out`` (``(max_people, 3)``, padded with rows
+        ``(inf, inf, 0)``); their number."""
+        out[...] = self._no_people
         crowd = self.world.crowd
         n = min(crowd.n, self.max_people)
         if n:
             out[:n, :2] = crowd.pos[:n]
             vel = crowd.vel[:n]
             out[:n, 2] = np.arctan2(vel[:, 1], vel[:, 0])  # heading of motion, as people_poses
-        return out, n
+        return n
 
     def people(self) -> PeopleSnapshot:
         """A read-only snapshot of the current run's people (ids, positions, radii)."""
@@ -491,6 +541,72 @@ class DynMapEnv(gymnasium.Env):
             self._window.close()
             self._window = None
         super().close()
+
+
+class InfoRows:
+    """A vector env's observations and infos of ``n`` :class:`DynMapEnv` sub-envs as batch
+    arrays, row ``i`` for sub-env ``i``: ``scan``, ``odom`` and the fields of ``info``
+    (``truth``'s ``pose``, ``beam_class``, ``beam_object``, ``range_m``, ``n_people``,
+    ``people``, ``time``; ``collision``, ``route_progress``, ``stamp_s``), written in place
+    by :meth:`DynMapEnv._observe_into` or :meth:`put`."""
+
+    def __init__(self, n: int, n_beams: int, max_people: int) -> None:
+        self.scan = np.zeros((n, n_beams), dtype=np.float32)
+        self.odom = np.zeros((n, 3))
+        self.pose = np.zeros((n, 3))
+        self.beam_class = np.zeros((n, n_beams), dtype=np.int8)
+        self.beam_object = np.zeros((n, n_beams), dtype=np.int32)
+        self.range_m = np.zeros((n, n_beams))
+        self.n_people = np.zeros(n, dtype=np.int64)
+        self.people = np.zeros((n, max_people, 3))
+        self.time: list[tuple[int, int, float] | None] = [None] * n
+        self.collision = np.zeros(n, dtype=np.bool_)
+        self.route_progress = np.zeros(n)
+        self.stamp_s = np.zeros(n)
+
+    def put(self, i: int, obs: dict[str, np.ndarray], info: dict[str, Any]) -> None:
+        """Row ``i`` from one sub-env's ``obs`` and ``info`` (of ``reset`` or ``step``)."""
+        self.scan[i] = obs["scan"]
+        self.odom[i] = obs["odom"]
+        truth = info["truth"]
+        for key in ("pose", "beam_class", "beam_object", "range_m", "n_people", "people"):
+            getattr(self, key)[i] = truth[key]
+        self.time[i] = truth["time"]
+        for key in ("collision", "route_progress", "stamp_s"):
+            getattr(self, key)[i] = info[key]
+
+    def infos(self) -> dict[str, Any]:
+        """The batched infos (fresh arrays), as Gymnasium's ``VectorEnv._add_info`` batches
+        the sub-envs' info dicts: an array per key and a ``_key`` mask (all True)."""
+        n = self.scan.shape[0]
+        time = np.full(n, fill_value=None, dtype=object)
+        for i, v in enumerate(self.time):
+            time[i] = v
+        truth = {
+            "pose": self.pose.copy(),
+            "beam_class": self.beam_class.copy(),
+            "beam_object": self.beam_object.copy(),
+            "range_m": self.range_m.copy(),
+            "n_people": self.n_people.copy(),
+            "people": self.people.copy(),
+            "time": time,
+        }
+        out: dict[str, Any] = {
+            "truth": _with_masks(truth, n),
+            "collision": self.collision.copy(),
+            "route_progress": self.route_progress.copy(),
+            "stamp_s": self.stamp_s.copy(),
+        }
+        return _with_masks(out, n)
+
+
+def _with_masks(d: dict[str, Any], n: int) -> dict[str, Any]:
+    """``d`` with a ``_key`` mask of ``n`` True after each key (``VectorEnv._add_info``)."""
+    out: dict[str, Any] = {}
+    for key, value in d.items():
+        out[key] = value
+        out[f"_{key}"] = np.ones(n, dtype=np.bool_)
+    return out
 
 
 # -- rendering: the numpy rasterizer of dynmap_sim.raster (no matplotlib state, ~ms per frame) --

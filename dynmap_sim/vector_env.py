@@ -20,9 +20,12 @@ Batched: the scans of all sub-envs are cast in one pass
 their own, then the broad phase and intersections of every env's (beam, shape) pairs are one
 set of numpy calls), and their noise is one pass too (:meth:`Lidar.apply_noise_rows`: each
 env's draws from its own generator, in its own order, the arithmetic once), with the same
-numbers as one env at a time. Not batched: each sub-env's robot and world (people, pymunk
-bodies) run one after another; the gain over ``SyncVectorEnv`` is the copies and layers it
-skips plus the shared cast and noise (measured in ``benchmarks/bench_peers.py``).
+numbers as one env at a time. The worlds step together too
+(:class:`~dynmap_sim.world.world.WorldBatch`): the people of all sub-envs on the numpy
+backend move in one social-force step (:class:`~dynmap_sim.world.people.batch.CrowdBatch`)
+and their legs are placed in one pass. Not batched: each sub-env's robot (pymunk contacts,
+odometry) and its people's pymunk bodies near the robot run one after another (measured
+in ``benchmarks/bench_peers.py``).
 """
 
 from __future__ import annotations
@@ -33,8 +36,9 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from dynmap_sim.env import DynMapEnv
+from dynmap_sim.env import DynMapEnv, InfoRows
 from dynmap_sim.sensors.lidar import cast_many
+from dynmap_sim.world.world import WorldBatch
 
 
 class DynMapVectorEnv(VectorEnv):
@@ -56,12 +60,13 @@ class DynMapVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, num_envs)
         self.render_mode = None
         n_beams = self.single_observation_space["scan"].shape[0]
-        self._scan = np.zeros((num_envs, n_beams), dtype=np.float32)
-        self._odom = np.zeros((num_envs, 3), dtype=np.float64)
+        self._rows = InfoRows(num_envs, n_beams, first.max_people)
         self._rewards = np.zeros(num_envs, dtype=np.float64)
         self._terminations = np.zeros(num_envs, dtype=np.bool_)
         self._truncations = np.zeros(num_envs, dtype=np.bool_)
         self._autoreset = np.zeros(num_envs, dtype=np.bool_)
+        self._worlds = WorldBatch()  # steps the sub-envs' worlds together
+        self._dt_s = first.dt_s  # the same for all (the same arguments)
         # one noise pass for all scans needs the same laser, noise model and per-beam bias
         lid = first.lidar
         self._same_lidars = all(
@@ -72,11 +77,7 @@ class DynMapVectorEnv(VectorEnv):
         )
 
     def _obs(self) -> dict[str, np.ndarray]:
-        return {"scan": self._scan.copy(), "odom": self._odom.copy()}
-
-    def _put(self, i: int, obs: dict[str, np.ndarray]) -> None:
-        self._scan[i] = obs["scan"]
-        self._odom[i] = obs["odom"]
+        return {"scan": self._rows.scan.copy(), "odom": self._rows.odom.copy()}
 
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
@@ -90,44 +91,12 @@ class DynMapVectorEnv(VectorEnv):
             seeds = list(seed)
             if len(seeds) != self.num_envs:
                 raise ValueError(f"reset: {len(seeds)} seeds for {self.num_envs} envs")
-        infos = []
         for i, (env, s) in enumerate(zip(self.envs, seeds, strict=True)):
-            obs, info = env.reset(seed=s, options=options)
-            self._put(i, obs)
-            infos.append(info)
+            self._rows.put(i, *env.reset(seed=s, options=options))
         self._autoreset[:] = False
         self._terminations[:] = False
         self._truncations[:] = False
-        return self._obs(), self._batch_infos(infos)
-
-    def _batch_infos(self, infos: list[dict[str, Any]]) -> dict[str, Any]:
-        """The sub-envs' infos batched exactly as ``VectorEnv._add_info`` batches them (an
-        array per key, ``_key`` masks, nested dicts recursively), one array call per key
-        instead of one assignment per key and env; infos with differing keys go through
-        ``_add_info``."""
-        first = infos[0]
-        if any(info.keys() != first.keys() for info in infos[1:]):
-            out: dict[str, Any] = {}
-            for i, info in enumerate(infos):
-                out = self._add_info(out, info, i)
-            return out
-        out = {}
-        n = self.num_envs
-        for key, value in first.items():
-            vals = [info[key] for info in infos]
-            if isinstance(value, dict):
-                arr: Any = self._batch_infos(vals)
-            elif type(value) in (int, float, bool) or issubclass(type(value), np.number):
-                arr = np.array(vals, dtype=type(value))
-            elif isinstance(value, np.ndarray):
-                arr = np.stack(vals).astype(value.dtype, copy=False)
-            else:
-                arr = np.full(n, fill_value=None, dtype=object)
-                for i, v in enumerate(vals):
-                    arr[i] = v
-            out[key] = arr
-            out[f"_{key}"] = np.ones(n, dtype=np.bool_)
-        return out
+        return self._obs(), self._rows.infos()
 
     def step(
         self, actions: Any
@@ -137,44 +106,70 @@ class DynMapVectorEnv(VectorEnv):
         a = np.asarray(actions)
         if a.shape != (self.num_envs, 2):
             raise ValueError(f"actions must have shape ({self.num_envs}, 2), got {a.shape}")
-        infos: list[dict[str, Any]] = [{}] * self.num_envs
-        moved: list[tuple[int, np.ndarray, bool]] = []  # (env, pose, collision) to observe
+        # the checks of DynMapEnv._drive, for all actions at once (those of envs that reset
+        # are ignored, as SyncVectorEnv ignores them)
+        if a.dtype.kind not in "iuf" and not self._autoreset.all():
+            raise ValueError(
+                f"actions must be real numbers (v_mps, omega_radps), got {a.dtype} values {a!r}"
+            )
+        a = a.astype(np.float64) if a.dtype.kind in "iuf" else np.zeros((self.num_envs, 2))
+        bad = ~np.isfinite(a).all(axis=1) & ~self._autoreset
+        if bad.any():
+            i = int(bad.argmax())
+            raise ValueError(
+                f"action of env {i} must be finite (v_mps, omega_radps), got {a[i].tolist()}"
+            )
+        vw = a.tolist()
+        driven: list[tuple[int, np.ndarray, bool]] = []  # (env, pose, collision)
         for i, env in enumerate(self.envs):
             if self._autoreset[i]:
-                obs, info = env.reset()
+                self._rows.put(i, *env.reset())
                 self._rewards[i] = 0.0
                 self._terminations[i] = False
                 self._truncations[i] = False
-                self._put(i, obs)
-                infos[i] = info
             else:
-                pose, collision, r, term, trunc = env._advance(a[i])
-                self._rewards[i] = r
-                self._terminations[i] = term
-                self._truncations[i] = trunc
-                moved.append((i, pose, collision))
-        # the scans of all envs that moved, cast in one pass; noise and infos per env
-        if moved:
-            envs = [self.envs[i] for i, _, _ in moved]
+                if not env._started:
+                    raise RuntimeError("call reset() before step()")
+                pose, collision = env._drive_vw(*vw[i])
+                driven.append((i, pose, collision))
+        # the worlds of all envs that moved, stepped together (people in one batch)
+        stepping = [self.envs[i] for i, _, _ in driven]
+        self._worlds.step(
+            [e.world for e in stepping],
+            self._dt_s,
+            [p for _, p, _ in driven],
+            [e.robot_params.radius_m for e in stepping],
+        )
+        for env, (i, pose, collision) in zip(stepping, driven, strict=True):
+            _, _, r, term, trunc = env._score(pose, collision)
+            self._rewards[i] = r
+            self._terminations[i] = term
+            self._truncations[i] = trunc
+        # the scans of all envs that moved, cast in one pass, their noise in one pass
+        if driven:
+            envs = stepping
             casts = cast_many(
-                [e.lidar for e in envs], [p for _, p, _ in moved], [e.world.geometry for e in envs]
+                [e.lidar for e in envs], [p for _, p, _ in driven], [e.world.geometry for e in envs]
             )
-            noisy: list[Any] = [None] * len(envs)
             if self._same_lidars and len(envs) > 1:
                 true_r = np.stack([c[0] for c in casts])
-                noisy = list(envs[0].lidar.apply_noise_rows(true_r, [e._rng_lidar for e in envs]))
+                noisy = envs[0].lidar.apply_noise_rows(true_r, [e._rng_lidar for e in envs])
+            else:
+                noisy = [
+                    e.lidar.apply_noise(c[0], e._rng_lidar)
+                    for e, c in zip(envs, casts, strict=True)
+                ]
             for env, (i, pose, collision), cast, rng_m in zip(
-                envs, moved, casts, noisy, strict=True
+                envs, driven, casts, noisy, strict=True
             ):
-                obs, infos[i] = env._observe(pose, collision, cast, rng_m)
-                self._put(i, obs)
+                env._observe_into(self._rows, i, pose, collision, cast, rng_m)
         np.logical_or(self._terminations, self._truncations, out=self._autoreset)
         return (
             self._obs(),
             self._rewards.copy(),
             self._terminations.copy(),
             self._truncations.copy(),
-            self._batch_infos(infos),
+            self._rows.infos(),
         )
 
     def close_extras(self, **kwargs: Any) -> None:

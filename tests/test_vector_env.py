@@ -122,7 +122,51 @@ def test_bad_arguments() -> None:
     v.reset(seed=0)
     with pytest.raises(ValueError, match="shape"):
         v.step(np.zeros((3, 2)))
+    with pytest.raises(ValueError, match="env 1 must be finite"):
+        v.step(np.array([[0.1, 0.0], [np.nan, 0.0]]))
+    with pytest.raises(ValueError, match="real numbers"):
+        v.step(np.array([["a", "b"], ["c", "d"]]))
     with pytest.raises(ValueError, match="seeds"):
         v.reset(seed=[1, 2, 3])
     with pytest.raises(ValueError, match="World-v0"):
         gym.make_vec("dynmap_sim/World-v0", num_envs=2)
+
+
+@pytest.mark.parametrize("backend", ["numpy", "numba"])
+def test_same_numbers_with_people(backend) -> None:
+    """The lab's lunch crowd (people stepped in one batch on numpy, env by env on numba),
+    across autoresets into the next runs: every sub-env's observation, reward, flags,
+    people and true ranges equal a single env's with the same seed."""
+    if backend == "numba":
+        pytest.importorskip("numba")
+    kw = {"world": "lab", "max_episode_steps": 12, "sensor_options": {"backend": backend}}
+    n = 3
+    vec = DynMapVectorEnv(num_envs=n, **kw)
+    singles = [DynMapEnv(**kw) for _ in range(n)]
+    opts = {"day": 1, "run": 2}
+    obs, info = vec.reset(seed=4, options=opts)
+    assert (info["truth"]["n_people"] > 10).all()
+    for i, env in enumerate(singles):
+        np.testing.assert_array_equal(
+            obs["scan"][i], env.reset(seed=4 + i, options=opts)[0]["scan"]
+        )
+    acts = _actions(30, n)
+    done = np.zeros(n, dtype=bool)
+    for act in acts:
+        obs, rew, term, trunc, info = vec.step(act)
+        for i, env in enumerate(singles):
+            if done[i]:
+                s_obs, s_info = env.reset()
+                s_rew, s_term, s_trunc = 0.0, False, False
+            else:
+                s_obs, s_rew, s_term, s_trunc, s_info = env.step(act[i])
+            np.testing.assert_array_equal(obs["scan"][i], s_obs["scan"])
+            np.testing.assert_array_equal(obs["odom"][i], s_obs["odom"])
+            assert (rew[i], term[i], trunc[i]) == (s_rew, s_term, s_trunc)
+            for key, value in s_info["truth"].items():
+                np.testing.assert_array_equal(info["truth"][key][i], value)
+                assert np.asarray(info["truth"][key][i]).dtype == np.asarray(value).dtype
+            for key in ("collision", "route_progress", "stamp_s"):
+                assert info[key][i] == s_info[key]
+        done = term | trunc
+    vec.close()

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -128,9 +128,9 @@ def cast_scan(
     """
     if u_l is None:
         u_l = cos_l + 1j * sin_l
-    shapes = _scan_shapes(pose, float(max_range_m), segments, circles)
+    shapes = _scan_shapes([pose], float(max_range_m), [segments], [circles])
     ranges, hit = _cast_shapes(
-        [shapes], angle_min_rad, angle_increment_rad, u_l, float(max_range_m), cos_l.shape[0]
+        shapes, angle_min_rad, angle_increment_rad, u_l, float(max_range_m), cos_l.shape[0]
     )
     return ranges[0], hit[0]
 
@@ -149,26 +149,25 @@ def cast_scans(
     """:func:`cast_scan` of ``S`` scans at once, each from its own pose among its own shapes
     (``segments[i]``, ``circles[i]``; the same laser): ranges and hit indices ``(S, n_beams)``.
 
-    Each scan's shapes are moved into its sensor frame on their own; the broad phase and
-    the intersections of all scans' (beam, shape) pairs are then one pass, so the numpy call
-    overhead of that part is paid once for all scans. Every number is the one
+    The shapes of all scans are moved into their sensor frames in one pass (each with its
+    scan's origin and rotation), and the broad phase and the intersections of all scans'
+    (beam, shape) pairs are one pass too, so the numpy call overhead is paid once for all
+    scans. Every number is the one
     :func:`cast_scan` gives for that scan alone.
     """
     if u_l is None:
         u_l = cos_l + 1j * sin_l
     r_max = float(max_range_m)
-    shapes = [
-        _scan_shapes(pose, r_max, seg, circ)
-        for pose, seg, circ in zip(poses, segments, circles, strict=True)
-    ]
+    shapes = _scan_shapes(poses, r_max, segments, circles)
     return _cast_shapes(shapes, angle_min_rad, angle_increment_rad, u_l, r_max, cos_l.shape[0])
 
 
 class _Shapes(NamedTuple):
-    """The shapes within range of one scan, in its sensor frame: segments (first endpoint
-    ``a``, direction ``d``, ``a x d``, bearing interval ``start``, ``span``, rows ``ids``) and
-    circles (centre ``c``, ``|c|^2 - r^2`` ``c0``, ``inside``, bearing interval ``cstart``,
-    ``cspan``, hit indices ``cids``)."""
+    """The shapes within range of the scans, each in its scan's sensor frame, scan after
+    scan: segments (first endpoint ``a``, direction ``d``, ``a x d``, bearing interval
+    ``start``, ``span``, rows ``ids``) and circles (centre ``c``, ``|c|^2 - r^2`` ``c0``,
+    ``inside``, bearing interval ``cstart``, ``cspan``, hit indices ``cids``); ``lens``: the
+    number of segments of each scan, then the number of circles of each."""
 
     a: ComplexArray
     d: ComplexArray
@@ -182,26 +181,43 @@ class _Shapes(NamedTuple):
     cstart: FloatArray
     cspan: FloatArray
     cids: IntArray
+    lens: list[int]
 
 
-def _no_circles() -> tuple[NDArray, ...]:
-    """The circle fields of :class:`_Shapes` for a scan with no circle in range (empty)."""
+def _no_circles(n_scans: int) -> tuple[Any, ...]:
+    """The circle fields of :class:`_Shapes` for scans with no circle in range (empty)."""
     f, c = np.zeros(0), np.zeros(0, np.complex128)
-    return c, f, np.zeros(0, bool), f, f, np.zeros(0, np.int64)
+    return c, f, np.zeros(0, bool), f, f, np.zeros(0, np.int64), [0] * n_scans
+
+
+def _per_shape(values: list[Any], counts: list[int]) -> Any:
+    """``values[i]`` for each of the ``counts[i]`` shapes of scan ``i`` (the value itself
+    for a single scan: numpy's arithmetic is the same with a scalar)."""
+    if len(values) == 1:
+        return values[0]
+    return np.repeat(np.array(values), counts)
 
 
 def _scan_shapes(
-    pose: tuple[float, float, float],
+    poses: list[tuple[float, float, float]],
     r_max: float,
-    segments: SegmentCache,
-    circles: FloatArray | None,
+    segments: list[SegmentCache],
+    circles: list[FloatArray | None],
 ) -> _Shapes:
-    """The segments near the sensor's cell (memoized) and the circles within range, moved
-    into the frame of the sensor at ``pose``."""
-    ox, oy, heading = float(pose[0]), float(pose[1]), float(pose[2])
-    rot = complex(math.cos(heading), -math.sin(heading))  # map -> sensor frame
-    o = complex(ox, oy)
-    sidx, p0, d0 = segments.near(ox, oy, r_max)
+    """The segments near each sensor's cell (memoized) and the circles within range, moved
+    into the frame of the sensor at ``poses[i]`` (scan ``i`` among ``segments[i]`` and
+    ``circles[i]``), all scans in one pass."""
+    xs = [float(p[0]) for p in poses]
+    ys = [float(p[1]) for p in poses]
+    rots = [complex(math.cos(float(p[2])), -math.sin(float(p[2]))) for p in poses]  # map->sensor
+    origins = [complex(x, y) for x, y in zip(xs, ys, strict=True)]
+    near = [seg.near(x, y, r_max) for seg, x, y in zip(segments, xs, ys, strict=True)]
+    if len(near) == 1:
+        sidx, p0, d0 = near[0]
+    else:
+        sidx, p0, d0 = (np.concatenate(f) for f in zip(*near, strict=True))
+    counts = [len(n[0]) for n in near]
+    o, rot = _per_shape(origins, counts), _per_shape(rots, counts)
     a = (p0 - o) * rot  # first endpoint
     d = d0 * rot
     b = a + d  # second endpoint
@@ -210,48 +226,69 @@ def _scan_shapes(
     span = np.abs(np.arctan2(a_x_d, ab.real))  # bearing interval of each segment [rad]
     first = np.where(a_x_d >= 0.0, a, b)
     start = np.arctan2(first.imag, first.real)
-    circ: tuple[NDArray, ...] | None = None
-    if circles is not None and circles.shape[0] > 0:
-        if circles.flags.c_contiguous and circles.dtype == np.float64:
-            cw = circles[:, :2].view(np.complex128)[:, 0] - o  # centres, sensor at 0
-        else:
-            cw = circles[:, 0] + 1j * circles[:, 1] - o
-        cr = circles[:, 2]
-        dist = np.abs(cw)
-        cnear = (dist <= r_max + cr).nonzero()[0]
-        if cnear.shape[0]:
-            c = cw[cnear] * rot
-            cr = cr[cnear]
-            dist = dist[cnear]
-            c0 = (dist - cr) * (dist + cr)  # |c|^2 - r^2 (<= 0: the sensor is inside it)
-            inside = c0 <= 0.0
-            half = np.arcsin(cr / np.maximum(dist, cr))  # half the angle the circle subtends
-            half[inside] = np.pi
-            cstart = np.arctan2(c.imag, c.real) - half
-            circ = (c, c0, inside, cstart, 2.0 * half, segments.n + cnear)
-    return _Shapes(a, d, a_x_d, start, span, sidx, *(circ or _no_circles()))
+    circ = _circle_shapes(origins, rots, r_max, segments, circles)
+    return _Shapes(a, d, a_x_d, start, span, sidx, *circ[:-1], counts + circ[-1])
+
+
+def _circle_shapes(
+    origins: list[complex],
+    rots: list[complex],
+    r_max: float,
+    segments: list[SegmentCache],
+    circles: list[FloatArray | None],
+) -> tuple[Any, ...]:
+    """The circle fields of :class:`_Shapes` (and the number of circles of each scan)."""
+    n_scans = len(origins)
+    circ_counts = [0 if c is None else c.shape[0] for c in circles]
+    if not sum(circ_counts):
+        return _no_circles(n_scans)
+    if n_scans == 1:
+        all_c: FloatArray = circles[0]  # type: ignore[assignment]
+    else:
+        all_c = np.concatenate([c for c in circles if c is not None and c.shape[0]])
+    o = _per_shape(origins, circ_counts)
+    if all_c.flags.c_contiguous and all_c.dtype == np.float64:
+        cw = all_c[:, :2].view(np.complex128)[:, 0] - o  # centres, sensor at 0
+    else:
+        cw = all_c[:, 0] + 1j * all_c[:, 1] - o
+    cr = all_c[:, 2]
+    dist = np.abs(cw)
+    cnear = (dist <= r_max + cr).nonzero()[0]
+    if not cnear.shape[0]:
+        return _no_circles(n_scans)
+    rot = _per_shape(rots, circ_counts)
+    c = cw[cnear] * (rot if n_scans == 1 else rot[cnear])
+    cr = cr[cnear]
+    dist = dist[cnear]
+    c0 = (dist - cr) * (dist + cr)  # |c|^2 - r^2 (<= 0: the sensor is inside it)
+    inside = c0 <= 0.0
+    half = np.arcsin(cr / np.maximum(dist, cr))  # half the angle the circle subtends
+    half[inside] = np.pi
+    cstart = np.arctan2(c.imag, c.real) - half
+    if n_scans == 1:
+        return c, c0, inside, cstart, 2.0 * half, segments[0].n + cnear, [cnear.shape[0]]
+    # hit index of each circle: its scan's segment count plus its index among its circles
+    scan = np.repeat(np.arange(n_scans), circ_counts)[cnear]
+    firsts = np.cumsum(circ_counts) - circ_counts
+    base = np.array([s.n for s in segments]) - firsts
+    counts = np.bincount(scan, minlength=n_scans).tolist()
+    return c, c0, inside, cstart, 2.0 * half, base[scan] + cnear, counts
 
 
 def _cast_shapes(
-    scans: list[_Shapes],
+    shapes: _Shapes,
     angle_min_rad: float,
     angle_increment_rad: float,
     u_l: ComplexArray,
     r_max: float,
     n_beams: int,
 ) -> tuple[FloatArray, IntArray]:
-    """Broad phase and intersections of the (beam, shape) pairs of all ``scans``; ranges
-    and hit indices ``(S, n_beams)``. Shapes are laid out as: every scan's segments, their
-    wrap copies, every scan's circles, their wrap copies."""
+    """Broad phase and intersections of the (beam, shape) pairs of all scans' ``shapes``;
+    ranges and hit indices ``(S, n_beams)``. Shapes are laid out as: every scan's segments,
+    their wrap copies, every scan's circles, their wrap copies."""
     inc = float(angle_increment_rad)
-    n_scans = len(scans)
-
-    if n_scans == 1:
-        a, d, a_x_d, start, span, ids, c, c0, inside, cstart, cspan, cids = scans[0]
-    else:  # field by field, every scan's values end to end
-        a, d, a_x_d, start, span, ids, c, c0, inside, cstart, cspan, cids = (
-            np.concatenate(field) for field in zip(*scans, strict=True)
-        )
+    a, d, a_x_d, start, span, ids, c, c0, inside, cstart, cspan, cids, lens = shapes
+    n_scans = len(lens) // 2
     n_s = a.shape[0]
     n_c = c.shape[0]
     # runs in the order: segments, their wrap copies, circles, their wrap copies
@@ -305,7 +342,6 @@ def _cast_shapes(
 
     if n_scans > 1:  # the beam of each pair in the scans' beams laid end to end
         per_scan = np.arange(n_scans) * n_beams
-        lens = [sc.a.shape[0] for sc in scans] + [sc.c.shape[0] for sc in scans]
         beam += np.repeat(np.concatenate([per_scan, per_scan]), lens)[key]
     ranges = np.full(n_scans * n_beams, np.inf)
     np.fmin.at(ranges, beam, t_all)  # NaN (no hit) never wins

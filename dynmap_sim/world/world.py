@@ -10,14 +10,17 @@ the run started, so weeks of stepping do not drift.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 import pymunk
+from numpy.typing import NDArray
 
 from dynmap_sim.world.calendar import Calendar, RunSlot
 from dynmap_sim.world.geometry import GeometryView, StaticGeometry, build_static
 from dynmap_sim.world.people import Crowd, SocialForce
+from dynmap_sim.world.people.batch import CrowdBatch
 from dynmap_sim.world.people.legs import leg_centres_into
 from dynmap_sim.world.people.params import LEG_RADIUS_M
 from dynmap_sim.world.people.social_force import check_backend
@@ -195,12 +198,17 @@ class World:
         crowd = forces.spawn(self.calendar.slot(day, run).start_s, active, keep_away=start)
         return forces, crowd
 
-    def _refresh_people(self) -> None:
+    def _refresh_people(self, leg_centres: NDArray[np.complex128] | None = None) -> None:
+        """The geometry with the people's legs where they are now (``leg_centres``: their
+        centres ``x + iy`` when already placed, as :func:`leg_centres_into` writes them)."""
         if self._crowd.n:
             circles = self._circles_template.copy()
             ns = self._static.circles.shape[0]
-            legs = self._forces.backend_ops().legs
-            leg_centres_into(self._crowd, circles[ns:, :2].view(np.complex128)[:, 0], legs)
+            out = circles[ns:, :2].view(np.complex128)[:, 0]
+            if leg_centres is None:
+                leg_centres_into(self._crowd, out, self._forces.backend_ops().legs)
+            else:
+                out[:] = leg_centres
         else:
             circles = self._static.circles
         self._geometry = GeometryView(
@@ -221,20 +229,27 @@ class World:
         robot_radius_m: float = 0.2,
     ) -> None:
         """Advance the clock and people by ``dt_s`` seconds; people avoid the robot's disc."""
-        if not (math.isfinite(dt_s) and 0.0 <= dt_s <= 10.0):
-            raise ValueError(f"dt_s must be a finite time step in [0, 10] s, not {dt_s!r}")
-        self._time_us += int(round(dt_s * 1e6))
+        self._tick(dt_s)
         if self._crowd.n == 0:
             return
         if robot_pose is None:
             self._forces.step(self._crowd, dt_s, None, robot_radius_m)
             self._sync_bodies(None)
         else:
-            rxy = np.array((float(robot_pose[0]), float(robot_pose[1])))
+            rxy = _robot_xy(robot_pose)
             self._forces.step(self._crowd, dt_s, rxy, robot_radius_m)
-            near_m = robot_radius_m + SYNC_MARGIN_M + SYNC_SPEED_MPS * dt_s
-            self._sync_bodies(complex(rxy[0], rxy[1]), near_m)
+            self._sync_near(dt_s, rxy, robot_radius_m)
         self._refresh_people()
+
+    def _tick(self, dt_s: float) -> None:
+        """Advance the clock by ``dt_s`` seconds (checked)."""
+        if not (math.isfinite(dt_s) and 0.0 <= dt_s <= 10.0):
+            raise ValueError(f"dt_s must be a finite time step in [0, 10] s, not {dt_s!r}")
+        self._time_us += int(round(dt_s * 1e6))
+
+    def _sync_near(self, dt_s: float, rxy: FloatArray, robot_radius_m: float) -> None:
+        """After the people moved: bring the bodies near the robot at ``rxy`` up to date."""
+        self._sync_bodies(complex(rxy[0], rxy[1]), _near_m(dt_s, robot_radius_m))
 
     def _sync_bodies(self, robot_xy: complex | None, near_m: float = 0.0) -> None:
         """Move people's pymunk bodies to the crowd's state: all of them, or (with a robot)
@@ -251,8 +266,15 @@ class World:
             self._stale = True  # (cheaper than checking whether all were near)
             if not len(idx):
                 return
+        self._move_bodies(idx)
+
+    def _move_bodies(self, idx: Any) -> None:
+        """Move the pymunk bodies of the people ``idx`` (indices, or ``slice(None)``: all)
+        to the crowd's state."""
+        crowd = self._crowd
+        z = crowd.pos.view(np.complex128)[:, 0]
         bodies = self._people_bodies
-        which = range(crowd.n) if robot_xy is None else idx.tolist()
+        which = range(crowd.n) if isinstance(idx, slice) else idx.tolist()
         # the setters of the bodies' properties, without pymunk's per-attribute wrapper
         set_pos = pymunk.Body.position.fset
         set_vel = pymunk.Body.velocity.fset
@@ -263,7 +285,7 @@ class World:
             set_vel(body, uv)
             # the space is never stepped: refresh the shapes' cached positions for queries
             reindex(body)
-        synced[idx] = z[idx]
+        self._synced[idx] = z[idx]
 
     @property
     def space(self) -> pymunk.Space:
@@ -329,3 +351,67 @@ class World:
             snap = Snapshot(day=day, run=run, objects=objects, people=people)
             self._snapshots[key] = snap
         return snap
+
+
+def _near_m(dt_s: float, robot_radius_m: float) -> float:
+    """How near the robot a person's body is kept up to date [m] (``SYNC_MARGIN_M``)."""
+    return robot_radius_m + SYNC_MARGIN_M + SYNC_SPEED_MPS * dt_s
+
+
+def _robot_xy(robot_pose: tuple[float, float, float] | FloatArray) -> FloatArray:
+    """The robot's position ``(2,)`` from its pose."""
+    return np.array((float(robot_pose[0]), float(robot_pose[1])))
+
+
+class WorldBatch:
+    """Steps many worlds at once (a vector env's), with the numbers of :meth:`World.step`
+    of each: the people of all worlds on the numpy backend move in one
+    :class:`~dynmap_sim.world.people.batch.CrowdBatch` step and their legs are placed in
+    one pass; the rest (clock, pymunk bodies near the robot, other backends) world by
+    world. Keeps the crowds' batch constants between steps (no module-level state)."""
+
+    def __init__(self) -> None:
+        self._crowds = CrowdBatch()
+
+    def step(
+        self,
+        worlds: Sequence[World],
+        dt_s: float,
+        robot_poses: Sequence[FloatArray],
+        robot_radius_m: Sequence[float],
+    ) -> None:
+        """:meth:`World.step` of each ``worlds[i]`` with robot ``robot_poses[i]`` of radius
+        ``robot_radius_m[i]``."""
+        batch: list[tuple[World, FloatArray, float]] = []
+        for w, pose, rr in zip(worlds, robot_poses, robot_radius_m, strict=True):
+            if w._crowd.n == 0 or not CrowdBatch.batchable(w._forces):
+                w.step(dt_s, robot_pose=pose, robot_radius_m=rr)
+                continue
+            w._tick(dt_s)
+            batch.append((w, _robot_xy(pose), rr))
+        if not batch:
+            return
+        self._crowds.step(
+            [w._forces for w, _, _ in batch],
+            [w._crowd for w, _, _ in batch],
+            dt_s,
+            [xy for _, xy, _ in batch],
+            [rr for _, _, rr in batch],
+        )
+        # the bodies near each robot (World._sync_bodies), tested for all people at once
+        z = self._crowds.positions()
+        counts = [w._crowd.n for w, _, _ in batch]
+        rz = np.repeat(np.array([complex(xy[0], xy[1]) for _, xy, _ in batch]), counts)
+        near_m = np.repeat(np.array([_near_m(dt_s, rr) for _, _, rr in batch]), counts)
+        synced = np.concatenate([w._synced for w, _, _ in batch])
+        near = (np.abs(z - rz) < near_m) | (np.abs(synced - rz) < near_m)
+        legs = self._crowds.leg_centres()
+        at = 0
+        for w, _, _ in batch:
+            n = w._crowd.n
+            w._stale = True  # (as World._sync_bodies with a robot)
+            idx = near[at : at + n].nonzero()[0]
+            if len(idx):
+                w._move_bodies(idx)
+            w._refresh_people(legs[2 * at : 2 * (at + n)])
+            at += n

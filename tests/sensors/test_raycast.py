@@ -208,3 +208,21 @@ def test_cast_scans_gives_each_scan_the_numbers_of_cast_scan():
         assert np.array_equal(ranges[i], r)
         assert np.array_equal(hits[i], h)
     assert np.isinf(ranges[-1]).all() and (hits[-1] == -1).all()
+
+
+def test_cast_scans_without_circles_in_range():
+    """No circle anywhere, or circles only out of every scan's range: the same numbers as
+    one scan at a time."""
+    rng = np.random.default_rng(12)
+    cl, sl = beam_directions(-2.0862, URG_INC, 683)
+    segs, circ = random_geometry(rng, n_seg=80, n_circ=6)
+    far = circ.copy()
+    far[:, :2] += 1000.0
+    cache = SegmentCache.build(segs)
+    poses = [(*rng.uniform(-4.0, 4.0, 2), rng.uniform(-np.pi, np.pi)) for _ in range(3)]
+    for circles in ([None, None, None], [far, np.zeros((0, 3)), None]):
+        ranges, hits = cast_scans(poses, -2.0862, URG_INC, cl, sl, 5.6, [cache] * 3, circles)
+        for i, pose in enumerate(poses):
+            r, h = cast_scan(pose, -2.0862, URG_INC, cl, sl, 5.6, cache, circles[i])
+            assert np.array_equal(ranges[i], r)
+            assert np.array_equal(hits[i], h)

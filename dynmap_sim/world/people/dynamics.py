@@ -11,6 +11,7 @@ formulas of :mod:`dynmap_sim.world.people`, evaluated exactly (no precomputed fi
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -128,7 +129,7 @@ def social_force(
     # smallest gaps before the move [m]: between two bodies, and per person to a segment
     pair_gap = float((d[:, :n] - k.rsum_masked).min())
     wall_gap = d[:, n + 1 :].min(axis=1) - crowd.radius
-    force += repulsion(diff, d, k)
+    force += repulsion_terms(diff, d, k).sum(axis=1)
     if rz is None:
         return force, pair_gap, wall_gap, np.inf
     force += evasion(e, diff[:, n], d[:, n], k)
@@ -166,18 +167,18 @@ def source_vectors(
     return diff
 
 
-def repulsion(
-    diff: NDArray[np.complex128], d: FloatArray, k: StepConstants
-) -> NDArray[np.complex128]:
-    """Sum of the exponential repulsions ``A exp((r - d) / B) n`` of all sources ``diff``
-    (lengths ``d``): people (H&M eq. 3-4; the diagonal is masked by the constants), the robot,
-    and segments (H&M eq. 5; only those within ``REACH_M`` count)."""
+def repulsion_terms(diff: NDArray[np.complex128], d: FloatArray, k: Any) -> NDArray[np.complex128]:
+    """The exponential repulsions ``A exp((r - d) / B) n`` of all sources ``diff`` (lengths
+    ``d``), one per source: people (H&M eq. 3-4; the diagonal is masked by the constants),
+    the robot, and segments (H&M eq. 5; only those within ``REACH_M`` count). Their sum over
+    a row is the repulsion on that person. ``k``: :class:`StepConstants` (or the batched
+    constants of :mod:`.batch`: ``n`` people columns, then the robot, then segments)."""
     n = k.n
     w = np.exp(k.log_a - d * k.inv_b)
     w /= np.maximum(d, 1e-9)
     w_wall = w[:, n + 1 :]
     w_wall[d[:, n + 1 :] > REACH_M] = 0.0
-    return (w * diff).sum(axis=1)
+    return w * diff
 
 
 def evasion(
