@@ -28,6 +28,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from dynmap_sim.agent.grid import OccupancyGrid
+from dynmap_sim.agent.localization import mcl_numba
+from dynmap_sim.jit import kernel_backend
 
 FloatArray = NDArray[np.float64]
 
@@ -61,9 +63,13 @@ def endpoint_cells(
     angles_rad: FloatArray,
     mount_pose: ArrayLike,
     grid: OccupancyGrid,
+    backend: str = "auto",
 ) -> NDArray[np.intp]:
     """Flat cell index ``(P, B)`` of each beam's end point; ``H * W`` (one past the last
-    cell) where the end point falls outside the grid. Computed in float32 for speed."""
+    cell) where the end point falls outside the grid. Computed in float32 for speed.
+    ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): the particles x beams part in
+    :mod:`.mcl_numba`'s kernel (the same cells) or in numpy."""
+    kernel = kernel_backend(backend)
     mx, my, myaw = (float(v) for v in mount_pose)
     th = particles[:, 2]
     c64, s64 = np.cos(th), np.sin(th)
@@ -75,13 +81,16 @@ def endpoint_cells(
     ly = ((particles[:, 1] + s64 * mx + c64 * my - grid.origin_xy_m[1]) * inv_res).astype(
         np.float32
     )
-    c = c64.astype(np.float32)[:, None]
-    s = s64.astype(np.float32)[:, None]
-    bx = (ranges_m * np.cos(angles_rad + myaw) * inv_res).astype(np.float32)[None, :]
-    by = (ranges_m * np.sin(angles_rad + myaw) * inv_res).astype(np.float32)[None, :]
-    hx = c * bx - s * by
+    c = c64.astype(np.float32)
+    s = s64.astype(np.float32)
+    bx = (ranges_m * np.cos(angles_rad + myaw) * inv_res).astype(np.float32)
+    by = (ranges_m * np.sin(angles_rad + myaw) * inv_res).astype(np.float32)
+    if kernel:
+        return mcl_numba.endpoint_cells(lx, ly, c, s, bx, by, grid.shape,
+                                               python=kernel == "python")  # fmt: skip
+    hx = c[:, None] * bx[None, :] - s[:, None] * by[None, :]
     hx += lx[:, None]
-    hy = s * bx + c * by
+    hy = s[:, None] * bx[None, :] + c[:, None] * by[None, :]
     hy += ly[:, None]
     h, w = grid.shape
     ix = np.floor(hx, out=hx).astype(np.intp)

@@ -61,6 +61,7 @@ from scipy.sparse.csgraph import connected_components
 
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import OccupancyGrid
+from dynmap_sim.agent.localization import mcl_numba
 from dynmap_sim.agent.localization.distance_filter import expected_ranges, short_readings
 from dynmap_sim.agent.localization.kld_sampling import ONE_BIN_RULES, bin_keys, kld_prefix_size
 from dynmap_sim.agent.localization.likelihood_field import (
@@ -80,6 +81,7 @@ from dynmap_sim.agent.localization.verified_recovery import VerifiedRecovery
 from dynmap_sim.agent.localizer import Localizer, MapUser, register_localizer
 from dynmap_sim.agent.maps.map_source import MapSource, PriorWallsMap, make_map_source
 from dynmap_sim.agent.params import check_fields, coerce_fields
+from dynmap_sim.jit import kernel_backend
 from dynmap_sim.types import Diagnostic, LaserSpec, Odometry, PoseEstimate, Prior, Scan
 
 FloatArray = NDArray[np.float64]
@@ -448,6 +450,37 @@ def weighted_pose_stats(
     return mean, 0.5 * (cov + cov.T)
 
 
+def bin_clusters(
+    ukeys: NDArray[np.int64], ny: int, n_th: int, backend: str = "auto"
+) -> NDArray[np.intp]:
+    """Cluster label of each occupied bin (``pf_cluster_stats``): ``ukeys`` sorted unique bin
+    keys ``(bx * ny + by) * n_th + bt`` (``bx, by >= 0``), a cluster the bins connected
+    through their 26 neighbours (theta wraps around), numbered in the order of their first
+    bin. ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): :mod:`.mcl_numba`'s union-find
+    or the numpy adjacency and scipy's ``connected_components`` (the same labels)."""
+    kernel = kernel_backend(backend)
+    if kernel:
+        return mcl_numba.bin_clusters(ukeys, ny, n_th, python=kernel == "python")
+    ubx, rem = np.divmod(ukeys, ny * n_th)
+    uby, ubt = np.divmod(rem, n_th)
+    rows, cols = [], []
+    for dx in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            for dt in (-1, 0, 1):
+                if dx == dy == dt == 0:
+                    continue
+                nk = ((ubx + dx) * ny + (uby + dy)) * n_th + (ubt + dt) % n_th
+                pos = np.searchsorted(ukeys, nk)
+                pos = np.minimum(pos, len(ukeys) - 1)
+                hit = (ukeys[pos] == nk) & (ubx + dx >= 0) & (uby + dy >= 0)
+                rows.append(np.nonzero(hit)[0])
+                cols.append(pos[hit])
+    r = np.concatenate(rows)
+    cidx = np.concatenate(cols)
+    adj = coo_matrix((np.ones(len(r)), (r, cidx)), shape=(len(ukeys), len(ukeys)))
+    return connected_components(adj, directed=False)[1]
+
+
 class AMCLFilter:
     """The particle filter of nav2's AMCL on a fixed :class:`OccupancyGrid` (no ROS)."""
 
@@ -697,24 +730,7 @@ class AMCLFilter:
         ukeys, inv = np.unique(key, return_inverse=True)
         if len(ukeys) == 1:
             return weighted_pose_stats(p, self.weights)
-        ubx, rem = np.divmod(ukeys, ny * n_th)
-        uby, ubt = np.divmod(rem, n_th)
-        rows, cols = [], []
-        for dx in (-1, 0, 1):
-            for dy in (-1, 0, 1):
-                for dt in (-1, 0, 1):
-                    if dx == dy == dt == 0:
-                        continue
-                    nk = ((ubx + dx) * ny + (uby + dy)) * n_th + (ubt + dt) % n_th
-                    pos = np.searchsorted(ukeys, nk)
-                    pos = np.minimum(pos, len(ukeys) - 1)
-                    hit = (ukeys[pos] == nk) & (ubx + dx >= 0) & (uby + dy >= 0)
-                    rows.append(np.nonzero(hit)[0])
-                    cols.append(pos[hit])
-        r = np.concatenate(rows)
-        cidx = np.concatenate(cols)
-        adj = coo_matrix((np.ones(len(r)), (r, cidx)), shape=(len(ukeys), len(ukeys)))
-        _, label = connected_components(adj, directed=False)
+        label = bin_clusters(ukeys, ny, n_th)
         plabel = label[inv]
         cw = np.bincount(plabel, weights=self.weights)
         best = plabel == int(np.argmax(cw))

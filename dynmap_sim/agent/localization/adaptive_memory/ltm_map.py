@@ -33,21 +33,13 @@ from numpy.typing import NDArray
 
 from dynmap_sim.agent.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
 from dynmap_sim.agent.localization.adaptive_memory import ltm_numba
+from dynmap_sim.jit import KERNEL_BACKENDS, kernel_backend
 
 FloatArray = NDArray[np.float64]
-#: Values of the ``backend`` arguments: ``numba`` (extra ``fast``; ``auto`` when installed)
+#: Values of the ``backend`` arguments (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): ``numba``
 #: runs :mod:`.ltm_numba`'s kernels, identical in result to ``numpy``; ``python`` the same
 #: kernels uncompiled (slow: for the tests).
-BACKENDS = ("auto", "numpy", "numba", "python")
-
-
-def _kernel_backend(backend: str) -> str | None:
-    """``"numba"``, ``"python"`` or None (numpy) for a ``backend`` argument."""
-    if backend not in BACKENDS:
-        raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
-    if backend == "auto":
-        return "numba" if ltm_numba.numba_available() else None
-    return None if backend == "numpy" else backend
+BACKENDS = KERNEL_BACKENDS
 
 
 @lru_cache(maxsize=16)
@@ -139,7 +131,7 @@ class LTMMap:
         """Fuse points ``(n, 2)`` with covariances ``(n, 2, 2)`` seen from ``laser_xy``;
         ``occupied`` (default all): the points that add occupied evidence (the others add
         only the free space along their beams). ``backend``: :data:`BACKENDS`."""
-        kernel = _kernel_backend(backend)
+        kernel = kernel_backend(backend)
         if len(points) == 0:
             return
         h, w = self.shape
@@ -208,7 +200,7 @@ class LTMMap:
         the Mahalanobis ellipse), at least 1.5 cells, at most ``semistatic_max_cells``.
         Two stages: the 3 x 3 cells around each point decide most points (a return on a
         known wall); the rest search their whole circle. ``backend``: :data:`BACKENDS`."""
-        kernel = _kernel_backend(backend)
+        kernel = kernel_backend(backend)
         n = len(points)
         if n == 0:
             return np.zeros(0, bool)

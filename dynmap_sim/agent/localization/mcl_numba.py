@@ -1,0 +1,125 @@
+"""Optional numba kernel of the likelihood field's end-point projection (extra ``fast``).
+
+:func:`endpoint_cells` is the particles x beams part of
+:func:`.likelihood_field.endpoint_cells` (*Probabilistic Robotics* Table 6.3, line 5: each
+beam's end point in the map) one end point at a time: the numpy code builds four float32
+``(P, B)`` arrays and two integer ones for it. The arithmetic is the numpy code's, operation
+for operation (float32 products and sums in the same order, ``floor`` in float32, the same
+bounds), so the cells are identical; the per-particle and per-beam terms (``cos``, ``sin``,
+the float64 laser origins) stay in numpy, whose results the kernel takes. The tests check the
+plain-Python kernel (what numba compiles) and the compiled one against the numpy code.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dynmap_sim.jit import compiled, require_numba
+from dynmap_sim.jit import numba_available as numba_available  # re-exported
+
+Float32Array = NDArray[np.float32]
+
+
+def _endpoint_cells_py(lx, ly, c, s, bx, by, h, w, out):  # type: ignore[no-untyped-def]
+    """``out[i, j]``: the flat cell ``iy * w + ix`` of particle ``i``'s beam ``j``, whose end
+    point is ``(c_i bx_j - s_i by_j + lx_i, s_i bx_j + c_i by_j + ly_i)`` [cells] (all
+    float32), or ``h * w`` outside the grid."""
+    outside = h * w
+    for i in range(lx.shape[0]):
+        ci, si, lxi, lyi = c[i], s[i], lx[i], ly[i]
+        for j in range(bx.shape[0]):
+            fx = np.floor(ci * bx[j] - si * by[j] + lxi)
+            fy = np.floor(si * bx[j] + ci * by[j] + lyi)
+            if 0 <= fx < w and 0 <= fy < h:
+                out[i, j] = int(fy) * w + int(fx)
+            else:
+                out[i, j] = outside
+
+
+_endpoint_cells = compiled(_endpoint_cells_py)
+
+
+def endpoint_cells(
+    lx: Float32Array,
+    ly: Float32Array,
+    c: Float32Array,
+    s: Float32Array,
+    bx: Float32Array,
+    by: Float32Array,
+    shape: tuple[int, int],
+    python: bool = False,
+) -> NDArray[np.intp]:
+    """:func:`_endpoint_cells_py` compiled (needs numba; ``python``: the plain kernel) on a
+    grid of ``shape`` ``(H, W)``: the ``(P, B)`` flat cells."""
+    kernel = _endpoint_cells_py if python else _endpoint_cells
+    if kernel is None:
+        require_numba("likelihood field")
+    h, w = shape
+    out = np.empty((len(lx), len(bx)), dtype=np.intp)
+    kernel(lx, ly, c, s, bx, by, int(h), int(w), out)
+    return out
+
+
+def _bin_clusters_py(ukeys, ny, n_th, parent, label):  # type: ignore[no-untyped-def]
+    """``label[u]``: the cluster of occupied bin ``u`` (``ukeys`` sorted, key ``(bx * ny + by)
+    * n_th + bt``), bins joined with their 26 neighbours (theta wraps around), clusters
+    numbered in the order of their first bin; ``parent``: scratch of ``len(ukeys)``."""
+    n = ukeys.shape[0]
+    for u in range(n):
+        parent[u] = u
+    for u in range(n):
+        bx, rem = divmod(ukeys[u], ny * n_th)
+        by, bt = divmod(rem, n_th)
+        for dx in range(-1, 2):
+            for dy in range(-1, 2):
+                if bx + dx < 0 or by + dy < 0:
+                    continue
+                for dt in range(-1, 2):
+                    if dx == 0 and dy == 0 and dt == 0:
+                        continue
+                    nk = ((bx + dx) * ny + (by + dy)) * n_th + (bt + dt) % n_th
+                    lo, hi = 0, n  # binary search: the first key >= nk
+                    while lo < hi:
+                        mid = (lo + hi) // 2
+                        if ukeys[mid] < nk:
+                            lo = mid + 1
+                        else:
+                            hi = mid
+                    v = lo
+                    if v < n and ukeys[v] == nk:
+                        ru, rv = u, v  # union under the smaller root, path halving
+                        while parent[ru] != ru:
+                            parent[ru] = parent[parent[ru]]
+                            ru = parent[ru]
+                        while parent[rv] != rv:
+                            parent[rv] = parent[parent[rv]]
+                            rv = parent[rv]
+                        if ru < rv:
+                            parent[rv] = ru
+                        elif rv < ru:
+                            parent[ru] = rv
+    n_labels = 0
+    for u in range(n):  # a parent is never after its child: its label is known
+        if parent[u] == u:
+            label[u] = n_labels
+            n_labels += 1
+        else:
+            label[u] = label[parent[u]]
+
+
+_bin_clusters = compiled(_bin_clusters_py)
+
+
+def bin_clusters(
+    ukeys: NDArray[np.int64], ny: int, n_th: int, python: bool = False
+) -> NDArray[np.intp]:
+    """:func:`_bin_clusters_py` compiled (needs numba; ``python``: the plain kernel): the
+    cluster label of each occupied bin."""
+    kernel = _bin_clusters_py if python else _bin_clusters
+    if kernel is None:
+        require_numba("particle clusters")
+    parent = np.empty(len(ukeys), dtype=np.intp)
+    label = np.empty(len(ukeys), dtype=np.intp)
+    kernel(ukeys, int(ny), int(n_th), parent, label)
+    return label

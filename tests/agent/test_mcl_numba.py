@@ -1,0 +1,55 @@
+"""The MCL core's kernels (:mod:`.mcl_numba`) give the numpy code's numbers exactly: the
+likelihood field's end-point cells and the particle clusters, on random inputs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from dynmap_sim.agent.grid import OccupancyGrid
+from dynmap_sim.agent.localization import mcl_numba
+from dynmap_sim.agent.localization.likelihood_field import endpoint_cells
+from dynmap_sim.agent.localization.particle_filter import bin_clusters
+
+needs_numba = pytest.mark.skipif(
+    not mcl_numba.numba_available(), reason="numba (extra 'fast') not installed"
+)
+KERNELS = ["python", pytest.param("numba", marks=needs_numba)]
+
+
+@pytest.mark.parametrize("kernel", KERNELS)
+def test_endpoint_cells_of_the_kernel_equal_numpy(kernel: str) -> None:
+    rng = np.random.default_rng(21)
+    for _ in range(30 if kernel == "python" else 200):
+        h, w = (int(v) for v in rng.integers(1, 120, 2))
+        res = float(rng.choice([0.05, 0.1, 0.033]))
+        grid = OccupancyGrid(np.zeros((h, w), np.int8), rng.uniform(-3, 3, 2), res, 1.0)
+        n_p, n_b = int(rng.integers(1, 200)), int(rng.integers(1, 70))
+        span = np.array([w, h]) * res
+        xy = grid.origin_xy_m + rng.uniform(-0.3, 1.3, (n_p, 2)) * span  # some outside
+        particles = np.column_stack([xy, rng.uniform(-4, 4, n_p)])
+        ranges = rng.uniform(0.0, 6.0, n_b)
+        angles = np.sort(rng.uniform(-2.1, 2.1, n_b))
+        mount = [rng.normal(0, 0.2), rng.normal(0, 0.1), rng.normal(0, 0.5)]
+        if rng.random() < 0.1:
+            particles[rng.integers(n_p)] = np.nan  # a lost particle is outside, as in numpy
+        with np.errstate(invalid="ignore"):  # NaN to int: outside
+            ref = endpoint_cells(particles, ranges, angles, mount, grid, backend="numpy")
+        got = endpoint_cells(particles, ranges, angles, mount, grid, backend=kernel)
+        np.testing.assert_array_equal(got, ref)
+        assert got.dtype == ref.dtype
+
+
+@pytest.mark.parametrize("kernel", KERNELS)
+def test_bin_clusters_of_the_kernel_equal_scipy(kernel: str) -> None:
+    rng = np.random.default_rng(22)
+    n_th = 36
+    for _ in range(60 if kernel == "python" else 300):
+        n = int(rng.integers(1, 400))
+        bx = rng.integers(0, rng.integers(1, 15), n)
+        by = rng.integers(0, rng.integers(1, 15), n)
+        bt = rng.integers(0, n_th, n)
+        ny = int(by.max()) + 3
+        ukeys = np.unique((bx * ny + by) * n_th + bt)
+        ref = bin_clusters(ukeys, ny, n_th, backend="numpy")
+        np.testing.assert_array_equal(bin_clusters(ukeys, ny, n_th, backend=kernel), ref)
