@@ -101,27 +101,15 @@ def endpoint_cells(
     return flat
 
 
-def endpoint_distances(
-    particles: FloatArray,
-    ranges_m: FloatArray,
-    angles_rad: FloatArray,
-    mount_pose: ArrayLike,
-    grid: OccupancyGrid,
-) -> NDArray[np.float32]:
-    """Distance-field value ``(P, B)`` at each beam's end point (``max_dist_m`` outside)."""
-    flat = endpoint_cells(particles, ranges_m, angles_rad, mount_pose, grid)
-    table = np.append(grid.dist_m.ravel(), np.float32(grid.max_dist_m))
-    return np.take(table, flat)
-
-
 class LikelihoodTable:
     """Per-cell beam likelihood tables for one grid and one parameter set (AMCL precomputes
     the distance map; we also precompute ``p`` and ``log p`` so the hot loop is a gather).
-    The last entry is the value outside the grid (distance ``max_dist_m``)."""
+    The last entry is the value outside the grid (distance ``max_dist_m``): ``dist`` [m]
+    float32, indexed by :func:`endpoint_cells`."""
 
     def __init__(self, grid: OccupancyGrid, params: LikelihoodFieldParams) -> None:
-        d = np.append(grid.dist_m.ravel(), np.float32(grid.max_dist_m)).astype(np.float64)
-        p = beam_likelihoods(d, params)
+        self.dist = np.append(grid.dist_m.ravel(), np.float32(grid.max_dist_m))
+        p = beam_likelihoods(self.dist, params)
         self.p = p.astype(np.float32)
         self.logp = np.log(p).astype(np.float32)
         self.logp_skip = float(

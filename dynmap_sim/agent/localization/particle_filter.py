@@ -69,7 +69,6 @@ from dynmap_sim.agent.localization.likelihood_field import (
     LikelihoodTable,
     beam_likelihoods,
     endpoint_cells,
-    endpoint_distances,
     likelihood_field_prob_cells,
     likelihood_field_weights_cells,
     select_beams,
@@ -741,7 +740,8 @@ class AMCLFilter:
         r, a = self._beams_of(ranges_m)
         if len(r) == 0:
             return float("nan")
-        d = endpoint_distances(np.asarray(pose, float)[None, :], r, a, self.mount, self.grid)
+        cells = endpoint_cells(np.asarray(pose, float)[None, :], r, a, self.mount, self.grid)
+        d = np.take(self.table.dist, cells)
         return float(np.mean(np.log(beam_likelihoods(d, self.lf))))
 
 
