@@ -143,22 +143,23 @@ def likelihood_field_weights_cells(flat: NDArray[np.intp], table: LikelihoodTabl
     return 1.0 + np.sum((p * p * p).astype(np.float64), axis=1)
 
 
-def likelihood_field_prob_cells(
-    flat: NDArray[np.intp], table: LikelihoodTable, params: LikelihoodFieldParams
+def likelihood_field_prob_beams(
+    logp: NDArray[np.float32], table: LikelihoodTable, params: LikelihoodFieldParams
 ) -> tuple[FloatArray, NDArray[np.bool_]]:
-    """:func:`likelihood_field_prob_logweights` from end-point cells and a precomputed table.
+    """:func:`likelihood_field_prob_logweights` from the per-beam ``log p`` ``(P, B)`` of the
+    end-point cells (``np.take(table.logp, cells)``, precomputed table).
 
     ``d < beam_skip_distance`` is ``log p > log p(beam_skip_distance)`` (p falls with d).
     """
-    logp = np.take(table.logp, flat)
-    n_beams = flat.shape[1]
+    n_beams = logp.shape[1]
     use = np.ones(n_beams, dtype=bool)
     if params.do_beamskip and n_beams > 0:
         frac_close = np.mean(logp > table.logp_skip, axis=0)
         use = frac_close > params.beam_skip_threshold
         if int(np.sum(~use)) >= n_beams * params.beam_skip_error_threshold:
             use[:] = True
-    return logp[:, use].sum(axis=1, dtype=np.float64), use
+    kept = logp if use.all() else logp[:, use]
+    return kept.sum(axis=1, dtype=np.float64), use
 
 
 def likelihood_field_prob_logweights(

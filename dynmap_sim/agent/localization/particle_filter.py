@@ -69,7 +69,7 @@ from dynmap_sim.agent.localization.likelihood_field import (
     LikelihoodTable,
     beam_likelihoods,
     endpoint_cells,
-    likelihood_field_prob_cells,
+    likelihood_field_prob_beams,
     likelihood_field_weights_cells,
     select_beams,
     valid_beams,
@@ -568,8 +568,10 @@ class AMCLFilter:
         if len(r) == 0:
             return
         cells = endpoint_cells(self.particles, r, a, self.mount, self.grid)
+        beam_logp = None  # (P, B) log p of the end points, gathered once
         if self.config.laser_model_type == "likelihood_field_prob":
-            logp, _ = likelihood_field_prob_cells(cells, self.table, self.lf)
+            beam_logp = np.take(self.table.logp, cells)
+            logp, _ = likelihood_field_prob_beams(beam_logp, self.table, self.lf)
         else:
             logp = np.log(likelihood_field_weights_cells(cells, self.table))
         w_prev = self.weights
@@ -584,7 +586,9 @@ class AMCLFilter:
             # Per-beam geometric mean over the beams the distance filter keeps (all valid
             # beams without it), beam skipping not applied.
             use = self._recovery_beams(w_prev, r, a)
-            total = per_beam_average(lw_prev, np.take(self.table.logp, cells[:, use]))
+            if beam_logp is None:
+                beam_logp = np.take(self.table.logp, cells)
+            total = per_beam_average(lw_prev, beam_logp[:, use])
             # This update's average feeds local resetting; a fit back at w_ref ends a
             # local-resetting episode.
             self.w_last = total
