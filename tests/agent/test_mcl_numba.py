@@ -1,12 +1,15 @@
-"""The MCL core's kernels (:mod:`.mcl_numba`) give the numpy code's numbers exactly: the
-likelihood field's end-point cells and the particle clusters, on random inputs."""
+"""The MCL core's kernels give the numpy code's numbers exactly, on random inputs: the
+likelihood field's end-point cells and the particle clusters (:mod:`.mcl_numba`), and the
+occupancy grid's distance field (:mod:`dynmap_sim.agent.grid_numba`, against scipy)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy import ndimage
 
-from dynmap_sim.agent.grid import OccupancyGrid
+from dynmap_sim.agent import grid_numba
+from dynmap_sim.agent.grid import OCCUPIED, OccupancyGrid
 from dynmap_sim.agent.localization import mcl_numba
 from dynmap_sim.agent.localization.likelihood_field import endpoint_cells
 from dynmap_sim.agent.localization.particle_filter import bin_clusters
@@ -53,3 +56,20 @@ def test_bin_clusters_of_the_kernel_equal_scipy(kernel: str) -> None:
         ukeys = np.unique((bx * ny + by) * n_th + bt)
         ref = bin_clusters(ukeys, ny, n_th, backend="numpy")
         np.testing.assert_array_equal(bin_clusters(ukeys, ny, n_th, backend=kernel), ref)
+
+
+@pytest.mark.parametrize("kernel", KERNELS)
+def test_distances_of_the_kernel_equal_scipy(kernel: str) -> None:
+    rng = np.random.default_rng(31)
+    for _ in range(60 if kernel == "python" else 400):
+        h, w = (int(v) for v in rng.integers(1, 90, 2))
+        occ = rng.random((h, w)) < rng.choice([0.001, 0.01, 0.1, 0.5, 0.95])
+        occ[rng.integers(h), rng.integers(w)] = True
+        ref = ndimage.distance_transform_edt(~occ)
+        got = np.sqrt(grid_numba.squared_distances(occ, python=kernel == "python"))
+        assert got.tobytes() == ref.tobytes()
+        cells = np.where(occ, OCCUPIED, rng.choice([-1, 0], (h, w))).astype(np.int8)
+        origin, res, max_d = rng.uniform(-3, 3, 2), float(rng.choice([0.05, 0.1])), 1.3
+        grid = OccupancyGrid(cells, origin, res, max_d, backend=kernel)
+        ref_grid = OccupancyGrid(cells, origin, res, max_d, backend="numpy")
+        assert grid.dist_m.tobytes() == ref_grid.dist_m.tobytes()
