@@ -11,7 +11,7 @@ from scipy import ndimage
 from dynmap_sim.agent import grid_numba
 from dynmap_sim.agent.grid import OCCUPIED, OccupancyGrid
 from dynmap_sim.agent.localization import mcl_numba
-from dynmap_sim.agent.localization.likelihood_field import endpoint_cells
+from dynmap_sim.agent.localization.likelihood_field import endpoint_cells, endpoint_values
 from dynmap_sim.agent.localization.particle_filter import bin_clusters
 
 needs_numba = pytest.mark.skipif(
@@ -21,7 +21,7 @@ KERNELS = ["python", pytest.param("numba", marks=needs_numba)]
 
 
 @pytest.mark.parametrize("kernel", KERNELS)
-def test_endpoint_cells_of_the_kernel_equal_numpy(kernel: str) -> None:
+def test_endpoint_values_of_the_kernel_equal_numpy(kernel: str) -> None:
     rng = np.random.default_rng(21)
     for _ in range(30 if kernel == "python" else 200):
         h, w = (int(v) for v in rng.integers(1, 120, 2))
@@ -37,10 +37,12 @@ def test_endpoint_cells_of_the_kernel_equal_numpy(kernel: str) -> None:
         if rng.random() < 0.1:
             particles[rng.integers(n_p)] = np.nan  # a lost particle is outside, as in numpy
         with np.errstate(invalid="ignore"):  # NaN to int: outside
-            ref = endpoint_cells(particles, ranges, angles, mount, grid, backend="numpy")
-        got = endpoint_cells(particles, ranges, angles, mount, grid, backend=kernel)
-        np.testing.assert_array_equal(got, ref)
-        assert got.dtype == ref.dtype
+            cells = endpoint_cells(particles, ranges, angles, mount, grid)
+        table = rng.normal(0, 1, h * w + 1).astype(np.float32)
+        for values, ref in ((table, np.take(table, cells)), (np.arange(h * w + 1), cells)):
+            got = endpoint_values(values, particles, ranges, angles, mount, grid, backend=kernel)
+            assert got.dtype == ref.dtype
+            assert got.tobytes() == ref.tobytes()
 
 
 @pytest.mark.parametrize("kernel", KERNELS)

@@ -57,37 +57,41 @@ class LikelihoodFieldParams:
     beam_skip_error_threshold: float = 0.9
 
 
-def endpoint_cells(
+def _endpoint_terms(
     particles: FloatArray,
     ranges_m: FloatArray,
     angles_rad: FloatArray,
     mount_pose: ArrayLike,
     grid: OccupancyGrid,
-    backend: str = "auto",
-) -> NDArray[np.intp]:
-    """Flat cell index ``(P, B)`` of each beam's end point; ``H * W`` (one past the last
-    cell) where the end point falls outside the grid. Computed in float32 for speed.
-    ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): the particles x beams part in
-    :mod:`.mcl_numba`'s kernel (the same cells) or in numpy."""
-    kernel = kernel_backend(backend)
+) -> tuple[NDArray[np.float32], ...]:
+    """The per-particle and per-beam float32 terms of the end points [cells]: laser origins
+    ``lx, ly`` relative to the grid origin, ``cos, sin`` of the headings, beam offsets
+    ``bx, by`` in the laser frame (:func:`endpoint_cells`)."""
     mx, my, myaw = (float(v) for v in mount_pose)
     th = particles[:, 2]
     c64, s64 = np.cos(th), np.sin(th)
     inv_res = 1.0 / grid.resolution_m
-    # Laser origin per particle, in cell units relative to the grid origin.
     lx = ((particles[:, 0] + c64 * mx - s64 * my - grid.origin_xy_m[0]) * inv_res).astype(
         np.float32
     )
     ly = ((particles[:, 1] + s64 * mx + c64 * my - grid.origin_xy_m[1]) * inv_res).astype(
         np.float32
     )
-    c = c64.astype(np.float32)
-    s = s64.astype(np.float32)
     bx = (ranges_m * np.cos(angles_rad + myaw) * inv_res).astype(np.float32)
     by = (ranges_m * np.sin(angles_rad + myaw) * inv_res).astype(np.float32)
-    if kernel:
-        return mcl_numba.endpoint_cells(lx, ly, c, s, bx, by, grid.shape,
-                                               python=kernel == "python")  # fmt: skip
+    return lx, ly, c64.astype(np.float32), s64.astype(np.float32), bx, by
+
+
+def endpoint_cells(
+    particles: FloatArray,
+    ranges_m: FloatArray,
+    angles_rad: FloatArray,
+    mount_pose: ArrayLike,
+    grid: OccupancyGrid,
+) -> NDArray[np.intp]:
+    """Flat cell index ``(P, B)`` of each beam's end point; ``H * W`` (one past the last
+    cell) where the end point falls outside the grid. Computed in float32 for speed."""
+    lx, ly, c, s, bx, by = _endpoint_terms(particles, ranges_m, angles_rad, mount_pose, grid)
     hx = c[:, None] * bx[None, :] - s[:, None] * by[None, :]
     hx += lx[:, None]
     hy = s[:, None] * bx[None, :] + c[:, None] * by[None, :]
@@ -99,6 +103,26 @@ def endpoint_cells(
     flat = iy * w + ix
     flat[~inside] = h * w
     return flat
+
+
+def endpoint_values(
+    values: NDArray[np.generic],
+    particles: FloatArray,
+    ranges_m: FloatArray,
+    angles_rad: FloatArray,
+    mount_pose: ArrayLike,
+    grid: OccupancyGrid,
+    backend: str = "auto",
+) -> NDArray[np.generic]:
+    """``values`` ``(H * W + 1,)`` (a :class:`LikelihoodTable`'s, the last entry for outside
+    the grid) at each beam's end point ``(P, B)``: ``values[endpoint_cells(...)]``.
+    ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): :mod:`.mcl_numba`'s kernel, which
+    gathers as it projects (the same values), or numpy."""
+    kernel = kernel_backend(backend)
+    if kernel:
+        terms = _endpoint_terms(particles, ranges_m, angles_rad, mount_pose, grid)
+        return mcl_numba.endpoint_values(values, terms, grid.shape, python=kernel == "python")
+    return np.take(values, endpoint_cells(particles, ranges_m, angles_rad, mount_pose, grid))
 
 
 class LikelihoodTable:
@@ -137,9 +161,9 @@ def likelihood_field_weights(d: ArrayLike, params: LikelihoodFieldParams) -> Flo
     return 1.0 + np.sum(p * p * p, axis=1)
 
 
-def likelihood_field_weights_cells(flat: NDArray[np.intp], table: LikelihoodTable) -> FloatArray:
-    """:func:`likelihood_field_weights` from end-point cells and a precomputed table."""
-    p = np.take(table.p, flat)
+def likelihood_field_weights_beams(p: NDArray[np.float32]) -> FloatArray:
+    """:func:`likelihood_field_weights` from the per-beam ``p`` ``(P, B)`` of the end-point
+    cells (``np.take(table.p, cells)``, precomputed table)."""
     return 1.0 + np.sum((p * p * p).astype(np.float64), axis=1)
 
 

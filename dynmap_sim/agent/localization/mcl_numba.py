@@ -1,13 +1,19 @@
-"""Optional numba kernel of the likelihood field's end-point projection (extra ``fast``).
+"""Optional numba kernels of the MCL core (extra ``fast``).
 
-:func:`endpoint_cells` is the particles x beams part of
-:func:`.likelihood_field.endpoint_cells` (*Probabilistic Robotics* Table 6.3, line 5: each
-beam's end point in the map) one end point at a time: the numpy code builds four float32
-``(P, B)`` arrays and two integer ones for it. The arithmetic is the numpy code's, operation
-for operation (float32 products and sums in the same order, ``floor`` in float32, the same
-bounds), so the cells are identical; the per-particle and per-beam terms (``cos``, ``sin``,
-the float64 laser origins) stay in numpy, whose results the kernel takes. The tests check the
-plain-Python kernel (what numba compiles) and the compiled one against the numpy code.
+* :func:`endpoint_values`: the particles x beams part of
+  :func:`.likelihood_field.endpoint_values` (*Probabilistic Robotics* Table 6.3, line 5: each
+  beam's end point in the map, and the likelihood table's value there) one end point at a
+  time: the numpy code builds four float32 and three integer ``(P, B)`` arrays for it, then
+  gathers. The arithmetic is the numpy code's, operation for operation (float32 products and
+  sums in the same order, ``floor`` in float32, the same bounds), so the values are
+  identical; the per-particle and per-beam terms (``cos``, ``sin``, the float64 laser
+  origins) stay in numpy, whose results the kernel takes.
+* :func:`bin_clusters`: the particle clusters of ``AMCLFilter.estimate`` (``pf_cluster_stats``)
+  by union-find over the occupied bins, numbered as scipy's ``connected_components`` numbers
+  them.
+
+The tests check the plain-Python kernels (what numba compiles) and the compiled ones against
+the numpy code.
 """
 
 from __future__ import annotations
@@ -21,43 +27,40 @@ from dynmap_sim.jit import numba_available as numba_available  # re-exported
 Float32Array = NDArray[np.float32]
 
 
-def _endpoint_cells_py(lx, ly, c, s, bx, by, h, w, out):  # type: ignore[no-untyped-def]
-    """``out[i, j]``: the flat cell ``iy * w + ix`` of particle ``i``'s beam ``j``, whose end
-    point is ``(c_i bx_j - s_i by_j + lx_i, s_i bx_j + c_i by_j + ly_i)`` [cells] (all
-    float32), or ``h * w`` outside the grid."""
-    outside = h * w
+def _endpoint_values_py(lx, ly, c, s, bx, by, values, h, w, out):  # type: ignore[no-untyped-def]
+    """``out[i, j]``: ``values[iy * w + ix]`` at the cell of particle ``i``'s beam ``j``, whose
+    end point is ``(c_i bx_j - s_i by_j + lx_i, s_i bx_j + c_i by_j + ly_i)`` [cells] (all
+    float32), or ``values[h * w]`` outside the grid."""
+    outside = values[h * w]
     for i in range(lx.shape[0]):
         ci, si, lxi, lyi = c[i], s[i], lx[i], ly[i]
         for j in range(bx.shape[0]):
             fx = np.floor(ci * bx[j] - si * by[j] + lxi)
             fy = np.floor(si * bx[j] + ci * by[j] + lyi)
             if 0 <= fx < w and 0 <= fy < h:
-                out[i, j] = int(fy) * w + int(fx)
+                out[i, j] = values[int(fy) * w + int(fx)]
             else:
                 out[i, j] = outside
 
 
-_endpoint_cells = compiled(_endpoint_cells_py)
+_endpoint_values = compiled(_endpoint_values_py)
 
 
-def endpoint_cells(
-    lx: Float32Array,
-    ly: Float32Array,
-    c: Float32Array,
-    s: Float32Array,
-    bx: Float32Array,
-    by: Float32Array,
+def endpoint_values(
+    values: NDArray[np.generic],
+    terms: tuple[Float32Array, ...],
     shape: tuple[int, int],
     python: bool = False,
-) -> NDArray[np.intp]:
-    """:func:`_endpoint_cells_py` compiled (needs numba; ``python``: the plain kernel) on a
-    grid of ``shape`` ``(H, W)``: the ``(P, B)`` flat cells."""
-    kernel = _endpoint_cells_py if python else _endpoint_cells
+) -> NDArray[np.generic]:
+    """:func:`_endpoint_values_py` compiled (needs numba; ``python``: the plain kernel) on a
+    grid of ``shape`` ``(H, W)``, ``terms`` ``(lx, ly, c, s, bx, by)``: the ``(P, B)`` values
+    (``values``' dtype)."""
+    kernel = _endpoint_values_py if python else _endpoint_values
     if kernel is None:
         require_numba("likelihood field")
     h, w = shape
-    out = np.empty((len(lx), len(bx)), dtype=np.intp)
-    kernel(lx, ly, c, s, bx, by, int(h), int(w), out)
+    out = np.empty((len(terms[0]), len(terms[4])), dtype=values.dtype)
+    kernel(*terms, values, int(h), int(w), out)
     return out
 
 

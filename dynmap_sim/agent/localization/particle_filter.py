@@ -68,9 +68,9 @@ from dynmap_sim.agent.localization.likelihood_field import (
     LikelihoodFieldParams,
     LikelihoodTable,
     beam_likelihoods,
-    endpoint_cells,
+    endpoint_values,
     likelihood_field_prob_beams,
-    likelihood_field_weights_cells,
+    likelihood_field_weights_beams,
     select_beams,
     valid_beams,
 )
@@ -567,13 +567,13 @@ class AMCLFilter:
         r, a = self._beams_of(ranges_m)
         if len(r) == 0:
             return
-        cells = endpoint_cells(self.particles, r, a, self.mount, self.grid)
-        beam_logp = None  # (P, B) log p of the end points, gathered once
+        beam_logp = None  # (P, B) log p of the end points
         if self.config.laser_model_type == "likelihood_field_prob":
-            beam_logp = np.take(self.table.logp, cells)
+            beam_logp = self._endpoint_values(self.table.logp, self.particles, r, a)
             logp, _ = likelihood_field_prob_beams(beam_logp, self.table, self.lf)
         else:
-            logp = np.log(likelihood_field_weights_cells(cells, self.table))
+            p = self._endpoint_values(self.table.p, self.particles, r, a)
+            logp = np.log(likelihood_field_weights_beams(p))
         w_prev = self.weights
         lw_prev = np.log(np.maximum(w_prev, 1e-300))
         logw = lw_prev + logp
@@ -587,7 +587,7 @@ class AMCLFilter:
             # beams without it), beam skipping not applied.
             use = self._recovery_beams(w_prev, r, a)
             if beam_logp is None:
-                beam_logp = np.take(self.table.logp, cells)
+                beam_logp = self._endpoint_values(self.table.logp, self.particles, r, a)
             total = per_beam_average(lw_prev, beam_logp[:, use])
             # This update's average feeds local resetting; a fit back at w_ref ends a
             # local-resetting episode.
@@ -600,6 +600,16 @@ class AMCLFilter:
             w_ref = self.reference_weight()
             low = w_ref > 0 and self.w_fast < c.recovery_ratio_threshold * w_ref
             self.n_low_updates = self.n_low_updates + 1 if low else 0
+
+    def _endpoint_values(
+        self,
+        values: NDArray[np.generic],
+        particles: FloatArray,
+        ranges_m: FloatArray,
+        angles_rad: FloatArray,
+    ) -> NDArray[np.generic]:
+        """``values`` of the likelihood table at the beams' end points ``(P, B)``."""
+        return endpoint_values(values, particles, ranges_m, angles_rad, self.mount, self.grid)
 
     def _recovery_beams(
         self, weights: FloatArray, ranges_m: FloatArray, angles_rad: FloatArray
@@ -744,8 +754,7 @@ class AMCLFilter:
         r, a = self._beams_of(ranges_m)
         if len(r) == 0:
             return float("nan")
-        cells = endpoint_cells(np.asarray(pose, float)[None, :], r, a, self.mount, self.grid)
-        d = np.take(self.table.dist, cells)
+        d = self._endpoint_values(self.table.dist, np.asarray(pose, float)[None, :], r, a)
         return float(np.mean(np.log(beam_likelihoods(d, self.lf))))
 
 
