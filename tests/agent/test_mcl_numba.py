@@ -1,6 +1,7 @@
 """The MCL core's kernels give the numpy code's numbers exactly, on random inputs: the
-likelihood field's end-point cells and the particle clusters (:mod:`.mcl_numba`), and the
-occupancy grid's distance field (:mod:`dynmap_sim.agent.grid_numba`, against scipy)."""
+likelihood field's end-point values, the ray casting of expected ranges and the particle
+clusters (:mod:`.mcl_numba`), and the occupancy grid's distance field
+(:mod:`dynmap_sim.agent.grid_numba`, against scipy)."""
 
 from __future__ import annotations
 
@@ -11,6 +12,7 @@ from scipy import ndimage
 from dynmap_sim.agent import grid_numba
 from dynmap_sim.agent.grid import OCCUPIED, OccupancyGrid
 from dynmap_sim.agent.localization import mcl_numba
+from dynmap_sim.agent.localization.distance_filter import cast_rays
 from dynmap_sim.agent.localization.likelihood_field import endpoint_cells, endpoint_values
 from dynmap_sim.agent.localization.particle_filter import bin_clusters
 
@@ -75,3 +77,20 @@ def test_distances_of_the_kernel_equal_scipy(kernel: str) -> None:
         grid = OccupancyGrid(cells, origin, res, max_d, backend=kernel)
         ref_grid = OccupancyGrid(cells, origin, res, max_d, backend="numpy")
         assert grid.dist_m.tobytes() == ref_grid.dist_m.tobytes()
+
+
+@pytest.mark.parametrize("kernel", KERNELS)
+def test_cast_rays_of_the_kernel_equal_numpy(kernel: str) -> None:
+    rng = np.random.default_rng(23)
+    for _ in range(30 if kernel == "python" else 200):
+        h, w = (int(v) for v in rng.integers(1, 80, 2))
+        occupied = rng.random((h, w)) < rng.choice([0.0, 0.01, 0.1, 0.5])
+        origin, res = rng.uniform(-3, 3, 2), float(rng.choice([0.05, 0.1]))
+        span = np.array([w, h]) * res
+        pose = [*(origin + rng.uniform(-0.2, 1.2, 2) * span), rng.uniform(-4, 4)]
+        angles = rng.uniform(-2.1, 2.1, int(rng.integers(1, 70)))
+        range_max = float(rng.uniform(0.01, 6.0))
+        t_ref, ref = cast_rays(occupied, origin, res, pose, angles, range_max, backend="numpy")
+        t, got = cast_rays(occupied, origin, res, pose, angles, range_max, backend=kernel)
+        assert t.tobytes() == t_ref.tobytes()
+        np.testing.assert_array_equal(got, ref)

@@ -8,6 +8,9 @@
   sums in the same order, ``floor`` in float32, the same bounds), so the values are
   identical; the per-particle and per-beam terms (``cos``, ``sin``, the float64 laser
   origins) stay in numpy, whose results the kernel takes.
+* :func:`first_occupied`: the ray casting of the expected ranges (Fox et al.'s distance
+  filter, H&W §6.1's map selection), beam by beam up to its first occupied sample, where the
+  numpy code samples every beam to the end;
 * :func:`bin_clusters`: the particle clusters of ``AMCLFilter.estimate`` (``pf_cluster_stats``)
   by union-find over the occupied bins, numbered as scipy's ``connected_components`` numbers
   them.
@@ -126,3 +129,41 @@ def bin_clusters(
     label = np.empty(len(ukeys), dtype=np.intp)
     kernel(ukeys, int(ny), int(n_th), parent, label)
     return label
+
+
+def _first_occupied_py(occupied, x0, y0, ca, sa, t, ox, oy, res, out):  # type: ignore[no-untyped-def]
+    """``out[i]``: the first ``k`` whose sample ``(x0 + ca_i t_k, y0 + sa_i t_k)`` falls in an
+    occupied cell (``occupied[iy, ix]``, cells ``floor((x - ox) / res)``), -1 for none."""
+    h, w = occupied.shape
+    for i in range(ca.shape[0]):
+        out[i] = -1
+        for k in range(t.shape[0]):
+            fx = np.floor((x0 + ca[i] * t[k] - ox) / res)
+            fy = np.floor((y0 + sa[i] * t[k] - oy) / res)
+            if 0 <= fx < w and 0 <= fy < h and occupied[int(fy), int(fx)]:
+                out[i] = k
+                break
+
+
+_first_occupied = compiled(_first_occupied_py)
+
+
+def first_occupied(
+    occupied: NDArray[np.bool_],
+    origin_xy: NDArray[np.float64],
+    res: float,
+    laser_xy: NDArray[np.float64],
+    cos_sin: tuple[NDArray[np.float64], NDArray[np.float64]],
+    t: NDArray[np.float64],
+    python: bool = False,
+) -> NDArray[np.intp]:
+    """:func:`_first_occupied_py` compiled (needs numba; ``python``: the plain kernel): per
+    beam (direction ``cos_sin``), the index into ``t`` of its first occupied sample, -1 for
+    none."""
+    kernel = _first_occupied_py if python else _first_occupied
+    if kernel is None:
+        require_numba("ray casting")
+    out = np.empty(len(cos_sin[0]), dtype=np.intp)
+    kernel(occupied, float(laser_xy[0]), float(laser_xy[1]), cos_sin[0], cos_sin[1], t,
+           float(origin_xy[0]), float(origin_xy[1]), float(res), out)  # fmt: skip
+    return out

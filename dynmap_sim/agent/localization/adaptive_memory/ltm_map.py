@@ -33,6 +33,7 @@ from numpy.typing import NDArray
 
 from dynmap_sim.agent.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
 from dynmap_sim.agent.localization.adaptive_memory import ltm_numba
+from dynmap_sim.agent.localization.distance_filter import cast_rays
 from dynmap_sim.jit import KERNEL_BACKENDS, kernel_backend
 
 FloatArray = NDArray[np.float64]
@@ -259,18 +260,9 @@ class LTMMap:
     ) -> FloatArray:
         """Ray-cast ranges [m] on the occupied cells (half-cell steps; ``range_max`` when
         nothing is hit)."""
-        step = 0.5 * self.resolution
-        t = np.arange(1, int(np.ceil(range_max / step)) + 1) * step
-        a = laser_pose[2] + angles
-        xs = laser_pose[0] + np.cos(a)[:, None] * t[None, :]
-        ys = laser_pose[1] + np.sin(a)[:, None] * t[None, :]
-        ix, iy = self.cells(np.stack([xs, ys], axis=-1))
-        h, w = self.shape
-        inside = (ix >= 0) & (ix < w) & (iy >= 0) & (iy < h)
-        hit = np.zeros(ix.shape, bool)
-        hit[inside] = self.logodds[iy[inside], ix[inside]] >= params.l_occupied
-        first = np.argmax(hit, axis=1)
-        return np.where(hit.any(axis=1), t[first], range_max)
+        t, first = cast_rays(self.occupied(params), self.origin, self.resolution, laser_pose,
+                             angles, range_max)  # fmt: skip
+        return np.where(first >= 0, t[first], range_max)
 
 
 def point_covariances(
