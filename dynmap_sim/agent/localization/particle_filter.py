@@ -426,6 +426,21 @@ def running_averages(
     )
 
 
+def weighted_mean_pose(
+    particles: FloatArray, weights: FloatArray
+) -> tuple[FloatArray, FloatArray, float, float]:
+    """Weighted mean pose (circular for theta) of a particle set, with the normalized weights
+    and the weighted means of ``cos theta``, ``sin theta`` (:func:`weighted_pose_stats`)."""
+    w = np.asarray(weights, dtype=np.float64)
+    w = w / w.sum()
+    c = float(np.sum(w * np.cos(particles[:, 2])))
+    s = float(np.sum(w * np.sin(particles[:, 2])))
+    mean = np.array(
+        [float(np.sum(w * particles[:, 0])), float(np.sum(w * particles[:, 1])), np.arctan2(s, c)]
+    )
+    return mean, w, c, s
+
+
 def weighted_pose_stats(
     particles: FloatArray, weights: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
@@ -434,13 +449,7 @@ def weighted_pose_stats(
     The theta variance is AMCL's circular ``-2 ln R`` (``R`` the mean resultant length);
     cross terms use the wrapped angle residuals.
     """
-    w = np.asarray(weights, dtype=np.float64)
-    w = w / w.sum()
-    c = float(np.sum(w * np.cos(particles[:, 2])))
-    s = float(np.sum(w * np.sin(particles[:, 2])))
-    mean = np.array(
-        [float(np.sum(w * particles[:, 0])), float(np.sum(w * particles[:, 1])), np.arctan2(s, c)]
-    )
+    mean, w, c, s = weighted_mean_pose(particles, weights)
     res = particles - mean
     res[:, 2] = se2.wrap_angle(res[:, 2])
     cov = (res * w[:, None]).T @ res
@@ -622,7 +631,7 @@ class AMCLFilter:
         margin = self.config.recovery_distance_filter_m
         if margin <= 0:
             return all_beams
-        mean, _ = weighted_pose_stats(self.particles, weights)
+        mean = weighted_mean_pose(self.particles, weights)[0]
         laser_pose = se2.compose(mean, self.mount)
         expected = expected_ranges(self.grid, laser_pose, angles_rad, self.range_max)
         keep = np.nonzero(~short_readings(ranges_m, expected, margin))[0]
