@@ -131,7 +131,9 @@ class LTMMap:
     ) -> None:
         """Fuse points ``(n, 2)`` with covariances ``(n, 2, 2)`` seen from ``laser_xy``;
         ``occupied`` (default all): the points that add occupied evidence (the others add
-        only the free space along their beams). ``backend``: :data:`BACKENDS`."""
+        only the free space along their beams). The cells it changes are clamped to
+        ``[l_min, l_max]`` and the pinned ones among them reset to ``l_max``; the grid's
+        other cells must already be (every map starts so). ``backend``: :data:`BACKENDS`."""
         kernel = kernel_backend(backend)
         if len(points) == 0:
             return
@@ -188,8 +190,15 @@ class LTMMap:
             flat = np.concatenate(flat_all)
             add = np.concatenate(add_all)
             np.add.at(lo, flat, add.astype(np.float32))
-        np.clip(lo, params.l_min, params.l_max, out=lo)
-        self.logodds[self.pinned] = params.l_max
+        # Clamp and re-pin the cells this update can have changed: those between the laser
+        # and the points' stencils (the others already are, as every map starts so).
+        lc = self.cells(np.asarray(laser_xy, dtype=np.float64))
+        k = params.stencil_cells
+        x0, x1 = max(min(int(ix.min()) - k, int(lc[0])), 0), max(int(ix.max()) + k, int(lc[0])) + 1
+        y0, y1 = max(min(int(iy.min()) - k, int(lc[1])), 0), max(int(iy.max()) + k, int(lc[1])) + 1
+        sub = self.logodds[y0:y1, x0:x1]
+        np.clip(sub, params.l_min, params.l_max, out=sub)
+        sub[self.pinned[y0:y1, x0:x1]] = params.l_max
 
     # -- §4.4 ---------------------------------------------------------------------------
     def explained(
