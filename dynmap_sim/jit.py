@@ -25,6 +25,22 @@ def compiled(fn: Callable[..., Any]) -> Callable[..., Any] | None:
     return numba.njit(cache=True, nogil=True)(fn) if numba is not None else None
 
 
+#: Values of a ``backend`` argument of code with optional kernels: ``numba`` (``auto`` when
+#: installed) runs the compiled kernels, identical in result to ``numpy``; ``python`` the same
+#: kernels uncompiled (slow: for the tests).
+KERNEL_BACKENDS = ("auto", "numpy", "numba", "python")
+
+
+def kernel_backend(backend: str) -> str | None:
+    """``"numba"``, ``"python"`` or None (the numpy code) for a ``backend`` argument
+    (:data:`KERNEL_BACKENDS`)."""
+    if backend not in KERNEL_BACKENDS:
+        raise ValueError(f"backend must be one of {KERNEL_BACKENDS}, got {backend!r}")
+    if backend == "auto":
+        return "numba" if numba is not None else None
+    return None if backend == "numpy" else backend
+
+
 def require_numba(what: str) -> None:
     """Raise a clear error when the numba backend of ``what`` is asked for without numba."""
     if numba is None:

@@ -20,15 +20,36 @@ def compose(a: ArrayLike, b: ArrayLike) -> FloatArray:
     """``a ⊕ b``: pose ``b`` expressed in frame ``a``, returned in ``a``'s parent frame."""
     a = np.asarray(a, dtype=np.float64)
     b = np.asarray(b, dtype=np.float64)
+    if a.shape == b.shape == (3,):
+        return _compose_one(a, b)
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
     y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
     return np.stack([x, y, wrap_angle(a[..., 2] + b[..., 2])], axis=-1)
 
 
+def _compose_one(a: FloatArray, b: FloatArray) -> FloatArray:
+    """:func:`compose` of two single poses on numpy float64 scalars: the same operations in
+    the same order (so the same numbers), without the array machinery (several times faster
+    for one pose, as the localizers compose them every scan)."""
+    a0, a1, a2 = a
+    b0, b1, b2 = b
+    c, s = np.cos(a2), np.sin(a2)
+    return np.array([a0 + c * b0 - s * b1, a1 + s * b0 + c * b1, _wrap_one(a2 + b2)])
+
+
+def _wrap_one(theta_rad: np.float64) -> np.float64:
+    """:func:`wrap_angle` of one numpy float64 scalar (the same operations)."""
+    return (theta_rad + np.pi) % (2.0 * np.pi) - np.pi
+
+
 def inverse(a: ArrayLike) -> FloatArray:
     """``⊖ a``: the inverse transform."""
     a = np.asarray(a, dtype=np.float64)
+    if a.shape == (3,):
+        a0, a1, a2 = a  # one pose on numpy scalars, as _compose_one
+        c, s = np.cos(a2), np.sin(a2)
+        return np.array([-c * a0 - s * a1, s * a0 - c * a1, _wrap_one(-a2)])
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = -c * a[..., 0] - s * a[..., 1]
     y = s * a[..., 0] - c * a[..., 1]

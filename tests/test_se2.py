@@ -41,3 +41,17 @@ def test_scan_to_points_drops_non_finite():
     a = np.array([0.0, 0.1, 0.2, 0.3, np.pi / 2])
     pts = se2.scan_to_points(r, a, pose=np.array([1.0, 1.0, 0.0]))
     np.testing.assert_allclose(pts, [[2.0, 1.0], [1.0, 3.0]], atol=1e-12)
+
+
+def test_one_pose_gives_the_numbers_of_a_batch_of_one():
+    """compose and inverse of single poses (a scalar fast path) equal the batched code bit
+    for bit, also where theta wraps at +-pi."""
+    rng = np.random.default_rng(5)
+    a = rng.normal(0, 5, (4000, 3))
+    b = rng.normal(0, 5, (4000, 3))
+    a[::7, 2] = np.pi * rng.integers(-3, 4, len(a[::7]))
+    b[::5, 2] = -a[::5, 2] + rng.choice([np.pi, -np.pi, 0.0, 2 * np.pi], len(b[::5]))
+    for i in range(len(a)):
+        one = se2.compose(a[i], b[i])
+        assert one.tobytes() == se2.compose(a[i : i + 1], b[i : i + 1])[0].tobytes()
+        assert se2.inverse(a[i]).tobytes() == se2.inverse(a[i : i + 1])[0].tobytes()

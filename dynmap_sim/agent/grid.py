@@ -19,6 +19,8 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
 from dynmap_sim import se2
+from dynmap_sim.agent import grid_numba
+from dynmap_sim.jit import kernel_backend
 from dynmap_sim.types import LaserSpec
 
 FloatArray = NDArray[np.float64]
@@ -33,7 +35,8 @@ class OccupancyGrid:
 
     ``occupancy`` is ``(H, W)`` int8 (``-1``/``0``/``100``); ``origin_xy_m`` the map-frame
     corner of cell ``[0, 0]``; ``dist_m`` ``(H, W)`` float32 the distance [m] from each
-    cell centre to the nearest occupied cell centre, clipped at ``max_dist_m``.
+    cell centre to the nearest occupied cell centre, clipped at ``max_dist_m`` (``backend``:
+    how it is computed, :meth:`_distance_field`).
     """
 
     def __init__(
@@ -42,6 +45,7 @@ class OccupancyGrid:
         origin_xy_m: ArrayLike,
         resolution_m: float = 0.05,
         max_dist_m: float = 2.0,
+        backend: str = "auto",
     ) -> None:
         occ = np.asarray(occupancy, dtype=np.int8)
         if occ.ndim != 2 or occ.size == 0:
@@ -52,7 +56,7 @@ class OccupancyGrid:
         self.origin_xy_m = np.asarray(origin_xy_m, dtype=np.float64).reshape(2)
         self.resolution_m = float(resolution_m)
         self.max_dist_m = float(max_dist_m)
-        self.dist_m = self._distance_field(self.max_dist_m)
+        self.dist_m = self._distance_field(self.max_dist_m, backend)
 
     # -- geometry ------------------------------------------------------------------------
     @property
@@ -85,11 +89,18 @@ class OccupancyGrid:
             axis=-1,
         )
 
-    def _distance_field(self, max_dist_m: float) -> NDArray[np.float32]:
+    def _distance_field(self, max_dist_m: float, backend: str = "auto") -> NDArray[np.float32]:
+        """``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): the distances from
+        :mod:`.grid_numba`'s kernel or from scipy, the same numbers."""
+        kernel = kernel_backend(backend)
         occ = self.occupancy == OCCUPIED
         if not occ.any():
             return np.full(self.shape, max_dist_m, dtype=np.float32)
-        d = ndimage.distance_transform_edt(~occ) * self.resolution_m
+        if kernel:
+            edt = np.sqrt(grid_numba.squared_distances(occ, python=kernel == "python"))
+        else:
+            edt = ndimage.distance_transform_edt(~occ)
+        d = edt * self.resolution_m
         return np.minimum(d, max_dist_m).astype(np.float32)
 
     def distance_at(self, x_m: ArrayLike, y_m: ArrayLike) -> NDArray[np.float32]:

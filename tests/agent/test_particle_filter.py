@@ -134,6 +134,22 @@ def test_kld_one_bin_fox_stops_at_the_minimum():
         MCLConfig(kld_one_bin="fox")
 
 
+def test_kld_prefix_size_is_the_sequential_loop():
+    """The bound evaluated once per bin count gives the draw-by-draw loop's size (AMCL's
+    ``pf_update_resample``: stop once the count exceeds the bound of the bins so far)."""
+    rng = np.random.default_rng(3)
+    for _ in range(40):
+        keys = rng.integers(0, int(rng.integers(1, 400)), int(rng.integers(1, 3000)))
+        args = (float(rng.choice([0.01, 0.05])), float(rng.choice([0.99, 2.33])), 20, 2500)
+        seen, n = set(), len(keys)
+        for i, key in enumerate(keys):
+            seen.add(int(key))
+            if i + 1 > kld_sample_count(len(seen), *args):
+                n = i + 1
+                break
+        assert kld_prefix_size(keys, *args) == int(np.clip(n, min(20, len(keys)), 2500))
+
+
 # -- likelihood field --------------------------------------------------------------------
 def test_select_beams_like_amcl():
     b = select_beams(683, 60)

@@ -20,6 +20,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from dynmap_sim.agent.grid import OCCUPIED, OccupancyGrid
+from dynmap_sim.agent.localization import mcl_numba
+from dynmap_sim.jit import kernel_backend
 
 FloatArray = NDArray[np.float64]
 
@@ -30,19 +32,44 @@ def expected_ranges(
     """Distance [m] from ``laser_pose`` (x, y, theta) to the first occupied cell along each
     beam at ``angles_rad`` (laser frame), stepping half a cell; ``inf`` when there is none
     within ``range_max_m`` (unknown and off-grid cells do not stop a beam)."""
+    t, first = cast_rays(grid.occupancy == OCCUPIED, grid.origin_xy_m, grid.resolution_m,
+                         laser_pose, angles_rad, range_max_m)  # fmt: skip
+    return np.where(first >= 0, t[first], np.inf)
+
+
+def cast_rays(
+    occupied: NDArray[np.bool_],
+    origin_xy_m: FloatArray,
+    resolution_m: float,
+    laser_pose: ArrayLike,
+    angles_rad: ArrayLike,
+    range_max_m: float,
+    backend: str = "auto",
+) -> tuple[FloatArray, NDArray[np.intp]]:
+    """The samples ``t`` [m] along each beam (every half cell up to ``range_max_m``) and, per
+    beam, the index of the first in an ``occupied`` cell of the grid (cells ``(H, W)`` from
+    ``origin_xy_m``), -1 for none; off-grid samples never hit. ``backend``
+    (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): :mod:`.mcl_numba`'s kernel, which stops each
+    beam at its first hit (the same indices), or numpy."""
+    kernel = kernel_backend(backend)
     p = np.asarray(laser_pose, dtype=np.float64).reshape(3)
     a = p[2] + np.asarray(angles_rad, dtype=np.float64)
-    step = 0.5 * grid.resolution_m
+    step = 0.5 * resolution_m
     t = np.arange(1, int(np.ceil(range_max_m / step)) + 1) * step
+    if kernel:
+        first = mcl_numba.first_occupied(occupied, origin_xy_m, resolution_m, p[:2],
+                                         (np.cos(a), np.sin(a)), t,
+                                         python=kernel == "python")  # fmt: skip
+        return t, first
     xs = p[0] + np.cos(a)[:, None] * t[None, :]
     ys = p[1] + np.sin(a)[:, None] * t[None, :]
-    ix, iy = grid.cell_of(np.stack([xs, ys], axis=-1))
-    h, w = grid.shape
+    ix = np.floor((xs - origin_xy_m[0]) / resolution_m).astype(np.intp)
+    iy = np.floor((ys - origin_xy_m[1]) / resolution_m).astype(np.intp)
+    h, w = occupied.shape
     inside = (ix >= 0) & (ix < w) & (iy >= 0) & (iy < h)
     occ = np.zeros(xs.shape, dtype=bool)
-    occ[inside] = grid.occupancy[iy[inside], ix[inside]] == OCCUPIED
-    first = np.argmax(occ, axis=1)
-    return np.where(occ.any(axis=1), t[first], np.inf)
+    occ[inside] = occupied[iy[inside], ix[inside]]
+    return t, np.where(occ.any(axis=1), np.argmax(occ, axis=1), -1)
 
 
 def short_readings(

@@ -80,7 +80,10 @@ def kld_prefix_size(
     new_bin[first] = 1
     k = np.cumsum(new_bin)
     count = np.arange(1, len(keys) + 1)
-    limit = kld_sample_count(k, pf_err, pf_z, min_particles, max_particles, one_bin)
+    # the bound of each bin count 1..k[-1] once (elementwise: the same numbers as per draw)
+    bound = kld_sample_count(np.arange(1, k[-1] + 1), pf_err, pf_z, min_particles,
+                             max_particles, one_bin)  # fmt: skip
+    limit = bound[k - 1]
     stop = np.nonzero(count > limit)[0]
     n = int(stop[0] + 1) if len(stop) else len(keys)
     return int(np.clip(n, min(min_particles, len(keys)), max_particles))

@@ -28,6 +28,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from dynmap_sim.agent.grid import OccupancyGrid
+from dynmap_sim.agent.localization import mcl_numba
+from dynmap_sim.jit import kernel_backend
 
 FloatArray = NDArray[np.float64]
 
@@ -55,6 +57,31 @@ class LikelihoodFieldParams:
     beam_skip_error_threshold: float = 0.9
 
 
+def _endpoint_terms(
+    particles: FloatArray,
+    ranges_m: FloatArray,
+    angles_rad: FloatArray,
+    mount_pose: ArrayLike,
+    grid: OccupancyGrid,
+) -> tuple[NDArray[np.float32], ...]:
+    """The per-particle and per-beam float32 terms of the end points [cells]: laser origins
+    ``lx, ly`` relative to the grid origin, ``cos, sin`` of the headings, beam offsets
+    ``bx, by`` in the laser frame (:func:`endpoint_cells`)."""
+    mx, my, myaw = (float(v) for v in mount_pose)
+    th = particles[:, 2]
+    c64, s64 = np.cos(th), np.sin(th)
+    inv_res = 1.0 / grid.resolution_m
+    lx = ((particles[:, 0] + c64 * mx - s64 * my - grid.origin_xy_m[0]) * inv_res).astype(
+        np.float32
+    )
+    ly = ((particles[:, 1] + s64 * mx + c64 * my - grid.origin_xy_m[1]) * inv_res).astype(
+        np.float32
+    )
+    bx = (ranges_m * np.cos(angles_rad + myaw) * inv_res).astype(np.float32)
+    by = (ranges_m * np.sin(angles_rad + myaw) * inv_res).astype(np.float32)
+    return lx, ly, c64.astype(np.float32), s64.astype(np.float32), bx, by
+
+
 def endpoint_cells(
     particles: FloatArray,
     ranges_m: FloatArray,
@@ -64,24 +91,10 @@ def endpoint_cells(
 ) -> NDArray[np.intp]:
     """Flat cell index ``(P, B)`` of each beam's end point; ``H * W`` (one past the last
     cell) where the end point falls outside the grid. Computed in float32 for speed."""
-    mx, my, myaw = (float(v) for v in mount_pose)
-    th = particles[:, 2]
-    c64, s64 = np.cos(th), np.sin(th)
-    inv_res = 1.0 / grid.resolution_m
-    # Laser origin per particle, in cell units relative to the grid origin.
-    lx = ((particles[:, 0] + c64 * mx - s64 * my - grid.origin_xy_m[0]) * inv_res).astype(
-        np.float32
-    )
-    ly = ((particles[:, 1] + s64 * mx + c64 * my - grid.origin_xy_m[1]) * inv_res).astype(
-        np.float32
-    )
-    c = c64.astype(np.float32)[:, None]
-    s = s64.astype(np.float32)[:, None]
-    bx = (ranges_m * np.cos(angles_rad + myaw) * inv_res).astype(np.float32)[None, :]
-    by = (ranges_m * np.sin(angles_rad + myaw) * inv_res).astype(np.float32)[None, :]
-    hx = c * bx - s * by
+    lx, ly, c, s, bx, by = _endpoint_terms(particles, ranges_m, angles_rad, mount_pose, grid)
+    hx = c[:, None] * bx[None, :] - s[:, None] * by[None, :]
     hx += lx[:, None]
-    hy = s * bx + c * by
+    hy = s[:, None] * bx[None, :] + c[:, None] * by[None, :]
     hy += ly[:, None]
     h, w = grid.shape
     ix = np.floor(hx, out=hx).astype(np.intp)
@@ -92,27 +105,35 @@ def endpoint_cells(
     return flat
 
 
-def endpoint_distances(
+def endpoint_values(
+    values: NDArray[np.generic],
     particles: FloatArray,
     ranges_m: FloatArray,
     angles_rad: FloatArray,
     mount_pose: ArrayLike,
     grid: OccupancyGrid,
-) -> NDArray[np.float32]:
-    """Distance-field value ``(P, B)`` at each beam's end point (``max_dist_m`` outside)."""
-    flat = endpoint_cells(particles, ranges_m, angles_rad, mount_pose, grid)
-    table = np.append(grid.dist_m.ravel(), np.float32(grid.max_dist_m))
-    return np.take(table, flat)
+    backend: str = "auto",
+) -> NDArray[np.generic]:
+    """``values`` ``(H * W + 1,)`` (a :class:`LikelihoodTable`'s, the last entry for outside
+    the grid) at each beam's end point ``(P, B)``: ``values[endpoint_cells(...)]``.
+    ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): :mod:`.mcl_numba`'s kernel, which
+    gathers as it projects (the same values), or numpy."""
+    kernel = kernel_backend(backend)
+    if kernel:
+        terms = _endpoint_terms(particles, ranges_m, angles_rad, mount_pose, grid)
+        return mcl_numba.endpoint_values(values, terms, grid.shape, python=kernel == "python")
+    return np.take(values, endpoint_cells(particles, ranges_m, angles_rad, mount_pose, grid))
 
 
 class LikelihoodTable:
     """Per-cell beam likelihood tables for one grid and one parameter set (AMCL precomputes
     the distance map; we also precompute ``p`` and ``log p`` so the hot loop is a gather).
-    The last entry is the value outside the grid (distance ``max_dist_m``)."""
+    The last entry is the value outside the grid (distance ``max_dist_m``): ``dist`` [m]
+    float32, indexed by :func:`endpoint_cells`."""
 
     def __init__(self, grid: OccupancyGrid, params: LikelihoodFieldParams) -> None:
-        d = np.append(grid.dist_m.ravel(), np.float32(grid.max_dist_m)).astype(np.float64)
-        p = beam_likelihoods(d, params)
+        self.dist = np.append(grid.dist_m.ravel(), np.float32(grid.max_dist_m))
+        p = beam_likelihoods(self.dist, params)
         self.p = p.astype(np.float32)
         self.logp = np.log(p).astype(np.float32)
         self.logp_skip = float(
@@ -140,28 +161,29 @@ def likelihood_field_weights(d: ArrayLike, params: LikelihoodFieldParams) -> Flo
     return 1.0 + np.sum(p * p * p, axis=1)
 
 
-def likelihood_field_weights_cells(flat: NDArray[np.intp], table: LikelihoodTable) -> FloatArray:
-    """:func:`likelihood_field_weights` from end-point cells and a precomputed table."""
-    p = np.take(table.p, flat)
+def likelihood_field_weights_beams(p: NDArray[np.float32]) -> FloatArray:
+    """:func:`likelihood_field_weights` from the per-beam ``p`` ``(P, B)`` of the end-point
+    cells (``np.take(table.p, cells)``, precomputed table)."""
     return 1.0 + np.sum((p * p * p).astype(np.float64), axis=1)
 
 
-def likelihood_field_prob_cells(
-    flat: NDArray[np.intp], table: LikelihoodTable, params: LikelihoodFieldParams
+def likelihood_field_prob_beams(
+    logp: NDArray[np.float32], table: LikelihoodTable, params: LikelihoodFieldParams
 ) -> tuple[FloatArray, NDArray[np.bool_]]:
-    """:func:`likelihood_field_prob_logweights` from end-point cells and a precomputed table.
+    """:func:`likelihood_field_prob_logweights` from the per-beam ``log p`` ``(P, B)`` of the
+    end-point cells (``np.take(table.logp, cells)``, precomputed table).
 
     ``d < beam_skip_distance`` is ``log p > log p(beam_skip_distance)`` (p falls with d).
     """
-    logp = np.take(table.logp, flat)
-    n_beams = flat.shape[1]
+    n_beams = logp.shape[1]
     use = np.ones(n_beams, dtype=bool)
     if params.do_beamskip and n_beams > 0:
         frac_close = np.mean(logp > table.logp_skip, axis=0)
         use = frac_close > params.beam_skip_threshold
         if int(np.sum(~use)) >= n_beams * params.beam_skip_error_threshold:
             use[:] = True
-    return logp[:, use].sum(axis=1, dtype=np.float64), use
+    kept = logp if use.all() else logp[:, use]
+    return kept.sum(axis=1, dtype=np.float64), use
 
 
 def likelihood_field_prob_logweights(

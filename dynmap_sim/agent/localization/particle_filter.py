@@ -61,16 +61,16 @@ from scipy.sparse.csgraph import connected_components
 
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import OccupancyGrid
+from dynmap_sim.agent.localization import mcl_numba
 from dynmap_sim.agent.localization.distance_filter import expected_ranges, short_readings
 from dynmap_sim.agent.localization.kld_sampling import ONE_BIN_RULES, bin_keys, kld_prefix_size
 from dynmap_sim.agent.localization.likelihood_field import (
     LikelihoodFieldParams,
     LikelihoodTable,
     beam_likelihoods,
-    endpoint_cells,
-    endpoint_distances,
-    likelihood_field_prob_cells,
-    likelihood_field_weights_cells,
+    endpoint_values,
+    likelihood_field_prob_beams,
+    likelihood_field_weights_beams,
     select_beams,
     valid_beams,
 )
@@ -80,6 +80,7 @@ from dynmap_sim.agent.localization.verified_recovery import VerifiedRecovery
 from dynmap_sim.agent.localizer import Localizer, MapUser, register_localizer
 from dynmap_sim.agent.maps.map_source import MapSource, PriorWallsMap, make_map_source
 from dynmap_sim.agent.params import check_fields, coerce_fields
+from dynmap_sim.jit import kernel_backend
 from dynmap_sim.types import Diagnostic, LaserSpec, Odometry, PoseEstimate, Prior, Scan
 
 FloatArray = NDArray[np.float64]
@@ -425,6 +426,21 @@ def running_averages(
     )
 
 
+def weighted_mean_pose(
+    particles: FloatArray, weights: FloatArray
+) -> tuple[FloatArray, FloatArray, float, float]:
+    """Weighted mean pose (circular for theta) of a particle set, with the normalized weights
+    and the weighted means of ``cos theta``, ``sin theta`` (:func:`weighted_pose_stats`)."""
+    w = np.asarray(weights, dtype=np.float64)
+    w = w / w.sum()
+    c = float(np.sum(w * np.cos(particles[:, 2])))
+    s = float(np.sum(w * np.sin(particles[:, 2])))
+    mean = np.array(
+        [float(np.sum(w * particles[:, 0])), float(np.sum(w * particles[:, 1])), np.arctan2(s, c)]
+    )
+    return mean, w, c, s
+
+
 def weighted_pose_stats(
     particles: FloatArray, weights: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
@@ -433,19 +449,44 @@ def weighted_pose_stats(
     The theta variance is AMCL's circular ``-2 ln R`` (``R`` the mean resultant length);
     cross terms use the wrapped angle residuals.
     """
-    w = np.asarray(weights, dtype=np.float64)
-    w = w / w.sum()
-    c = float(np.sum(w * np.cos(particles[:, 2])))
-    s = float(np.sum(w * np.sin(particles[:, 2])))
-    mean = np.array(
-        [float(np.sum(w * particles[:, 0])), float(np.sum(w * particles[:, 1])), np.arctan2(s, c)]
-    )
+    mean, w, c, s = weighted_mean_pose(particles, weights)
     res = particles - mean
     res[:, 2] = se2.wrap_angle(res[:, 2])
     cov = (res * w[:, None]).T @ res
     r_len = min(max(np.hypot(c, s), 1e-12), 1.0)
     cov[2, 2] = max(-2.0 * np.log(r_len), 0.0)
     return mean, 0.5 * (cov + cov.T)
+
+
+def bin_clusters(
+    ukeys: NDArray[np.int64], ny: int, n_th: int, backend: str = "auto"
+) -> NDArray[np.intp]:
+    """Cluster label of each occupied bin (``pf_cluster_stats``): ``ukeys`` sorted unique bin
+    keys ``(bx * ny + by) * n_th + bt`` (``bx, by >= 0``), a cluster the bins connected
+    through their 26 neighbours (theta wraps around), numbered in the order of their first
+    bin. ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): :mod:`.mcl_numba`'s union-find
+    or the numpy adjacency and scipy's ``connected_components`` (the same labels)."""
+    kernel = kernel_backend(backend)
+    if kernel:
+        return mcl_numba.bin_clusters(ukeys, ny, n_th, python=kernel == "python")
+    ubx, rem = np.divmod(ukeys, ny * n_th)
+    uby, ubt = np.divmod(rem, n_th)
+    rows, cols = [], []
+    for dx in (-1, 0, 1):
+        for dy in (-1, 0, 1):
+            for dt in (-1, 0, 1):
+                if dx == dy == dt == 0:
+                    continue
+                nk = ((ubx + dx) * ny + (uby + dy)) * n_th + (ubt + dt) % n_th
+                pos = np.searchsorted(ukeys, nk)
+                pos = np.minimum(pos, len(ukeys) - 1)
+                hit = (ukeys[pos] == nk) & (ubx + dx >= 0) & (uby + dy >= 0)
+                rows.append(np.nonzero(hit)[0])
+                cols.append(pos[hit])
+    r = np.concatenate(rows)
+    cidx = np.concatenate(cols)
+    adj = coo_matrix((np.ones(len(r)), (r, cidx)), shape=(len(ukeys), len(ukeys)))
+    return connected_components(adj, directed=False)[1]
 
 
 class AMCLFilter:
@@ -535,11 +576,13 @@ class AMCLFilter:
         r, a = self._beams_of(ranges_m)
         if len(r) == 0:
             return
-        cells = endpoint_cells(self.particles, r, a, self.mount, self.grid)
+        beam_logp = None  # (P, B) log p of the end points
         if self.config.laser_model_type == "likelihood_field_prob":
-            logp, _ = likelihood_field_prob_cells(cells, self.table, self.lf)
+            beam_logp = self._endpoint_values(self.table.logp, self.particles, r, a)
+            logp, _ = likelihood_field_prob_beams(beam_logp, self.table, self.lf)
         else:
-            logp = np.log(likelihood_field_weights_cells(cells, self.table))
+            p = self._endpoint_values(self.table.p, self.particles, r, a)
+            logp = np.log(likelihood_field_weights_beams(p))
         w_prev = self.weights
         lw_prev = np.log(np.maximum(w_prev, 1e-300))
         logw = lw_prev + logp
@@ -552,7 +595,9 @@ class AMCLFilter:
             # Per-beam geometric mean over the beams the distance filter keeps (all valid
             # beams without it), beam skipping not applied.
             use = self._recovery_beams(w_prev, r, a)
-            total = per_beam_average(lw_prev, np.take(self.table.logp, cells[:, use]))
+            if beam_logp is None:
+                beam_logp = self._endpoint_values(self.table.logp, self.particles, r, a)
+            total = per_beam_average(lw_prev, beam_logp[:, use])
             # This update's average feeds local resetting; a fit back at w_ref ends a
             # local-resetting episode.
             self.w_last = total
@@ -565,6 +610,16 @@ class AMCLFilter:
             low = w_ref > 0 and self.w_fast < c.recovery_ratio_threshold * w_ref
             self.n_low_updates = self.n_low_updates + 1 if low else 0
 
+    def _endpoint_values(
+        self,
+        values: NDArray[np.generic],
+        particles: FloatArray,
+        ranges_m: FloatArray,
+        angles_rad: FloatArray,
+    ) -> NDArray[np.generic]:
+        """``values`` of the likelihood table at the beams' end points ``(P, B)``."""
+        return endpoint_values(values, particles, ranges_m, angles_rad, self.mount, self.grid)
+
     def _recovery_beams(
         self, weights: FloatArray, ranges_m: FloatArray, angles_rad: FloatArray
     ) -> NDArray[np.intp]:
@@ -576,7 +631,7 @@ class AMCLFilter:
         margin = self.config.recovery_distance_filter_m
         if margin <= 0:
             return all_beams
-        mean, _ = weighted_pose_stats(self.particles, weights)
+        mean = weighted_mean_pose(self.particles, weights)[0]
         laser_pose = se2.compose(mean, self.mount)
         expected = expected_ranges(self.grid, laser_pose, angles_rad, self.range_max)
         keep = np.nonzero(~short_readings(ranges_m, expected, margin))[0]
@@ -697,24 +752,7 @@ class AMCLFilter:
         ukeys, inv = np.unique(key, return_inverse=True)
         if len(ukeys) == 1:
             return weighted_pose_stats(p, self.weights)
-        ubx, rem = np.divmod(ukeys, ny * n_th)
-        uby, ubt = np.divmod(rem, n_th)
-        rows, cols = [], []
-        for dx in (-1, 0, 1):
-            for dy in (-1, 0, 1):
-                for dt in (-1, 0, 1):
-                    if dx == dy == dt == 0:
-                        continue
-                    nk = ((ubx + dx) * ny + (uby + dy)) * n_th + (ubt + dt) % n_th
-                    pos = np.searchsorted(ukeys, nk)
-                    pos = np.minimum(pos, len(ukeys) - 1)
-                    hit = (ukeys[pos] == nk) & (ubx + dx >= 0) & (uby + dy >= 0)
-                    rows.append(np.nonzero(hit)[0])
-                    cols.append(pos[hit])
-        r = np.concatenate(rows)
-        cidx = np.concatenate(cols)
-        adj = coo_matrix((np.ones(len(r)), (r, cidx)), shape=(len(ukeys), len(ukeys)))
-        _, label = connected_components(adj, directed=False)
+        label = bin_clusters(ukeys, ny, n_th)
         plabel = label[inv]
         cw = np.bincount(plabel, weights=self.weights)
         best = plabel == int(np.argmax(cw))
@@ -725,7 +763,7 @@ class AMCLFilter:
         r, a = self._beams_of(ranges_m)
         if len(r) == 0:
             return float("nan")
-        d = endpoint_distances(np.asarray(pose, float)[None, :], r, a, self.mount, self.grid)
+        d = self._endpoint_values(self.table.dist, np.asarray(pose, float)[None, :], r, a)
         return float(np.mean(np.log(beam_likelihoods(d, self.lf))))
 
 

@@ -74,6 +74,27 @@ def test_update_of_the_kernel_equals_numpy_bit_for_bit(kernel: str) -> None:
             assert fast.logodds.tobytes() == ref.logodds.tobytes()
 
 
+@pytest.mark.parametrize("kernel", ["numpy", *KERNELS])
+def test_update_clamps_as_a_clamp_of_the_whole_grid(kernel: str) -> None:
+    """The update clamps and re-pins only the cells it can change: on a map within
+    ``[l_min, l_max]`` with its pinned cells at ``l_max`` (as every map starts), clamping
+    and re-pinning the whole grid afterwards changes nothing."""
+    rng = np.random.default_rng(13)
+    for _ in range(10 if kernel == "python" else 60):
+        m = random_map(rng, *(int(v) for v in rng.integers(3, 60, 2)))
+        p = random_params(rng)
+        np.clip(m.logodds, p.l_min, p.l_max, out=m.logodds)
+        m.logodds[m.pinned] = p.l_max
+        h, w = m.shape
+        for _ in range(int(rng.integers(1, 6))):
+            pts, covs = random_points(rng, m, int(rng.integers(1, 40)))
+            laser = m.origin + rng.uniform(-0.3, 1.1, 2) * np.array([w, h]) * m.resolution
+            m.update(laser, pts, covs, p, backend=kernel)
+            whole = np.clip(m.logodds, p.l_min, p.l_max)
+            whole[m.pinned] = p.l_max
+            assert whole.tobytes() == m.logodds.tobytes()
+
+
 def test_an_unknown_backend_is_refused() -> None:
     m = random_map(np.random.default_rng(0), 5, 5)
     with pytest.raises(ValueError, match="backend must be one of"):

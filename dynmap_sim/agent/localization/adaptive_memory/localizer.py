@@ -447,9 +447,10 @@ class AdaptiveMemoryLocalizer(Localizer):
                                       c.sigma_alpha_rad, sig_r)  # fmt: skip
         cur = ltm.map()
         explained = cur.explained(pts, covs, self.lp)  # for step 4, before this scan's points
-        stat = np.nonzero(tracked[vi] == STATIC)[0]
+        tracked_v = tracked[vi]
+        stat = np.nonzero(tracked_v == STATIC)[0]
         n_take = int(round(c.u * len(stat)))
-        if len(stat) and np.mean(explained[stat]) < c.ltm_min_explained:
+        if c.ltm_min_explained > 0 and len(stat) and np.mean(explained[stat]) < c.ltm_min_explained:
             n_take = 0  # the map disagrees with most of the scan: the pose is not trusted
         take = self.rng.choice(stat, size=n_take, replace=False) if n_take else stat[:0]
         if n_take and c.ltm_update_pose == "predicted":
@@ -457,7 +458,7 @@ class AdaptiveMemoryLocalizer(Localizer):
             cur.update(laser_xy, pts[take], covs[take], self.lp,
                        self._hits(pts[take], covs[take]))  # fmt: skip
         # 4. the semistatic test (§4.4)
-        cls_v = tracked[vi].copy()
+        cls_v = tracked_v.copy()
         lab = boxes.labels[vi]
         dyn = (cls_v == DYNAMIC) & (lab >= 0)
         if dyn.any():  # the long-term map vetoes boxes it explains (ltm_veto_dynamic)
@@ -493,11 +494,12 @@ class AdaptiveMemoryLocalizer(Localizer):
                                        c.sigma_alpha_rad, sig_r[take])  # fmt: skip
             cur.update(se2.compose(mean, self.mount)[:2], p2, c2, self.lp, self._hits(p2, c2))
         r_used, _ = f._beams_of(ranges)
+        n_class = np.bincount(cls_v, minlength=4)
         extras = {
             "point_classes": classes,
-            "n_dynamic": int(np.sum(cls_v == DYNAMIC)),
-            "n_semistatic": int(np.sum(cls_v == SEMISTATIC)),
-            "n_static": int(np.sum(cls_v == STATIC)),
+            "n_dynamic": int(n_class[DYNAMIC]),
+            "n_semistatic": int(n_class[SEMISTATIC]),
+            "n_static": int(n_class[STATIC]),
             "ltm_slot": int(self.used_slot),
             "static_points_used": len(r_used),
             "scan_loglik": f.mean_beam_loglik(mean, ranges),

@@ -33,21 +33,14 @@ from numpy.typing import NDArray
 
 from dynmap_sim.agent.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
 from dynmap_sim.agent.localization.adaptive_memory import ltm_numba
+from dynmap_sim.agent.localization.distance_filter import cast_rays
+from dynmap_sim.jit import KERNEL_BACKENDS, kernel_backend
 
 FloatArray = NDArray[np.float64]
-#: Values of the ``backend`` arguments: ``numba`` (extra ``fast``; ``auto`` when installed)
+#: Values of the ``backend`` arguments (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): ``numba``
 #: runs :mod:`.ltm_numba`'s kernels, identical in result to ``numpy``; ``python`` the same
 #: kernels uncompiled (slow: for the tests).
-BACKENDS = ("auto", "numpy", "numba", "python")
-
-
-def _kernel_backend(backend: str) -> str | None:
-    """``"numba"``, ``"python"`` or None (numpy) for a ``backend`` argument."""
-    if backend not in BACKENDS:
-        raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
-    if backend == "auto":
-        return "numba" if ltm_numba.numba_available() else None
-    return None if backend == "numpy" else backend
+BACKENDS = KERNEL_BACKENDS
 
 
 @lru_cache(maxsize=16)
@@ -138,8 +131,10 @@ class LTMMap:
     ) -> None:
         """Fuse points ``(n, 2)`` with covariances ``(n, 2, 2)`` seen from ``laser_xy``;
         ``occupied`` (default all): the points that add occupied evidence (the others add
-        only the free space along their beams). ``backend``: :data:`BACKENDS`."""
-        kernel = _kernel_backend(backend)
+        only the free space along their beams). The cells it changes are clamped to
+        ``[l_min, l_max]`` and the pinned ones among them reset to ``l_max``; the grid's
+        other cells must already be (every map starts so). ``backend``: :data:`BACKENDS`."""
+        kernel = kernel_backend(backend)
         if len(points) == 0:
             return
         h, w = self.shape
@@ -195,8 +190,15 @@ class LTMMap:
             flat = np.concatenate(flat_all)
             add = np.concatenate(add_all)
             np.add.at(lo, flat, add.astype(np.float32))
-        np.clip(lo, params.l_min, params.l_max, out=lo)
-        self.logodds[self.pinned] = params.l_max
+        # Clamp and re-pin the cells this update can have changed: those between the laser
+        # and the points' stencils (the others already are, as every map starts so).
+        lc = self.cells(np.asarray(laser_xy, dtype=np.float64))
+        k = params.stencil_cells
+        x0, x1 = max(min(int(ix.min()) - k, int(lc[0])), 0), max(int(ix.max()) + k, int(lc[0])) + 1
+        y0, y1 = max(min(int(iy.min()) - k, int(lc[1])), 0), max(int(iy.max()) + k, int(lc[1])) + 1
+        sub = self.logodds[y0:y1, x0:x1]
+        np.clip(sub, params.l_min, params.l_max, out=sub)
+        sub[self.pinned[y0:y1, x0:x1]] = params.l_max
 
     # -- §4.4 ---------------------------------------------------------------------------
     def explained(
@@ -208,7 +210,7 @@ class LTMMap:
         the Mahalanobis ellipse), at least 1.5 cells, at most ``semistatic_max_cells``.
         Two stages: the 3 x 3 cells around each point decide most points (a return on a
         known wall); the rest search their whole circle. ``backend``: :data:`BACKENDS`."""
-        kernel = _kernel_backend(backend)
+        kernel = kernel_backend(backend)
         n = len(points)
         if n == 0:
             return np.zeros(0, bool)
@@ -267,18 +269,9 @@ class LTMMap:
     ) -> FloatArray:
         """Ray-cast ranges [m] on the occupied cells (half-cell steps; ``range_max`` when
         nothing is hit)."""
-        step = 0.5 * self.resolution
-        t = np.arange(1, int(np.ceil(range_max / step)) + 1) * step
-        a = laser_pose[2] + angles
-        xs = laser_pose[0] + np.cos(a)[:, None] * t[None, :]
-        ys = laser_pose[1] + np.sin(a)[:, None] * t[None, :]
-        ix, iy = self.cells(np.stack([xs, ys], axis=-1))
-        h, w = self.shape
-        inside = (ix >= 0) & (ix < w) & (iy >= 0) & (iy < h)
-        hit = np.zeros(ix.shape, bool)
-        hit[inside] = self.logodds[iy[inside], ix[inside]] >= params.l_occupied
-        first = np.argmax(hit, axis=1)
-        return np.where(hit.any(axis=1), t[first], range_max)
+        t, first = cast_rays(self.occupied(params), self.origin, self.resolution, laser_pose,
+                             angles, range_max)  # fmt: skip
+        return np.where(first >= 0, t[first], range_max)
 
 
 def point_covariances(

@@ -141,6 +141,8 @@ class ObjectTracker:
 
     def __init__(self, params: TrackerParams) -> None:
         self.params = params
+        #: A new track's covariance.
+        self.P0 = np.diag([params.sigma_meas_m**2] * 2 + [params.sigma_v0**2] * 2)
         self.reset()
 
     def reset(self) -> None:
@@ -166,8 +168,8 @@ class ObjectTracker:
         g = np.array([0.5 * dt * dt, dt])
         Q1 = q * np.outer(g, g)
         Q = np.zeros((4, 4))
-        Q[np.ix_([0, 2], [0, 2])] = Q1
-        Q[np.ix_([1, 3], [1, 3])] = Q1
+        Q[0::2, 0::2] = Q1  # (x, vx)
+        Q[1::2, 1::2] = Q1  # (y, vy)
         self.x = self.x @ F.T
         self.P = F @ self.P @ F.T + Q
 
@@ -222,9 +224,8 @@ class ObjectTracker:
         alive = self.misses <= p.max_misses
         new = ~matched
         n_new = int(new.sum())
-        P0 = np.diag([p.sigma_meas_m**2] * 2 + [p.sigma_v0**2] * 2)
         self.x = np.concatenate([self.x[alive], np.column_stack([z[new], np.zeros((n_new, 2))])])
-        self.P = np.concatenate([self.P[alive], np.broadcast_to(P0, (n_new, 4, 4))])
+        self.P = np.concatenate([self.P[alive], np.broadcast_to(self.P0, (n_new, 4, 4))])
         for name in ("hits", "misses", "fast", "slow"):
             start = 1 if name == "hits" else 0  # a new track has been seen once
             old = getattr(self, name)[alive]
