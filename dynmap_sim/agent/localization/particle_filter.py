@@ -291,7 +291,10 @@ NAV2_DEFAULT = MCLConfig()
 
 #: Tuned to the simulated sensors and maps: URG-04LX noise (1 cm / 1 %) on a 5 cm grid built
 #: by first-run SLAM (a few cm of map error) -> sigma_hit 0.12 m with the proper product model;
-#: wheel odometry that drifts ~1-2 % -> alphas 0.05; people and unmapped objects -> beam
+#: wheel odometry that drifts ~1-2 % -> alphas 0.05 (in the corrected model a standard
+#: deviation of sqrt(0.05) = 22 % of every step, far looser than that drift; 0.01 was measured
+#: on the untuned worlds and FR079 and is not the default: README, "Worlds nobody tuned
+#: for", benchmarks/mcl_untuned_variants.py); people and unmapped objects -> beam
 #: skipping; kidnapping and global localization -> Table 8.3 recovery, 8000 particles at most
 #: and the real 99 % normal quantile as pf_z; updates every 0.1 m / 0.1 rad; local resetting
 #: before the global recovery (``recovery_local_*``: real odometry glitches, FR079). The
