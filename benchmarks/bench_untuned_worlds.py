@@ -87,8 +87,9 @@ def verdict(label: str, ate_m: float, max_m: float) -> str:
     return "yes" if ok else "NO"
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def add_tour_arguments(ap: argparse.ArgumentParser) -> None:
+    """The options of a run of the worlds' tours: ``--days``, ``--worlds``, ``--seed``,
+    ``--workers``, ``--out`` (also :mod:`mcl_untuned_variants`'s)."""
     ap.add_argument(
         "--days",
         type=day_range,
@@ -112,6 +113,11 @@ def main() -> None:
         type=Path,
         help="keep each world's results in OUT/<world> (default: a temporary folder, removed)",
     )
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_tour_arguments(ap)
     args = ap.parse_args()
     with tempfile.TemporaryDirectory(prefix="untuned-worlds-") as tmp:
         base = args.out if args.out is not None else Path(tmp)

@@ -1,5 +1,6 @@
-"""``static-mcl`` variants side by side on the worlds nobody tuned it for, over several filter
-seeds (issue 16: "no jump over 0.5 m").
+"""``static-mcl`` variants side by side on the untuned worlds, over several filter seeds.
+
+Issue 16: "no jump over 0.5 m" on the worlds nobody tuned the localizers for.
 
 A jump of ``static-mcl`` is a rare event: whether it happens in a 10-day calendar depends on
 the filter's own random draws as much as on its settings, so one run per setting says little
@@ -32,7 +33,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from bench_untuned_worlds import WORLDS, day_range, world_list
+from bench_untuned_worlds import WORLDS, add_tour_arguments
 
 from dynmap_sim.agent.localization.particle_filter import CONFIGS, MCLConfig
 from dynmap_sim.experiments.replay import json_or_text
@@ -106,18 +107,7 @@ def main() -> None:
     ap.add_argument(
         "--filter-seeds", type=positive, default=2, help="copies of each variant (default: 2)"
     )
-    ap.add_argument(
-        "--worlds",
-        type=world_list,
-        default=list(WORLDS),
-        help=f"comma-separated worlds (default: {','.join(WORLDS)})",
-    )
-    ap.add_argument("--days", type=day_range, help="day range (default: the whole calendar)")
-    ap.add_argument("--seed", type=int, default=0, help="world and noise seed (default: 0)")
-    ap.add_argument(
-        "--workers", type=int, default=1, help="localizer worker processes (default: 1)"
-    )
-    ap.add_argument("--out", type=Path, help="keep each world's results in OUT/<world>")
+    add_tour_arguments(ap)
     args = ap.parse_args()
     variants = args.variant or [("tuned", {})]
     names = [n for n, _ in variants]

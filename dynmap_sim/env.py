@@ -380,22 +380,11 @@ class DynMapEnv(gymnasium.Env):
         return pose, collision, float(reward), terminated, truncated
 
     def _observe(
-        self,
-        pose: FloatArray,
-        collision: bool,
-        cast: tuple[FloatArray, NDArray[np.int64]] | None = None,
-        ranges_m: NDArray[np.float32] | None = None,
+        self, pose: FloatArray, collision: bool
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        """Observation and info at ``pose``; ``cast``: the scan's noise-free ranges and hit
-        indices when already cast, ``ranges_m`` its noisy readings when already made from
-        this env's lidar generator (a vector env casts and noises all its envs' scans at
-        once)."""
-        if cast is None:
-            reading = self.lidar.scan(pose, self.world.geometry, self._rng_lidar)
-        else:
-            reading = self.lidar.reading(
-                *cast, self.world.geometry, self._rng_lidar, ranges_m=ranges_m
-            )
+        """Observation and info at ``pose`` (a vector env, which casts and noises all its
+        envs' scans at once, writes the same values with :meth:`_observe_into`)."""
+        reading = self.lidar.scan(pose, self.world.geometry, self._rng_lidar)
         slot = self.world.slot
         people, n_people = self._people()
         obs = {"scan": reading.ranges_m, "odom": self.odometry.pose}

@@ -261,8 +261,7 @@ class World:
             idx: Any = slice(None)
             self._stale = False
         else:
-            near = (np.abs(z - robot_xy) < near_m) | (np.abs(synced - robot_xy) < near_m)
-            idx = near.nonzero()[0]
+            idx = _near(z, synced, robot_xy, near_m).nonzero()[0]
             self._stale = True  # (cheaper than checking whether all were near)
             if not len(idx):
                 return
@@ -358,6 +357,13 @@ def _near_m(dt_s: float, robot_radius_m: float) -> float:
     return robot_radius_m + SYNC_MARGIN_M + SYNC_SPEED_MPS * dt_s
 
 
+def _near(z: Any, synced: Any, robot_xy: Any, near_m: Any) -> NDArray[np.bool_]:
+    """Which people's bodies to move (``World._sync_bodies``): those whose new position
+    ``z`` or last synced position ``synced`` (``x + iy``) lies within ``near_m`` of the robot
+    at ``robot_xy`` (scalars, or one value per person)."""
+    return (np.abs(z - robot_xy) < near_m) | (np.abs(synced - robot_xy) < near_m)
+
+
 def _robot_xy(robot_pose: tuple[float, float, float] | FloatArray) -> FloatArray:
     """The robot's position ``(2,)`` from its pose."""
     return np.array((float(robot_pose[0]), float(robot_pose[1])))
@@ -404,7 +410,7 @@ class WorldBatch:
         rz = np.repeat(np.array([complex(xy[0], xy[1]) for _, xy, _ in batch]), counts)
         near_m = np.repeat(np.array([_near_m(dt_s, rr) for _, _, rr in batch]), counts)
         synced = np.concatenate([w._synced for w, _, _ in batch])
-        near = (np.abs(z - rz) < near_m) | (np.abs(synced - rz) < near_m)
+        near = _near(z, synced, rz, near_m)
         legs = self._crowds.leg_centres()
         at = 0
         for w, _, _ in batch:

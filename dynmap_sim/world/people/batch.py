@@ -37,11 +37,13 @@ from dynmap_sim.world.people.dynamics import (
     driving_force,
     evasion,
     goals_due,
+    max_move_m,
     repulsion_terms,
+    segment_vectors_into,
     speed_factor,
 )
 from dynmap_sim.world.people.legs import leg_centres_into
-from dynmap_sim.world.people.params import CELL_M, ROBOT_GAP_M, STRIDE_M
+from dynmap_sim.world.people.params import CELL_M, STRIDE_M
 from dynmap_sim.world.people.social_force import NUMPY_OPS, SocialForce
 from dynmap_sim.world.polygons import FloatArray
 
@@ -132,12 +134,7 @@ class CrowdBatch:
         diff = np.empty((z.shape[0], n + 1 + rows.shape[1]), dtype=np.complex128)
         np.subtract(z[:, None], z[lay.people_src], out=diff[:, :n])
         np.subtract(z, rz, out=diff[:, n])
-        a = z[:, None] - rows[..., 0]
-        cd = rows[..., 1]
-        t = (a * cd).real
-        t *= rows[..., 2].real
-        np.minimum(np.maximum(t, 0.0, out=t), 1.0, out=t)
-        np.subtract(a, t * cd.conjugate(), out=diff[:, n + 1 :])
+        segment_vectors_into(z, rows, diff[:, n + 1 :])
         d = np.abs(diff)
         first = starts[:-1]
         pair_gap = np.minimum.reduceat((d[:, :n] - lay.rsum_masked).min(axis=1), first)
@@ -152,7 +149,7 @@ class CrowdBatch:
         v *= speed_factor(v, lay)  # type: ignore[arg-type]
         old = z.copy()
         z += dt_s * v
-        moved_max = dt_s * lay.vmax_max * (1.0 + 1e-9) + 1e-9
+        moved_max = max_move_m(dt_s, lay.vmax_max)
         # the position correction (correction.correct), crowd by crowd where needed
         rows_at = starts.tolist()
         for i in np.flatnonzero(robot_gap <= moved_max).tolist():
@@ -186,8 +183,8 @@ class CrowdBatch:
             c.best_goal_m = progress.best_goal_m[s].copy()
             c.stuck_s = progress.stuck_s[s].copy()
         for i in np.flatnonzero(due).tolist():
-            f, xy = forces[i], robot_xy[i]
-            avoid = (xy, float(robot_radius_m[i]) + ROBOT_GAP_M + 0.1)
+            f = forces[i]
+            avoid = spawning.goal_avoid(robot_xy[i], float(robot_radius_m[i]))
             s = slice(rows_at[i], rows_at[i + 1])
             spawning.renew_goals(crowds[i], redo[s], f.populations, f.obstacles, f.rng, avoid)
 

@@ -158,13 +158,27 @@ def source_vectors(
     diff = np.empty((n, n + 1 + rows.shape[1]), dtype=np.complex128)
     np.subtract(z[:, None], z[None, :], out=diff[:, :n])
     np.subtract(z, _FAR if rz is None else rz, out=diff[:, n])
+    segment_vectors_into(z, rows, diff[:, n + 1 :])
+    return diff
+
+
+def segment_vectors_into(
+    z: NDArray[np.complex128], rows: NDArray[np.complex128], out: NDArray[np.complex128]
+) -> None:
+    """Write into ``out`` ``(P, K)`` the vector from the closest point of each candidate
+    segment (``rows``, :meth:`Obstacles.rows`) to the person at ``z``."""
     a = z[:, None] - rows[..., 0]
     cd = rows[..., 1]  # conj(d)
     t = (a * cd).real
     t *= rows[..., 2].real
     np.minimum(np.maximum(t, 0.0, out=t), 1.0, out=t)
-    np.subtract(a, t * cd.conjugate(), out=diff[:, n + 1 :])  # closest point -> person
-    return diff
+    np.subtract(a, t * cd.conjugate(), out=out)  # closest point -> person
+
+
+def max_move_m(dt_s: float, vmax_max: Any) -> Any:
+    """The longest move of a step [m]: ``dt * vmax`` plus rounding (a person within it of the
+    robot's disc, another body or a wall is checked after the move)."""
+    return dt_s * vmax_max * (1.0 + 1e-9) + 1e-9
 
 
 def repulsion_terms(diff: NDArray[np.complex128], d: FloatArray, k: Any) -> NDArray[np.complex128]:

@@ -16,11 +16,12 @@ from dynmap_sim.world.people.crowd import Crowd
 from dynmap_sim.world.people.dynamics import (
     StepConstants,
     goals_due,
+    max_move_m,
     social_force,
     speed_factor,
 )
 from dynmap_sim.world.people.obstacles import Obstacles
-from dynmap_sim.world.people.params import ROBOT_GAP_M, STRIDE_M
+from dynmap_sim.world.people.params import STRIDE_M
 from dynmap_sim.world.polygons import FloatArray
 from dynmap_sim.world.spec import PeopleSpec
 
@@ -154,14 +155,14 @@ class SocialForce:
         z += dt_s * v
         # a move is at most dt * vmax (plus rounding): the robot's disc is checked only when
         # someone was that close to it
-        moved_max_m = dt_s * k.vmax_max * (1.0 + 1e-9) + 1e-9
+        moved_max_m = max_move_m(dt_s, k.vmax_max)
         gaps = (pair_gap, wall_gap, robot_gap)
         disp = correct(crowd, z, v, rows, rz, k, old, gaps, moved_max_m, ops.pair_push)
         crowd.phase += disp * (2 * np.pi / STRIDE_M)
         redo = ops.goals_due(crowd, goal, z, dt_s, rz, k)
         if redo is None or not redo.any():
             return
-        avoid = None if rz is None else (robot_xy, robot_radius_m + ROBOT_GAP_M + 0.1)
+        avoid = None if robot_xy is None else spawning.goal_avoid(robot_xy, robot_radius_m)
         spawning.renew_goals(crowd, redo, self.populations, self.obstacles, self.rng, avoid)
 
     def backend_ops(self) -> StepOps:

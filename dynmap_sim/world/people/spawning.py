@@ -14,7 +14,7 @@ from numpy.typing import NDArray
 
 from dynmap_sim.world.people.crowd import Crowd, profile_fraction
 from dynmap_sim.world.people.obstacles import Obstacles
-from dynmap_sim.world.people.params import GOAL_TOL_M, PAUSE_S
+from dynmap_sim.world.people.params import GOAL_TOL_M, PAUSE_S, ROBOT_GAP_M
 from dynmap_sim.world.polygons import FloatArray
 from dynmap_sim.world.spec import PeopleSpec
 
@@ -258,6 +258,12 @@ def _free_spot(
         if ok:
             return c
     return None
+
+
+def goal_avoid(robot_xy: FloatArray, robot_radius_m: float) -> tuple[FloatArray, float]:
+    """The disc new goals keep clear of (``avoid`` of :func:`renew_goals`): the robot's
+    comfort disc (``ROBOT_GAP_M`` beyond its radius) and 0.1 m more."""
+    return robot_xy, robot_radius_m + ROBOT_GAP_M + 0.1
 
 
 def renew_goals(
