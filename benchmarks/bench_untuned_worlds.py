@@ -89,7 +89,7 @@ def verdict(label: str, ate_m: float, max_m: float) -> str:
 
 def add_tour_arguments(ap: argparse.ArgumentParser) -> None:
     """The options of a run of the worlds' tours: ``--days``, ``--worlds``, ``--seed``,
-    ``--workers``, ``--out`` (also :mod:`mcl_untuned_variants`'s)."""
+    ``--workers``, ``--out``, ``--force`` (also :mod:`mcl_untuned_variants`'s)."""
     ap.add_argument(
         "--days",
         type=day_range,
@@ -113,12 +113,24 @@ def add_tour_arguments(ap: argparse.ArgumentParser) -> None:
         type=Path,
         help="keep each world's results in OUT/<world> (default: a temporary folder, removed)",
     )
+    ap.add_argument("--force", action="store_true", help="replace results already in OUT/<world>")
+
+
+def check_out(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """Refuse (before anything runs) to replace results in ``--out`` without ``--force``."""
+    if args.out is None or args.force:
+        return
+    taken = [args.out / w for w in args.worlds if (args.out / w).exists()]
+    taken = [d for d in taken if not d.is_dir() or any(d.iterdir())]
+    if taken:
+        ap.error(f"{taken[0]} already holds results; give --force to replace them")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     add_tour_arguments(ap)
     args = ap.parse_args()
+    check_out(ap, args)
     with tempfile.TemporaryDirectory(prefix="untuned-worlds-") as tmp:
         base = args.out if args.out is not None else Path(tmp)
         results = {w: measure(w, base / w, args.days, args.seed, args.workers) for w in args.worlds}

@@ -33,7 +33,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from bench_untuned_worlds import WORLDS, add_tour_arguments
+from bench_untuned_worlds import WORLDS, add_tour_arguments, check_out
 
 from dynmap_sim.agent.localization.particle_filter import CONFIGS, MCLConfig
 from dynmap_sim.experiments.replay import json_or_text
@@ -109,6 +109,7 @@ def main() -> None:
     )
     add_tour_arguments(ap)
     args = ap.parse_args()
+    check_out(ap, args)
     variants = args.variant or [("tuned", {})]
     names = [n for n, _ in variants]
     if len(set(names)) != len(names):
