@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from synthetic_scans import LASER, box, drifting_stream, polyline_path
 
+from dynmap_sim import se2
 from dynmap_sim.agent.localization.dynamic_map_localizer import (
     DynamicMapConfig,
     DynamicMapLocalizer,
@@ -185,3 +186,34 @@ def test_long_term_maps_fill_by_u_n_per_step(learned):
     assert 5 < l5 <= 5 + 3
     assert 20 < l4 <= 20 + 3
     assert max(int(np.sum(lm.sub[1].count == 10)) for lm in dmap.local_maps) > 50
+
+
+def test_long_term_anchor_overrides_a_short_term_slide_only(learned):
+    """``ltm_anchor_tol_m``: the match against λ2–λ5 alone replaces the pose when the two
+    lie further apart than the tolerance, and never otherwise; in the learned room it keeps
+    the accuracy and is rarely needed."""
+    loc = pickle.loads(pickle.dumps(learned[0]["dynamic-map"]))
+    loc.config = replace(loc.config, ltm_anchor_tol_m=0.05)
+    truth = learned[2]
+    rng = np.random.default_rng(11)
+    loc.begin_run(Prior(initial_pose=truth[0].copy(), day=2, run=1))
+    stream = list(_stream(truth, _world(False), rng))
+    ests = [loc.update(o, s) for o, s in stream[:30]]
+    # the long-term current map is now synthesized at the estimate of scan 29
+    o, s = stream[30]
+    pts = se2.scan_to_points(np.asarray(s.ranges_m, float), LASER.angles())
+    pred = truth[30].copy()
+    c_o = np.diag([0.02**2, 0.02**2, 0.01**2])
+    slid = pred + [0.3, 0.0, 0.0]  # where a sliding short-term match would have put it
+    pose, cov = loc._anchor(pts, pred, c_o, slid)
+    assert np.hypot(*(pose[:2] - truth[30][:2])) < 0.05
+    assert np.all(np.linalg.eigvalsh(cov) > 0)
+    assert loc._anchor(pts, pred, c_o, pose + [0.01, 0.0, 0.0]) is None  # within tolerance
+    ests += [loc.update(o, s) for o, s in stream[30:]]
+    loc.end_run()
+    err = np.hypot(*(np.array([e.mean[:2] for e in ests]) - truth[:, :2]).T)
+    assert err.mean() < 0.05
+    anchored = np.mean([e.extras.get("anchored", False) for e in ests])
+    assert anchored < 0.2
+    # off by default: the paper has no anchor
+    assert DynamicMapConfig().ltm_anchor_tol_m == 0

@@ -61,7 +61,12 @@ import numpy as np
 from dynmap_sim import se2
 from dynmap_sim.agent.localizer import Localizer, ScanMapUser, register_localizer
 from dynmap_sim.agent.mapping.first_run import FirstRunMapper
-from dynmap_sim.agent.mapping.scan_matcher import MatchResult, PointMap, match_scan
+from dynmap_sim.agent.mapping.scan_matcher import (
+    MatchResult,
+    PointMap,
+    match_scan,
+    worst_position_sigma,
+)
 from dynmap_sim.agent.mapping.scan_points import BeamDirections, scan_points_base
 from dynmap_sim.agent.maps.current_map import CurrentMap, SynthesisParams, synthesize_current_map
 from dynmap_sim.agent.maps.dynamic_map import DynamicMap, MapSnapshot
@@ -171,6 +176,16 @@ class DynamicMapConfig:
     #: Keep a snapshot of λ2-λ5 after each day's learning (for figures like B&D Fig. 9;
     #: ~0.5 MB a day in the lab).
     day_snapshots: bool = True
+    #: Long-term anchor (not in B&D; 0 = off, the paper): each scan is also matched against
+    #: a current map of λ2–λ5 alone, and when that match pins the position (worst-direction
+    #: sigma of its scan term at most ``ltm_anchor_max_sigma_m``) and lies more than this [m]
+    #: from the match with λ1, its pose is taken. λ1 learns the robot's own scans at its own
+    #: estimates, so along a corridor whose walls are blank nothing else holds the estimate
+    #: and it slides (measured on the corridor world: 1.5 m in one run), and the slid poses
+    #: then train λ2–λ5; the anchor bounds the slide by this tolerance.
+    ltm_anchor_tol_m: float = 0.0
+    #: ... (the long-term match must be this good [m] to override; see above).
+    ltm_anchor_max_sigma_m: float = 0.05
     #: A ray's first time step takes up to ``n`` measurements (the toy example of §3.5);
     #: False: ``u n`` per step until full, as §3.1 states (λ5 then fills in ~20 days, one
     #: of §5.4's reasons why λ5 is used more and more).
@@ -190,7 +205,7 @@ class DynamicMapConfig:
                 "min_readings", "max_select_readings", "explained_density", "odom_k_xy",
                 "odom_k_th", "max_kappa_doublings", "min_matched", "map_voxel_m",
                 "ltm_scans_per_run", "min_update_dist_m", "min_update_angle_rad",
-                "ltm_day_scans_per_run",
+                "ltm_day_scans_per_run", "ltm_anchor_tol_m", "ltm_anchor_max_sigma_m",
             ),
         )  # fmt: skip
 
@@ -279,6 +294,9 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
         self._mapper: FirstRunMapper | None = None
         self._cmap_points = np.zeros((0, 2))
         self._cmap: PointMap | None = None
+        # the current map of λ2–λ5 alone (``ltm_anchor_tol_m``)
+        self._anchor_points = np.zeros((0, 2))
+        self._anchor_map: PointMap | None = None
         # (pose, ranges in mm) pairs of the current run and of the current day (§4.4)
         self._run_poses: list[FloatArray] = []
         self._run_ranges: list[np.ndarray] = []
@@ -297,6 +315,7 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
         state["_cmap"] = None  # a KD-tree: rebuilt from _cmap_points on demand
+        state["_anchor_map"] = None
         return state
 
     # ------------------------------------------------------------------ levels
@@ -331,6 +350,8 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
         self._day = int(prior.day)
         self._cmap_points = np.zeros((0, 2))
         self._cmap = None
+        self._anchor_points = np.zeros((0, 2))
+        self._anchor_map = None
         self._run_poses, self._run_ranges = [], []
         self._mapper = None
         mapped = self._map_given and len(self.dmap) > 0
@@ -365,6 +386,8 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
             return est
         opose = np.asarray(odom.pose, dtype=np.float64)
         kappa = 0.0
+        sigma_m = float("inf")
+        anchored = None
         if self._last_odom is not None:
             delta = se2.between(self._last_odom, opose)
             if (
@@ -384,13 +407,24 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
             self._last_odom = opose.copy()
             pred = se2.compose(self._pose, delta)
             c_o = odometry_covariance(delta, *self.config.odom_params)
-            pose, cov, kappa = self._match(pts_base, pred, c_o)
+            pose, cov, kappa, sigma_m = self._match(pts_base, pred, c_o, self._current_point_map())
+            if self._anchoring:
+                anchored = self._anchor(pts_base, pred, c_o, pose)
+                if anchored is not None:
+                    pose, cov = anchored
             self._pose, self._cov = pose, cov
         pts_map = se2.transform_points(self._pose, pts_base)
         cur = synthesize_current_map(
             self.dmap, self._pose, pts_map, self.selectable_levels, self.config.synthesis
         )
         self._set_current_map(cur)
+        if self._anchoring:
+            levels = [level for level in self.selectable_levels if level != 0]
+            self._set_anchor_map(
+                synthesize_current_map(
+                    self.dmap, self._pose, pts_map, levels, self.config.synthesis
+                ).points
+            )
         if self.learns_stm:
             self.dmap.learn_online(
                 self._pose, pts_map, self.rng, levels=[0], allow_new=not self.frozen
@@ -406,19 +440,22 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
             "timescales": tuple(level for _, level in cur.selections),
             "safe_mode": cur.safe_mode,
             "kappa": kappa,
+            "position_sigma_m": sigma_m,
+            "anchored": anchored is not None,
             "n_local_maps": len(self.dmap),
         }
         return PoseEstimate(mean=self._pose.copy(), cov=self._cov.copy(), extras=extras)
 
     # ------------------------------------------------------------------ eq. 9
     def _match(
-        self, pts_base: FloatArray, pred: FloatArray, c_o: FloatArray
-    ) -> tuple[FloatArray, FloatArray, float]:
-        """Scan matching with the adaptive odometry prior (§4.3, eq. 9)."""
+        self, pts_base: FloatArray, pred: FloatArray, c_o: FloatArray, target: PointMap | None
+    ) -> tuple[FloatArray, FloatArray, float, float]:
+        """Scan matching against ``target`` with the adaptive odometry prior (§4.3, eq. 9):
+        pose, covariance, final κ and :func:`worst_position_sigma` of the scan term (``inf``:
+        no match, the prediction is returned)."""
         c = self.config
-        target = self._current_point_map()
         if target is None or len(pts_base) < c.min_matched:
-            return pred, self._propagated_cov(c_o), float("nan")
+            return pred, self._propagated_cov(c_o), float("nan"), float("inf")
         step = max(1, int(np.ceil(len(pts_base) / c.max_match_points)))
         pts = pts_base[::step]
         info_o = np.linalg.inv(c_o)
@@ -451,8 +488,35 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
                     break
                 kappa *= 2.0
             else:
-                return pred, self._propagated_cov(c_o), float("inf")
-        return res.pose, res.cov, kappa
+                return pred, self._propagated_cov(c_o), float("inf"), float("inf")
+        return res.pose, res.cov, kappa, worst_position_sigma(res.scan_info)
+
+    @property
+    def _anchoring(self) -> bool:
+        """The long-term anchor is on and λ1 takes part (``ltm_anchor_tol_m``)."""
+        return self.config.ltm_anchor_tol_m > 0 and 0 in self.selectable_levels
+
+    def _anchor(
+        self, pts_base: FloatArray, pred: FloatArray, c_o: FloatArray, pose: FloatArray
+    ) -> tuple[FloatArray, FloatArray] | None:
+        """The match against λ2–λ5 alone, when it pins the position and lies more than
+        ``ltm_anchor_tol_m`` from ``pose`` (see :class:`DynamicMapConfig`); else None."""
+        c = self.config
+        pose_l, cov_l, _, sigma_l = self._match(pts_base, pred, c_o, self._anchor_point_map())
+        if sigma_l > c.ltm_anchor_max_sigma_m:
+            return None
+        if np.hypot(*(pose_l[:2] - pose[:2])) <= c.ltm_anchor_tol_m:
+            return None
+        return pose_l, cov_l
+
+    def _set_anchor_map(self, pts: FloatArray) -> None:
+        self._anchor_points = self._thinned(pts)
+        self._anchor_map = None
+
+    def _anchor_point_map(self) -> PointMap | None:
+        if self._anchor_map is None and len(self._anchor_points) >= self.config.min_matched:
+            self._anchor_map = PointMap(self._anchor_points)
+        return self._anchor_map
 
     def _propagated_cov(self, c_o: FloatArray) -> FloatArray:
         c, s = np.cos(self._pose[2]), np.sin(self._pose[2])
@@ -460,12 +524,16 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
         return self._cov + rot @ c_o @ rot.T
 
     # ------------------------------------------------------------------ current map
-    def _set_current_map(self, cur: CurrentMap) -> None:
-        pts = cur.points
+    def _thinned(self, pts: FloatArray) -> FloatArray:
+        """``pts`` thinned to one per ``map_voxel_m`` cell (first in order)."""
         if len(pts) and self.config.map_voxel_m > 0:
             key = np.floor(pts / self.config.map_voxel_m).astype(np.int64)
             _, idx = np.unique(key[:, 0] * 1_000_003 + key[:, 1], return_index=True)
             pts = pts[np.sort(idx)]
+        return pts
+
+    def _set_current_map(self, cur: CurrentMap) -> None:
+        pts = self._thinned(cur.points)
         if self._cmap is not None and np.array_equal(pts, self._cmap_points):
             return  # the same points as the last scan's (long-term timescales): keep the KD-tree
         self._cmap_points = pts

@@ -143,7 +143,9 @@ class MatchResult:
     """Outcome of :func:`match_scan`: the pose of the scan's frame in the map frame.
 
     ``cov`` is the 3x3 pose covariance [m², rad²]; ``n_matched`` the number of points with a
-    correspondence in the last iteration; ``rmse_m`` their point-to-line RMS residual.
+    correspondence in the last iteration; ``rmse_m`` their point-to-line RMS residual;
+    ``scan_info`` the scan term's share of the information (``cov``'s inverse without the
+    prior) [1/m², 1/(m rad), 1/rad²]: how well the scan alone constrains each direction.
     """
 
     pose: FloatArray
@@ -151,6 +153,7 @@ class MatchResult:
     n_matched: int
     rmse_m: float
     converged: bool
+    scan_info: FloatArray
 
 
 def _sym3_condition(h: FloatArray) -> float:
@@ -342,14 +345,31 @@ def match_scan(
             converged = True
             break
     sigma2 = max(rmse**2 if math.isfinite(rmse) else 0.0, floor2) * info_inflation
-    info = h_scan / sigma2
-    if lam is not None:
-        info = info + lam
+    scan_info = h_scan / sigma2
+    info = scan_info if lam is None else scan_info + lam
     try:
         cov = np.linalg.inv(info + 1e-9 * np.eye(3))
     except np.linalg.LinAlgError:
         cov = np.diag([1e6, 1e6, 1e6])
     cov = 0.5 * (cov + cov.T)
     return MatchResult(
-        pose=pose, cov=cov, n_matched=n_matched, rmse_m=float(rmse), converged=converged
+        pose=pose,
+        cov=cov,
+        n_matched=n_matched,
+        rmse_m=float(rmse),
+        converged=converged,
+        scan_info=scan_info,
     )
+
+
+def worst_position_sigma(scan_info: FloatArray) -> float:
+    """Standard deviation [m] of the position along its worst-constrained direction under a
+    scan match's information ``scan_info`` (3x3, x y θ) alone, the heading marginalized out
+    (Schur complement): large along a corridor whose walls are blank (the degeneracy measure
+    of Zhang, Kaess & Singh 2016, as a length). ``inf`` if a direction is unconstrained."""
+    h = 0.5 * (scan_info + scan_info.T)
+    htt = h[:2, :2]
+    if h[2, 2] > 0.0:
+        htt = htt - np.outer(h[:2, 2], h[:2, 2]) / h[2, 2]
+    lam = float(np.linalg.eigvalsh(htt)[0])
+    return float(1.0 / np.sqrt(lam)) if lam > 0.0 else float("inf")

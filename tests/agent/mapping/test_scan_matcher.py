@@ -15,6 +15,7 @@ from dynmap_sim.agent.mapping.scan_matcher import (
     _newton_step,
     _sym3_condition,
     match_scan,
+    worst_position_sigma,
 )
 from dynmap_sim.agent.mapping.scan_matcher_numba import (
     BucketGrid,
@@ -92,6 +93,38 @@ def test_prior_pulls_along_a_corridor(laser, cast):
     # The covariance says so: large along x (the prior's 5 cm), tiny across.
     assert np.sqrt(res.cov[0, 0]) == pytest.approx(0.05, rel=0.05)
     assert np.sqrt(res.cov[1, 1]) < 0.005
+
+
+def test_scan_info_tells_the_corridor_from_a_room(laser, cast, segments):
+    # The scan term's information is the covariance's inverse without the prior ...
+    corridor = np.array([[-50.0, -1.0, 50.0, -1.0], [-50.0, 1.0, 50.0, 1.0]])
+    truth = np.array([0.0, 0.1, 0.0])
+    r = cast(truth, laser.angles(), corridor, laser.range_max_m)
+    pts = se2.scan_to_points(r, laser.angles())
+    prior_info = np.diag([1.0 / 0.05**2, 1.0 / 0.05**2, 1.0 / 0.02**2])
+    res = match_scan(
+        pts, PointMap(_dense_points(corridor, 0.05)), truth, prior_mean=truth, prior_info=prior_info
+    )
+    np.testing.assert_allclose(
+        np.linalg.inv(res.cov), res.scan_info + prior_info, rtol=1e-6, atol=1e-3
+    )
+    # ... and says that two parallel walls do not fix the position along them (metres) ...
+    assert worst_position_sigma(res.scan_info) > 1.0
+    # ... while a room does.
+    room = np.array([2.5, 1.2, 0.3])
+    r = cast(room, laser.angles(), segments, laser.range_max_m)
+    res = match_scan(se2.scan_to_points(r, laser.angles()), PointMap(_dense_points(segments)), room)
+    assert worst_position_sigma(res.scan_info) < 0.01
+
+
+def test_worst_position_sigma_closed_form():
+    # Uncoupled: the weaker of the two translation directions, as a standard deviation.
+    assert worst_position_sigma(np.diag([100.0, 10_000.0, 5.0])) == pytest.approx(0.1)
+    # A direction with no information at all.
+    assert worst_position_sigma(np.diag([0.0, 10_000.0, 5.0])) == np.inf
+    # Heading coupled to x: marginalizing it out leaves x with 100 - 40^2/20 = 20.
+    h = np.array([[100.0, 0.0, 40.0], [0.0, 1e4, 0.0], [40.0, 0.0, 20.0]])
+    assert worst_position_sigma(h) == pytest.approx(1.0 / np.sqrt(20.0))
 
 
 def test_too_few_points_is_not_converged(segments):
