@@ -13,11 +13,17 @@ Prints
    semistatic test, MCL) on the same scans;
 3. the long-term memory: bytes per m² (10 slots of 50 mm float32 log-odds cells) and for
    the shipped apartment's walls-prior grid.
+
+``--fingerprint`` prints instead a SHA-256 of everything adaptive-memory returns on the
+stream (estimates, covariances, extras: point classes and diagnostics) and of its long-term
+grids after it: a change meant to be faster must leave it unchanged (with numba and with
+numba blocked).
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import math
 import sys
 import time
@@ -139,6 +145,26 @@ def bench_stages(loc, stream) -> None:
     )
 
 
+def fingerprint(rng: np.random.Generator) -> str:
+    """SHA-256 of adaptive-memory's outputs on the stream and of its long-term grids."""
+    truth, stream = _stream(rng)
+    loc = make_localizer("adaptive-memory", laser=URG, rng=np.random.default_rng(1))
+    loc.begin_run(Prior(initial_pose=truth[0].copy(), walls=_walls(), day=1, run=1))
+    h = hashlib.sha256()
+    for o, s in stream:
+        e = loc.update(o, s)
+        h.update(np.ascontiguousarray(e.mean, dtype=np.float64).tobytes())
+        h.update(np.ascontiguousarray(e.cov, dtype=np.float64).tobytes())
+        for k in sorted(e.extras):
+            h.update(k.encode())
+            h.update(np.ascontiguousarray(e.extras[k]).tobytes())
+    loc.end_run()
+    for k in loc.ltm.filled():
+        h.update(loc.ltm.map(k).logodds.tobytes())
+    print(f"fingerprint of {len(stream)} scans: {h.hexdigest()}")
+    return h.hexdigest()
+
+
 def bench_memory() -> None:
     cell = 0.05
     per_m2 = 10 * 4 / cell**2
@@ -165,8 +191,13 @@ def bench_memory() -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--fingerprint", action="store_true",
+                    help="print the SHA-256 of the outputs instead of timing them")  # fmt: skip
     args = ap.parse_args()
     rng = np.random.default_rng(args.seed)
+    if args.fingerprint:
+        fingerprint(rng)
+        return
     bench_localizer(rng)
     bench_memory()
 

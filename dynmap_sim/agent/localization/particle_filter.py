@@ -408,6 +408,21 @@ def information_lambda_min(cov: ArrayLike, floor: float = COV_FLOOR) -> float:
     return 1.0 / max(lam_max, floor)
 
 
+#: What :func:`reported_covariance` keeps: the filter's covariance, its regularized copy and
+#: the latter's information ``lambda_min``.
+CovReport = tuple[FloatArray, FloatArray, float]
+
+
+def reported_covariance(cov: FloatArray, last: CovReport | None) -> CovReport:
+    """``(cov, regularized_covariance(cov), information_lambda_min(...) of that)``, or
+    ``last`` when it was made from this very array: a filter's covariance changes only with
+    a new estimate, which is a new array, so the odometry-only scans in between reuse it."""
+    if last is not None and last[0] is cov:
+        return last
+    reg = regularized_covariance(cov)
+    return cov, reg, information_lambda_min(reg)
+
+
 def per_beam_average(log_w_prev: FloatArray, logp: NDArray[np.floating]) -> float:
     """Weighted mean scan likelihood per beam: ``(sum_i w_i prod_k p_ik) ** (1 / n_beams)``
     from log weights ``(N,)`` and per-beam ``log p`` ``(N, n_beams)``, in the log domain
@@ -792,6 +807,9 @@ class StaticMCL(Localizer, MapUser):
         ),
         Diagnostic("lambda_min", "float64", doc="smallest eigenvalue of the inverse covariance"),
     )
+    #: The reported covariance of ``_cov`` (:func:`reported_covariance`; a class default,
+    #: so that a localizer pickled before it existed resumes).
+    _cov_reported: CovReport | None = None
 
     def __init__(
         self,
@@ -923,10 +941,11 @@ class StaticMCL(Localizer, MapUser):
                 f.resample(self.rng, center=self._est_at_update)
             self._odom_at_update = pose_odom.copy()
         mean = se2.compose(self._est_at_update, se2.between(self._odom_at_update, pose_odom))
-        cov = regularized_covariance(self._cov)
+        self._cov_reported = reported_covariance(self._cov, self._cov_reported)
+        cov, lambda_min = self._cov_reported[1].copy(), self._cov_reported[2]
         extras = {
             "scan_loglik": f.mean_beam_loglik(mean, scan.ranges_m),
-            "lambda_min": information_lambda_min(cov),
+            "lambda_min": lambda_min,
             "n_particles": len(f.particles),
         }
         return PoseEstimate(mean=mean, cov=cov, extras=extras)

@@ -57,8 +57,7 @@ from dynmap_sim.agent.localization.likelihood_field import LikelihoodTable, sele
 from dynmap_sim.agent.localization.particle_filter import (
     CONFIGS,
     AMCLFilter,
-    information_lambda_min,
-    regularized_covariance,
+    reported_covariance,
 )
 from dynmap_sim.agent.localizer import Localizer, register_localizer
 from dynmap_sim.agent.params import check_fields, coerce_fields
@@ -512,9 +511,7 @@ class AdaptiveMemoryLocalizer(Localizer):
     def _reported_cov(self) -> tuple[FloatArray, float]:
         """The reported covariance (regularized) and its information's smallest eigenvalue,
         computed once per filter estimate: ``_cov`` changes only with one."""
-        if self._cov_reported is None or self._cov_reported[0] is not self._cov:
-            cov = regularized_covariance(self._cov)
-            self._cov_reported = (self._cov, cov, information_lambda_min(cov))
+        self._cov_reported = reported_covariance(self._cov, self._cov_reported)
         return self._cov_reported[1].copy(), self._cov_reported[2]
 
     def _hits(self, points: FloatArray, covs: FloatArray) -> NDArray[np.bool_] | None:

@@ -216,6 +216,12 @@ class LTMMap:
             return np.zeros(0, bool)
         h, w = self.shape
         res = self.resolution
+        if kernel:
+            return ltm_numba.explained(self.logodds, params.l_occupied, points, covs,
+                                       self.origin, res, params.cov_floor_m**2,
+                                       params.semistatic_sigma,
+                                       params.semistatic_max_cells * res,
+                                       python=kernel == "python")  # fmt: skip
         a = covs[:, 0, 0] + params.cov_floor_m**2
         c = covs[:, 1, 1] + params.cov_floor_m**2
         b = covs[:, 0, 1]
@@ -226,9 +232,6 @@ class LTMMap:
         fx = (points[:, 0] - self.origin[0]) / res - ix - 0.5  # offset from the cell centre
         fy = (points[:, 1] - self.origin[1]) / res - iy - 0.5
         k_max = int(np.ceil(rho.max() / res))
-        if kernel:
-            return ltm_numba.explained(self.logodds, params.l_occupied, ix, iy, fx, fy, rho,
-                                       res, k_max, python=kernel == "python")  # fmt: skip
         occ = (self.logodds >= params.l_occupied).ravel()
         out = np.zeros(n, bool)
         todo = np.arange(n)

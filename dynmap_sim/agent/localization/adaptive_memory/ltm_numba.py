@@ -1,6 +1,8 @@
 """Optional numba kernels of :class:`.ltm_map.LTMMap` (extra ``fast``).
 
-* :func:`explained`: §4.4's test (the complement of "semistatic") one point at a time, the
+* :func:`explained`: §4.4's test (the complement of "semistatic") one point at a time, from
+  the points and their covariances (the search radius from the covariance's largest
+  eigenvalue, the point's cell and its offset in it, as the numpy code computes them), the
   3 x 3 cells around it first, then its whole search square, stopping at the first occupied
   cell within its circle; the numpy code builds ``(points x cells)`` arrays instead.
 * :func:`fuse`: the end of eq. 15's update: the occupied log-odds of the stencils added in
@@ -10,9 +12,10 @@
 
 The arithmetic is the numpy code's, operation for operation (the same float64 ray samples and
 cell truncation, float32 sums, the threshold compared in float32 as numpy does with a float32
-grid), so the results are identical; the tests check the plain-Python kernels (what numba
-compiles) and the compiled ones against the numpy code. Transcendental functions (the
-stencil's ``exp``/``log``, ``hypot``, ``sqrt``) stay in numpy, whose results the kernels take.
+grid; ``sqrt`` and ``floor`` are exact IEEE operations), so the results are identical; the
+tests check the plain-Python kernels (what numba compiles) and the compiled ones against the
+numpy code. Transcendental functions (the stencil's ``exp``/``log``, ``hypot``) stay in
+numpy, whose results the kernels take.
 """
 
 from __future__ import annotations
@@ -30,15 +33,51 @@ IntArray = NDArray[np.intp]
 
 
 def _explained_py(  # type: ignore[no-untyped-def]
-    logodds, l_occupied32, ix, iy, fx, fy, rho_m, res_m, k_max, out
+    logodds,
+    l_occupied32,
+    points,
+    covs,
+    origin_x_m,
+    origin_y_m,
+    res_m,
+    floor2_m2,
+    n_sigma,
+    rho_max_m,
+    ix,
+    iy,
+    fx,
+    fy,
+    rho_m,
+    out,
 ):
     """``out[j]``: an occupied cell (``logodds >= l_occupied32``) of the ``(2 k + 1)^2``
     cells around point ``j`` (``k = max(k_max, 1)``; indices clipped to the grid, as the
-    numpy code does) has its centre within ``rho_m[j]`` of the point (offset ``fx, fy``
-    [cells] from its cell's centre)."""
+    numpy code does) has its centre within ``rho_m[j]`` of the point. First, per point: its
+    cell ``ix, iy``, its offset ``fx, fy`` [cells] from the cell's centre and ``rho_m``,
+    ``n_sigma`` standard deviations along the widest axis of ``covs[j]`` plus ``floor2_m2``
+    on the diagonal, within ``[1.5 res_m, rho_max_m]`` (the scratch arrays ``ix`` ... ``rho_m``
+    are filled); ``k_max`` from the largest ``rho_m``."""
     h, w = logodds.shape
+    n = points.shape[0]
+    rho_top = -math.inf
+    for j in range(n):
+        a = covs[j, 0, 0] + floor2_m2
+        c = covs[j, 1, 1] + floor2_m2
+        b = covs[j, 0, 1]
+        d = a - c
+        lam = 0.5 * (a + c) + math.sqrt(0.25 * (d * d) + b * b)
+        rho = min(max(n_sigma * math.sqrt(lam), 1.5 * res_m), rho_max_m)
+        rho_m[j] = rho
+        rho_top = max(rho_top, rho)
+        gx = (points[j, 0] - origin_x_m) / res_m
+        gy = (points[j, 1] - origin_y_m) / res_m
+        ix[j] = int(math.floor(gx))
+        iy[j] = int(math.floor(gy))
+        fx[j] = gx - ix[j] - 0.5
+        fy[j] = gy - iy[j] - 0.5
+    k_max = int(math.ceil(rho_top / res_m))
     k1 = 1
-    for j in range(ix.shape[0]):
+    for j in range(n):
         r2 = rho_m[j] * rho_m[j]
         hit = False
         # the 3 x 3 cells first (a return on a mapped wall), then the rest of the square
@@ -116,22 +155,28 @@ _fuse = compiled(_fuse_py)
 def explained(
     logodds: NDArray[np.float32],
     l_occupied: float,
-    ix: IntArray,
-    iy: IntArray,
-    fx: FloatArray,
-    fy: FloatArray,
-    rho_m: FloatArray,
+    points: FloatArray,
+    covs: FloatArray,
+    origin_m: FloatArray,
     res_m: float,
-    k_max: int,
+    floor2_m2: float,
+    n_sigma: float,
+    rho_max_m: float,
     python: bool = False,
 ) -> NDArray[np.bool_]:
-    """:func:`_explained_py` compiled (needs numba; ``python``: the plain kernel)."""
+    """:func:`_explained_py` compiled (needs numba; ``python``: the plain kernel) on points
+    ``(n, 2)`` [m] with covariances ``(n, 2, 2)`` [m²] (float64)."""
     kernel = _explained_py if python else _explained
     if kernel is None:
         require_numba("long-term map")
-    out = np.zeros(len(ix), dtype=np.bool_)
-    kernel(logodds, np.float32(l_occupied), ix, iy, fx, fy, rho_m, float(res_m), int(k_max),
-           out)  # fmt: skip
+    n = len(points)
+    out = np.zeros(n, dtype=np.bool_)
+    ix, iy = np.empty(n, dtype=np.intp), np.empty(n, dtype=np.intp)
+    fx, fy, rho = np.empty(n), np.empty(n), np.empty(n)
+    kernel(logodds, np.float32(l_occupied), np.ascontiguousarray(points, dtype=np.float64),
+           np.ascontiguousarray(covs, dtype=np.float64), float(origin_m[0]),
+           float(origin_m[1]), float(res_m), float(floor2_m2), float(n_sigma),
+           float(rho_max_m), ix, iy, fx, fy, rho, out)  # fmt: skip
     return out
 
 

@@ -29,6 +29,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynmap_sim import se2
+from dynmap_sim.agent.localization.adaptive_memory import tracker_numba
+from dynmap_sim.jit import kernel_backend
 
 FloatArray = NDArray[np.float64]
 
@@ -74,8 +76,12 @@ def segment_scan(
     mount: FloatArray,
     range_max_m: float,
     params: TrackerParams,
+    backend: str = "auto",
 ) -> Boxes:
-    """Segment one scan into oriented boxes (eqs. 8-9), vectorized (no per-point loop)."""
+    """Segment one scan into oriented boxes (eqs. 8-9), vectorized (no per-point loop).
+    ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): the arithmetic in
+    :mod:`.tracker_numba`'s kernels (the same numbers) or in numpy."""
+    kernel = kernel_backend(backend)
     r_all = np.asarray(ranges_m, dtype=np.float64)
     n_beams = len(r_all)
     labels = np.full(n_beams, -1, dtype=np.intp)
@@ -86,6 +92,9 @@ def segment_scan(
         return Boxes(np.zeros((0, 2)), empty, empty, empty, np.zeros(0, bool), labels)
     r = r_all[idx]
     a = angles_rad[idx] + mount[2]
+    if kernel:
+        return _segment_scan_kernels(r, a, angles_rad[idx], idx, mount, params, labels,
+                                     kernel == "python")  # fmt: skip
     xy = np.column_stack([mount[0] + r * np.cos(a), mount[1] + r * np.sin(a)])
     step = np.diff(xy, axis=0)
     dist = np.hypot(step[:, 0], step[:, 1])
@@ -131,6 +140,37 @@ def segment_scan(
         never |= occl_left | occl_right
     box_of_seg = np.full(len(starts), -1, dtype=np.intp)
     box_of_seg[keep] = np.arange(int(keep.sum()))
+    labels[idx] = box_of_seg[seg]
+    return Boxes(center[keep], phi[keep], length[keep], width[keep], never[keep], labels)
+
+
+def _segment_scan_kernels(
+    r: FloatArray,
+    a: FloatArray,
+    angles: FloatArray,
+    idx: NDArray[np.intp],
+    mount: FloatArray,
+    params: TrackerParams,
+    labels: NDArray[np.intp],
+    python: bool,
+) -> Boxes:
+    """:func:`segment_scan` of the valid returns ``r`` (beam angles ``angles``, plus the
+    mount's: ``a``; beam indices ``idx``) with :mod:`.tracker_numba`'s kernels; the
+    transcendental functions in numpy, as there."""
+    x = mount[0] + r * np.cos(a)
+    y = mount[1] + r * np.sin(a)
+    dist = np.hypot(np.diff(x), np.diff(y))
+    dalpha = np.abs(np.diff(angles))
+    lam = np.deg2rad(params.breakpoint_lambda_deg)
+    seg, starts, counts, mx, my, cxx, cxy, cyy, dx, dy = tracker_numba.segment_sums(
+        x, y, dist, np.sin(dalpha), np.sin(lam - dalpha), r, idx, params.sigma_r_m,
+        params.max_gap_beams, python=python,
+    )  # fmt: skip
+    phi = 0.5 * np.arctan2(2.0 * cxy, cxx - cyy)
+    center, length, width, never, box_of_seg, keep = tracker_numba.segment_boxes(
+        dx, dy, seg, starts, counts, mx, my, np.cos(phi), np.sin(phi), r, params.min_points,
+        params.max_dynamic_length_m, params.occlusion_never_dynamic, python=python,
+    )  # fmt: skip
     labels[idx] = box_of_seg[seg]
     return Boxes(center[keep], phi[keep], length[keep], width[keep], never[keep], labels)
 
