@@ -148,21 +148,20 @@ class DynMapVectorEnv(VectorEnv):
         # the scans of all envs that moved, cast in one pass, their noise in one pass
         if driven:
             envs = stepping
-            casts = cast_many(
-                [e.lidar for e in envs], [p for _, p, _ in driven], [e.world.geometry for e in envs]
-            )
+            poses = [p for _, p, _ in driven]
+            cast = cast_many([e.lidar for e in envs], poses, [e.world.geometry for e in envs])
+            true_r = cast[0]
             if self._same_lidars and len(envs) > 1:
-                true_r = np.stack([c[0] for c in casts])
                 noisy = envs[0].lidar.apply_noise_rows(true_r, [e._rng_lidar for e in envs])
             else:
-                noisy = [
-                    e.lidar.apply_noise(c[0], e._rng_lidar)
-                    for e, c in zip(envs, casts, strict=True)
-                ]
-            for env, (i, pose, collision), cast, rng_m in zip(
-                envs, driven, casts, noisy, strict=True
-            ):
-                env._observe_into(self._rows, i, pose, collision, cast, rng_m)
+                noisy = np.stack(
+                    [
+                        e.lidar.apply_noise(r, e._rng_lidar)
+                        for e, r in zip(envs, true_r, strict=True)
+                    ]
+                )
+            at = [i for i, _, _ in driven]
+            self._rows.write_steps(envs, at, poses, [c for _, _, c in driven], cast, noisy)
         np.logical_or(self._terminations, self._truncations, out=self._autoreset)
         return (
             self._obs(),
