@@ -229,7 +229,7 @@ def _candidate_rows(lay: _Layout, z: NDArray[np.complex128]) -> NDArray[np.compl
     """Each row's candidate segments (its crowd's :meth:`SegmentGrid.rows`, padded)."""
     ij = ((z - lay.origin_c) * (1.0 / CELL_M)).view(np.float64).reshape(-1, 2)
     ij = ij.astype(np.int64)
-    np.clip(ij, 0, lay.cell_hi, out=ij)
+    np.minimum(np.maximum(ij, 0, out=ij), lay.cell_hi, out=ij)  # (np.clip, without its overhead)
     cell = lay.cell_first + ij[:, 0] * lay.cell_ny + ij[:, 1]
     return lay.segrows[lay.cells[cell]]
 
@@ -249,7 +249,9 @@ def _build_layout(forces: Sequence[SocialForce], ks: tuple[StepConstants, ...]) 
     people_src = np.empty((n_rows, pmax), dtype=np.int64)
     by_width: dict[int, tuple[list[IntArray], list[IntArray]]] = {}
     seg_at = cell_at = 0
-    cells, segrows, cell_first, origin, hi, ny = [], [], [], [], [], []
+    segrows, cell_first, origin, hi, ny = [], [], [], [], []
+    # every grid's cell lists (into the joint segrows), padded with its far dummy
+    cells = np.empty((sum(g.cells.shape[0] for g in grids), kmax), dtype=np.int64)
     for k, g, r0 in zip(ks, grids, starts[:-1].tolist(), strict=True):
         p, kk = k.n, k.k_cols
         rs = slice(r0, r0 + p)
@@ -265,10 +267,10 @@ def _build_layout(forces: Sequence[SocialForce], ks: tuple[StepConstants, ...]) 
         rows_i, idx_i = by_width.setdefault(p + 1 + kk, ([], []))
         rows_i.append(np.arange(r0, r0 + p))
         idx_i.append(np.arange(r0, r0 + p)[:, None] * width + cols[None, :])
-        far = g.segrows.shape[0] - 1
-        c = np.full((g.cells.shape[0], kmax), far, dtype=np.int64)
-        c[:, : g.cells.shape[1]] = g.cells
-        cells.append(c + seg_at)
+        n_cells, w = g.cells.shape
+        mine = cells[cell_at : cell_at + n_cells]
+        np.add(g.cells, seg_at, out=mine[:, :w])
+        mine[:, w:] = seg_at + g.segrows.shape[0] - 1  # the far dummy
         segrows.append(g.segrows)
         cell_first.append(np.full(p, cell_at, dtype=np.int64))
         origin.append(np.full(p, g.origin_c, dtype=np.complex128))
@@ -294,7 +296,7 @@ def _build_layout(forces: Sequence[SocialForce], ks: tuple[StepConstants, ...]) 
         vmax_max=np.array([k.vmax_max for k in ks]),
         sum_groups=[(cat(r), cat(i)) for r, i in by_width.values()],
         segrows=cat(segrows),
-        cells=cat(cells),
+        cells=cells,
         origin_c=cat(origin),
         cell_hi=cat(hi),
         cell_ny=cat(ny),
