@@ -93,6 +93,7 @@ class CrowdBatch:
     def __init__(self) -> None:
         self._layout: _Layout | None = None
         self._moved: _Moved | None = None
+        self._state: _State | None = None
 
     @staticmethod
     def batchable(forces: SocialForce) -> bool:
@@ -117,9 +118,10 @@ class CrowdBatch:
         lay = self._layout
         if lay is None or len(lay.ks) != len(ks) or any(map(_differ, lay.ks, ks)):
             lay = self._layout = _build_layout(forces, ks)
-        pos = np.concatenate([c.pos for c in crowds])
-        vel = np.concatenate([c.vel for c in crowds])
-        goal_xy = np.concatenate([c.goal for c in crowds])
+        state = self._state
+        if state is None or not state.holds(crowds):
+            state = self._state = _State(crowds)
+        pos, vel, goal_xy = state.pos, state.vel, state.goal
         z = pos.view(np.complex128)[:, 0]
         v = vel.view(np.complex128)[:, 0]
         goal = goal_xy.view(np.complex128)[:, 0]
@@ -166,22 +168,13 @@ class CrowdBatch:
             s = slice(rows_at[i], rows_at[i + 1])
             _push_out_of_walls(crowds[i], z[s], v[s], rows[s, : ks[i].k_cols])
             disp[s] = np.abs(z[s] - old[s])
-        phase = np.concatenate([c.phase for c in crowds])
+        phase = state.phase
         phase += disp * (2 * np.pi / STRIDE_M)
-        progress = _Progress(
-            np.concatenate([c.best_goal_m for c in crowds]),
-            np.concatenate([c.stuck_s for c in crowds]),
-        )
+        progress = _Progress(state.best_goal_m, state.stuck_s)
         redo = goals_due(progress, goal, z, dt_s, rz, lay)  # type: ignore[arg-type]
         due = np.logical_or.reduceat(redo, first)
         self._moved = _Moved(pos, vel, phase)
-        for i, c in enumerate(crowds):
-            s = slice(rows_at[i], rows_at[i + 1])
-            c.pos[...] = pos[s]
-            c.vel[...] = vel[s]
-            c.phase[...] = phase[s]
-            c.best_goal_m = progress.best_goal_m[s].copy()
-            c.stuck_s = progress.stuck_s[s].copy()
+        state.progressed(progress.best_goal_m, progress.stuck_s)
         for i in np.flatnonzero(due).tolist():
             f = forces[i]
             avoid = spawning.goal_avoid(robot_xy[i], float(robot_radius_m[i]))
@@ -215,6 +208,50 @@ class _Moved:
     pos: FloatArray
     vel: FloatArray
     phase: FloatArray
+
+
+class _State:
+    """The per-person state of a batch's crowds as the rows of joint arrays, crowd after
+    crowd, each crowd's arrays being views of its rows: a step reads and moves everyone in
+    place, with nothing to gather before or to write back after (what a crowd's own
+    functions change in place, a new goal say, lands in the joint rows too)."""
+
+    def __init__(self, crowds: Sequence[Crowd]) -> None:
+        self.crowds = tuple(crowds)
+        at = np.cumsum([0, *(c.n for c in crowds)]).tolist()
+        self.rows = [slice(a, b) for a, b in zip(at[:-1], at[1:], strict=True)]
+        self.pos = np.concatenate([c.pos for c in crowds])
+        self.vel = np.concatenate([c.vel for c in crowds])
+        self.goal = np.concatenate([c.goal for c in crowds])
+        self.phase = np.concatenate([c.phase for c in crowds])
+        self.best_goal_m = np.concatenate([c.best_goal_m for c in crowds])
+        self.stuck_s = np.concatenate([c.stuck_s for c in crowds])
+        self._given: list[list[FloatArray]] = []  # each crowd's views, in _FIELDS order
+        for c, s in zip(self.crowds, self.rows, strict=True):
+            c.pos, c.vel, c.goal = self.pos[s], self.vel[s], self.goal[s]
+            c.phase, c.best_goal_m, c.stuck_s = self.phase[s], self.best_goal_m[s], self.stuck_s[s]
+            self._given.append([c.pos, c.vel, c.goal, c.phase, c.best_goal_m, c.stuck_s])
+
+    def holds(self, crowds: Sequence[Crowd]) -> bool:
+        """True if these are this state's crowds, in order, with the arrays it gave them
+        (a new run, or a crowd stepped on its own since, needs a new state)."""
+        return len(crowds) == len(self.crowds) and all(
+            c is mine
+            and c.pos is g[0]
+            and c.vel is g[1]
+            and c.goal is g[2]
+            and c.phase is g[3]
+            and c.best_goal_m is g[4]
+            and c.stuck_s is g[5]
+            for c, mine, g in zip(crowds, self.crowds, self._given, strict=True)
+        )
+
+    def progressed(self, best_goal_m: FloatArray, stuck_s: FloatArray) -> None:
+        """Take the new goal progress (:func:`~.dynamics.goals_due` replaces its arrays)."""
+        self.best_goal_m, self.stuck_s = best_goal_m, stuck_s
+        for c, s, g in zip(self.crowds, self.rows, self._given, strict=True):
+            c.best_goal_m = g[4] = best_goal_m[s]
+            c.stuck_s = g[5] = stuck_s[s]
 
 
 @dataclass
