@@ -170,3 +170,40 @@ def test_same_numbers_with_people(backend) -> None:
                 assert info[key][i] == s_info[key]
         done = term | trunc
     vec.close()
+
+
+def test_same_numbers_when_sub_envs_end_at_different_steps() -> None:
+    """Sub-envs that truncate at different steps: a step that resets some sub-envs and
+    drives the others writes the driven ones' rows (a subset) with a single env's numbers."""
+    kw = {"world": "lab", "max_episode_steps": 9}
+    n = 3
+    vec = DynMapVectorEnv(num_envs=n, **kw)
+    singles = [DynMapEnv(**kw) for _ in range(n)]
+    opts = {"day": 1, "run": 2}
+    vec.reset(seed=11, options=opts)
+    for i, env in enumerate(singles):
+        env.reset(seed=11 + i, options=opts)
+        env._steps = vec.envs[i]._steps = 3 * i  # sub-env i truncates 3 i steps earlier
+    acts = _actions(20, n)
+    done = np.zeros(n, dtype=bool)
+    subsets = 0
+    for act in acts:
+        obs, rew, term, trunc, info = vec.step(act)
+        subsets += int(0 < done.sum() < n)
+        for i, env in enumerate(singles):
+            if done[i]:
+                s_obs, s_info = env.reset()
+                s_rew, s_term, s_trunc = 0.0, False, False
+            else:
+                s_obs, s_rew, s_term, s_trunc, s_info = env.step(act[i])
+            _assert_same(
+                ({k: v[i] for k, v in obs.items()}, rew[i], term[i], trunc[i]),
+                (s_obs, s_rew, s_term, s_trunc),
+            )
+            for key, value in s_info["truth"].items():
+                np.testing.assert_array_equal(info["truth"][key][i], value)
+            for key in ("collision", "route_progress", "stamp_s"):
+                assert info[key][i] == s_info[key]
+        done = term | trunc
+    assert subsets > 0
+    vec.close()
