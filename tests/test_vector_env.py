@@ -150,10 +150,20 @@ def test_same_numbers_with_people(backend) -> None:
         np.testing.assert_array_equal(
             obs["scan"][i], env.reset(seed=4 + i, options=opts)[0]["scan"]
         )
-    acts = _actions(30, n)
+    _step_alongside(vec, singles, _actions(30, n))
+    vec.close()
+
+
+def _step_alongside(vec: DynMapVectorEnv, singles: list[DynMapEnv], acts: np.ndarray) -> int:
+    """Step ``vec`` and, alongside, each single env with its row of ``acts`` (resetting it
+    where the vector env autoresets): every field of sub-env ``i`` equals single env ``i``'s.
+    The number of steps on which some but not all sub-envs reset."""
+    n = len(singles)
     done = np.zeros(n, dtype=bool)
+    subsets = 0
     for act in acts:
         obs, rew, term, trunc, info = vec.step(act)
+        subsets += int(0 < done.sum() < n)
         for i, env in enumerate(singles):
             if done[i]:
                 s_obs, s_info = env.reset()
@@ -169,7 +179,7 @@ def test_same_numbers_with_people(backend) -> None:
             for key in ("collision", "route_progress", "stamp_s"):
                 assert info[key][i] == s_info[key]
         done = term | trunc
-    vec.close()
+    return subsets
 
 
 def test_same_numbers_when_sub_envs_end_at_different_steps() -> None:
@@ -184,26 +194,6 @@ def test_same_numbers_when_sub_envs_end_at_different_steps() -> None:
     for i, env in enumerate(singles):
         env.reset(seed=11 + i, options=opts)
         env._steps = vec.envs[i]._steps = 3 * i  # sub-env i truncates 3 i steps earlier
-    acts = _actions(20, n)
-    done = np.zeros(n, dtype=bool)
-    subsets = 0
-    for act in acts:
-        obs, rew, term, trunc, info = vec.step(act)
-        subsets += int(0 < done.sum() < n)
-        for i, env in enumerate(singles):
-            if done[i]:
-                s_obs, s_info = env.reset()
-                s_rew, s_term, s_trunc = 0.0, False, False
-            else:
-                s_obs, s_rew, s_term, s_trunc, s_info = env.step(act[i])
-            _assert_same(
-                ({k: v[i] for k, v in obs.items()}, rew[i], term[i], trunc[i]),
-                (s_obs, s_rew, s_term, s_trunc),
-            )
-            for key, value in s_info["truth"].items():
-                np.testing.assert_array_equal(info["truth"][key][i], value)
-            for key in ("collision", "route_progress", "stamp_s"):
-                assert info[key][i] == s_info[key]
-        done = term | trunc
+    subsets = _step_alongside(vec, singles, _actions(20, n))
     assert subsets > 0
     vec.close()
