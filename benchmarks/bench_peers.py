@@ -15,9 +15,11 @@ per-round ratios is reported, so a busy machine slows both sides of a round alik
    geometry (the reference of ``bench_sim.py``, which simulates no people at all).
 3. **Vector env**: ``gymnasium.make_vec("dynmap_sim/Lab-v0", 8)`` (the ``vector_entry_point``,
    :class:`~dynmap_sim.vector_env.DynMapVectorEnv`) against 8 ``DynMapEnv`` stepped one after
-   another, in env-steps/s, and against ``SyncVectorEnv`` of the same 8 envs.
+   another, in env-steps/s, and against ``SyncVectorEnv`` of the same 8 envs (``--envs``:
+   other numbers of envs, each its own row).
 
     python benchmarks/bench_peers.py [--steps 300] [--rounds 5] [--backend numpy|numba|both]
+        [--only peers|lab|vector] [--envs 8,16]
 
 Timing thresholds are never checked in tests; this prints the figures and the issue's targets.
 """
@@ -360,6 +362,9 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=5, help="alternating rounds (median kept)")
     ap.add_argument("--backend", choices=("numpy", "numba", "both"), default="both")
     ap.add_argument("--only", choices=("peers", "lab", "vector"), default=None)
+    ap.add_argument(
+        "--envs", default="8", help="vector case: comma-separated numbers of envs (e.g. 8,16)"
+    )
     args = ap.parse_args()
     from dynmap_sim.jit import numba_available
 
@@ -373,7 +378,8 @@ def main() -> None:
         for b in backends:
             lab_crowd(args.steps, args.rounds, b)
     if args.only in (None, "vector"):
-        vector(max(20, args.steps // 4), args.rounds)
+        for n in (int(v) for v in args.envs.split(",")):
+            vector(max(20, args.steps // 4), args.rounds, n)
 
 
 if __name__ == "__main__":

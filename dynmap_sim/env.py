@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +20,7 @@ from dynmap_sim.sensors.odometry import EncoderNoise, WheelOdometry
 from dynmap_sim.truth import ObstacleSnapshot, PeopleSnapshot, RunSlot, WorldFacts, read_only
 from dynmap_sim.types import LaserSpec
 from dynmap_sim.world import World, WorldSpec, load_world, resolve_world_path
+from dynmap_sim.world.people.crowd import Crowd
 
 FloatArray = NDArray[np.float64]
 
@@ -383,7 +385,7 @@ class DynMapEnv(gymnasium.Env):
         self, pose: FloatArray, collision: bool
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """Observation and info at ``pose`` (a vector env, which casts and noises all its
-        envs' scans at once, writes the same values with :meth:`_observe_into`)."""
+        envs' scans at once, writes the same values with :meth:`InfoRows.write_steps`)."""
         reading = self.lidar.scan(pose, self.world.geometry, self._rng_lidar)
         slot = self.world.slot
         people, n_people = self._people()
@@ -406,33 +408,6 @@ class DynMapEnv(gymnasium.Env):
         if self.render_mode == "human":
             self._show()
         return obs, info
-
-    def _observe_into(
-        self,
-        rows: InfoRows,
-        i: int,
-        pose: FloatArray,
-        collision: bool,
-        cast: tuple[FloatArray, NDArray[np.int64]],
-        ranges_m: NDArray[np.float32],
-    ) -> None:
-        """:meth:`_observe` written into row ``i`` of a vector env's batch arrays ``rows``
-        instead of dicts (the same values): ``cast`` the scan's noise-free ranges and hit
-        indices, ``ranges_m`` its noisy readings (from this env's lidar generator)."""
-        reading = self.lidar.reading(*cast, self.world.geometry, self._rng_lidar, ranges_m)
-        rows.scan[i] = ranges_m
-        rows.odom[i] = self.odometry._pose
-        rows.pose[i] = pose
-        rows.beam_class[i] = reading.beam_class
-        rows.beam_object[i] = reading.beam_object
-        rows.range_m[i] = reading.true_range_m
-        rows.n_people[i] = self._people_into(rows.people[i])
-        slot = self.world.slot
-        rows.time[i] = (slot.day, slot.run, self.world.time_s)
-        rows.collision[i] = collision
-        rows.route_progress[i] = self.route.fraction
-        rows.stamp_s[i] = self.world.elapsed_s
-        self._last = {"pose": pose, "reading": reading}
 
     def _show(self) -> None:
         """``render_mode="human"``: the frame in the window (opened at the first frame)."""
@@ -552,6 +527,12 @@ class InfoRows:
         self.collision = np.zeros(n, dtype=np.bool_)
         self.route_progress = np.zeros(n)
         self.stamp_s = np.zeros(n)
+        self._no_people = np.zeros((n, max_people, 3))  # padding rows (inf, inf, 0)
+        self._no_people[:, :, :2] = np.inf
+        self._labels: _LabelRows | None = None
+        # the (row, person) index of each person written by _people_rows, and for which
+        # (rows, counts) it was made
+        self._people_at: tuple[Any, Any] = (None, None)
 
     def put(self, i: int, obs: dict[str, np.ndarray], info: dict[str, Any]) -> None:
         """Row ``i`` from one sub-env's ``obs`` and ``info`` (of ``reset`` or ``step``)."""
@@ -563,6 +544,69 @@ class InfoRows:
         self.time[i] = truth["time"]
         for key in ("collision", "route_progress", "stamp_s"):
             getattr(self, key)[i] = info[key]
+
+    def write_steps(
+        self,
+        envs: Sequence[DynMapEnv],
+        at: list[int],
+        poses: Sequence[FloatArray],
+        collisions: Sequence[bool],
+        cast: tuple[FloatArray, NDArray[np.int64]],
+        ranges_m: NDArray[np.float32],
+    ) -> None:
+        """Rows ``at`` after a step of each of ``envs`` (at ``poses``, with ``collisions``):
+        what :meth:`DynMapEnv._observe` returns, each field of all rows in one array
+        operation. ``cast`` holds the scans' noise-free ranges [m] and hit indices
+        ``(len(envs), n_beams)``, ``ranges_m`` their noisy readings. The sub-envs' last
+        readings are not kept (a vector env's sub-envs do not render)."""
+        rows: Any = slice(None) if len(at) == self.scan.shape[0] else at
+        true_r, hits = cast
+        self.scan[rows] = ranges_m
+        self.range_m[rows] = true_r
+        self.pose[rows] = poses
+        odom, route, stamp, crowds, tables = [], [], [], [], []
+        for i, env in zip(at, envs, strict=True):
+            world = env.world
+            slot = world.slot
+            self.time[i] = (slot.day, slot.run, world.time_s)
+            odom.append(env.odometry._pose)
+            route.append(env.route.fraction)
+            stamp.append(world.elapsed_s)
+            crowds.append(world.crowd)
+            tables.append(env.lidar._label_tables(world.geometry))
+        self.odom[rows] = odom
+        self.collision[rows] = collisions
+        self.route_progress[rows] = route
+        self.stamp_s[rows] = stamp
+        labels = self._labels
+        if labels is None or not labels.holds(tables):
+            labels = self._labels = _LabelRows(tables)
+        idx = hits + labels.first
+        self.beam_object[rows] = labels.obj[idx]
+        self.beam_class[rows] = labels.cls[idx]
+        self._people_rows(rows, at, crowds)
+
+    def _people_rows(self, rows: Any, at: list[int], crowds: list[Crowd]) -> None:
+        """``people`` and ``n_people`` of rows ``at`` (``rows``: the same as an index) from
+        their worlds' ``crowds``, as :meth:`DynMapEnv._people_into` writes each."""
+        people = self.people
+        max_people = people.shape[1]
+        counts = [min(c.n, max_people) for c in crowds]
+        self.n_people[rows] = counts
+        people[rows] = self._no_people[rows]
+        total = sum(counts)
+        if not total:
+            return
+        pos = np.concatenate([c.pos[:k] for c, k in zip(crowds, counts, strict=True)])
+        vel = np.concatenate([c.vel[:k] for c, k in zip(crowds, counts, strict=True)])
+        key = (at, counts)
+        if self._people_at[0] != key:  # (the same rows and counts from step to step)
+            env = np.repeat(np.array(at), counts)
+            person = np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts)
+            self._people_at = (key, (env, person))
+        env, person = self._people_at[1]
+        people[env, person, :2] = pos
+        people[env, person, 2] = np.arctan2(vel[:, 1], vel[:, 0])  # as _people_into
 
     def infos(self) -> dict[str, Any]:
         """The batched infos (fresh arrays), as Gymnasium's ``VectorEnv._add_info`` batches
@@ -587,6 +631,28 @@ class InfoRows:
             "stamp_s": self.stamp_s.copy(),
         }
         return _with_masks(out, n)
+
+
+class _LabelRows:
+    """The label tables (object index, class per hit index, from
+    :meth:`Lidar._label_tables`) of several scans laid end to end after one sentinel, so
+    that hit index ``h`` of scan ``i`` reads entry ``h + first[i]``: each table ends with
+    its own sentinel (the entry of hit ``-1``), which is also the entry before the next
+    table."""
+
+    def __init__(self, tables: list[tuple[NDArray[np.int32], NDArray[np.int8]]]) -> None:
+        self.tables = tables
+        sizes = [len(obj) for obj, _ in tables]
+        self.first = (1 + np.cumsum(sizes) - sizes)[:, None]
+        self.obj = np.concatenate([[-1], *(obj for obj, _ in tables)]).astype(np.int32)
+        self.cls = np.concatenate([[0], *(cls for _, cls in tables)]).astype(np.int8)
+
+    def holds(self, tables: list[tuple[NDArray[np.int32], NDArray[np.int8]]]) -> bool:
+        """True if these are the very tables laid out here (the same arrays, in order)."""
+        mine = self.tables
+        return len(mine) == len(tables) and all(
+            a[0] is b[0] and a[1] is b[1] for a, b in zip(mine, tables, strict=True)
+        )
 
 
 def _with_masks(d: dict[str, Any], n: int) -> dict[str, Any]:

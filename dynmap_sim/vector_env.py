@@ -22,10 +22,17 @@ set of numpy calls), and their noise is one pass too (:meth:`Lidar.apply_noise_r
 env's draws from its own generator, in its own order, the arithmetic once), with the same
 numbers as one env at a time. The worlds step together too
 (:class:`~dynmap_sim.world.world.WorldBatch`): the people of all sub-envs on the numpy
-backend move in one social-force step (:class:`~dynmap_sim.world.people.batch.CrowdBatch`)
-and their legs are placed in one pass. Not batched: each sub-env's robot (pymunk contacts,
-odometry) and its people's pymunk bodies near the robot run one after another (measured
-in ``benchmarks/bench_peers.py``).
+backend move in one social-force step (:class:`~dynmap_sim.world.people.batch.CrowdBatch`,
+whose crowds' state arrays are views of joint rows) and their legs are placed in one pass; the
+observations and infos of all sub-envs are written field by field as rows
+(:meth:`~dynmap_sim.env.InfoRows.write_steps`). Not batched: each sub-env's robot (pymunk
+contacts, slip and encoder draws, odometry) and its people's pymunk bodies near the robot
+run one after another. The robot's and odometry's arithmetic is a few dozen scalar
+operations per env: as numpy arrays of 8 envs it is slower than 8 scalar passes (the
+odometry of 8 envs, measured: 44 µs as one numpy pass against 31 µs one by one), and numpy's
+sines, cosines and minima need not round as ``math``'s do, so the numbers could drift from
+a single env's. ``benchmarks/bench_peers.py --only vector`` times the whole against
+sequential envs.
 """
 
 from __future__ import annotations
@@ -148,21 +155,20 @@ class DynMapVectorEnv(VectorEnv):
         # the scans of all envs that moved, cast in one pass, their noise in one pass
         if driven:
             envs = stepping
-            casts = cast_many(
-                [e.lidar for e in envs], [p for _, p, _ in driven], [e.world.geometry for e in envs]
-            )
+            poses = [p for _, p, _ in driven]
+            cast = cast_many([e.lidar for e in envs], poses, [e.world.geometry for e in envs])
+            true_r = cast[0]
             if self._same_lidars and len(envs) > 1:
-                true_r = np.stack([c[0] for c in casts])
                 noisy = envs[0].lidar.apply_noise_rows(true_r, [e._rng_lidar for e in envs])
             else:
-                noisy = [
-                    e.lidar.apply_noise(c[0], e._rng_lidar)
-                    for e, c in zip(envs, casts, strict=True)
-                ]
-            for env, (i, pose, collision), cast, rng_m in zip(
-                envs, driven, casts, noisy, strict=True
-            ):
-                env._observe_into(self._rows, i, pose, collision, cast, rng_m)
+                noisy = np.stack(
+                    [
+                        e.lidar.apply_noise(r, e._rng_lidar)
+                        for e, r in zip(envs, true_r, strict=True)
+                    ]
+                )
+            at = [i for i, _, _ in driven]
+            self._rows.write_steps(envs, at, poses, [c for _, _, c in driven], cast, noisy)
         np.logical_or(self._terminations, self._truncations, out=self._autoreset)
         return (
             self._obs(),

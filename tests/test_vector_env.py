@@ -150,10 +150,20 @@ def test_same_numbers_with_people(backend) -> None:
         np.testing.assert_array_equal(
             obs["scan"][i], env.reset(seed=4 + i, options=opts)[0]["scan"]
         )
-    acts = _actions(30, n)
+    _step_alongside(vec, singles, _actions(30, n))
+    vec.close()
+
+
+def _step_alongside(vec: DynMapVectorEnv, singles: list[DynMapEnv], acts: np.ndarray) -> int:
+    """Step ``vec`` and, alongside, each single env with its row of ``acts`` (resetting it
+    where the vector env autoresets): every field of sub-env ``i`` equals single env ``i``'s.
+    The number of steps on which some but not all sub-envs reset."""
+    n = len(singles)
     done = np.zeros(n, dtype=bool)
+    subsets = 0
     for act in acts:
         obs, rew, term, trunc, info = vec.step(act)
+        subsets += int(0 < done.sum() < n)
         for i, env in enumerate(singles):
             if done[i]:
                 s_obs, s_info = env.reset()
@@ -169,4 +179,21 @@ def test_same_numbers_with_people(backend) -> None:
             for key in ("collision", "route_progress", "stamp_s"):
                 assert info[key][i] == s_info[key]
         done = term | trunc
+    return subsets
+
+
+def test_same_numbers_when_sub_envs_end_at_different_steps() -> None:
+    """Sub-envs that truncate at different steps: a step that resets some sub-envs and
+    drives the others writes the driven ones' rows (a subset) with a single env's numbers."""
+    kw = {"world": "lab", "max_episode_steps": 9}
+    n = 3
+    vec = DynMapVectorEnv(num_envs=n, **kw)
+    singles = [DynMapEnv(**kw) for _ in range(n)]
+    opts = {"day": 1, "run": 2}
+    vec.reset(seed=11, options=opts)
+    for i, env in enumerate(singles):
+        env.reset(seed=11 + i, options=opts)
+        env._steps = vec.envs[i]._steps = 3 * i  # sub-env i truncates 3 i steps earlier
+    subsets = _step_alongside(vec, singles, _actions(20, n))
+    assert subsets > 0
     vec.close()

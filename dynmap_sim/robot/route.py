@@ -54,22 +54,28 @@ class RouteProgress:
         if n_seg == 0:
             return 0.0
         best_d2 = math.inf
-        best_k, best_s = self._k, self.progress_m
-        for k in range(self._k, min(self._k + self.lookahead + 1, n_seg)):
-            (x0, y0), (x1, y1) = self._pts[k], self._pts[k + 1]
+        k0, done_m, gain_m = self._k, self.progress_m, self.max_gain_m
+        best_k, best_s = k0, done_m
+        pts, lens, cum = self._pts, self._len, self._cum
+        for k in range(k0, min(k0 + self.lookahead + 1, n_seg)):
+            if k > k0 and cum[k] - done_m > gain_m:
+                # too far ahead along the route for one update, and so is every later
+                # segment (its start is farther still, and s >= cum[k] below)
+                break
+            (x0, y0), (x1, y1) = pts[k], pts[k + 1]
             dx, dy = x1 - x0, y1 - y0
-            L = self._len[k]
+            L = lens[k]
             t = ((x_m - x0) * dx + (y_m - y0) * dy) / (L * L) if L > 0.0 else 0.0
             t = min(max(t, 0.0), 1.0)
             ex, ey = x0 + t * dx - x_m, y0 + t * dy - y_m
             d2 = ex * ex + ey * ey
-            s = self._cum[k] + t * L
-            if k > self._k and s - self.progress_m > self.max_gain_m:
+            s = cum[k] + t * L
+            if k > k0 and s - done_m > gain_m:
                 continue  # too far ahead along the route for one update
             if d2 < best_d2 - 1e-12:
                 best_d2, best_k, best_s = d2, k, s
         self._k = best_k
-        gained = max(best_s - self.progress_m, 0.0)
+        gained = max(best_s - done_m, 0.0)
         self.progress_m += gained
         return gained
 

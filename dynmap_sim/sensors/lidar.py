@@ -182,8 +182,9 @@ def make_lidar(
 
 def cast_many(
     lidars: list[Lidar], robot_poses: list[FloatArray], geoms: list[GeometryLike]
-) -> list[tuple[FloatArray, NDArray]]:
-    """:meth:`Lidar.cast` of each lidar from its robot pose among its geometry; one
+) -> tuple[FloatArray, NDArray[np.int64]]:
+    """:meth:`Lidar.cast` of each lidar from its robot pose among its geometry, as rows:
+    noise-free ranges [m] and hit indices ``(len(lidars), n_beams)``; one
     :func:`~dynmap_sim.sensors.raycast.cast_scans` pass for all when they are numpy
     casters of the same beams (the same numbers as one by one)."""
     first = lidars[0]
@@ -192,9 +193,10 @@ def cast_many(
         for lid in lidars
     )
     if len(lidars) < 2 or first.backend != "numpy" or not same:
-        return [lid.cast(p, g) for lid, p, g in zip(lidars, robot_poses, geoms, strict=True)]
+        casts = [lid.cast(p, g) for lid, p, g in zip(lidars, robot_poses, geoms, strict=True)]
+        return np.stack([c[0] for c in casts]), np.stack([c[1] for c in casts])
     spec = first.spec
-    ranges, hits = cast_scans(
+    return cast_scans(
         [lid.sensor_pose(p) for lid, p in zip(lidars, robot_poses, strict=True)],
         spec.angle_min_rad,
         spec.angle_increment_rad,
@@ -205,7 +207,6 @@ def cast_many(
         [g.circles if g.circles.shape[0] else None for g in geoms],
         first._u,
     )
-    return list(zip(ranges, hits, strict=True))
 
 
 @dataclass

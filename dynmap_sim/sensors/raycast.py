@@ -317,8 +317,16 @@ def _cast_shapes(
     else:
         shape = np.concatenate([shape, shape])
     key = shape.repeat(count)
-    beam = np.arange(key.shape[0]) - (ends - count - lo).repeat(count)
-    uc = u_l.conjugate()[beam]  # conj(u) of each pair's beam
+    # the beam of each pair in the scans' beams laid end to end (scan i's beam j at
+    # i n_beams + j): each run starts at its beam lo plus its scan's first beam
+    first_beam = ends - count - lo
+    uc_l = u_l.conjugate()
+    if n_scans > 1:
+        per_scan = np.arange(n_scans) * n_beams
+        first_beam -= np.repeat(np.concatenate([per_scan, per_scan]), lens)[shape]
+        uc_l = np.tile(uc_l, n_scans)
+    beam = np.arange(key.shape[0]) - first_beam.repeat(count)
+    uc = uc_l[beam]  # conj(u) of each pair's beam
     m = int(ends[2 * n_s - 1]) if n_s else 0  # pairs [0, m) are segment pairs
 
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -340,9 +348,6 @@ def _cast_shapes(
             okc = (tc >= 0.0) & (tc <= r_max)
             t_all = np.concatenate([t_all, np.where(okc, tc, np.nan)])
 
-    if n_scans > 1:  # the beam of each pair in the scans' beams laid end to end
-        per_scan = np.arange(n_scans) * n_beams
-        beam += np.repeat(np.concatenate([per_scan, per_scan]), lens)[key]
     ranges = np.full(n_scans * n_beams, np.inf)
     np.fmin.at(ranges, beam, t_all)  # NaN (no hit) never wins
     win = t_all == ranges[beam]

@@ -198,19 +198,20 @@ class World:
         crowd = forces.spawn(self.calendar.slot(day, run).start_s, active, keep_away=start)
         return forces, crowd
 
-    def _refresh_people(self, leg_centres: NDArray[np.complex128] | None = None) -> None:
-        """The geometry with the people's legs where they are now (``leg_centres``: their
-        centres ``x + iy`` when already placed, as :func:`leg_centres_into` writes them)."""
+    def _refresh_people(self) -> None:
+        """The geometry with the people's legs where they are now."""
         if self._crowd.n:
             circles = self._circles_template.copy()
             ns = self._static.circles.shape[0]
             out = circles[ns:, :2].view(np.complex128)[:, 0]
-            if leg_centres is None:
-                leg_centres_into(self._crowd, out, self._forces.backend_ops().legs)
-            else:
-                out[:] = leg_centres
+            leg_centres_into(self._crowd, out, self._forces.backend_ops().legs)
         else:
             circles = self._static.circles
+        self._set_circles(circles)
+
+    def _set_circles(self, circles: FloatArray) -> None:
+        """The geometry with ``circles`` ``(M, 3)``: the static ones, then the legs (as
+        :meth:`_circles_start` lays them out, their centres placed)."""
         self._geometry = GeometryView(
             segments=self._static.segments,
             segment_object=self._static.segment_object,
@@ -378,6 +379,7 @@ class WorldBatch:
 
     def __init__(self) -> None:
         self._crowds = CrowdBatch()
+        self._circles: _JointCircles | None = None
 
     def step(
         self,
@@ -411,13 +413,48 @@ class WorldBatch:
         near_m = np.repeat(np.array([_near_m(dt_s, rr) for _, _, rr in batch]), counts)
         synced = np.concatenate([w._synced for w, _, _ in batch])
         near = _near(z, synced, rz, near_m)
-        legs = self._crowds.leg_centres()
-        at = 0
-        for w, _, _ in batch:
-            n = w._crowd.n
+        first = np.cumsum([0, *counts])  # each world's first row, and the end
+        near_at = np.flatnonzero(near)  # (rows of all worlds, ascending)
+        cuts = np.searchsorted(near_at, first).tolist()
+        rows0 = first[:-1].tolist()
+        for (w, _, _), a, b, row0 in zip(batch, cuts[:-1], cuts[1:], rows0, strict=True):
             w._stale = True  # (as World._sync_bodies with a robot)
-            idx = near[at : at + n].nonzero()[0]
-            if len(idx):
-                w._move_bodies(idx)
-            w._refresh_people(legs[2 * at : 2 * (at + n)])
-            at += n
+            if b > a:
+                w._move_bodies(near_at[a:b] - row0)
+        # the circles of all worlds (World._refresh_people), legs placed in one pass
+        worlds = [w for w, _, _ in batch]
+        circles = self._circles
+        if circles is None or not circles.holds(worlds):
+            circles = self._circles = _JointCircles(worlds)
+        for w, c in zip(worlds, circles.place(self._crowds.leg_centres()), strict=True):
+            w._set_circles(c)
+
+
+class _JointCircles:
+    """The circles' templates (:meth:`World._circles_start`) of many worlds as the rows
+    of one array, and where their legs go: a step's circles of all worlds are one copy
+    and one placement of all legs, each world's a view of its rows."""
+
+    def __init__(self, worlds: list[World]) -> None:
+        self.templates = [w._circles_template for w in worlds]
+        sizes = [t.shape[0] for t in self.templates]
+        first = np.cumsum([0, *sizes]).tolist()
+        self.rows = [slice(a, b) for a, b in zip(first[:-1], first[1:], strict=True)]
+        self.template = np.concatenate(self.templates)
+        # each world's legs are its last 2 n rows
+        self.legs = np.concatenate(
+            [np.arange(b - 2 * w._crowd.n, b) for w, b in zip(worlds, first[1:], strict=True)]
+        )
+
+    def holds(self, worlds: list[World]) -> bool:
+        """True if these worlds still have the templates laid out here, in order."""
+        return len(worlds) == len(self.templates) and all(
+            w._circles_template is t for w, t in zip(worlds, self.templates, strict=True)
+        )
+
+    def place(self, leg_centres: NDArray[np.complex128]) -> list[FloatArray]:
+        """Each world's circles with its legs at ``leg_centres`` (``x + iy``, every world's
+        legs one after another)."""
+        circles = self.template.copy()
+        circles[:, :2].view(np.complex128)[self.legs, 0] = leg_centres
+        return [circles[s] for s in self.rows]

@@ -76,3 +76,24 @@ def test_world_batch_is_world_step_of_each(name, slots, monkeypatch) -> None:
     assert calls.get("_clear_robot", 0) > 0
     if name == "lab":  # the lunch crowd: bodies overlap now and then
         assert calls.get("_separate_pairs", 0) > 0 and calls.get("_push_out_of_walls", 0) > 0
+
+
+def test_world_batch_after_a_world_stepped_alone_or_reset() -> None:
+    """The batch keeps its crowds' state as views of joint rows; a world stepped on its own
+    between batch steps, or reset to a new run, is picked up again with the same numbers."""
+    worlds = _worlds("lab", [(0, 1, 2), (1, 1, 2), (2, 2, 2)])
+    alone = copy.deepcopy(worlds)
+    batch = WorldBatch()
+    poses = [np.array([*w.spec.robot.start[:2], 0.0]) for w in worlds]
+    for t in range(40):
+        if t == 15:  # one world steps on its own
+            for w in (worlds[1], alone[1]):
+                w.step(0.1, robot_pose=poses[1], robot_radius_m=0.2)
+        if t == 25:  # another starts a new run
+            for w in (worlds[2], alone[2]):
+                w.reset(1, 3)
+        batch.step(worlds, 0.1, poses, [0.2] * 3)
+        for w, pose in zip(alone, poses, strict=True):
+            w.step(0.1, robot_pose=pose, robot_radius_m=0.2)
+        for a, b in zip(worlds, alone, strict=True):
+            assert _state(a) == _state(b), t

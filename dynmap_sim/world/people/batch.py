@@ -93,6 +93,7 @@ class CrowdBatch:
     def __init__(self) -> None:
         self._layout: _Layout | None = None
         self._moved: _Moved | None = None
+        self._state: _State | None = None
 
     @staticmethod
     def batchable(forces: SocialForce) -> bool:
@@ -117,9 +118,10 @@ class CrowdBatch:
         lay = self._layout
         if lay is None or len(lay.ks) != len(ks) or any(map(_differ, lay.ks, ks)):
             lay = self._layout = _build_layout(forces, ks)
-        pos = np.concatenate([c.pos for c in crowds])
-        vel = np.concatenate([c.vel for c in crowds])
-        goal_xy = np.concatenate([c.goal for c in crowds])
+        state = self._state
+        if state is None or not state.holds(crowds):
+            state = self._state = _State(crowds)
+        pos, vel, goal_xy = state.pos, state.vel, state.goal
         z = pos.view(np.complex128)[:, 0]
         v = vel.view(np.complex128)[:, 0]
         goal = goal_xy.view(np.complex128)[:, 0]
@@ -166,22 +168,13 @@ class CrowdBatch:
             s = slice(rows_at[i], rows_at[i + 1])
             _push_out_of_walls(crowds[i], z[s], v[s], rows[s, : ks[i].k_cols])
             disp[s] = np.abs(z[s] - old[s])
-        phase = np.concatenate([c.phase for c in crowds])
+        phase = state.phase
         phase += disp * (2 * np.pi / STRIDE_M)
-        progress = _Progress(
-            np.concatenate([c.best_goal_m for c in crowds]),
-            np.concatenate([c.stuck_s for c in crowds]),
-        )
+        progress = _Progress(state.best_goal_m, state.stuck_s)
         redo = goals_due(progress, goal, z, dt_s, rz, lay)  # type: ignore[arg-type]
         due = np.logical_or.reduceat(redo, first)
         self._moved = _Moved(pos, vel, phase)
-        for i, c in enumerate(crowds):
-            s = slice(rows_at[i], rows_at[i + 1])
-            c.pos[...] = pos[s]
-            c.vel[...] = vel[s]
-            c.phase[...] = phase[s]
-            c.best_goal_m = progress.best_goal_m[s].copy()
-            c.stuck_s = progress.stuck_s[s].copy()
+        state.progressed(progress.best_goal_m, progress.stuck_s)
         for i in np.flatnonzero(due).tolist():
             f = forces[i]
             avoid = spawning.goal_avoid(robot_xy[i], float(robot_radius_m[i]))
@@ -217,6 +210,50 @@ class _Moved:
     phase: FloatArray
 
 
+class _State:
+    """The per-person state of a batch's crowds as the rows of joint arrays, crowd after
+    crowd, each crowd's arrays being views of its rows: a step reads and moves everyone in
+    place, with nothing to gather before or to write back after (what a crowd's own
+    functions change in place, a new goal say, lands in the joint rows too)."""
+
+    def __init__(self, crowds: Sequence[Crowd]) -> None:
+        self.crowds = tuple(crowds)
+        at = np.cumsum([0, *(c.n for c in crowds)]).tolist()
+        self.rows = [slice(a, b) for a, b in zip(at[:-1], at[1:], strict=True)]
+        self.pos = np.concatenate([c.pos for c in crowds])
+        self.vel = np.concatenate([c.vel for c in crowds])
+        self.goal = np.concatenate([c.goal for c in crowds])
+        self.phase = np.concatenate([c.phase for c in crowds])
+        self.best_goal_m = np.concatenate([c.best_goal_m for c in crowds])
+        self.stuck_s = np.concatenate([c.stuck_s for c in crowds])
+        self._given: list[list[FloatArray]] = []  # each crowd's views, in _FIELDS order
+        for c, s in zip(self.crowds, self.rows, strict=True):
+            c.pos, c.vel, c.goal = self.pos[s], self.vel[s], self.goal[s]
+            c.phase, c.best_goal_m, c.stuck_s = self.phase[s], self.best_goal_m[s], self.stuck_s[s]
+            self._given.append([c.pos, c.vel, c.goal, c.phase, c.best_goal_m, c.stuck_s])
+
+    def holds(self, crowds: Sequence[Crowd]) -> bool:
+        """True if these are this state's crowds, in order, with the arrays it gave them
+        (a new run, or a crowd stepped on its own since, needs a new state)."""
+        return len(crowds) == len(self.crowds) and all(
+            c is mine
+            and c.pos is g[0]
+            and c.vel is g[1]
+            and c.goal is g[2]
+            and c.phase is g[3]
+            and c.best_goal_m is g[4]
+            and c.stuck_s is g[5]
+            for c, mine, g in zip(crowds, self.crowds, self._given, strict=True)
+        )
+
+    def progressed(self, best_goal_m: FloatArray, stuck_s: FloatArray) -> None:
+        """Take the new goal progress (:func:`~.dynamics.goals_due` replaces its arrays)."""
+        self.best_goal_m, self.stuck_s = best_goal_m, stuck_s
+        for c, s, g in zip(self.crowds, self.rows, self._given, strict=True):
+            c.best_goal_m = g[4] = best_goal_m[s]
+            c.stuck_s = g[5] = stuck_s[s]
+
+
 @dataclass
 class _Progress:
     """The goal-progress state :func:`~.dynamics.goals_due` reads and replaces."""
@@ -229,7 +266,7 @@ def _candidate_rows(lay: _Layout, z: NDArray[np.complex128]) -> NDArray[np.compl
     """Each row's candidate segments (its crowd's :meth:`SegmentGrid.rows`, padded)."""
     ij = ((z - lay.origin_c) * (1.0 / CELL_M)).view(np.float64).reshape(-1, 2)
     ij = ij.astype(np.int64)
-    np.clip(ij, 0, lay.cell_hi, out=ij)
+    np.minimum(np.maximum(ij, 0, out=ij), lay.cell_hi, out=ij)  # (np.clip, without its overhead)
     cell = lay.cell_first + ij[:, 0] * lay.cell_ny + ij[:, 1]
     return lay.segrows[lay.cells[cell]]
 
@@ -249,7 +286,9 @@ def _build_layout(forces: Sequence[SocialForce], ks: tuple[StepConstants, ...]) 
     people_src = np.empty((n_rows, pmax), dtype=np.int64)
     by_width: dict[int, tuple[list[IntArray], list[IntArray]]] = {}
     seg_at = cell_at = 0
-    cells, segrows, cell_first, origin, hi, ny = [], [], [], [], [], []
+    segrows, cell_first, origin, hi, ny = [], [], [], [], []
+    # every grid's cell lists (into the joint segrows), padded with its far dummy
+    cells = np.empty((sum(g.cells.shape[0] for g in grids), kmax), dtype=np.int64)
     for k, g, r0 in zip(ks, grids, starts[:-1].tolist(), strict=True):
         p, kk = k.n, k.k_cols
         rs = slice(r0, r0 + p)
@@ -265,10 +304,10 @@ def _build_layout(forces: Sequence[SocialForce], ks: tuple[StepConstants, ...]) 
         rows_i, idx_i = by_width.setdefault(p + 1 + kk, ([], []))
         rows_i.append(np.arange(r0, r0 + p))
         idx_i.append(np.arange(r0, r0 + p)[:, None] * width + cols[None, :])
-        far = g.segrows.shape[0] - 1
-        c = np.full((g.cells.shape[0], kmax), far, dtype=np.int64)
-        c[:, : g.cells.shape[1]] = g.cells
-        cells.append(c + seg_at)
+        n_cells, w = g.cells.shape
+        mine = cells[cell_at : cell_at + n_cells]
+        np.add(g.cells, seg_at, out=mine[:, :w])
+        mine[:, w:] = seg_at + g.segrows.shape[0] - 1  # the far dummy
         segrows.append(g.segrows)
         cell_first.append(np.full(p, cell_at, dtype=np.int64))
         origin.append(np.full(p, g.origin_c, dtype=np.complex128))
@@ -294,7 +333,7 @@ def _build_layout(forces: Sequence[SocialForce], ks: tuple[StepConstants, ...]) 
         vmax_max=np.array([k.vmax_max for k in ks]),
         sum_groups=[(cat(r), cat(i)) for r, i in by_width.values()],
         segrows=cat(segrows),
-        cells=cat(cells),
+        cells=cells,
         origin_c=cat(origin),
         cell_hi=cat(hi),
         cell_ny=cat(ny),
