@@ -88,10 +88,21 @@ class DynamicMap:
 
     @property
     def centres(self) -> FloatArray:
-        """Centres ``(L, 2)`` of the local maps [m]."""
+        """Centres ``(L, 2)`` of the local maps [m] (read-only; cached until a local map is
+        added: local maps are only ever appended, and a centre never moves)."""
         if not self.local_maps:
             return np.zeros((0, 2))
-        return np.array([lm.centre for lm in self.local_maps])
+        c = self.__dict__.get("_centres")
+        if c is None or len(c) != len(self.local_maps):
+            c = np.array([lm.centre for lm in self.local_maps])
+            c.flags.writeable = False
+            self._centres = c
+        return c
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state.pop("_centres", None)  # a cache
+        return state
 
     def levels(self, interval: str) -> list[int]:
         """Indices of the timescales updated at ``interval`` ("always", "run", "day")."""

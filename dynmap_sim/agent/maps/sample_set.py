@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from dynmap_sim.agent.maps.sample_set_numba import numba_available, robust_rows
+from dynmap_sim.agent.maps.sample_set_numba import numba_available, robust_rows, update_kernels
 
 #: Largest storable range [mm] (uint16); also the sort key of empty slots.
 MAX_RANGE_MM = 65535
@@ -126,6 +126,7 @@ class SampleSets:
         *,
         fill: bool = False,
         initialize: bool = True,
+        backend: str = "auto",
     ) -> None:
         """Apply one time step of the §3.1 rule with the measurements ``(ray_idx, values_mm)``.
 
@@ -138,6 +139,11 @@ class SampleSets:
         phase of ``u·n`` per step while not full, applies. ``fill=True``
         fills free slots without removing anything; with ``initialize=False`` it does not
         count as the first time step (used to seed a new local map with one scan, §4.4).
+
+        ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): with ``"numba"`` (``"auto"``
+        when installed) the bookkeeping runs in compiled kernels
+        (:func:`.sample_set_numba.update_kernels`) between the same random draws and sorts:
+        the same samples.
         """
         ray = np.asarray(ray_idx, dtype=np.int64).ravel()
         val = np.asarray(values_mm).ravel()
@@ -154,6 +160,10 @@ class SampleSets:
         order = np.argsort(ray + rng.random(m))  # by ray, random within a ray
         r_s = ray[order]
         v_s = val[order]
+        kernels = update_kernels(backend)
+        if kernels is not None:
+            self._update_kernels(kernels, r_s, v_s, rng, fill, initialize)
+            return
         # Runs of equal rays in the sorted order (what np.unique would return, without a sort).
         starts = np.empty(m, dtype=bool)
         starts[0] = True
@@ -193,6 +203,40 @@ class SampleSets:
         keep = rank < n_new[g]
         self.samples_mm[uniq[g[keep]], slot[keep]] = v_s[keep]
         self.count[uniq] = (cnt + n_add).astype(np.uint16)
+        self._est = None
+        self._table = None
+
+    def _update_kernels(
+        self,
+        kernels: tuple,
+        r_s: NDArray[np.int64],
+        v_s: NDArray[np.uint16],
+        rng: np.random.Generator,
+        fill: bool,
+        initialize: bool,
+    ) -> None:
+        """:meth:`update` after its sort, with :func:`.sample_set_numba.update_kernels`: the
+        same random draws in the same order (``u·n`` rounding, then the keys of the slots
+        to replace) and the same ``argsort`` of the keys."""
+        ray_runs, plan_update, write_update = kernels
+        first = np.empty(r_s.size, dtype=np.int64)
+        first = first[: ray_runs(r_s, first)]
+        n_groups = first.size
+        n_rule = np.zeros(n_groups, dtype=np.int64) if fill else self._n_new(n_groups, rng)
+        n_new = np.empty(n_groups, dtype=np.int64)
+        n_add = np.empty(n_groups, dtype=np.int64)
+        rep_cnt = np.empty(n_groups, dtype=np.int64)
+        n_rep = plan_update(
+            r_s, first, self.count, self.initialized, self.n_samples,
+            self.fills_first_step, fill, initialize, n_rule, n_new, n_add, rep_cnt,
+        )  # fmt: skip
+        if n_rep:
+            keys = rng.random((n_rep, self.n_samples))
+            keys[np.arange(self.n_samples)[None, :] >= rep_cnt[:n_rep, None]] = 2.0
+            perm = np.argsort(keys, axis=1)
+        else:
+            perm = np.zeros((0, self.n_samples), dtype=np.int64)
+        write_update(r_s, v_s, first, n_new, n_add, perm, self.samples_mm, self.count)
         self._est = None
         self._table = None
 
