@@ -26,7 +26,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from dynmap_sim.agent.maps.sample_set_numba import numba_available, robust_rows, update_kernels
+from dynmap_sim.agent.maps.sample_set_numba import (
+    numba_available,
+    robust_rows,
+    table_kernel,
+    update_kernels,
+)
 
 #: Largest storable range [mm] (uint16); also the sort key of empty slots.
 MAX_RANGE_MM = 65535
@@ -259,18 +264,34 @@ class SampleSets:
         return self._est
 
     def model_table(
-        self, max_range_m: float, sigma_min_m: float = 0.0, min_outlier_ratio: float = 0.0
+        self,
+        max_range_m: float,
+        sigma_min_m: float = 0.0,
+        min_outlier_ratio: float = 0.0,
+        backend: str = "auto",
     ) -> NDArray[np.float64]:
         """Per-ray constants of eq. 6–8, ``(n_rays, 4)``: ``ρ``, ``1/(2σ²)``,
         ``log((1 − p_o)/(σ√(2π)))`` and ``p_o/maxRange`` (cached until the next update).
 
         Used by :func:`table_log_likelihood`, the fast path of the localizer. ``σ`` is
-        floored at ``max(sigma_min_m, 1 µm)``.
+        floored at ``max(sigma_min_m, 1 µm)``. ``backend`` ``"numba"`` (``"auto"`` when
+        installed): the arithmetic but the logs in a compiled loop
+        (:func:`.sample_set_numba.table_kernel`), the same values.
         """
         key = (float(max_range_m), float(sigma_min_m), float(min_outlier_ratio))
         if self._table is not None and self._table[0] == key:
             return self._table[1]
         est = self.estimates()
+        kernel = table_kernel(backend)
+        if kernel is not None:
+            tab = np.empty((self.n_rays, 4))
+            omp, sig = np.empty(self.n_rays), np.empty(self.n_rays)
+            kernel(est.rho_m, est.sigma_m, est.outlier_ratio, est.count, max(sigma_min_m, 1e-6),
+                   float(min_outlier_ratio), float(max_range_m), tab, omp, sig)  # fmt: skip
+            with np.errstate(divide="ignore"):
+                tab[:, 2] = np.log(omp) - np.log(sig) + np.log(_INV_SQRT_2PI)
+            self._table = (key, tab)
+            return tab
         has = est.count > 0
         sig = np.where(has, np.maximum(np.nan_to_num(est.sigma_m), max(sigma_min_m, 1e-6)), 1.0)
         po = np.where(has, np.maximum(est.outlier_ratio, min_outlier_ratio), 1.0)

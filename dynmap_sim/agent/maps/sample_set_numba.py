@@ -184,3 +184,49 @@ def update_kernels(backend: str) -> tuple | None:
         require_numba("sample-set backend")
         return _ray_runs, _plan_update, _write_update
     return _ray_runs_py, _plan_update_py, _write_update_py
+
+
+def _table_rows_py(
+    rho_m: NDArray[np.float64],
+    sigma_m: NDArray[np.float64],
+    outlier: NDArray[np.float64],
+    count: NDArray[np.int64],
+    sigma_floor_m: float,
+    min_outlier_ratio: float,
+    max_range_m: float,
+    table: NDArray[np.float64],
+    one_minus_po: NDArray[np.float64],
+    sigma: NDArray[np.float64],
+) -> None:
+    """The arithmetic of :meth:`.sample_set.SampleSets.model_table` (eq. 6-8) but its logs:
+    columns 0, 1 and 3 of ``table`` (``ρ``, ``1/(2σ²)``, ``p_o/maxRange``), and the floored
+    ``σ`` and ``1 - p_o`` whose logs make column 2 (a ray without samples: ``σ = 1``,
+    ``p_o = 1``) -- the numpy code's IEEE operations, so the same values."""
+    for r in range(rho_m.shape[0]):
+        if count[r] > 0:
+            sg = sigma_m[r] if sigma_m[r] >= sigma_floor_m else sigma_floor_m
+            po = outlier[r] if outlier[r] >= min_outlier_ratio else min_outlier_ratio
+            table[r, 0] = rho_m[r]
+        else:
+            sg = 1.0
+            po = 1.0
+            table[r, 0] = 0.0
+        sigma[r] = sg
+        one_minus_po[r] = 1.0 - po
+        table[r, 1] = 0.5 / (sg * sg)
+        table[r, 3] = po / max_range_m
+
+
+_table_rows = compiled(_table_rows_py)
+
+
+def table_kernel(backend: str):
+    """:func:`_table_rows_py` compiled (``"numba"``) or not (``"python"``) for a ``backend``
+    argument (:data:`dynmap_sim.jit.KERNEL_BACKENDS`); None: the numpy code."""
+    kind = kernel_backend(backend)
+    if kind is None:
+        return None
+    if kind == "numba":
+        require_numba("sample-set backend")
+        return _table_rows
+    return _table_rows_py

@@ -238,3 +238,24 @@ def test_update_kernels_give_the_numpy_samples_and_draws(backend, seed):
         np.testing.assert_array_equal(a.count, b.count)
         np.testing.assert_array_equal(a.initialized, b.initialized)
     assert ra.random() == rb.random()
+
+
+@pytest.mark.parametrize("backend", UPDATE_KERNELS)
+@pytest.mark.parametrize("seed", range(20))
+def test_model_table_kernel_gives_the_numpy_table(backend, seed):
+    """model_table's compiled arithmetic (sample_set_numba.table_kernel) gives the numpy
+    table bit for bit: empty rays, point-mass rays (σ = 0), outliers, floors or none."""
+    rng = np.random.default_rng(seed)
+    n_samples = int(rng.choice([5, 10, 50, 100]))
+    s = SampleSets(200, n_samples, 0.2)
+    m = int(rng.integers(0, 4000))
+    base = rng.integers(300, 5000, 200)
+    ray = rng.integers(0, 180, m)  # rays 180-199 stay empty
+    val = base[ray] + rng.integers(-int(rng.integers(0, 40)) - 1, 40, m) * (rng.random(m) < 0.9)
+    s.update(ray, np.clip(val, 1, 60000).astype(np.uint16), rng, fill=True)
+    for max_range, sig_min, po_min in ((5.6, 0.01, 0.0), (4.0, 0.0, 0.05), (8.0, 0.003, 0.2)):
+        s._table = None
+        ref = s.model_table(max_range, sig_min, po_min, backend="numpy").copy()
+        s._table = None
+        got = s.model_table(max_range, sig_min, po_min, backend=backend)
+        assert ref.tobytes() == got.tobytes()
