@@ -142,9 +142,7 @@ class DynamicMap:
             self.max_range_m,
             self.__dict__.get("first_step_fills", True),
         )
-        polar = lm.polar(points_map)
-        for level in range(len(self.timescales)):
-            lm.learn(level, points_map, rng, fill=True, initialize=False, polar=polar)
+        lm.learn_levels(range(len(self.timescales)), points_map, rng, fill=True, initialize=False)
         self.local_maps.append(lm)
         return len(self.local_maps) - 1
 
@@ -170,10 +168,7 @@ class DynamicMap:
                 return [self.add_local_map(np.asarray(pose)[:2], pts, rng)]
             return []
         for i in idx:
-            lm = self.local_maps[int(i)]
-            polar = lm.polar(pts)
-            for level in lv:
-                lm.learn(level, pts, rng, polar=polar)
+            self.local_maps[int(i)].learn_levels(lv, pts, rng)
         return [int(i) for i in idx]
 
     def learn_offline(
@@ -203,10 +198,7 @@ class DynamicMap:
             pts = np.concatenate([points_map[k] for k in sel]) if sel.size else np.zeros((0, 2))
             if len(pts) == 0:
                 continue
-            lm = self.local_maps[int(i)]
-            polar = lm.polar(pts)
-            for level in levels:
-                lm.learn(level, pts, rng, polar=polar)
+            self.local_maps[int(i)].learn_levels(levels, pts, rng)
             n_updated += 1
         return n_updated
 

@@ -121,6 +121,30 @@ class LocalMap:
         ray = self.ray_index(ang[ok], self.timescales[level].n_rays)
         self.sub[level].update(ray, to_mm(dist[ok]), rng, fill=fill, initialize=initialize)
 
+    def learn_levels(
+        self,
+        levels: Sequence[int],
+        points_map: ArrayLike,
+        rng: np.random.Generator,
+        *,
+        fill: bool = False,
+        initialize: bool = True,
+        polar: tuple[FloatArray, FloatArray] | None = None,
+    ) -> None:
+        """:meth:`learn` of each of ``levels`` in turn with the same points: the same
+        updates (and random draws, level by level), the points' millimetre ranges and ray
+        indices computed once (per number of rays) instead of once per level."""
+        ang, dist = self.polar(points_map) if polar is None else polar
+        ok = dist <= self.max_range_m
+        ang_ok = ang[ok]
+        mm = to_mm(dist[ok])
+        rays: dict[int, NDArray[np.int64]] = {}
+        for level in levels:
+            n_rays = self.timescales[level].n_rays
+            if n_rays not in rays:
+                rays[n_rays] = self.ray_index(ang_ok, n_rays)
+            self.sub[level].update(rays[n_rays], mm, rng, fill=fill, initialize=initialize)
+
     # ------------------------------------------------------------------ perceptual model
     def log_likelihood(
         self,
