@@ -12,18 +12,19 @@ Prints
    local map and the robust estimates of a lambda1 sub-map -- numba (extra ``fast``) against
    numpy, with the ratio.
 
-``--replay`` (the default) instead records a scenario's sensor stream once
+By default (without ``--synthetic``) it instead records a scenario's sensor stream once
 (``--scenario``, ``--days``; the simulation with the steering localizer only, cached in
 ``--cache``) and replays ``dynamic-map`` on it as the runner does (its rng is the runner's
 generator child); the days before ``--timed-from`` (day 1: the first-run SLAM, which the
 other 27 days of the H&W replica do not do) are replayed once, untimed, and each timed
-replay starts from their pickled state. It prints scans/s of CPU (``time.process_time``) with a reference measured
-in the same process on the same stream (``static-mcl`` walls-only on the prior walls, as the
-H&W replica runs it) and their ratio, the CPU of the end-of-run/day learning, and with
-``--profile`` the CPU per stage [ms/scan] from cProfile. ``--fingerprint`` prints a SHA-256
-of everything ``dynamic-map`` returns on the replay (estimates, covariances, extras) and of
-its map's samples after it: a change meant to be faster must leave it unchanged (with numba
-and with numba blocked). ``--synthetic`` runs the sections above.
+replay starts from their pickled state. It prints scans/s of CPU (``time.process_time``)
+with a reference measured in the same process on the same stream (``static-mcl`` walls-only
+on the prior walls, as the H&W replica runs it) and their ratio, the CPU of the end-of-
+run/day learning, and with ``--profile`` the CPU per stage [ms/scan] from cProfile.
+``--fingerprint`` prints a SHA-256 of everything ``dynamic-map`` returns on the replay
+(estimates, covariances, extras) and of its map's samples after it: a change meant to be
+faster must leave it unchanged (with numba and with numba blocked). ``--synthetic`` runs the
+sections above.
 """
 
 from __future__ import annotations
@@ -374,7 +375,8 @@ def bench_replay(args) -> None:
     ref_state, _ = _prepared(args, args.reference, streams)
     n = sum(len(s.stamps_s) for s in timed)
     print(f"replay: {args.scenario} days {args.days[0]}-{args.days[1]}: {len(streams)} runs; "
-          f"timed: days {args.timed_from}-{args.days[1]}, {len(timed)} runs, {n} scans")  # fmt: skip
+          f"timed: days {args.timed_from}-{args.days[1]}, {len(timed)} runs, "
+          f"{n} scans")  # fmt: skip
     for rep in range(args.runs):
         t_ref, _, _ = _replay(pickle.loads(ref_state), timed)  # noqa: S301 - our own state
         t_dm, e_dm, _ = _replay(pickle.loads(dm_state), timed)  # noqa: S301

@@ -60,10 +60,9 @@ class BucketGrid:
             px = np.ascontiguousarray(points[:, 0], dtype=np.float64)
             py = np.ascontiguousarray(points[:, 1], dtype=np.float64)
             key, order = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64)
-            xs, ys, box = np.empty(m), np.empty(m), np.empty(4, dtype=np.int64)
-            start = build(px, py, float(cell_m), key, order, xs, ys, box)
-            return cls(float(cell_m), int(box[0]), int(box[1]), int(box[2]), int(box[3]),
-                       start, order, xs, ys)  # fmt: skip
+            xs, ys = np.empty(m), np.empty(m)
+            start, x0, y0, nx, ny = build(px, py, float(cell_m), key, order, xs, ys)
+            return cls(float(cell_m), int(x0), int(y0), int(nx), int(ny), start, order, xs, ys)
         cx = np.floor(points[:, 0] / cell_m).astype(np.int64)
         cy = np.floor(points[:, 1] / cell_m).astype(np.int64)
         x0, y0 = int(cx.min()), int(cy.min())
@@ -93,11 +92,9 @@ def _grid_build_py(
     order: IntArray,
     xs: FloatArray,
     ys: FloatArray,
-    box: IntArray,
-) -> IntArray:
+) -> tuple[IntArray, int, int, int, int]:
     """:meth:`BucketGrid.build` in one loop: cell keys as the numpy code computes them, the
-    points counting-sorted by key (the stable order), ``box`` = ``x0 y0 nx ny``; returns
-    ``start``."""
+    points counting-sorted by key (the stable order); returns ``start, x0, y0, nx, ny``."""
     m = px.shape[0]
     cxs = np.empty(m, dtype=np.int64)
     cys = np.empty(m, dtype=np.int64)
@@ -123,11 +120,7 @@ def _grid_build_py(
         order[p] = i
         xs[p] = px[i]
         ys[p] = py[i]
-    box[0] = x0
-    box[1] = y0
-    box[2] = nx
-    box[3] = ny
-    return start
+    return start, x0, y0, nx, ny
 
 
 _grid_build = compiled(_grid_build_py)

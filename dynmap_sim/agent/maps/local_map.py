@@ -102,25 +102,6 @@ class LocalMap:
         return cache[n]
 
     # ------------------------------------------------------------------ learning
-    def learn(
-        self,
-        level: int,
-        points_map: ArrayLike,
-        rng: np.random.Generator,
-        *,
-        fill: bool = False,
-        initialize: bool = True,
-        polar: tuple[FloatArray, FloatArray] | None = None,
-    ) -> None:
-        """One §3.1 update of sub-map ``level`` with the points (all of one time step).
-
-        Points farther than ``max_range_m`` from the centre are ignored.
-        """
-        ang, dist = self.polar(points_map) if polar is None else polar
-        ok = dist <= self.max_range_m
-        ray = self.ray_index(ang[ok], self.timescales[level].n_rays)
-        self.sub[level].update(ray, to_mm(dist[ok]), rng, fill=fill, initialize=initialize)
-
     def learn_levels(
         self,
         levels: Sequence[int],
@@ -131,9 +112,9 @@ class LocalMap:
         initialize: bool = True,
         polar: tuple[FloatArray, FloatArray] | None = None,
     ) -> None:
-        """:meth:`learn` of each of ``levels`` in turn with the same points: the same
-        updates (and random draws, level by level), the points' millimetre ranges and ray
-        indices computed once (per number of rays) instead of once per level."""
+        """One §3.1 update of each sub-map of ``levels`` in turn with the points (all of one
+        time step); points farther than ``max_range_m`` from the centre are ignored. The
+        points' millimetre ranges and ray indices are computed once (per number of rays)."""
         ang, dist = self.polar(points_map) if polar is None else polar
         ok = dist <= self.max_range_m
         ang_ok = ang[ok]
