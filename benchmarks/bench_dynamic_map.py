@@ -11,13 +11,31 @@ Prints
    (``match_scan``), ``PointMap`` construction (normals), the per-scan log-likelihoods of a
    local map and the robust estimates of a lambda1 sub-map -- numba (extra ``fast``) against
    numpy, with the ratio.
+
+By default (without ``--synthetic``) it instead records a scenario's sensor stream once
+(``--scenario``, ``--days``; the simulation with the steering localizer only, cached in
+``--cache``) and replays ``dynamic-map`` on it as the runner does (its rng is the runner's
+generator child); the days before ``--timed-from`` (day 1: the first-run SLAM, which the
+other 27 days of the H&W replica do not do) are replayed once, untimed, and each timed
+replay starts from their pickled state. It prints scans/s of CPU (``time.process_time``)
+with a reference measured in the same process on the same stream (``static-mcl`` walls-only
+on the prior walls, as the H&W replica runs it) and their ratio, the CPU of the end-of-
+run/day learning, and with ``--profile`` the CPU per stage [ms/scan] from cProfile.
+``--fingerprint`` prints a SHA-256 of everything ``dynamic-map`` returns on the replay
+(estimates, covariances, extras) and of its map's samples after it: a change meant to be
+faster must leave it unchanged (with numba and with numba blocked). ``--synthetic`` runs the
+sections above.
 """
 
 from __future__ import annotations
 
 import argparse
+import cProfile
+import hashlib
 import pickle
+import pstats
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -260,11 +278,192 @@ def bench_backends(rng: np.random.Generator, repeats: int) -> None:
     )
 
 
+# ---------------------------------------------------------------------- replay of a scenario
+def record_streams(scenario_path: str, days: tuple[int, int], cache: Path) -> list:
+    """The scenario's run streams (:class:`~dynmap_sim.experiments.bench.RunStream`) of
+    ``days``: simulated with the steering localizer alone (the others do not change the
+    stream), pickled to ``cache`` and read from there next time."""
+    if cache.exists():
+        with cache.open("rb") as f:
+            return pickle.load(f)  # noqa: S301 - our own cache
+    from dynmap_sim.analysis.scenarios import load_scenario
+    from dynmap_sim.experiments.runner import ExperimentRunner
+
+    sc = load_scenario(scenario_path)
+    with tempfile.TemporaryDirectory() as out:
+        runner = ExperimentRunner(sc, Path(out), days, sc.seeds[0], resume=False, workers=1)
+        runner._start_localizers()  # sets the lock-stepped steering localizer
+        streams = [runner.loop.run(i, runner.state, runner._steer).stream
+                   for i in range(len(runner.slots))]  # fmt: skip
+        runner.db.close()
+    with cache.open("wb") as f:
+        pickle.dump(streams, f, pickle.HIGHEST_PROTOCOL)
+    return streams
+
+
+def _replay_localizer(scenario_path: str, label: str):
+    """A fresh localizer of the scenario's ``label`` with the runner's generator child."""
+    from dynmap_sim.analysis.scenarios import load_scenario
+    from dynmap_sim.experiments.runner import localizer_seeds, make_env
+
+    sc = load_scenario(scenario_path)
+    env = make_env(sc)
+    laser = env.unwrapped.laser_spec
+    env.close()
+    rngs = localizer_seeds(sc.seeds[0], len(sc.localizers))
+    k = sc.labels.index(label)
+    c = sc.localizers[k]
+    return make_localizer(c.name, laser=laser, rng=rngs[k + 1], **c.params)
+
+
+def _replay(loc, streams, on_estimate=None) -> tuple[float, float, int]:
+    """Feed the streams to ``loc`` as the runner does; CPU [s] of ``update`` and of the
+    run/day hooks, and the number of scans."""
+    from dynmap_sim.types import Odometry, Scan
+
+    t_up = t_end = 0.0
+    n = 0
+    for st in streams:
+        loc.begin_run(st.prior)
+        for k in range(len(st.stamps_s)):
+            t = float(st.stamps_s[k])
+            odom = Odometry(pose=np.array(st.odom[k], dtype=np.float64), stamp_s=t)
+            scan = Scan(ranges_m=np.array(st.scans[k], dtype=np.float32), stamp_s=t)
+            c0 = time.process_time()
+            e = loc.update(odom, scan)
+            t_up += time.process_time() - c0
+            if on_estimate is not None:
+                on_estimate(e)
+        n += len(st.stamps_s)
+        c0 = time.process_time()
+        loc.end_run()
+        if st.last_of_day:
+            loc.end_day()
+        pickle.dumps(loc, pickle.HIGHEST_PROTOCOL)  # as the runner does after every run
+        t_end += time.process_time() - c0
+    return t_up, t_end, n
+
+
+#: Functions whose cumulative CPU is reported per scan by ``--profile`` (name, label).
+STAGES = (
+    ("_match", "ICP with adaptive kappa (eq. 9)"),
+    ("_current_point_map", "PointMap of the current map (normals)"),
+    ("synthesize_current_map", "current-map synthesis (4.3)"),
+    ("_set_current_map", "current map thinning/compare"),
+    ("learn_online", "lambda1 online learning (4.4)"),
+    ("scan_points_base", "scan points"),
+    ("lambda_min", "lambda_min"),
+    ("_store", "store (pose, scan)"),
+    ("end_run", "end_run (lambda2)"),
+    ("end_day", "end_day (lambda3-5)"),
+)
+
+
+def _prepared(args, label: str, streams) -> tuple[bytes, list]:
+    """The pickled localizer ``label`` after the untimed runs (days before
+    ``--timed-from``: the first-run SLAM of day 1 is not what the other days do), and the
+    runs to time."""
+    untimed = [s for s in streams if s.prior.day < args.timed_from]
+    loc = _replay_localizer(args.scenario, label)
+    _replay(loc, untimed)
+    return pickle.dumps(loc, pickle.HIGHEST_PROTOCOL), streams[len(untimed) :]
+
+
+def bench_replay(args) -> None:
+    streams = record_streams(args.scenario, args.days, args.cache)
+    dm_state, timed = _prepared(args, "dynamic-map", streams)
+    ref_state, _ = _prepared(args, args.reference, streams)
+    n = sum(len(s.stamps_s) for s in timed)
+    print(f"replay: {args.scenario} days {args.days[0]}-{args.days[1]}: {len(streams)} runs; "
+          f"timed: days {args.timed_from}-{args.days[1]}, {len(timed)} runs, "
+          f"{n} scans")  # fmt: skip
+    for rep in range(args.runs):
+        t_ref, _, _ = _replay(pickle.loads(ref_state), timed)  # noqa: S301 - our own state
+        t_dm, e_dm, _ = _replay(pickle.loads(dm_state), timed)  # noqa: S301
+        print(f"  [{rep + 1}] dynamic-map {n / t_dm:6.0f} scans/s of CPU ({1e3 * t_dm / n:.3f} "
+              f"ms/scan; run/day ends {e_dm:.2f} s); {args.reference} {n / t_ref:6.0f} "
+              f"scans/s ({1e3 * t_ref / n:.3f} ms/scan); ratio dynamic-map/reference "
+              f"{t_dm / t_ref:.3f}")  # fmt: skip
+    if args.profile:
+        loc = pickle.loads(dm_state)  # noqa: S301
+        prof = cProfile.Profile(time.process_time)
+        prof.enable()
+        _replay(loc, timed)
+        prof.disable()
+        st = pstats.Stats(prof)
+        cum: dict[str, float] = {}
+        for (_, _, name), (_, _, _, ct, _) in st.stats.items():
+            cum[name] = cum.get(name, 0.0) + ct
+        print("  per stage [ms/scan of CPU, cProfile]:")
+        for name, what in STAGES:
+            print(f"    {what:40s} {1e3 * cum.get(name, 0.0) / n:8.3f}")
+        st.sort_stats("tottime").print_stats(30)
+
+
+def fingerprint(args) -> str:
+    """SHA-256 of dynamic-map's outputs on the replay and of its map's samples after it."""
+    streams = record_streams(args.scenario, args.days, args.cache)
+    loc = _replay_localizer(args.scenario, "dynamic-map")
+    h = hashlib.sha256()
+
+    def add(e) -> None:
+        h.update(np.ascontiguousarray(e.mean, dtype=np.float64).tobytes())
+        h.update(np.ascontiguousarray(e.cov, dtype=np.float64).tobytes())
+        for k in sorted(e.extras):
+            h.update(k.encode())
+            h.update(np.ascontiguousarray(e.extras[k]).tobytes())
+
+    _, _, n = _replay(loc, streams, add)
+    for lm in loc.dmap.local_maps:
+        h.update(lm.centre.tobytes())
+        for s in lm.sub:
+            h.update(s.samples_mm.tobytes())
+            h.update(s.count.tobytes())
+            h.update(s.initialized.tobytes())
+    h.update(np.asarray(loc.rng.random(4)).tobytes())  # the generator's position
+    print(f"fingerprint of {n} scans, {len(loc.dmap)} local maps: {h.hexdigest()}")
+    return h.hexdigest()
+
+
+def _days(text: str) -> tuple[int, int]:
+    a, _, b = text.partition("-")
+    return int(a), int(b or a)
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--repeats", type=int, default=200)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--synthetic", action="store_true", help="the synthetic sections 1-4")
+    p.add_argument(
+        "--fingerprint",
+        action="store_true",
+        help="print the SHA-256 of the replay's outputs instead of timing them",
+    )
+    p.add_argument("--profile", action="store_true", help="also the CPU per stage (cProfile)")
+    p.add_argument("--scenario", default="worlds/scenarios/apartment-28d-hw.toml")
+    p.add_argument("--days", type=_days, default=(1, 4), help="day range of the replay")
+    p.add_argument("--timed-from", type=int, default=2, help="first timed day (see doc)")
+    p.add_argument("--runs", type=int, default=3, help="timed replays (each with reference)")
+    p.add_argument(
+        "--reference",
+        default="static-mcl walls",
+        help="label of the scenario's reference localizer",
+    )
+    p.add_argument("--cache", type=Path, default=None,
+                   help="recorded streams (default: a file in the temp folder)")  # fmt: skip
     args = p.parse_args()
+    if args.cache is None:
+        name = Path(args.scenario).stem
+        args.cache = Path(tempfile.gettempdir()) / (
+            f"bench_dynamic_map_{name}_d{args.days[0]}-{args.days[1]}.pkl"
+        )
+    if args.fingerprint:
+        fingerprint(args)
+        return
+    if not args.synthetic:
+        bench_replay(args)
+        return
     rng = np.random.default_rng(args.seed)
     bench_sample_sets(rng, args.repeats)
     bench_localizer(rng)

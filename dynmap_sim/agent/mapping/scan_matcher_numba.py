@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from dynmap_sim.jit import compiled, require_numba
+from dynmap_sim.jit import compiled, kernel_backend, require_numba
 from dynmap_sim.jit import numba_available as numba_available  # re-exported
 
 FloatArray = NDArray[np.float64]
@@ -47,7 +47,22 @@ class BucketGrid:
     ys: FloatArray
 
     @classmethod
-    def build(cls, points: FloatArray, cell_m: float) -> BucketGrid:
+    def build(cls, points: FloatArray, cell_m: float, backend: str = "auto") -> BucketGrid:
+        """The grid of ``points`` ``(M, 2)``; ``backend`` ``"numba"`` (``"auto"`` when
+        installed) or ``"python"`` builds it in one loop (:func:`_grid_build_py`: a counting
+        sort, which is the stable argsort of the cell keys), the same arrays."""
+        kind = kernel_backend(backend)
+        if kind is not None and len(points):
+            if kind == "numba":
+                require_numba("grid backend")
+            build = _grid_build if kind == "numba" else _grid_build_py
+            m = len(points)
+            px = np.ascontiguousarray(points[:, 0], dtype=np.float64)
+            py = np.ascontiguousarray(points[:, 1], dtype=np.float64)
+            key, order = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64)
+            xs, ys = np.empty(m), np.empty(m)
+            start, x0, y0, nx, ny = build(px, py, float(cell_m), key, order, xs, ys)
+            return cls(float(cell_m), int(x0), int(y0), int(nx), int(ny), start, order, xs, ys)
         cx = np.floor(points[:, 0] / cell_m).astype(np.int64)
         cy = np.floor(points[:, 1] / cell_m).astype(np.int64)
         x0, y0 = int(cx.min()), int(cy.min())
@@ -67,6 +82,48 @@ class BucketGrid:
             np.ascontiguousarray(points[order, 0]),
             np.ascontiguousarray(points[order, 1]),
         )
+
+
+def _grid_build_py(
+    px: FloatArray,
+    py: FloatArray,
+    cell_m: float,
+    key: IntArray,
+    order: IntArray,
+    xs: FloatArray,
+    ys: FloatArray,
+) -> tuple[IntArray, int, int, int, int]:
+    """:meth:`BucketGrid.build` in one loop: cell keys as the numpy code computes them, the
+    points counting-sorted by key (the stable order); returns ``start, x0, y0, nx, ny``."""
+    m = px.shape[0]
+    cxs = np.empty(m, dtype=np.int64)
+    cys = np.empty(m, dtype=np.int64)
+    for i in range(m):
+        cxs[i] = np.int64(math.floor(px[i] / cell_m))
+        cys[i] = np.int64(math.floor(py[i] / cell_m))
+    x0 = cxs.min()
+    y0 = cys.min()
+    nx = cxs.max() - x0 + 1
+    ny = cys.max() - y0 + 1
+    start = np.zeros(nx * ny + 1, dtype=np.int64)
+    for i in range(m):
+        k = (cxs[i] - x0) * ny + (cys[i] - y0)
+        key[i] = k
+        start[k + 1] += 1
+    for k in range(nx * ny):
+        start[k + 1] += start[k]
+    fill = start[:-1].copy()
+    for i in range(m):
+        k = key[i]
+        p = fill[k]
+        fill[k] = p + 1
+        order[p] = i
+        xs[p] = px[i]
+        ys[p] = py[i]
+    return start, x0, y0, nx, ny
+
+
+_grid_build = compiled(_grid_build_py)
 
 
 def _icp_terms_py(

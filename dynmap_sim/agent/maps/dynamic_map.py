@@ -88,10 +88,21 @@ class DynamicMap:
 
     @property
     def centres(self) -> FloatArray:
-        """Centres ``(L, 2)`` of the local maps [m]."""
+        """Centres ``(L, 2)`` of the local maps [m] (read-only; cached until a local map is
+        added: local maps are only ever appended, and a centre never moves)."""
         if not self.local_maps:
             return np.zeros((0, 2))
-        return np.array([lm.centre for lm in self.local_maps])
+        c = self.__dict__.get("_centres")
+        if c is None or len(c) != len(self.local_maps):
+            c = np.array([lm.centre for lm in self.local_maps])
+            c.flags.writeable = False
+            self._centres = c
+        return c
+
+    def __getstate__(self) -> dict:
+        state = self.__dict__.copy()
+        state.pop("_centres", None)  # a cache
+        return state
 
     def levels(self, interval: str) -> list[int]:
         """Indices of the timescales updated at ``interval`` ("always", "run", "day")."""
@@ -131,9 +142,7 @@ class DynamicMap:
             self.max_range_m,
             self.__dict__.get("first_step_fills", True),
         )
-        polar = lm.polar(points_map)
-        for level in range(len(self.timescales)):
-            lm.learn(level, points_map, rng, fill=True, initialize=False, polar=polar)
+        lm.learn_levels(range(len(self.timescales)), points_map, rng, fill=True, initialize=False)
         self.local_maps.append(lm)
         return len(self.local_maps) - 1
 
@@ -159,10 +168,7 @@ class DynamicMap:
                 return [self.add_local_map(np.asarray(pose)[:2], pts, rng)]
             return []
         for i in idx:
-            lm = self.local_maps[int(i)]
-            polar = lm.polar(pts)
-            for level in lv:
-                lm.learn(level, pts, rng, polar=polar)
+            self.local_maps[int(i)].learn_levels(lv, pts, rng)
         return [int(i) for i in idx]
 
     def learn_offline(
@@ -192,10 +198,7 @@ class DynamicMap:
             pts = np.concatenate([points_map[k] for k in sel]) if sel.size else np.zeros((0, 2))
             if len(pts) == 0:
                 continue
-            lm = self.local_maps[int(i)]
-            polar = lm.polar(pts)
-            for level in levels:
-                lm.learn(level, pts, rng, polar=polar)
+            self.local_maps[int(i)].learn_levels(levels, pts, rng)
             n_updated += 1
         return n_updated
 

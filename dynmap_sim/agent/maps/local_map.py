@@ -102,9 +102,9 @@ class LocalMap:
         return cache[n]
 
     # ------------------------------------------------------------------ learning
-    def learn(
+    def learn_levels(
         self,
-        level: int,
+        levels: Sequence[int],
         points_map: ArrayLike,
         rng: np.random.Generator,
         *,
@@ -112,14 +112,19 @@ class LocalMap:
         initialize: bool = True,
         polar: tuple[FloatArray, FloatArray] | None = None,
     ) -> None:
-        """One §3.1 update of sub-map ``level`` with the points (all of one time step).
-
-        Points farther than ``max_range_m`` from the centre are ignored.
-        """
+        """One §3.1 update of each sub-map of ``levels`` in turn with the points (all of one
+        time step); points farther than ``max_range_m`` from the centre are ignored. The
+        points' millimetre ranges and ray indices are computed once (per number of rays)."""
         ang, dist = self.polar(points_map) if polar is None else polar
         ok = dist <= self.max_range_m
-        ray = self.ray_index(ang[ok], self.timescales[level].n_rays)
-        self.sub[level].update(ray, to_mm(dist[ok]), rng, fill=fill, initialize=initialize)
+        ang_ok = ang[ok]
+        mm = to_mm(dist[ok])
+        rays: dict[int, NDArray[np.int64]] = {}
+        for level in levels:
+            n_rays = self.timescales[level].n_rays
+            if n_rays not in rays:
+                rays[n_rays] = self.ray_index(ang_ok, n_rays)
+            self.sub[level].update(rays[n_rays], mm, rng, fill=fill, initialize=initialize)
 
     # ------------------------------------------------------------------ perceptual model
     def log_likelihood(
@@ -186,22 +191,28 @@ class LocalMap:
     def _model_stack(
         self, levels: list[int], sigma_min_m: float, min_outlier_ratio: float
     ) -> tuple[FloatArray, NDArray[np.int64]]:
-        """The levels' model tables stacked ``(sum of rays, 4)`` and each level's first row;
-        cached until one of the tables changes."""
+        """The levels' model tables stacked ``(sum of rays, 4)`` and each level's first row.
+
+        Cached per ``levels``: a level whose table changed since (λ1 after every online step)
+        has its rows copied into the stack in place, the others are kept."""
         tabs = [
             self.sub[level].model_table(self.max_range_m, sigma_min_m, min_outlier_ratio)
             for level in levels
         ]
+        key = tuple(levels)
         cached = self.__dict__.get("_stack")
-        if (
-            cached is None
-            or len(cached[0]) != len(tabs)
-            or any(a is not b for a, b in zip(cached[0], tabs, strict=True))
-        ):
+        if cached is None or cached[0] != key or len(cached[1]) != len(tabs):
             offsets = np.concatenate([[0], np.cumsum([len(t) for t in tabs])[:-1]])
-            cached = (tabs, np.concatenate(tabs), offsets.astype(np.int64))
+            n_rays = np.array([len(t) for t in tabs], dtype=np.int64)
+            cached = (key, tabs, np.concatenate(tabs), offsets.astype(np.int64), n_rays)
             self._stack = cached
-        return cached[1], cached[2]
+            return cached[2], cached[3]
+        held, stack, offsets = cached[1], cached[2], cached[3]
+        for b, tab in enumerate(tabs):
+            if held[b] is not tab:  # (a level's number of rays never changes)
+                stack[offsets[b] : offsets[b] + len(tab)] = tab
+                held[b] = tab
+        return stack, offsets
 
     def scan_log_likelihoods(
         self,
@@ -226,7 +237,7 @@ class LocalMap:
         compiled = backend == "numba" or (backend == "auto" and numba_available())
         if compiled and sigma_min_m > 0.0 and levels:
             table, offsets = self._model_stack(levels, sigma_min_m, min_outlier_ratio)
-            n_rays = np.array([self.timescales[level].n_rays for level in levels], np.int64)
+            n_rays = self._stack[4]  # rows of each level's table: its rays
             return scan_log_likelihoods(pts, self.centre, table, offsets, n_rays, self.max_range_m)
         return self.log_likelihoods(
             levels,

@@ -26,7 +26,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from dynmap_sim.agent.maps.sample_set_numba import numba_available, robust_rows
+from dynmap_sim.agent.maps.sample_set_numba import (
+    numba_available,
+    robust_rows,
+    table_kernel,
+    update_kernels,
+)
 
 #: Largest storable range [mm] (uint16); also the sort key of empty slots.
 MAX_RANGE_MM = 65535
@@ -126,6 +131,7 @@ class SampleSets:
         *,
         fill: bool = False,
         initialize: bool = True,
+        backend: str = "auto",
     ) -> None:
         """Apply one time step of the §3.1 rule with the measurements ``(ray_idx, values_mm)``.
 
@@ -138,6 +144,11 @@ class SampleSets:
         phase of ``u·n`` per step while not full, applies. ``fill=True``
         fills free slots without removing anything; with ``initialize=False`` it does not
         count as the first time step (used to seed a new local map with one scan, §4.4).
+
+        ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): with ``"numba"`` (``"auto"``
+        when installed) the bookkeeping runs in compiled kernels
+        (:func:`.sample_set_numba.update_kernels`) between the same random draws and sorts:
+        the same samples.
         """
         ray = np.asarray(ray_idx, dtype=np.int64).ravel()
         val = np.asarray(values_mm).ravel()
@@ -154,6 +165,10 @@ class SampleSets:
         order = np.argsort(ray + rng.random(m))  # by ray, random within a ray
         r_s = ray[order]
         v_s = val[order]
+        kernels = update_kernels(backend)
+        if kernels is not None:
+            self._update_kernels(kernels, r_s, v_s, rng, fill, initialize)
+            return
         # Runs of equal rays in the sorted order (what np.unique would return, without a sort).
         starts = np.empty(m, dtype=bool)
         starts[0] = True
@@ -196,6 +211,40 @@ class SampleSets:
         self._est = None
         self._table = None
 
+    def _update_kernels(
+        self,
+        kernels: tuple,
+        r_s: NDArray[np.int64],
+        v_s: NDArray[np.uint16],
+        rng: np.random.Generator,
+        fill: bool,
+        initialize: bool,
+    ) -> None:
+        """:meth:`update` after its sort, with :func:`.sample_set_numba.update_kernels`: the
+        same random draws in the same order (``u·n`` rounding, then the keys of the slots
+        to replace) and the same ``argsort`` of the keys."""
+        ray_runs, plan_update, write_update = kernels
+        first = np.empty(r_s.size, dtype=np.int64)
+        first = first[: ray_runs(r_s, first)]
+        n_groups = first.size
+        n_rule = np.zeros(n_groups, dtype=np.int64) if fill else self._n_new(n_groups, rng)
+        n_new = np.empty(n_groups, dtype=np.int64)
+        n_add = np.empty(n_groups, dtype=np.int64)
+        rep_cnt = np.empty(n_groups, dtype=np.int64)
+        n_rep = plan_update(
+            r_s, first, self.count, self.initialized, self.n_samples,
+            self.fills_first_step, fill, initialize, n_rule, n_new, n_add, rep_cnt,
+        )  # fmt: skip
+        if n_rep:
+            keys = rng.random((n_rep, self.n_samples))
+            keys[np.arange(self.n_samples)[None, :] >= rep_cnt[:n_rep, None]] = 2.0
+            perm = np.argsort(keys, axis=1)
+        else:
+            perm = np.zeros((0, self.n_samples), dtype=np.int64)
+        write_update(r_s, v_s, first, n_new, n_add, perm, self.samples_mm, self.count)
+        self._est = None
+        self._table = None
+
     def update_m(
         self,
         ray_idx: ArrayLike,
@@ -215,18 +264,34 @@ class SampleSets:
         return self._est
 
     def model_table(
-        self, max_range_m: float, sigma_min_m: float = 0.0, min_outlier_ratio: float = 0.0
+        self,
+        max_range_m: float,
+        sigma_min_m: float = 0.0,
+        min_outlier_ratio: float = 0.0,
+        backend: str = "auto",
     ) -> NDArray[np.float64]:
         """Per-ray constants of eq. 6–8, ``(n_rays, 4)``: ``ρ``, ``1/(2σ²)``,
         ``log((1 − p_o)/(σ√(2π)))`` and ``p_o/maxRange`` (cached until the next update).
 
         Used by :func:`table_log_likelihood`, the fast path of the localizer. ``σ`` is
-        floored at ``max(sigma_min_m, 1 µm)``.
+        floored at ``max(sigma_min_m, 1 µm)``. ``backend`` ``"numba"`` (``"auto"`` when
+        installed): the arithmetic but the logs in a compiled loop
+        (:func:`.sample_set_numba.table_kernel`), the same values.
         """
         key = (float(max_range_m), float(sigma_min_m), float(min_outlier_ratio))
         if self._table is not None and self._table[0] == key:
             return self._table[1]
         est = self.estimates()
+        kernel = table_kernel(backend)
+        if kernel is not None:
+            tab = np.empty((self.n_rays, 4))
+            omp, sig = np.empty(self.n_rays), np.empty(self.n_rays)
+            kernel(est.rho_m, est.sigma_m, est.outlier_ratio, est.count, max(sigma_min_m, 1e-6),
+                   float(min_outlier_ratio), float(max_range_m), tab, omp, sig)  # fmt: skip
+            with np.errstate(divide="ignore"):
+                tab[:, 2] = np.log(omp) - np.log(sig) + np.log(_INV_SQRT_2PI)
+            self._table = (key, tab)
+            return tab
         has = est.count > 0
         sig = np.where(has, np.maximum(np.nan_to_num(est.sigma_m), max(sigma_min_m, 1e-6)), 1.0)
         po = np.where(has, np.maximum(est.outlier_ratio, min_outlier_ratio), 1.0)

@@ -5,6 +5,13 @@ The robust estimates of Biber & Duckett §3.3 -- median (eq. 4, the lower middle
 loop (insertion sort in place: a ray holds at most a few hundred samples), with the same
 integer arithmetic and the same floating-point operations as the numpy code, so the results
 are identical. :func:`numba_available` says whether it can be used.
+
+The bookkeeping of one §3.1 update step (:meth:`.sample_set.SampleSets.update`: the runs of
+equal rays in the randomly ordered measurements, how many each ray takes, adds and replaces,
+which slots they go to) is here too, in three kernels between which the numpy code draws its
+random numbers and sorts (:func:`ray_runs`, :func:`plan_update`, :func:`write_update`): the
+draws keep their order and count, the sorts are numpy's, the integer arithmetic is the numpy
+code's, so the samples are identical.
 """
 
 from __future__ import annotations
@@ -12,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from dynmap_sim.jit import compiled, require_numba
+from dynmap_sim.jit import compiled, kernel_backend, require_numba
 from dynmap_sim.jit import numba_available as numba_available  # re-exported
 
 
@@ -77,3 +84,149 @@ def robust_rows(
     rho, sig, out = np.empty(n_rays), np.empty(n_rays), np.empty(n_rays)
     _robust_rows(np.ascontiguousarray(samples_mm), count, rho, sig, out)
     return rho, sig, out
+
+
+def _ray_runs_py(r_s: NDArray[np.int64], first: NDArray[np.int64]) -> int:
+    """Starts of the runs of equal values in ``r_s`` (sorted by ray) into ``first``; their
+    number."""
+    n = 0
+    for i in range(r_s.shape[0]):
+        if i == 0 or r_s[i] != r_s[i - 1]:
+            first[n] = i
+            n += 1
+    return n
+
+
+def _plan_update_py(
+    r_s: NDArray[np.int64],
+    first: NDArray[np.int64],
+    count: NDArray[np.uint16],
+    initialized: NDArray[np.bool_],
+    n_samples: int,
+    fills_first_step: bool,
+    fill: bool,
+    initialize: bool,
+    n_rule: NDArray[np.int64],
+    n_new: NDArray[np.int64],
+    n_add: NDArray[np.int64],
+    rep_cnt: NDArray[np.int64],
+) -> int:
+    """Per run ``g`` (ray ``r_s[first[g]]``): ``n_new`` measurements taken, ``n_add`` of them
+    into free slots, the rest replacing old samples; ``initialized`` set as the numpy code
+    sets it. ``rep_cnt`` gets the old counts of the runs that replace, in order; returns how
+    many do (the rows of random keys to draw)."""
+    m = r_s.shape[0]
+    n_groups = first.shape[0]
+    n_rep_rows = 0
+    for g in range(n_groups):
+        ray = r_s[first[g]]
+        end = first[g + 1] if g + 1 < n_groups else m
+        m_per = end - first[g]
+        cnt = np.int64(count[ray])
+        free = n_samples - cnt
+        if fill or (fills_first_step and not initialized[ray]):
+            k = min(m_per, free)
+        else:
+            k = min(n_rule[g], m_per)
+        if initialize or not fill:
+            initialized[ray] = True
+        a = min(k, free)
+        n_new[g] = k
+        n_add[g] = a
+        if k - a > 0:
+            rep_cnt[n_rep_rows] = cnt
+            n_rep_rows += 1
+    return n_rep_rows
+
+
+def _write_update_py(
+    r_s: NDArray[np.int64],
+    v_s: NDArray[np.uint16],
+    first: NDArray[np.int64],
+    n_new: NDArray[np.int64],
+    n_add: NDArray[np.int64],
+    perm: NDArray[np.int64],
+    samples_mm: NDArray[np.uint16],
+    count: NDArray[np.uint16],
+) -> None:
+    """Each run's first ``n_add`` measurements into the next free slots, the next
+    ``n_new - n_add`` into the old slots ``perm[row, :]`` (``row``: the run's order among
+    those that replace), and the new counts."""
+    n_groups = first.shape[0]
+    row = 0
+    for g in range(n_groups):
+        start = first[g]
+        ray = r_s[start]
+        cnt = np.int64(count[ray])
+        a = n_add[g]
+        for j in range(a):
+            samples_mm[ray, cnt + j] = v_s[start + j]
+        rep = n_new[g] - a
+        if rep > 0:
+            for j in range(rep):
+                samples_mm[ray, perm[row, j]] = v_s[start + a + j]
+            row += 1
+        count[ray] = np.uint16(cnt + a)
+
+
+_ray_runs = compiled(_ray_runs_py)
+_plan_update = compiled(_plan_update_py)
+_write_update = compiled(_write_update_py)
+
+
+def update_kernels(backend: str) -> tuple | None:
+    """The three update kernels, compiled (``"numba"``) or not (``"python"``), for a
+    ``backend`` argument (:data:`dynmap_sim.jit.KERNEL_BACKENDS`); None: the numpy code."""
+    kind = kernel_backend(backend)
+    if kind is None:
+        return None
+    if kind == "numba":
+        require_numba("sample-set backend")
+        return _ray_runs, _plan_update, _write_update
+    return _ray_runs_py, _plan_update_py, _write_update_py
+
+
+def _table_rows_py(
+    rho_m: NDArray[np.float64],
+    sigma_m: NDArray[np.float64],
+    outlier: NDArray[np.float64],
+    count: NDArray[np.int64],
+    sigma_floor_m: float,
+    min_outlier_ratio: float,
+    max_range_m: float,
+    table: NDArray[np.float64],
+    one_minus_po: NDArray[np.float64],
+    sigma: NDArray[np.float64],
+) -> None:
+    """The arithmetic of :meth:`.sample_set.SampleSets.model_table` (eq. 6-8) but its logs:
+    columns 0, 1 and 3 of ``table`` (``ρ``, ``1/(2σ²)``, ``p_o/maxRange``), and the floored
+    ``σ`` and ``1 - p_o`` whose logs make column 2 (a ray without samples: ``σ = 1``,
+    ``p_o = 1``) -- the numpy code's IEEE operations, so the same values."""
+    for r in range(rho_m.shape[0]):
+        if count[r] > 0:
+            sg = sigma_m[r] if sigma_m[r] >= sigma_floor_m else sigma_floor_m
+            po = outlier[r] if outlier[r] >= min_outlier_ratio else min_outlier_ratio
+            table[r, 0] = rho_m[r]
+        else:
+            sg = 1.0
+            po = 1.0
+            table[r, 0] = 0.0
+        sigma[r] = sg
+        one_minus_po[r] = 1.0 - po
+        table[r, 1] = 0.5 / (sg * sg)
+        table[r, 3] = po / max_range_m
+
+
+_table_rows = compiled(_table_rows_py)
+
+
+def table_kernel(backend: str):
+    """:func:`_table_rows_py` compiled (``"numba"``) or not (``"python"``) for a ``backend``
+    argument (:data:`dynmap_sim.jit.KERNEL_BACKENDS`); None: the numpy code."""
+    kind = kernel_backend(backend)
+    if kind is None:
+        return None
+    if kind == "numba":
+        require_numba("sample-set backend")
+        return _table_rows
+    return _table_rows_py

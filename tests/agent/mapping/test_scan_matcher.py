@@ -329,3 +329,32 @@ def test_rank_deficient_problem_stops_like_the_reference(backend):
     ref = _reference_match(pts, target, np.zeros(3))
     assert np.allclose(res.pose, ref, atol=1e-12)
     assert not res.converged and res.n_matched == 41
+
+
+@pytest.mark.parametrize(
+    "backend",
+    [
+        "python",
+        pytest.param(
+            "numba", marks=pytest.mark.skipif(not numba_available(), reason="numba not installed")
+        ),
+    ],
+)
+@pytest.mark.parametrize("seed", range(12))
+def test_bucket_grid_kernel_builds_the_numpy_grid(backend, seed):
+    """BucketGrid.build in one compiled loop (a counting sort) gives the numpy build's arrays
+    (the stable argsort of the cell keys): negative coordinates, points on cell borders,
+    duplicates, a single point."""
+    rng = np.random.default_rng(seed)
+    m = 1 if seed == 0 else int(rng.integers(2, 3000))
+    cell = float(rng.choice([0.03, 0.05, 0.3, 1.0]))
+    pts = rng.uniform(-7.0, 9.0, (m, 2))
+    pts[: m // 5] = np.round(pts[: m // 5] / cell) * cell  # on the borders
+    pts[m // 5 : m // 4] = pts[: m // 4 - m // 5]  # duplicates
+    ref = BucketGrid.build(pts, cell, backend="numpy")
+    got = BucketGrid.build(pts, cell, backend=backend)
+    for f in ("cell_m", "x0", "y0", "nx", "ny"):
+        assert getattr(ref, f) == getattr(got, f)
+    for f in ("start", "order", "xs", "ys"):
+        a, b = getattr(ref, f), getattr(got, f)
+        assert a.dtype == b.dtype and a.tobytes() == b.tobytes()

@@ -199,3 +199,63 @@ def test_compiled_robust_estimates_are_identical(n_samples):
         b = robust_estimates(s, c, backend="numba")
         for f in ("rho_m", "sigma_m", "outlier_ratio", "count"):
             assert np.array_equal(getattr(a, f), getattr(b, f), equal_nan=True), f
+
+
+UPDATE_KERNELS = [
+    "python",
+    pytest.param(
+        "numba",
+        marks=pytest.mark.skipif(
+            not sample_set_numba.numba_available(), reason="numba (extra 'fast') not installed"
+        ),
+    ),
+]
+
+
+@pytest.mark.parametrize("backend", UPDATE_KERNELS)
+@pytest.mark.parametrize("seed", range(40))
+def test_update_kernels_give_the_numpy_samples_and_draws(backend, seed):
+    """The compiled bookkeeping of one §3.1 step (sample_set_numba.update_kernels) leaves
+    the samples, counts and first-step flags of the numpy code and the generator where the
+    numpy code leaves it: fill / seed / rule steps, integer and fractional u·n, full sets."""
+    cfg = np.random.default_rng(1000 + seed)
+    n_rays = int(cfg.integers(1, 60))
+    n_samples = int(cfg.choice([1, 5, 10, 17, 50, 100]))
+    u = float(cfg.choice([0.05, 0.2, 0.25, 0.8, 1.0, 0.33]))
+    fills = bool(cfg.integers(2))
+    a = SampleSets(n_rays, n_samples, u, fills)
+    b = SampleSets(n_rays, n_samples, u, fills)
+    ra, rb = np.random.default_rng(seed), np.random.default_rng(seed)
+    for _ in range(int(cfg.integers(1, 25))):
+        m = int(cfg.integers(0, 8 * n_rays * 3))
+        ray = cfg.integers(0, n_rays, m)
+        val = cfg.integers(1, 6000, m).astype(np.uint16)
+        fill = bool(cfg.random() < 0.2)
+        init = bool(cfg.random() < 0.7)
+        a.update(ray, val, ra, fill=fill, initialize=init, backend="numpy")
+        b.update(ray, val, rb, fill=fill, initialize=init, backend=backend)
+        np.testing.assert_array_equal(a.samples_mm, b.samples_mm)
+        np.testing.assert_array_equal(a.count, b.count)
+        np.testing.assert_array_equal(a.initialized, b.initialized)
+    assert ra.random() == rb.random()
+
+
+@pytest.mark.parametrize("backend", UPDATE_KERNELS)
+@pytest.mark.parametrize("seed", range(20))
+def test_model_table_kernel_gives_the_numpy_table(backend, seed):
+    """model_table's compiled arithmetic (sample_set_numba.table_kernel) gives the numpy
+    table bit for bit: empty rays, point-mass rays (σ = 0), outliers, floors or none."""
+    rng = np.random.default_rng(seed)
+    n_samples = int(rng.choice([5, 10, 50, 100]))
+    s = SampleSets(200, n_samples, 0.2)
+    m = int(rng.integers(0, 4000))
+    base = rng.integers(300, 5000, 200)
+    ray = rng.integers(0, 180, m)  # rays 180-199 stay empty
+    val = base[ray] + rng.integers(-int(rng.integers(0, 40)) - 1, 40, m) * (rng.random(m) < 0.9)
+    s.update(ray, np.clip(val, 1, 60000).astype(np.uint16), rng, fill=True)
+    for max_range, sig_min, po_min in ((5.6, 0.01, 0.0), (4.0, 0.0, 0.05), (8.0, 0.003, 0.2)):
+        s._table = None
+        ref = s.model_table(max_range, sig_min, po_min, backend="numpy").copy()
+        s._table = None
+        got = s.model_table(max_range, sig_min, po_min, backend=backend)
+        assert ref.tobytes() == got.tobytes()
