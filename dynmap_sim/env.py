@@ -512,7 +512,8 @@ class InfoRows:
     arrays, row ``i`` for sub-env ``i``: ``scan``, ``odom`` and the fields of ``info``
     (``truth``'s ``pose``, ``beam_class``, ``beam_object``, ``range_m``, ``n_people``,
     ``people``, ``time``; ``collision``, ``route_progress``, ``stamp_s``), written in place
-    by :meth:`DynMapEnv._observe_into` or :meth:`put`."""
+    by :meth:`write_steps` (after a step of several sub-envs) or :meth:`put` (one sub-env's
+    ``obs`` and ``info``)."""
 
     def __init__(self, n: int, n_beams: int, max_people: int) -> None:
         self.scan = np.zeros((n, n_beams), dtype=np.float32)

@@ -514,8 +514,7 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
         self._anchor_map = None
 
     def _anchor_point_map(self) -> PointMap | None:
-        if self._anchor_map is None and len(self._anchor_points) >= self.config.min_matched:
-            self._anchor_map = PointMap(self._anchor_points)
+        self._anchor_map = self._point_map(self._anchor_points, self._anchor_map)
         return self._anchor_map
 
     def _propagated_cov(self, c_o: FloatArray) -> FloatArray:
@@ -540,9 +539,15 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
         self._cmap = None
 
     def _current_point_map(self) -> PointMap | None:
-        if self._cmap is None and len(self._cmap_points) >= self.config.min_matched:
-            self._cmap = PointMap(self._cmap_points)
+        self._cmap = self._point_map(self._cmap_points, self._cmap)
         return self._cmap
+
+    def _point_map(self, points: FloatArray, built: PointMap | None) -> PointMap | None:
+        """``built``, or a :class:`PointMap` of ``points`` built now (None: fewer than
+        ``min_matched`` points, nothing to match against)."""
+        if built is None and len(points) >= self.config.min_matched:
+            return PointMap(points)
+        return built
 
     # ------------------------------------------------------------------ learning (§4.4)
     def _store(self, pose: FloatArray, ranges: np.ndarray) -> None:

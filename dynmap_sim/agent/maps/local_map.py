@@ -177,7 +177,7 @@ class LocalMap:
                     min_outlier_ratio=min_outlier_ratio,
                 )
             return out
-        table, offsets = self._model_stack(levels, sigma_min_m, min_outlier_ratio)
+        table, offsets, _ = self._model_stack(levels, sigma_min_m, min_outlier_ratio)
         rays = np.empty(len(levels) * n, dtype=np.int64)
         by_n_rays: dict[int, NDArray[np.int64]] = {}
         for b, level in enumerate(levels):
@@ -190,8 +190,9 @@ class LocalMap:
 
     def _model_stack(
         self, levels: list[int], sigma_min_m: float, min_outlier_ratio: float
-    ) -> tuple[FloatArray, NDArray[np.int64]]:
-        """The levels' model tables stacked ``(sum of rays, 4)`` and each level's first row.
+    ) -> tuple[FloatArray, NDArray[np.int64], NDArray[np.int64]]:
+        """The levels' model tables stacked ``(sum of rays, 4)``, each level's first row and
+        its number of rows (rays).
 
         Cached per ``levels``: a level whose table changed since (λ1 after every online step)
         has its rows copied into the stack in place, the others are kept."""
@@ -206,13 +207,13 @@ class LocalMap:
             n_rays = np.array([len(t) for t in tabs], dtype=np.int64)
             cached = (key, tabs, np.concatenate(tabs), offsets.astype(np.int64), n_rays)
             self._stack = cached
-            return cached[2], cached[3]
-        held, stack, offsets = cached[1], cached[2], cached[3]
+            return cached[2], cached[3], cached[4]
+        held, stack, offsets, n_rays = cached[1:]
         for b, tab in enumerate(tabs):
             if held[b] is not tab:  # (a level's number of rays never changes)
                 stack[offsets[b] : offsets[b] + len(tab)] = tab
                 held[b] = tab
-        return stack, offsets
+        return stack, offsets, n_rays
 
     def scan_log_likelihoods(
         self,
@@ -236,8 +237,7 @@ class LocalMap:
         pts = np.asarray(points_map, dtype=np.float64).reshape(-1, 2)
         compiled = backend == "numba" or (backend == "auto" and numba_available())
         if compiled and sigma_min_m > 0.0 and levels:
-            table, offsets = self._model_stack(levels, sigma_min_m, min_outlier_ratio)
-            n_rays = self._stack[4]  # rows of each level's table: its rays
+            table, offsets, n_rays = self._model_stack(levels, sigma_min_m, min_outlier_ratio)
             return scan_log_likelihoods(pts, self.centre, table, offsets, n_rays, self.max_range_m)
         return self.log_likelihoods(
             levels,
