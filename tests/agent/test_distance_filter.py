@@ -69,12 +69,13 @@ def test_a_crowd_in_front_does_not_look_like_a_kidnapping():
 
 
 def test_a_scan_mostly_shorter_than_the_map_is_not_filtered():
-    """More than half of the readings short (a kidnapping into a smaller room looks like
-    that): the recovery average uses every reading."""
+    """``recovery_occluded = "all-beams"``: more than half of the readings short (a
+    kidnapping into a smaller room looks like that): the recovery average uses every
+    reading."""
     segs = room()
     grid = OccupancyGrid.from_segments(segs, free_seed_xy_m=(1, 1))
     pose = np.array([1.2, 1.1, 0.4])
-    f = AMCLFilter(grid, LASER, TUNED)
+    f = AMCLFilter(grid, LASER, replace(TUNED, recovery_occluded="all-beams"))
     f.init_gaussian(pose, np.diag([0.02**2, 0.02**2, 0.01**2]), np.random.default_rng(0))
     good = raycast(pose, LASER.angles(), segs, LASER.range_max_m)
     r, a = f._beams_of(good)
@@ -85,3 +86,49 @@ def test_a_scan_mostly_shorter_than_the_map_is_not_filtered():
     most = r.copy()
     most[: 2 * len(r) // 3] = 0.3
     assert len(f._recovery_beams(f.weights, most, a)) == len(r)
+
+
+def test_hold_leaves_the_recovery_averages_of_an_occluded_scan_alone():
+    """``recovery_occluded = "hold"`` (``tuned``): a scan mostly shorter than the map predicts
+    feeds neither ``w_slow`` nor ``w_fast`` (nor local resetting's ``w_last``) while the
+    global gate is not counting; once it counts, such a scan feeds them with all its beams;
+    a scan with few short readings feeds them as before."""
+    segs = room()
+    grid = OccupancyGrid.from_segments(segs, free_seed_xy_m=(1, 1))
+    pose = np.array([1.2, 1.1, 0.4])
+    assert TUNED.recovery_occluded == "hold"
+    f = AMCLFilter(grid, LASER, TUNED)
+    rng = np.random.default_rng(3)
+    f.init_gaussian(pose, np.diag([0.02**2, 0.02**2, 0.01**2]), rng)
+    good = raycast(pose, LASER.angles(), segs, LASER.range_max_m)
+    for _ in range(10):
+        f.correct(good)
+        f.resample(rng)
+    r, a = f._beams_of(good)
+    occluded = good.copy()
+    occluded[f.beams[: 2 * len(f.beams) // 3]] = 0.3
+    assert f._recovery_beams(f.weights, *f._beams_of(occluded)) is None
+    held = (f.w_slow, f.w_fast, f.w_last, f.n_low_updates)
+    for _ in range(10):
+        f.correct(occluded)
+        f.resample(rng)
+    assert (f.w_slow, f.w_fast, f.w_last, f.n_low_updates) == held
+    few = good.copy()
+    few[f.beams[: len(f.beams) // 3]] = 0.3
+    kept = f._recovery_beams(f.weights, *f._beams_of(few))
+    assert kept is not None and len(r) // 2 <= len(kept) < len(r)
+    f.correct(few)
+    assert f.w_fast != held[1]
+    f.n_low_updates = 1  # the gate counts: the fit had fallen before
+    ro, ao = f._beams_of(occluded)
+    assert len(f._recovery_beams(f.weights, ro, ao)) == len(ro)
+
+
+def test_recovery_occluded_and_min_share_are_checked():
+    for bad in ({"recovery_occluded": "skip"}, {"recovery_min_beam_share": 1.5}):
+        try:
+            replace(TUNED, **bad)
+        except ValueError as exc:
+            assert "static-mcl" in str(exc) and next(iter(bad)) in str(exc)
+        else:
+            raise AssertionError(f"{bad} accepted")

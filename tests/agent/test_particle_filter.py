@@ -273,7 +273,10 @@ def furnished_room() -> tuple[np.ndarray, np.ndarray]:
 def test_walls_only_is_tuned_for_a_map_without_the_furniture():
     assert CONFIGS["walls-only"] is WALLS_ONLY
     changed = {k for k in vars(TUNED) if getattr(TUNED, k) != getattr(WALLS_ONLY, k)}
-    assert changed == {"z_hit", "z_rand", "beam_skip_distance", "recovery_floor_loglik"}
+    assert changed == {
+        "z_hit", "z_rand", "beam_skip_distance", "recovery_floor_loglik", "recovery_occluded"
+    }  # fmt: skip
+    assert WALLS_ONLY.recovery_occluded == "all-beams"  # measured on furnished maps only
     assert (WALLS_ONLY.z_hit, WALLS_ONLY.z_rand) == (NAV2_DEFAULT.z_hit, NAV2_DEFAULT.z_rand)
     # AMCL's default beam_skip_distance / sigma_hit (0.5 / 0.2) at tuned's sigma_hit
     ratio = NAV2_DEFAULT.beam_skip_distance / NAV2_DEFAULT.sigma_hit
@@ -292,7 +295,9 @@ def test_tuned_floor_takes_a_furnished_room_for_lost_and_walls_only_does_not():
     probs = {}
     for name in ("tuned", "walls-only"):
         rng = np.random.default_rng(7)
-        f = AMCLFilter(grid, LASER, CONFIGS[name])
+        # every scan here is mostly short (the furniture): "all-beams", so that the floor
+        # decides, not tuned's hold of occluded scans
+        f = AMCLFilter(grid, LASER, replace(CONFIGS[name], recovery_occluded="all-beams"))
         f.init_gaussian(pose, np.diag([0.02**2, 0.02**2, 0.01**2]), rng)
         _track(f, scan, rng, TUNED.recovery_min_updates + 2)
         assert np.log(f.w_fast) < TUNED.recovery_floor_loglik  # right, but "unlikely"
@@ -626,7 +631,8 @@ def test_verify_keeps_the_tracked_set_when_no_stranger_fits_well():
     good = raycast(pose, LASER.angles(), segs, LASER.range_max_m)
     junk = np.random.default_rng(4).uniform(0.3, 2.0, len(good))
     cov = np.diag([0.02**2, 0.02**2, 0.01**2])
-    for cfg in (VERIFY, TUNED):
+    # the junk is mostly short: "all-beams", so that it counts against the tracked set
+    for cfg in (replace(c, recovery_occluded="all-beams") for c in (VERIFY, TUNED)):
         rng = np.random.default_rng(9)
         f = AMCLFilter(grid, LASER, cfg)
         f.init_gaussian(pose, cov, rng)

@@ -90,6 +90,9 @@ FloatArray = NDArray[np.float64]
 LASER_MODELS = ("likelihood_field", "likelihood_field_prob")
 #: Where the global recovery's random poses go (:attr:`MCLConfig.recovery_global`).
 GLOBAL_RECOVERY_MODES = ("inject", "verify")
+#: What the recovery average does with a scan the distance filter leaves too few beams of
+#: (:attr:`MCLConfig.recovery_occluded`).
+OCCLUDED_MODES = ("all-beams", "hold")
 #: At most this many particles: every update holds a few arrays of ``max_particles x
 #: max_beams`` floats (60 beams: ~0.5 GB at this bound); the tuned config uses 8000.
 MAX_PARTICLES = 1_000_000
@@ -170,6 +173,20 @@ class MCLConfig:
     #: threshold can be higher and a real kidnapping is found sooner (apartment: median
     #: 6.3 s, max 8.4 s, against 8.0 s / 12.5 s without the filter at threshold 0.3).
     recovery_distance_filter_m: float = 0.0
+    #: The distance filter applies only when it leaves at least this share of the valid
+    #: beams (``recovery_distance_filter_m`` > 0).
+    recovery_min_beam_share: float = 0.5
+    #: ... and a scan that leaves fewer: ``all-beams`` averages all valid beams (a scan mostly
+    #: shorter than the map predicts, e.g. after a kidnapping into a smaller room, says "wrong
+    #: pose" as loudly as "crowd"); ``hold`` leaves the recovery averages as they are for
+    #: this update (such a scan says nothing about the pose: Fox et al. 1999's short readings
+    #: are explained by unmapped objects, so the beams that could tell a wrong pose are too
+    #: few). Why ``hold`` exists: in the hall world (tuned for nowhere) the evening crowd and
+    #: the unmapped exhibition panels make 65-75 % of the readings short at the *true* pose
+    #: for 15-20 s, ``all-beams`` then feeds -2 to -3.5 per beam into ``w_fast``, the gate
+    #: opens and random poses win 6-11 m away, while at that pose almost no reading is
+    #: longer than the map allows (0-8 %: nothing contradicts it).
+    recovery_occluded: str = "all-beams"
     #: **Local resetting first** (per-beam mode only; 0 off, as nav2). Sensor resetting
     #: localization (Lenser & Veloso 2000, "Sensor resetting localization for poorly
     #: modelled mobile robots", ICRA) replaces a share ``1 - P_avg / threshold`` of the
@@ -255,6 +272,7 @@ class MCLConfig:
                 "beam_skip_threshold", "beam_skip_error_threshold", "recovery_alpha_slow",
                 "recovery_alpha_fast", "recovery_max_fraction", "recovery_local_ratio",
                 "recovery_local_max_fraction", "recovery_accept_ratio",
+                "recovery_min_beam_share",
             ),
             finite=("laser_max_range", "laser_min_range"),
             not_nan=("recovery_floor_loglik",),
@@ -279,6 +297,11 @@ class MCLConfig:
                 "static-mcl: recovery_global 'verify' compares per-beam fits; it needs "
                 "recovery_w_avg_per_beam = true"
             )
+        if self.recovery_occluded not in OCCLUDED_MODES:
+            raise ValueError(
+                f"static-mcl: recovery_occluded must be one of {OCCLUDED_MODES}, "
+                f"got {self.recovery_occluded!r}"
+            )
         if self.laser_model_type not in LASER_MODELS:
             raise ValueError(
                 f"static-mcl: laser_model_type must be one of {LASER_MODELS}, "
@@ -299,7 +322,10 @@ NAV2_DEFAULT = MCLConfig()
 #: and the real 99 % normal quantile as pf_z; updates every 0.1 m / 0.1 rad; local resetting
 #: before the global recovery (``recovery_local_*``: real odometry glitches, FR079). The
 #: global recovery injects (Table 8.3); ``recovery_global = "verify"`` (an override) was
-#: measured against it and is not the default (see :attr:`MCLConfig.recovery_global`).
+#: measured against it and is not the default (see :attr:`MCLConfig.recovery_global`). A
+#: scan the distance filter leaves fewer than half the beams of holds the recovery averages
+#: while the gate is not counting (``recovery_occluded = "hold"``, measured on the worlds
+#: nobody tuned for: README, "Worlds nobody tuned for").
 #: Measured with benchmarks/mcl_apartment_week1.py and benchmarks/mcl_global_kidnap.py.
 TUNED = MCLConfig(
     alpha1=0.05,
@@ -326,6 +352,7 @@ TUNED = MCLConfig(
     recovery_min_updates=5,
     recovery_max_fraction=0.35,
     recovery_distance_filter_m=0.3,
+    recovery_occluded="hold",
     recovery_local_ratio=0.5,
     recovery_local_max_fraction=0.3,
     recovery_local_sigma_xy=0.5,
@@ -336,11 +363,6 @@ TUNED = MCLConfig(
     init_sigma_xy=0.2,
     init_sigma_theta=0.1,
 )
-
-#: The distance filter applies only when it leaves at least this share of the beams: a
-#: scan mostly shorter than the map predicts (a kidnapping into a smaller room) says "wrong
-#: pose" as loudly as "crowd".
-MIN_RECOVERY_BEAM_SHARE = 0.5
 
 #: ``tuned`` for a map that lacks the furniture: the walls-only prior (H&W Fig. 4, their
 #: static MCL of §7.3). Measured on ``apartment-28d-hw`` days 1-3 (seed 0, 60 beams at the
@@ -366,13 +388,18 @@ MIN_RECOVERY_BEAM_SHARE = 0.5
 #:   all but 0.2 % of the wall beams. Alone (floor off): 0.14-0.16 m, never lost.
 #:
 #: Together: 0.105-0.133 m mean a day, never lost, no random pose injected (days 1-3, two
-#: filter seeds). The rest is ``tuned`` (sensor noise, odometry alphas, particles).
+#: filter seeds). The rest is ``tuned`` (sensor noise, odometry alphas, particles), but for
+#: ``recovery_occluded``: ``all-beams`` as before ``tuned`` took ``hold``. On this map half of
+#: the readings are short at the true pose on every scan (the furniture it lacks), so
+#: ``hold`` would leave the recovery signal out on most scans; it was measured on maps that
+#: hold the furniture only.
 WALLS_ONLY = replace(
     TUNED,
     z_hit=0.5,
     z_rand=0.5,
     beam_skip_distance=0.3,
     recovery_floor_loglik=float("-inf"),
+    recovery_occluded="all-beams",
 )
 
 CONFIGS: dict[str, MCLConfig] = {
@@ -613,6 +640,8 @@ class AMCLFilter:
             # Per-beam geometric mean over the beams the distance filter keeps (all valid
             # beams without it), beam skipping not applied.
             use = self._recovery_beams(w_prev, r, a)
+            if use is None:  # an occluded scan, recovery_occluded = "hold"
+                return
             if beam_logp is None:
                 beam_logp = self._endpoint_values(self.table.logp, self.particles, r, a)
             total = per_beam_average(lw_prev, beam_logp[:, use])
@@ -640,11 +669,12 @@ class AMCLFilter:
 
     def _recovery_beams(
         self, weights: FloatArray, ranges_m: FloatArray, angles_rad: FloatArray
-    ) -> NDArray[np.intp]:
+    ) -> NDArray[np.intp] | None:
         """Indices of the beams that feed the recovery average: all, or with
         ``recovery_distance_filter_m`` those not much shorter than the map predicts at the
-        weighted mean particle (Fox et al. 1999), if at least
-        :data:`MIN_RECOVERY_BEAM_SHARE` of them remain."""
+        weighted mean particle (Fox et al. 1999), if at least ``recovery_min_beam_share``
+        of them remain; else all (``recovery_occluded = "all-beams"``) or None (``hold``:
+        this scan does not feed the averages)."""
         all_beams = np.arange(len(ranges_m))
         margin = self.config.recovery_distance_filter_m
         if margin <= 0:
@@ -653,7 +683,10 @@ class AMCLFilter:
         laser_pose = se2.compose(mean, self.mount)
         expected = expected_ranges(self.grid, laser_pose, angles_rad, self.range_max)
         keep = np.nonzero(~short_readings(ranges_m, expected, margin))[0]
-        return keep if len(keep) >= MIN_RECOVERY_BEAM_SHARE * len(ranges_m) else all_beams
+        if len(keep) >= self.config.recovery_min_beam_share * len(ranges_m):
+            return keep
+        hold = self.config.recovery_occluded == "hold" and self.n_low_updates == 0
+        return None if hold else all_beams
 
     def reference_weight(self) -> float:
         """``w_slow``, floored at ``exp(recovery_floor_loglik)`` in per-beam mode."""
