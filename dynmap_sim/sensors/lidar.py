@@ -433,15 +433,9 @@ class Lidar:
             if e.size:
                 # flat index of the left beam of each edge (rows are n_beams long)
                 left = e + e // (spec.n_beams - 1) if r.shape[0] > 1 else e
-            if e.size and len(rngs) == 1:
-                _mixed_pixels(flat_out, flat_r, left.tolist(), rngs[0], nz.p_mixed)
-            elif e.size:
-                beams, others, owner = _edge_beams(left, left // group_size, len(rngs))
-                pick = _uniforms(rngs, owner) < nz.p_mixed
-                beams, others = beams[pick], others[pick]
-                w = _uniforms(rngs, owner[pick])
-                r_beams = flat_r[beams]
-                flat_out[beams] = r_beams + w * (flat_r[others] - r_beams)
+                # each group's edges with its generator (its draws in a lone group's order)
+                for g, left_g in _by_group(left.tolist(), group_size):
+                    _mixed_pixels(flat_out, flat_r, left_g, rngs[g], nz.p_mixed)
         # one uniform per beam picks at most one of the rare events (disjoint intervals)
         p1 = nz.p_dropout
         p2 = p1 + nz.p_short
@@ -449,17 +443,10 @@ class Lidar:
         if p3 > 0.0:
             u = rngs[0].random(r.shape) if len(rngs) == 1 else _row_draws(rngs, r.shape, "random")
             rare = ((u < p3) & hit).ravel().nonzero()[0]
-            if rare.size and len(rngs) == 1:
-                _rare_events(flat_out, flat_r, u.reshape(-1), rare.tolist(), rngs[0], p1, p2, spec)
-            elif rare.size:
-                ur = u.reshape(-1)[rare]
-                rmin = spec.range_min_m
-                short = _uniforms(rngs, rare // group_size)
-                flat_out[rare] = np.where(
-                    ur < p1,
-                    np.inf,
-                    np.where(ur < p2, rmin + short * (flat_r[rare] - rmin), np.nan),
-                )
+            if rare.size:
+                flat_u = u.reshape(-1)
+                for g, rare_g in _by_group(rare.tolist(), group_size):
+                    _rare_events(flat_out, flat_r, flat_u, rare_g, rngs[g], p1, p2, spec)
         out[out < spec.range_min_m] = -np.inf
         out[out > spec.range_max_m] = np.inf
         return out.astype(np.float32)
@@ -503,36 +490,16 @@ def _rare_events(
         out[i] = math.inf if ui < p1 else (rmin + sk * (r.item(i) - rmin) if ui < p2 else math.nan)
 
 
-def _edge_beams(
-    left: NDArray[np.int64], group: NDArray[np.int64], n_groups: int
-) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
-    """The two beams of each edge (flat index ``left`` of its left beam, ascending, in
-    ``group``): per group its left beams then its right beams, the beam across the edge from
-    each, and the group of each."""
-    right = left + 1
-    counts = np.bincount(group, minlength=n_groups)
-    first = counts.cumsum() - counts  # first edge of each group
-    pos_l = first[group] + np.arange(left.size)  # = 2 first + (index within the group)
-    pos_r = pos_l + counts[group]
-    beams = np.empty(2 * left.size, dtype=np.int64)
-    others = np.empty(2 * left.size, dtype=np.int64)
-    owner = np.empty(2 * left.size, dtype=np.int64)
-    beams[pos_l], beams[pos_r] = left, right
-    others[pos_l], others[pos_r] = right, left
-    owner[pos_l] = owner[pos_r] = group
-    return beams, others, owner
-
-
-def _uniforms(rngs: list[np.random.Generator], owner: NDArray[np.int64]) -> FloatArray:
-    """One uniform in [0, 1) per entry of ``owner`` (ascending group indices) from its
-    group's generator, each group's drawn in one call (as a lone group would draw them)."""
-    out = np.empty(owner.size)
-    counts = np.bincount(owner, minlength=len(rngs)).tolist()
-    at = 0
-    for rng, c in zip(rngs, counts, strict=True):
-        if c:
-            rng.random(out=out[at : at + c])
-            at += c
+def _by_group(beams: list[int], group_size: int) -> list[tuple[int, list[int]]]:
+    """Ascending flat ``beams`` split by group (``group_size`` flat beams each): ``(group,
+    its beams)`` for each group that has some, in group order."""
+    out: list[tuple[int, list[int]]] = []
+    for b in beams:
+        g = b // group_size
+        if out and out[-1][0] == g:
+            out[-1][1].append(b)
+        else:
+            out.append((g, [b]))
     return out
 
 
