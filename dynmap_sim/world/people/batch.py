@@ -134,7 +134,7 @@ class CrowdBatch:
         e, force = driving_force(z, v, goal, lay)  # type: ignore[arg-type]
         n = lay.n
         diff = np.empty((z.shape[0], n + 1 + rows.shape[1]), dtype=np.complex128)
-        np.subtract(z[:, None], z[lay.people_src], out=diff[:, :n])
+        np.subtract(z[:, None], z.take(lay.people_src), out=diff[:, :n])
         np.subtract(z, rz, out=diff[:, n])
         segment_vectors_into(z, rows, diff[:, n + 1 :])
         d = np.abs(diff)
@@ -268,7 +268,7 @@ def _candidate_rows(lay: _Layout, z: NDArray[np.complex128]) -> NDArray[np.compl
     ij = ij.astype(np.int64)
     np.minimum(np.maximum(ij, 0, out=ij), lay.cell_hi, out=ij)  # (np.clip, without its overhead)
     cell = lay.cell_first + ij[:, 0] * lay.cell_ny + ij[:, 1]
-    return lay.segrows[lay.cells[cell]]
+    return lay.segrows.take(lay.cells.take(cell, axis=0), axis=0)  # (see SegmentGrid.rows)
 
 
 def _build_layout(forces: Sequence[SocialForce], ks: tuple[StepConstants, ...]) -> _Layout:
