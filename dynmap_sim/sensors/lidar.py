@@ -304,7 +304,10 @@ class Lidar:
         if (
             lk is None
             or self._labels is None
-            or any(a is not b for a, b in zip(lk, src, strict=True))
+            or lk[0] is not src[0]
+            or lk[1] is not src[1]
+            or lk[2] is not src[2]
+            or lk[3] is not src[3]
         ):
             obj = np.concatenate([geom.segment_object, geom.circle_object, [-1]]).astype(np.int32)
             cls = np.concatenate([geom.segment_class, geom.circle_class, [0]]).astype(np.int8)
