@@ -196,7 +196,7 @@ def _per_shape(values: list[Any], counts: list[int]) -> Any:
     for a single scan: numpy's arithmetic is the same with a scalar)."""
     if len(values) == 1:
         return values[0]
-    return np.repeat(np.array(values), counts)
+    return np.array(values).repeat(counts)
 
 
 def _scan_shapes(
@@ -269,7 +269,7 @@ def _circle_shapes(
     if n_scans == 1:
         return c, c0, inside, cstart, 2.0 * half, segments[0].n + cnear, [cnear.shape[0]]
     # hit index of each circle: its scan's segment count plus its index among its circles
-    scan = np.repeat(np.arange(n_scans), circ_counts).take(cnear)
+    scan = np.arange(n_scans).repeat(circ_counts).take(cnear)
     firsts = itertools.accumulate(circ_counts[:-1], initial=0)
     base = np.array([s.n - f for s, f in zip(segments, firsts, strict=True)])
     counts = np.bincount(scan, minlength=n_scans).tolist()
@@ -324,8 +324,8 @@ def _cast_shapes(
     uc_l = u_l.conjugate()
     if n_scans > 1:
         per_scan = np.arange(n_scans) * n_beams
-        first_beam -= np.repeat(np.concatenate([per_scan, per_scan]), lens)[shape]
-        uc_l = np.tile(uc_l, n_scans)
+        first_beam -= np.concatenate([per_scan, per_scan]).repeat(lens).take(shape)
+        uc_l = np.concatenate([uc_l] * n_scans)
     beam = np.arange(key.shape[0]) - first_beam.repeat(count)
     uc = uc_l.take(beam)  # conj(u) of each pair's beam
     m = int(ends[2 * n_s - 1]) if n_s else 0  # pairs [0, m) are segment pairs
@@ -353,10 +353,12 @@ def _cast_shapes(
         ok_s &= s_neg >= -1.0
         t_all = np.where(ok, t_all, np.nan)
 
-    ranges = np.full(n_scans * n_beams, np.inf)
+    ranges = np.empty(n_scans * n_beams)
+    ranges.fill(np.inf)
     np.fmin.at(ranges, beam, t_all)  # NaN (no hit) never wins
     win = t_all == ranges.take(beam)
-    hit_key = np.full(n_scans * n_beams, -1, dtype=np.int64)
+    hit_key = np.empty(n_scans * n_beams, dtype=np.int64)
+    hit_key.fill(-1)
     hit_key[beam[win]] = key[win]
     # hit index of each shape (segment row or N + circle), and -1 (nothing) at the end
     if n_c:
