@@ -219,10 +219,10 @@ def _scan_shapes(
         sidx, p0, d0 = (np.concatenate(f) for f in zip(*near, strict=True))
     counts = [len(n[0]) for n in near]
     o, rot = _per_shape(origins, counts), _per_shape(rots, counts)
-    a = (p0 - o) * rot  # first endpoint
+    a = np.multiply(p0 - o, rot)  # first endpoint
     d = d0 * rot
     b = a + d  # second endpoint
-    ab = a.conjugate() * b  # imag: a x b = a x d (> 0: b is counter-clockwise of a)
+    ab = np.multiply(a.conjugate(), b)  # imag: a x b = a x d (> 0: b is counter-clockwise of a)
     a_x_d = ab.imag
     span = np.abs(np.arctan2(a_x_d, ab.real))  # bearing interval of each segment [rad]
     first = np.where(a_x_d >= 0.0, a, b)
@@ -258,7 +258,7 @@ def _circle_shapes(
     if not cnear.shape[0]:
         return _no_circles(n_scans)
     rot = _per_shape(rots, circ_counts)
-    c = cw.take(cnear) * (rot if n_scans == 1 else rot.take(cnear))
+    c = np.multiply(cw.take(cnear), rot if n_scans == 1 else rot.take(cnear))
     cr = cr.take(cnear)
     dist = dist.take(cnear)
     c0 = (dist - cr) * (dist + cr)  # |c|^2 - r^2 (<= 0: the sensor is inside it)
@@ -330,18 +330,21 @@ def _cast_shapes(
     uc = uc_l.take(beam)  # conj(u) of each pair's beam
     m = int(ends[2 * n_s - 1]) if n_s else 0  # pairs [0, m) are segment pairs
 
+    # (complex products by np.multiply, not *: numpy may reuse a temporary operand of
+    # >= 256 KB in place and then swap the operands, and a complex product's last bits
+    # depend on their order; many scans at once would not get one scan's numbers)
     t_all = np.empty(key.shape[0])  # the range of each pair (NaN: no hit)
     with np.errstate(invalid="ignore", divide="ignore"):
         # segments: t = (a x d) / (u x d), s = (a x u) / (u x d); here s_neg = -s
         ks = key[:m]
         ucs = uc[:m]
-        inv = 1.0 / (ucs * d.take(ks)).imag
+        inv = 1.0 / np.multiply(ucs, d.take(ks)).imag
         np.multiply(a_x_d.take(ks), inv, out=t_all[:m])
-        s_neg = (a.take(ks) * ucs).imag * inv
+        s_neg = np.multiply(a.take(ks), ucs).imag * inv
         if n_c:
             # circles: t = b - sqrt(b^2 - c0) with b = u . c (0 from inside the circle)
             kc = key[m:] - n_s
-            bdot = (uc[m:] * c.take(kc)).real
+            bdot = np.multiply(uc[m:], c.take(kc)).real
             tc = np.subtract(bdot, np.sqrt(bdot * bdot - c0.take(kc)), out=t_all[m:])
             if inside.any():
                 tc[inside.take(kc)] = 0.0
