@@ -21,12 +21,21 @@ per-round ratios is reported, so a busy machine slows both sides of a round alik
     python benchmarks/bench_peers.py [--steps 300] [--rounds 5] [--backend numpy|numba|both]
         [--only peers|lab|vector] [--envs 8,16]
 
+``--fingerprint`` times nothing: it prints a sha256 (16 hex digits) of every observation,
+reward, flag and info of fixed runs per backend (lab day 1 run 1, the lab lunch crowd,
+apartment day 15, the 10-people room, and vector envs of 4 lab and 4 apartment envs through
+autoresets), the check that a speed-up keeps the numbers bit for bit. With numba blocked:
+``python -c "import sys, runpy; sys.modules['numba'] = None;
+sys.argv = ['bench_peers.py', '--fingerprint']; runpy.run_path('benchmarks/bench_peers.py',
+run_name='__main__')"``.
+
 Timing thresholds are never checked in tests; this prints the figures and the issue's targets.
 """
 
 from __future__ import annotations
 
 import argparse
+import hashlib
 import math
 import statistics
 import sys
@@ -34,12 +43,14 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
 
 import dynmap_sim  # noqa: F401  (registers the envs)
 from dynmap_sim.env import DynMapEnv
+from dynmap_sim.vector_env import DynMapVectorEnv
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_sim import lunch_run, naive_scan, naive_space  # noqa: E402
@@ -356,6 +367,74 @@ def vector(steps: int, rounds: int, n: int = 8) -> None:
     print(f"  make_vec {a:,.0f}, SyncVectorEnv {b:,.0f}: {ratio:.2f}x")
 
 
+def _feed(h: Any, x: object) -> None:
+    """Hash ``x`` (nested dicts, tuples, lists, arrays and scalars) into ``h``."""
+    if isinstance(x, dict):
+        for k in sorted(x):
+            h.update(k.encode())
+            _feed(h, x[k])
+    elif isinstance(x, (tuple, list)):
+        for v in x:
+            _feed(h, v)
+    else:
+        a = np.asarray(x)
+        if a.dtype == object:
+            h.update(repr(a.tolist()).encode())
+        else:
+            h.update(f"{a.dtype}{a.shape}".encode())
+            h.update(np.ascontiguousarray(a).tobytes())
+
+
+def _fingerprint_actions(n: int, k: int = 1) -> np.ndarray:
+    """``(n, k, 2)`` wavy commands, a different phase for each of ``k`` envs."""
+    t = np.arange(n)[:, None] * 0.1 + np.arange(k)[None, :] * 0.7
+    v, w = 0.4 + 0.5 * np.sin(0.13 * t), 1.2 * np.sin(0.31 * t)
+    return np.stack([v, w], axis=-1).astype(np.float32)
+
+
+def _fingerprint_single(env: DynMapEnv, options: dict | None, steps: int = 300) -> str:
+    h = hashlib.sha256()
+    _feed(h, env.reset(seed=3, options=options))
+    for a in _fingerprint_actions(steps)[:, 0]:
+        out = env.step(a)
+        _feed(h, out)
+        if out[2] or out[3]:
+            _feed(h, env.reset())
+    return h.hexdigest()[:16]
+
+
+def _fingerprint_vector(world: str, backend: str, steps: int, max_steps: int, opts) -> str:
+    vec = DynMapVectorEnv(
+        num_envs=4, world=world, max_episode_steps=max_steps, sensor_options={"backend": backend}
+    )
+    h = hashlib.sha256()
+    _feed(h, vec.reset(seed=5, options=opts))
+    for a in _fingerprint_actions(steps, 4):
+        _feed(h, vec.step(a))
+    return h.hexdigest()[:16]
+
+
+def fingerprint(backends: list[str]) -> None:
+    """Print the sha256 of fixed single-env and vector-env runs for each backend."""
+    for b in backends:
+        lab = DynMapEnv(world="lab", sensor_options={"backend": b})
+        day, run = lunch_run(lab)
+        with tempfile.TemporaryDirectory() as d:
+            room = _fingerprint_single(our_env(Path(d), 10, b), None)
+        rows = [
+            ("lab d1r1", _fingerprint_single(lab, {"day": 1, "run": 1})),
+            (f"lab lunch d{day}r{run}", _fingerprint_single(lab, {"day": day, "run": run})),
+            ("apartment d15", _fingerprint_single(
+                DynMapEnv(world="apartment", sensor_options={"backend": b}), {"day": 15, "run": 1}
+            )),
+            ("room 10 people", room),
+            ("vector lab x4", _fingerprint_vector("lab", b, 120, 45, {"day": 1, "run": 2})),
+            ("vector apartment x4", _fingerprint_vector("apartment", b, 60, 25, None)),
+        ]  # fmt: skip
+        for name, digest in rows:
+            print(f"{b} {name}: {digest}", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=300, help="steps per round")
@@ -365,6 +444,9 @@ def main() -> None:
     ap.add_argument(
         "--envs", default="8", help="vector case: comma-separated numbers of envs (e.g. 8,16)"
     )
+    ap.add_argument(
+        "--fingerprint", action="store_true", help="print sha256s of fixed runs instead (no timing)"
+    )
     args = ap.parse_args()
     from dynmap_sim.jit import numba_available
 
@@ -372,6 +454,9 @@ def main() -> None:
     if "numba" in backends and not numba_available():
         print('numba is not installed (extra "fast"): numba rows skipped')
         backends.remove("numba")
+    if args.fingerprint:
+        fingerprint(backends)
+        return
     if args.only in (None, "peers"):
         peers_table(args.steps, args.rounds, backends)
     if args.only in (None, "lab"):

@@ -531,8 +531,9 @@ class InfoRows:
         self._no_people = np.zeros((n, max_people, 3))  # padding rows (inf, inf, 0)
         self._no_people[:, :, :2] = np.inf
         self._labels: _LabelRows | None = None
-        # the (row, person) index of each person written by _people_rows, and for which
-        # (rows, counts) it was made
+        # the people rows as one (n * max_people, 3) view; the flat row of each person
+        # written by _people_rows, and for which (rows, counts) it was made
+        self._people_flat = self.people.reshape(-1, 3)
         self._people_at: tuple[Any, Any] = (None, None)
 
     def put(self, i: int, obs: dict[str, np.ndarray], info: dict[str, Any]) -> None:
@@ -604,10 +605,10 @@ class InfoRows:
         if self._people_at[0] != key:  # (the same rows and counts from step to step)
             env = np.repeat(np.array(at), counts)
             person = np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts)
-            self._people_at = (key, (env, person))
-        env, person = self._people_at[1]
-        people[env, person, :2] = pos
-        people[env, person, 2] = np.arctan2(vel[:, 1], vel[:, 0])  # as _people_into
+            self._people_at = (key, env * max_people + person)
+        flat = self._people_at[1]
+        self._people_flat[flat, :2] = pos
+        self._people_flat[flat, 2] = np.arctan2(vel[:, 1], vel[:, 0])  # as _people_into
 
     def infos(self) -> dict[str, Any]:
         """The batched infos (fresh arrays), as Gymnasium's ``VectorEnv._add_info`` batches

@@ -304,7 +304,10 @@ class Lidar:
         if (
             lk is None
             or self._labels is None
-            or any(a is not b for a, b in zip(lk, src, strict=True))
+            or lk[0] is not src[0]
+            or lk[1] is not src[1]
+            or lk[2] is not src[2]
+            or lk[3] is not src[3]
         ):
             obj = np.concatenate([geom.segment_object, geom.circle_object, [-1]]).astype(np.int32)
             cls = np.concatenate([geom.segment_class, geom.circle_class, [0]]).astype(np.int8)
@@ -407,11 +410,15 @@ class Lidar:
         nz = self.noise
         spec = self.spec
         hit = r <= spec.range_max_m
-        sigma = (
-            np.maximum(nz.sigma_rel * np.where(hit, r, 0.0), nz.sigma_m)
-            if nz.sigma_rel
-            else nz.sigma_m
-        )
+        # the hits' ranges, NaN elsewhere (also the mixed pixels' edge test below)
+        rn = np.where(hit, r, np.nan) if nz.p_mixed > 0.0 or nz.sigma_rel else r
+        if not nz.sigma_rel:
+            sigma = nz.sigma_m
+        elif nz.sigma_m > 0.0:
+            # fmax skips the NaN of no-hit beams: sigma_m there, as max(sigma_rel * 0, sigma_m)
+            sigma = np.fmax(nz.sigma_rel * rn, nz.sigma_m)
+        else:
+            sigma = np.maximum(nz.sigma_rel * np.where(hit, r, 0.0), nz.sigma_m)
         if len(rngs) == 1:
             out = rngs[0].standard_normal(r.shape)
         else:
@@ -424,26 +431,14 @@ class Lidar:
         if nz.p_mixed > 0.0:
             # depth discontinuities between neighbours i, i+1 (NaN for no-hit beams: no edge)
             # (NaN arithmetic and comparisons are quiet: no errstate needed)
-            rn = np.where(hit, r, np.nan)
             edge = np.abs(rn[:, 1:] - rn[:, :-1]) > nz.mixed_jump_m
             e = edge.ravel().nonzero()[0]
             if e.size:
                 # flat index of the left beam of each edge (rows are n_beams long)
                 left = e + e // (spec.n_beams - 1) if r.shape[0] > 1 else e
-                if len(rngs) == 1:
-                    right = left + 1
-                    beams = np.concatenate([left, right])
-                    others = np.concatenate([right, left])
-                    pick = rngs[0].random(beams.size) < nz.p_mixed
-                    beams, others = beams[pick], others[pick]
-                    w = rngs[0].random(beams.size)
-                else:
-                    beams, others, owner = _edge_beams(left, left // group_size, len(rngs))
-                    pick = _uniforms(rngs, owner) < nz.p_mixed
-                    beams, others = beams[pick], others[pick]
-                    w = _uniforms(rngs, owner[pick])
-                r_beams = flat_r[beams]
-                flat_out[beams] = r_beams + w * (flat_r[others] - r_beams)
+                # each group's edges with its generator (its draws in a lone group's order)
+                for g, left_g in _by_group(left.tolist(), group_size):
+                    _mixed_pixels(flat_out, flat_r, left_g, rngs[g], nz.p_mixed)
         # one uniform per beam picks at most one of the rare events (disjoint intervals)
         p1 = nz.p_dropout
         p2 = p1 + nz.p_short
@@ -452,52 +447,62 @@ class Lidar:
             u = rngs[0].random(r.shape) if len(rngs) == 1 else _row_draws(rngs, r.shape, "random")
             rare = ((u < p3) & hit).ravel().nonzero()[0]
             if rare.size:
-                ur = u.reshape(-1)[rare]
-                rmin = spec.range_min_m
-                if len(rngs) == 1:
-                    short = rngs[0].random(rare.size)
-                else:
-                    short = _uniforms(rngs, rare // group_size)
-                flat_out[rare] = np.where(
-                    ur < p1,
-                    np.inf,
-                    np.where(ur < p2, rmin + short * (flat_r[rare] - rmin), np.nan),
-                )
+                flat_u = u.reshape(-1)
+                for g, rare_g in _by_group(rare.tolist(), group_size):
+                    _rare_events(flat_out, flat_r, flat_u, rare_g, rngs[g], p1, p2, spec)
         out[out < spec.range_min_m] = -np.inf
         out[out > spec.range_max_m] = np.inf
         return out.astype(np.float32)
 
 
-def _edge_beams(
-    left: NDArray[np.int64], group: NDArray[np.int64], n_groups: int
-) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.int64]]:
-    """The two beams of each edge (flat index ``left`` of its left beam, ascending, in
-    ``group``): per group its left beams then its right beams, the beam across the edge from
-    each, and the group of each."""
-    right = left + 1
-    counts = np.bincount(group, minlength=n_groups)
-    first = counts.cumsum() - counts  # first edge of each group
-    pos_l = first[group] + np.arange(left.size)  # = 2 first + (index within the group)
-    pos_r = pos_l + counts[group]
-    beams = np.empty(2 * left.size, dtype=np.int64)
-    others = np.empty(2 * left.size, dtype=np.int64)
-    owner = np.empty(2 * left.size, dtype=np.int64)
-    beams[pos_l], beams[pos_r] = left, right
-    others[pos_l], others[pos_r] = right, left
-    owner[pos_l] = owner[pos_r] = group
-    return beams, others, owner
+def _mixed_pixels(
+    out: FloatArray, r: FloatArray, left: list[int], rng: np.random.Generator, p_mixed: float
+) -> None:
+    """Mixed pixels of one scan (true ranges ``r``, readings ``out``) at the edges between
+    beams ``left[k]`` and ``left[k] + 1``: each edge's two beams (all left beams, then all
+    right beams) are picked with probability ``p_mixed`` and read a range uniformly between
+    the two surfaces. The draws and the arithmetic of the array form, one beam at a time
+    (the edges of a scan are a handful)."""
+    beams = left + [b + 1 for b in left]
+    others = [b + 1 for b in left] + left
+    pick = (rng.random(len(beams)) < p_mixed).tolist()
+    chosen = [(b, o) for b, o, p in zip(beams, others, pick, strict=True) if p]
+    w = rng.random(len(chosen)).tolist()
+    for (b, o), wk in zip(chosen, w, strict=True):
+        rb = r.item(b)
+        out[b] = rb + wk * (r.item(o) - rb)
 
 
-def _uniforms(rngs: list[np.random.Generator], owner: NDArray[np.int64]) -> FloatArray:
-    """One uniform in [0, 1) per entry of ``owner`` (ascending group indices) from its
-    group's generator, each group's drawn in one call (as a lone group would draw them)."""
-    out = np.empty(owner.size)
-    counts = np.bincount(owner, minlength=len(rngs)).tolist()
-    at = 0
-    for rng, c in zip(rngs, counts, strict=True):
-        if c:
-            rng.random(out=out[at : at + c])
-            at += c
+def _rare_events(
+    out: FloatArray,
+    r: FloatArray,
+    u: FloatArray,
+    rare: list[int],
+    rng: np.random.Generator,
+    p1: float,
+    p2: float,
+    spec: LaserSpec,
+) -> None:
+    """Dropouts (``u < p1``), short returns (``u < p2``) and invalid readings of the beams
+    ``rare`` of one scan (true ranges ``r``, readings ``out``, uniforms ``u``): one short
+    range drawn per rare beam, as the array form draws them, and the same arithmetic."""
+    rmin = spec.range_min_m
+    short = rng.random(len(rare)).tolist()
+    for i, sk in zip(rare, short, strict=True):
+        ui = u.item(i)
+        out[i] = math.inf if ui < p1 else (rmin + sk * (r.item(i) - rmin) if ui < p2 else math.nan)
+
+
+def _by_group(beams: list[int], group_size: int) -> list[tuple[int, list[int]]]:
+    """Ascending flat ``beams`` split by group (``group_size`` flat beams each): ``(group,
+    its beams)`` for each group that has some, in group order."""
+    out: list[tuple[int, list[int]]] = []
+    for b in beams:
+        g = b // group_size
+        if out and out[-1][0] == g:
+            out[-1][1].append(b)
+        else:
+            out.append((g, [b]))
     return out
 
 

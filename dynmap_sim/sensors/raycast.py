@@ -19,6 +19,7 @@ floating-point precision; see ``tests/sensors/test_raycast.py``.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
@@ -195,7 +196,7 @@ def _per_shape(values: list[Any], counts: list[int]) -> Any:
     for a single scan: numpy's arithmetic is the same with a scalar)."""
     if len(values) == 1:
         return values[0]
-    return np.repeat(np.array(values), counts)
+    return np.array(values).repeat(counts)
 
 
 def _scan_shapes(
@@ -218,10 +219,10 @@ def _scan_shapes(
         sidx, p0, d0 = (np.concatenate(f) for f in zip(*near, strict=True))
     counts = [len(n[0]) for n in near]
     o, rot = _per_shape(origins, counts), _per_shape(rots, counts)
-    a = (p0 - o) * rot  # first endpoint
+    a = np.multiply(p0 - o, rot)  # first endpoint
     d = d0 * rot
     b = a + d  # second endpoint
-    ab = a.conjugate() * b  # imag: a x b = a x d (> 0: b is counter-clockwise of a)
+    ab = np.multiply(a.conjugate(), b)  # imag: a x b = a x d (> 0: b is counter-clockwise of a)
     a_x_d = ab.imag
     span = np.abs(np.arctan2(a_x_d, ab.real))  # bearing interval of each segment [rad]
     first = np.where(a_x_d >= 0.0, a, b)
@@ -257,9 +258,9 @@ def _circle_shapes(
     if not cnear.shape[0]:
         return _no_circles(n_scans)
     rot = _per_shape(rots, circ_counts)
-    c = cw[cnear] * (rot if n_scans == 1 else rot[cnear])
-    cr = cr[cnear]
-    dist = dist[cnear]
+    c = np.multiply(cw.take(cnear), rot if n_scans == 1 else rot.take(cnear))
+    cr = cr.take(cnear)
+    dist = dist.take(cnear)
     c0 = (dist - cr) * (dist + cr)  # |c|^2 - r^2 (<= 0: the sensor is inside it)
     inside = c0 <= 0.0
     half = np.arcsin(cr / np.maximum(dist, cr))  # half the angle the circle subtends
@@ -268,11 +269,11 @@ def _circle_shapes(
     if n_scans == 1:
         return c, c0, inside, cstart, 2.0 * half, segments[0].n + cnear, [cnear.shape[0]]
     # hit index of each circle: its scan's segment count plus its index among its circles
-    scan = np.repeat(np.arange(n_scans), circ_counts)[cnear]
-    firsts = np.cumsum(circ_counts) - circ_counts
-    base = np.array([s.n for s in segments]) - firsts
+    scan = np.arange(n_scans).repeat(circ_counts).take(cnear)
+    firsts = itertools.accumulate(circ_counts[:-1], initial=0)
+    base = np.array([s.n - f for s, f in zip(segments, firsts, strict=True)])
     counts = np.bincount(scan, minlength=n_scans).tolist()
-    return c, c0, inside, cstart, 2.0 * half, base[scan] + cnear, counts
+    return c, c0, inside, cstart, 2.0 * half, base.take(scan) + cnear, counts
 
 
 def _cast_shapes(
@@ -323,42 +324,51 @@ def _cast_shapes(
     uc_l = u_l.conjugate()
     if n_scans > 1:
         per_scan = np.arange(n_scans) * n_beams
-        first_beam -= np.repeat(np.concatenate([per_scan, per_scan]), lens)[shape]
-        uc_l = np.tile(uc_l, n_scans)
+        first_beam -= np.concatenate([per_scan, per_scan]).repeat(lens).take(shape)
+        uc_l = np.concatenate([uc_l] * n_scans)
     beam = np.arange(key.shape[0]) - first_beam.repeat(count)
-    uc = uc_l[beam]  # conj(u) of each pair's beam
+    uc = uc_l.take(beam)  # conj(u) of each pair's beam
     m = int(ends[2 * n_s - 1]) if n_s else 0  # pairs [0, m) are segment pairs
 
+    # (complex products by np.multiply, not *: numpy may reuse a temporary operand of
+    # >= 256 KB in place and then swap the operands, and a complex product's last bits
+    # depend on their order; many scans at once would not get one scan's numbers)
+    t_all = np.empty(key.shape[0])  # the range of each pair (NaN: no hit)
     with np.errstate(invalid="ignore", divide="ignore"):
         # segments: t = (a x d) / (u x d), s = (a x u) / (u x d); here s_neg = -s
         ks = key[:m]
         ucs = uc[:m]
-        inv = 1.0 / (ucs * d[ks]).imag
-        t = a_x_d[ks] * inv
-        s_neg = (a[ks] * ucs).imag * inv
-        ok = (t >= 0.0) & (t <= r_max) & (s_neg <= 0.0) & (s_neg >= -1.0)
-        t_all = np.where(ok, t, np.nan)
+        inv = 1.0 / np.multiply(ucs, d.take(ks)).imag
+        np.multiply(a_x_d.take(ks), inv, out=t_all[:m])
+        s_neg = np.multiply(a.take(ks), ucs).imag * inv
         if n_c:
             # circles: t = b - sqrt(b^2 - c0) with b = u . c (0 from inside the circle)
             kc = key[m:] - n_s
-            bdot = (uc[m:] * c[kc]).real
-            tc = bdot - np.sqrt(bdot * bdot - c0[kc])
+            bdot = np.multiply(uc[m:], c.take(kc)).real
+            tc = np.subtract(bdot, np.sqrt(bdot * bdot - c0.take(kc)), out=t_all[m:])
             if inside.any():
-                tc[inside[kc]] = 0.0
-            okc = (tc >= 0.0) & (tc <= r_max)
-            t_all = np.concatenate([t_all, np.where(okc, tc, np.nan)])
+                tc[inside.take(kc)] = 0.0
+        # a hit: 0 <= t <= r_max, and 0 <= s <= 1 on a segment
+        ok = t_all >= 0.0
+        ok &= t_all <= r_max
+        ok_s = ok[:m]
+        ok_s &= s_neg <= 0.0
+        ok_s &= s_neg >= -1.0
+        t_all = np.where(ok, t_all, np.nan)
 
-    ranges = np.full(n_scans * n_beams, np.inf)
+    ranges = np.empty(n_scans * n_beams)
+    ranges.fill(np.inf)
     np.fmin.at(ranges, beam, t_all)  # NaN (no hit) never wins
-    win = t_all == ranges[beam]
-    hit_key = np.full(n_scans * n_beams, -1, dtype=np.int64)
+    win = t_all == ranges.take(beam)
+    hit_key = np.empty(n_scans * n_beams, dtype=np.int64)
+    hit_key.fill(-1)
     hit_key[beam[win]] = key[win]
     # hit index of each shape (segment row or N + circle), and -1 (nothing) at the end
     if n_c:
         shape_id = np.concatenate([ids, cids, [-1]])
     else:
         shape_id = np.concatenate([ids, [-1]])
-    return ranges.reshape(n_scans, n_beams), shape_id[hit_key].reshape(n_scans, n_beams)
+    return ranges.reshape(n_scans, n_beams), shape_id.take(hit_key).reshape(n_scans, n_beams)
 
 
 def beam_directions(

@@ -9,6 +9,7 @@ the run started, so weeks of stepping do not drift.
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 from typing import Any
@@ -409,14 +410,14 @@ class WorldBatch:
         # the bodies near each robot (World._sync_bodies), tested for all people at once
         z = self._crowds.positions()
         counts = [w._crowd.n for w, _, _ in batch]
-        rz = np.repeat(np.array([complex(xy[0], xy[1]) for _, xy, _ in batch]), counts)
-        near_m = np.repeat(np.array([_near_m(dt_s, rr) for _, _, rr in batch]), counts)
+        rz = np.array([complex(xy[0], xy[1]) for _, xy, _ in batch]).repeat(counts)
+        near_m = np.array([_near_m(dt_s, rr) for _, _, rr in batch]).repeat(counts)
         synced = np.concatenate([w._synced for w, _, _ in batch])
         near = _near(z, synced, rz, near_m)
-        first = np.cumsum([0, *counts])  # each world's first row, and the end
-        near_at = np.flatnonzero(near)  # (rows of all worlds, ascending)
-        cuts = np.searchsorted(near_at, first).tolist()
-        rows0 = first[:-1].tolist()
+        first = list(itertools.accumulate(counts, initial=0))  # each world's first row, end
+        near_at = near.nonzero()[0]  # (rows of all worlds, ascending)
+        cuts = near_at.searchsorted(first).tolist()
+        rows0 = first[:-1]
         for (w, _, _), a, b, row0 in zip(batch, cuts[:-1], cuts[1:], rows0, strict=True):
             w._stale = True  # (as World._sync_bodies with a robot)
             if b > a:

