@@ -132,3 +132,40 @@ def test_recovery_occluded_and_min_share_are_checked():
             assert "static-mcl" in str(exc) and next(iter(bad)) in str(exc)
         else:
             raise AssertionError(f"{bad} accepted")
+
+
+def test_random_poses_the_scan_contradicts_are_not_injected():
+    """``recovery_through_max_share``: at the true pose no reading passes through a wall of
+    the map, at most random poses (random headings) many do; with the option the global
+    recovery injects only the random poses at or below the share: fewer than without it, from
+    the same draws."""
+    segs = room()
+    grid = OccupancyGrid.from_segments(segs, free_seed_xy_m=(1, 1))
+    pose = np.array([1.0, 2.5, 0.0])
+    scan = raycast(pose, LASER.angles(), segs, LASER.range_max_m)
+    injected = {}
+    for share in (0.0, 0.5):
+        cfg = replace(TUNED, recovery_through_max_share=share, recovery_max_fraction=0.5)
+        f = AMCLFilter(grid, LASER, cfg)
+        rng = np.random.default_rng(11)
+        f.init_gaussian(pose, np.diag([0.02**2, 0.02**2, 0.01**2]), rng)
+        f.correct(scan)
+        # the gate forced open: half of the draws are random pose candidates
+        f.w_slow, f.w_fast, f.n_low_updates = 1.0, 1e-6, cfg.recovery_min_updates
+        f.resample(rng)
+        injected[share] = f.n_random_injected
+        if share:
+            assert f.through_shares(pose[None, :])[0] == 0.0
+            shares = f.through_shares(f.random_poses(300, rng))
+            assert 0.05 < np.mean(shares <= share) < 0.95
+    assert 0 < injected[0.5] < 0.95 * injected[0.0]
+
+
+def test_recovery_through_fields_are_checked():
+    for bad in ({"recovery_through_max_share": 1.5}, {"recovery_through_margin_m": -0.1}):
+        try:
+            replace(TUNED, **bad)
+        except ValueError as exc:
+            assert next(iter(bad)) in str(exc)
+        else:
+            raise AssertionError(f"{bad} accepted")
