@@ -177,15 +177,19 @@ class MCLConfig:
     #: beams (``recovery_distance_filter_m`` > 0).
     recovery_min_beam_share: float = 0.5
     #: ... and a scan that leaves fewer: ``all-beams`` averages all valid beams (a scan mostly
-    #: shorter than the map predicts, e.g. after a kidnapping into a smaller room, says "wrong
-    #: pose" as loudly as "crowd"); ``hold`` leaves the recovery averages as they are for
-    #: this update (such a scan says nothing about the pose: Fox et al. 1999's short readings
-    #: are explained by unmapped objects, so the beams that could tell a wrong pose are too
-    #: few). Why ``hold`` exists: in the hall world (tuned for nowhere) the evening crowd and
-    #: the unmapped exhibition panels make 65-75 % of the readings short at the *true* pose
-    #: for 15-20 s, ``all-beams`` then feeds -2 to -3.5 per beam into ``w_fast``, the gate
-    #: opens and random poses win 6-11 m away, while at that pose almost no reading is
-    #: longer than the map allows (0-8 %: nothing contradicts it).
+    #: shorter than the map predicts, e.g. after a kidnapping into a smaller room, says "wrong pose"
+    #: as loudly as "crowd"); ``hold`` leaves the recovery averages as they are for this update
+    #: while the gate is not counting (``n_low_updates == 0``: such a scan says nothing about the
+    #: pose, Fox et al. 1999's short readings are explained by unmapped objects and the beams that
+    #: could tell a wrong pose are too few) and averages all beams once it counts (the fit had
+    #: fallen before: in the apartment's kidnapping trials a robot carried into a smaller room is
+    #: first seen through the old place's walls, then the cloud reaches open space where every
+    #: reading is short; holding there kept it lost for 35 s, counting found it in 8 s). Why
+    #: ``hold`` exists: in the hall world (tuned for nowhere) the evening crowd and the unmapped
+    #: exhibition panels make 65-75 % of the readings short at the *true* pose for 15-20 s,
+    #: ``all-beams`` then feeds -2 to -3.5 per beam into ``w_fast``, the gate opens and random poses
+    #: win 6-11 m away, while at that pose almost no reading is longer than the map allows (0-8 %:
+    #: nothing contradicts it).
     recovery_occluded: str = "all-beams"
     #: Negative information for the global recovery's random poses (0 off, as nav2): a random
     #: pose at which more than this share of the scan's valid readings end more than
