@@ -324,9 +324,16 @@ class ExperimentRunner:
         """
         from tqdm.auto import tqdm
 
+        class Bar(tqdm):  # type: ignore[misc, valid-type]
+            """The progress bar without tqdm's monitor thread (it would outlive the bar): a
+            bar updated once a run does not need it, and the report forks after the run
+            (:func:`dynmap_sim.analysis.report.write_report`) where no other thread runs."""
+
+            monitor_interval = 0
+
         n = len(self.slots)
         last = n if stop_after is None else min(n, stop_after)
-        bar = tqdm(
+        bar = Bar(
             total=n,
             initial=self.start_index,
             disable=not progress,
