@@ -551,6 +551,7 @@ def _navigation(db: ResultsDB, out: Path) -> StudyReport | None:
 def _study_reports(out: Path) -> list[StudyReport]:
     """Each paper study that applies writes its figures, files and a summary section."""
     with ResultsDB.open(out) as db:
+        db.remember_per_scan()
         return [st.write(db, out) for st in all_studies() if st.applies(db)]
 
 
@@ -613,6 +614,7 @@ def write_report(out_dir: str | Path) -> list[Path]:
 def _write_report_beside(out: Path, reports: Any) -> list[Path]:
     """:func:`write_report`'s own part; ``reports``: the studies' reports to come."""
     with ResultsDB.open(out) as db:
+        db.remember_per_scan()
         written = [write_per_day_csv(db, out / "per_day.csv")]
         pc_rows = point_class_rows(db)
         if pc_rows:
