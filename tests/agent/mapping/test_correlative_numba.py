@@ -5,18 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dynmap_sim.agent.mapping import correlative_numba
 from dynmap_sim.agent.mapping.correlative_matcher import LikelihoodTable, correlative_match
-
-BACKENDS = [
-    "python",
-    pytest.param(
-        "numba",
-        marks=pytest.mark.skipif(
-            not correlative_numba.numba_available(), reason="numba (extra 'fast') not installed"
-        ),
-    ),
-]
+from tests.agent.maps.test_sample_set import UPDATE_KERNELS as BACKENDS  # python, numba
 
 
 @pytest.mark.parametrize("backend", BACKENDS)

@@ -9,6 +9,7 @@ from dynmap_sim.agent.maps import local_map_numba
 from dynmap_sim.agent.maps.current_map import synthesize_current_map
 from dynmap_sim.agent.maps.dynamic_map import DynamicMap
 from dynmap_sim.agent.maps.local_map import TABLE1, LocalMap
+from tests.agent.maps.test_sample_set import UPDATE_KERNELS  # python, numba
 
 
 def test_table1_memory():
@@ -163,18 +164,7 @@ def test_snapshot_points_are_the_sub_map_medians(room, scan_fn):
             assert np.abs(got - want).max() < 1e-3
 
 
-LEARN_BACKENDS = [
-    "python",
-    pytest.param(
-        "numba",
-        marks=pytest.mark.skipif(
-            not local_map_numba.numba_available(), reason="numba not installed"
-        ),
-    ),
-]
-
-
-@pytest.mark.parametrize("backend", LEARN_BACKENDS)
+@pytest.mark.parametrize("backend", UPDATE_KERNELS)
 @pytest.mark.parametrize("seed", range(6))
 def test_compiled_projection_learns_the_numpy_samples(backend, seed):
     """learn_levels with the compiled projection (local_map_numba.polar_rays) leaves every
