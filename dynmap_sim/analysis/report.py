@@ -548,9 +548,52 @@ def _navigation(db: ResultsDB, out: Path) -> StudyReport | None:
     return rep
 
 
+def _study_reports(out: Path) -> list[StudyReport]:
+    """Each paper study that applies writes its figures, files and a summary section."""
+    with ResultsDB.open(out) as db:
+        db.remember_per_scan()
+        return [st.write(db, out) for st in all_studies() if st.applies(db)]
+
+
+class _InProcess:
+    """What :func:`_studies_beside` gives where there is no second process: ``submit`` runs
+    the call when its result is asked for."""
+
+    def __init__(self) -> None:
+        self._call: Any = None
+
+    def submit(self, fn: Any, *args: Any) -> _InProcess:
+        self._call = (fn, args)
+        return self
+
+    def result(self) -> Any:
+        fn, args = self._call
+        return fn(*args)
+
+    def shutdown(self, wait: bool = True) -> None:
+        pass
+
+
+def _studies_beside() -> Any:
+    """An executor for the studies' part of the report: a forked process beside this one
+    (the studies and the rest take about the same time; a fork keeps the loaded modules and
+    matplotlib's backend) when there are two cores and this process has no other thread to
+    fork with, else :class:`_InProcess`. Either way the files are the same."""
+    import multiprocessing as mp
+    import os
+    import threading
+    from concurrent.futures import ProcessPoolExecutor
+
+    fork = "fork" in mp.get_all_start_methods() and threading.active_count() == 1
+    if (os.cpu_count() or 1) < 2 or not fork:
+        return _InProcess()
+    return ProcessPoolExecutor(1, mp_context=mp.get_context("fork"))
+
+
 def write_report(out_dir: str | Path) -> list[Path]:
     """Write figures, ``summary.md`` and ``per_day.csv`` (and ``point_classes_per_day.csv``
-    when a localizer reported point classes) into a results folder."""
+    when a localizer reported point classes) into a results folder. The paper studies' part
+    runs in a second process meanwhile (:func:`_studies_beside`)."""
     import matplotlib
 
     matplotlib.use("Agg", force=True)
@@ -560,6 +603,18 @@ def write_report(out_dir: str | Path) -> list[Path]:
             from dynmap_sim.errors import InputError
 
             raise InputError(f"{out}: no finished run to report on")
+    pool = _studies_beside()
+    try:
+        reports = pool.submit(_study_reports, out)  # forked before this process opens the db
+        return _write_report_beside(out, reports)
+    finally:
+        pool.shutdown(wait=True)
+
+
+def _write_report_beside(out: Path, reports: Any) -> list[Path]:
+    """:func:`write_report`'s own part; ``reports``: the studies' reports to come."""
+    with ResultsDB.open(out) as db:
+        db.remember_per_scan()
         written = [write_per_day_csv(db, out / "per_day.csv")]
         pc_rows = point_class_rows(db)
         if pc_rows:
@@ -576,9 +631,9 @@ def write_report(out_dir: str | Path) -> list[Path]:
         lik = _fig_likelihood(db, out / "likelihood_certainty.png")
         if lik is not None:
             figs.append(lik)
-        # each paper study that applies adds its figures, files and a summary section
-        studies = [st.write(db, out) for st in all_studies() if st.applies(db)]
         nav = _navigation(db, out)
+        # each paper study that applies adds its figures, files and a summary section
+        studies = list(reports.result())
         if nav is not None:
             studies.insert(0, nav)
         for rep in studies:

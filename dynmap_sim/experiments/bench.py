@@ -13,6 +13,9 @@ arrays, so the numbers are bit-identical whichever way they were computed.
 After each run every localizer is pickled (:attr:`LocalizerOutput.state`): that is the
 checkpoint's copy, and the pool moves a localizer to another worker by sending it that
 state (it balances the workers by the busy time each localizer took in the last run).
+Up to :attr:`LocalizerPool.depth` runs are in flight at once: a worker takes the next run's
+stream as it arrives (a reader thread) and starts on it as soon as it is done with the one
+before, so the simulation and the localizers never wait for each other within a run.
 Worker processes use the ``spawn`` start method, ignore SIGINT (the main process stops them),
 exit when the main process goes away, and report a failing localizer by its label; a dead
 worker is noticed through its process sentinel, so the main process never hangs on it.
@@ -24,10 +27,12 @@ import math
 import multiprocessing as mp
 import os
 import pickle
+import queue
 import signal
 import threading
 import time
 import traceback
+from collections import deque
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -350,6 +355,7 @@ class InProcessLocalizers:
     """All localizers in the calling process (``workers=1``): :meth:`submit` does the work."""
 
     pipelined = False
+    depth = 1
 
     def __init__(self, labels: Sequence[str], localizers: Sequence[Localizer]) -> None:
         self.labels = list(labels)
@@ -380,20 +386,37 @@ def _exit_with_parent(parent_pid: int) -> None:
             os._exit(1)
 
 
-def _worker_main(conn: Connection, parent_pid: int) -> None:
-    """A worker's loop: hold some localizers, run each submitted stream through them.
-
-    Messages: ``("adopt", {k: (label, pickled)})``, ``("drop", [k, ...])``,
-    ``("run", RunStream)``, ``("stop",)``. Each gets one reply: ``("ok", payload)`` or
-    ``("error", kind, message, traceback)``.
-    """
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the main process's business
-    threading.Thread(target=_exit_with_parent, args=(parent_pid,), daemon=True).start()
-    locs: dict[int, tuple[str, Localizer]] = {}
+def _receive(conn: Connection, inbox: queue.SimpleQueue) -> None:
+    """Reader thread of a worker: each message into ``inbox`` as it arrives (the main process
+    hands over the next run while this one is localized); None once the main process left
+    (or broke off a message), after ``("stop",)``."""
     while True:
         try:
             msg = conn.recv()
         except Exception:  # noqa: BLE001 - the main process left (or broke off a message)
+            inbox.put(None)
+            return
+        inbox.put(msg)
+        if msg[0] == "stop":
+            return
+
+
+def _worker_main(conn: Connection, parent_pid: int) -> None:
+    """A worker's loop: hold some localizers, run each submitted stream through them.
+
+    Messages: ``("adopt", {k: (label, pickled)})``, ``("drop", [k, ...])``,
+    ``("run", RunStream)``, ``("stop",)``, handled in order (:func:`_receive` reads them as
+    they come). Each gets one reply: ``("ok", payload)`` or ``("error", kind, message,
+    traceback)``.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the main process's business
+    threading.Thread(target=_exit_with_parent, args=(parent_pid,), daemon=True).start()
+    inbox: queue.SimpleQueue = queue.SimpleQueue()
+    threading.Thread(target=_receive, args=(conn, inbox), daemon=True).start()
+    locs: dict[int, tuple[str, Localizer]] = {}
+    while True:
+        msg = inbox.get()
+        if msg is None:
             return
         kind = msg[0]
         if kind == "stop":
@@ -435,11 +458,15 @@ class LocalizerPool:
     """Localizers spread over ``n_workers`` persistent worker processes (see module doc).
 
     ``states`` are the pickled localizers (fresh or from a checkpoint), index-aligned with
-    ``labels``. Use as: ``submit(stream)`` then ``result()`` per run; ``close()`` at the end
-    (also on errors: it terminates the workers).
+    ``labels``. Use as: ``submit(stream)`` per run and ``result()`` per run, in order, with
+    at most :attr:`depth` runs submitted and not yet collected; ``close()`` at the end (also
+    on errors: it terminates the workers).
     """
 
     pipelined = True
+    #: Runs in flight at most: the main process simulates the next run while the workers
+    #: localize the last two (one each would leave a core idle whenever one side waits).
+    depth = 2
 
     def __init__(self, labels: Sequence[str], states: Sequence[bytes], n_workers: int) -> None:
         if n_workers < 1:
@@ -447,7 +474,8 @@ class LocalizerPool:
         self.labels = list(labels)
         self.states = list(states)
         self.busy_s = [0.0] * len(self.labels)  # per localizer, last run
-        self._stream: RunStream | None = None
+        self._in_flight: deque[RunStream] = deque()  # submitted, not collected, oldest first
+        self._collected: deque[list[LocalizerOutput]] = deque()  # collected, not returned
         n_workers = min(n_workers, max(1, len(self.labels)))
         ctx = mp.get_context("spawn")
         self.workers: list[_Worker] = []
@@ -501,7 +529,7 @@ class LocalizerPool:
                 break
         if reply is None:
             w.proc.join(timeout=1.0)
-            what = f" on {_day_run(self._stream)}" if self._stream is not None else ""
+            what = f" on {_day_run(self._in_flight[0])}" if self._in_flight else ""
             raise LocalizerError(
                 f"{self._who(w)} died{what} (exit code {w.proc.exitcode}); "
                 "out of memory or a crash in native code?"
@@ -535,6 +563,8 @@ class LocalizerPool:
             load[j] += self.busy_s[k]
         if max(load) > (1.0 - REBALANCE_GAIN) * max(load_now):
             return
+        while self._in_flight:  # the localizers' states after the runs in flight first
+            self._collected.append(self._collect())
         # keep as many localizers in place as possible: match new groups to workers
         order = sorted(
             range(len(new)),
@@ -558,9 +588,12 @@ class LocalizerPool:
 
     # ------------------------------------------------------------------ runs
     def submit(self, stream: RunStream) -> None:
-        """Start localizing ``stream`` in the workers (returns at once)."""
+        """Start localizing ``stream`` in the workers (returns at once; a worker busy with an
+        earlier run starts on it when done)."""
+        if len(self._in_flight) + len(self._collected) >= self.depth:
+            raise RuntimeError(f"submit() with {self.depth} runs not collected")
         self._rebalance()
-        self._stream = stream
+        self._in_flight.append(stream)
         for w in self.workers:
             if w.locs:
                 try:
@@ -569,14 +602,22 @@ class LocalizerPool:
                     pass  # it died: result() says so
 
     def result(self) -> list[LocalizerOutput]:
-        """Wait for the submitted run's outputs (index-aligned with the labels)."""
-        if self._stream is None:
+        """Wait for the oldest submitted run's outputs (index-aligned with the labels)."""
+        if self._collected:
+            return self._collected.popleft()
+        if not self._in_flight:
             raise RuntimeError("result() without a submitted run")
+        return self._collect()
+
+    def _collect(self) -> list[LocalizerOutput]:
+        """The oldest run in flight's outputs, from the workers that have localizers (the
+        same that had them when it was submitted: a rebalance collects the runs in flight
+        first)."""
         out: dict[int, LocalizerOutput] = {}
         for w in self.workers:
             if w.locs:
                 out.update(self._recv(w))
-        self._stream = None
+        self._in_flight.popleft()
         for k, o in out.items():
             self.states[k] = o.state
             self.busy_s[k] = o.busy_s

@@ -380,6 +380,15 @@ class ResultsDB:
         self.path = path
         self.con = con
         self._lock = lock
+        #: :meth:`per_scan`'s arrays by (loc, day, run) once :meth:`remember_per_scan`
+        self._per_scan: dict[tuple[int, int | None, int | None], dict[str, Any]] | None = None
+
+    def remember_per_scan(self) -> None:
+        """From now on keep :meth:`per_scan`'s arrays and hand out copies of them again: for
+        a reader of finished results that asks for the same localizer's scans many times
+        (the report); they are not refreshed when runs are written afterwards."""
+        if self._per_scan is None:
+            self._per_scan = {}
 
     @contextmanager
     def _disk_full_is_clear(self, what: str) -> Iterator[None]:
@@ -944,6 +953,9 @@ class ResultsDB:
 
     def per_scan(self, loc: int, day: int | None = None, run: int | None = None) -> dict[str, Any]:
         """Per-scan arrays of one localizer (optionally one day / run), joined with truth."""
+        memo = self._per_scan
+        if memo is not None and (loc, day, run) in memo:
+            return {k: v.copy() for k, v in memo[(loc, day, run)].items()}
         where, params = "e.loc = ?", [loc]
         if day is not None:
             where += " AND e.day = ?"
@@ -982,6 +994,8 @@ class ResultsDB:
             ).fetchall()
             for j, x in enumerate(extra):
                 out[x.name] = _column_values([row[j] for row in rows], x)
+        if memo is not None:
+            memo[(loc, day, run)] = {k: v.copy() for k, v in out.items()}
         return out
 
     def run_diagnostic(self, loc: int, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

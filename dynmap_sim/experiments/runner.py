@@ -4,8 +4,8 @@ For every run of the chosen days: ``env.reset(seed, day, run)``, build the :clas
 the driver drive (it follows the true pose) and record the run's (odometry, scan) stream; then
 the *same* stream feeds every localizer: ``begin_run``, ``update`` per scan, ``end_run``, and
 ``end_day`` after the day's last run (:mod:`.workers`). With ``workers > 1`` the localizers
-work in worker processes on run ``i`` while this process simulates run ``i + 1``; the numbers
-are the same as with ``workers=1`` (all in this process).
+work in worker processes on runs ``i - 1`` and ``i`` while this process simulates run
+``i + 1``; the numbers are the same as with ``workers=1`` (all in this process).
 
 Each run's rows, summaries and a checkpoint (localizers, driver, RNG states, next run) are
 committed to the results store in one transaction, so an experiment killed at any moment
@@ -21,6 +21,7 @@ import hashlib
 import os
 import pickle
 import time
+from collections import deque
 from pathlib import Path
 from typing import Any
 
@@ -318,15 +319,23 @@ class ExperimentRunner:
     def run(self, progress: bool = True, stop_after: int | None = None) -> Path:
         """Run the remaining slots; return the results folder.
 
-        With ``workers > 1`` the localizers of run ``i`` work in worker processes while this
-        process simulates run ``i + 1``. ``stop_after`` (for tests) stops after that many
-        slots as if the process were killed: the experiment is left incomplete.
+        With ``workers > 1`` the localizers of runs ``i - 1`` and ``i`` work in worker
+        processes while this process simulates run ``i + 1``. ``stop_after`` (for tests)
+        stops after that many slots as if the process were killed: the experiment is left
+        incomplete.
         """
         from tqdm.auto import tqdm
 
+        class Bar(tqdm):  # type: ignore[misc, valid-type]
+            """The progress bar without tqdm's monitor thread (it would outlive the bar): a
+            bar updated once a run does not need it, and the report forks after the run
+            (:func:`dynmap_sim.analysis.report.write_report`) where no other thread runs."""
+
+            monitor_interval = 0
+
         n = len(self.slots)
         last = n if stop_after is None else min(n, stop_after)
-        bar = tqdm(
+        bar = Bar(
             total=n,
             initial=self.start_index,
             disable=not progress,
@@ -336,28 +345,24 @@ class ExperimentRunner:
         engine = None
         try:
             engine = self._start_localizers()
-            pending: tuple[Episode, EngineState] | None = None
+            pending: deque[tuple[Episode, EngineState]] = deque()  # submitted, not stored
             done_at = time.perf_counter()  # when storing the previous run began
             for i in range(self.start_index, last):
                 slot = self.slots[i]
                 bar.set_postfix_str(f"day {slot.day} run {slot.run}")
                 sim = self._simulate(i)
-                # pipelined: collect the previous run, start this one, then store the previous
-                outs = engine.result() if pending is not None else None
+                # pipelined: store the oldest run when as many are in flight as the bench
+                # holds, then start this one (the workers may still be on the one before)
+                if len(pending) >= engine.depth:
+                    done_at = self._store(pending.popleft(), engine.result(), done_at)
+                    bar.update(1)
                 engine.submit(sim[0].stream)
-                if pending is not None and outs is not None:
-                    outs = self._with_steered(pending[0], outs)
-                    done_at = self._write(*pending, outs, done_at)
-                    bar.update(1)
-                pending = sim
+                pending.append(sim)
                 if not engine.pipelined:
-                    outs = self._with_steered(pending[0], engine.result())
-                    done_at = self._write(*pending, outs, done_at)
+                    done_at = self._store(pending.popleft(), engine.result(), done_at)
                     bar.update(1)
-                    pending = None
-            if pending is not None:
-                outs = self._with_steered(pending[0], engine.result())
-                self._write(*pending, outs, done_at)
+            while pending:
+                done_at = self._store(pending.popleft(), engine.result(), done_at)
                 bar.update(1)
         except BaseException:
             self.db.close()  # releases the folder's lock (the stored runs stay)
@@ -371,6 +376,12 @@ class ExperimentRunner:
         self.db.close()
         self.env.close()
         return self.out_dir
+
+    def _store(
+        self, sim: tuple[Episode, EngineState], outs: list[LocalizerOutput], since: float
+    ) -> float:
+        """:meth:`_write` a simulated run with its bench outputs (and the steered one's)."""
+        return self._write(*sim, self._with_steered(sim[0], outs), since)
 
     def _simulate(self, i: int) -> tuple[Episode, EngineState]:
         """Drive run ``i`` through the episode loop; the state to checkpoint after it (copied

@@ -24,6 +24,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
+from dynmap_sim.agent.mapping import correlative_numba
+
 FloatArray = NDArray[np.float64]
 
 
@@ -105,6 +107,7 @@ def correlative_match(
     theta_step_rad: float | None = None,
     block: int = 8,
     max_blocks: int = 400,
+    backend: str = "auto",
 ) -> CorrelativeResult:
     """Best pose of ``points_base`` ``(N, 2)`` (scan frame) in ``target``'s frame.
 
@@ -112,7 +115,11 @@ def correlative_match(
     the table's grid, rotations every ``theta_step_rad`` (default: the angle that moves the
     farthest point by one cell, Olson 2009 §IV-A). ``block`` is the branch-and-bound block
     size in cells; at most ``max_blocks`` blocks are refined (the search is then approximate).
+    ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): ``"numba"`` (``"auto"`` when
+    installed) sums the bounds and the blocks' scores in compiled loops
+    (:mod:`.correlative_numba`, the same result bit for bit).
     """
+    kernels = correlative_numba.kernels(backend)
     pts = np.asarray(points_base, dtype=np.float64).reshape(-1, 2)
     init = np.asarray(init_pose, dtype=np.float64).reshape(3)
     if len(pts) == 0:
@@ -136,6 +143,14 @@ def correlative_match(
     iy0 = np.floor((wy - target.origin[1]) / res).astype(np.intp) + start
     # Upper bounds of every (rotation, block_y, block_x): sum over points of M.
     boff = np.arange(n_blocks) * block
+    if kernels is not None:
+        bounds_of, search = kernels
+        bounds = bounds_of(coarse, ix0, iy0, boff)
+        order = np.ascontiguousarray(np.argsort(bounds, axis=None)[::-1])
+        score, t, oy_c, ox_c, n_eval = search(
+            order, bounds, fine, ix0, iy0, boff, block, 2 * n_xy, max_blocks
+        )
+        return _result(init, thetas, start, res, (t, oy_c, ox_c), score, n_eval, len(pts))
     bounds = _lookup(
         coarse,
         ix0[:, :, None, None] + boff[None, None, None, :],
@@ -163,9 +178,24 @@ def correlative_match(
         if vals.flat[k] > best_score:
             best_score = float(vals.flat[k])
             best = (int(t), int(oy[k // len(ox)]), int(ox[k % len(ox)]))
-    t, oy_c, ox_c = best
+    return _result(init, thetas, start, res, best, best_score, n_eval, len(pts))
+
+
+def _result(
+    init: FloatArray,
+    thetas: FloatArray,
+    start: int,
+    res: float,
+    best: tuple[int, int, int],
+    best_score: float,
+    n_eval: int,
+    n_points: int,
+) -> CorrelativeResult:
+    """The pose of the best (rotation, y offset, x offset) [cells from ``start``] and its
+    score per point."""
+    t, oy_c, ox_c = (int(v) for v in best)
     pose = np.array(
         [init[0] + (start + ox_c) * res, init[1] + (start + oy_c) * res, thetas[t]],
         dtype=np.float64,
     )
-    return CorrelativeResult(pose, best_score / len(pts), n_eval)
+    return CorrelativeResult(pose, float(best_score) / n_points, int(n_eval))

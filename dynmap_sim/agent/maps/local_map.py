@@ -22,13 +22,18 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from dynmap_sim.agent.maps.local_map_numba import numba_available, scan_log_likelihoods
+from dynmap_sim.agent.maps.local_map_numba import (
+    numba_available,
+    polar_rays,
+    scan_log_likelihoods,
+)
 from dynmap_sim.agent.maps.sample_set import (
     SampleSets,
     mixture_log_likelihood,
     table_log_likelihood,
     to_mm,
 )
+from dynmap_sim.jit import kernel_backend
 
 FloatArray = NDArray[np.float64]
 
@@ -111,10 +116,25 @@ class LocalMap:
         fill: bool = False,
         initialize: bool = True,
         polar: tuple[FloatArray, FloatArray] | None = None,
+        backend: str = "auto",
     ) -> None:
         """One §3.1 update of each sub-map of ``levels`` in turn with the points (all of one
         time step); points farther than ``max_range_m`` from the centre are ignored. The
-        points' millimetre ranges and ray indices are computed once (per number of rays)."""
+        points' millimetre ranges and ray indices are computed once (per number of rays):
+        without ``polar``, by ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`) ``"numba"``
+        (``"auto"`` when installed) in one compiled pass (:func:`.local_map_numba.polar_rays`,
+        the same values)."""
+        kernel = kernel_backend(backend) if polar is None else None
+        if kernel is not None:
+            levels = list(levels)
+            n_rays = list(dict.fromkeys(self.timescales[level].n_rays for level in levels))
+            pts = np.asarray(points_map, dtype=np.float64).reshape(-1, 2)
+            mm, rays = polar_rays(pts, self.centre, self.max_range_m,
+                                  np.array(n_rays, dtype=np.int64), kernel == "python")  # fmt: skip
+            for level in levels:
+                row = rays[n_rays.index(self.timescales[level].n_rays)]
+                self.sub[level].update(row, mm, rng, fill=fill, initialize=initialize)
+            return
         ang, dist = self.polar(points_map) if polar is None else polar
         ok = dist <= self.max_range_m
         ang_ok = ang[ok]

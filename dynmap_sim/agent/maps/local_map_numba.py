@@ -6,6 +6,11 @@ timescales of one local map: each reading is projected to the map's centre (bear
 the model table (:meth:`.sample_set.SampleSets.model_table`) -- the numpy code's operations
 in one compiled loop (``libm``'s ``atan2``/``exp``/``log`` instead of numpy's, so values agree
 to rounding). :func:`numba_available` says whether it can be used.
+
+:func:`polar_rays` is the projection alone for learning (:meth:`.local_map.LocalMap.
+learn_levels`): each point's millimetre range and its ray in sub-maps of a few numbers of
+rays, for the points within the maximum range -- ``libm``'s ``atan2`` and ``hypot``, which
+numpy's ``arctan2`` and ``hypot`` call, then the numpy code's operations: the same values.
 """
 
 from __future__ import annotations
@@ -54,6 +59,66 @@ def _scan_loglik_py(
 
 
 _scan_loglik = compiled(_scan_loglik_py)
+
+
+def _polar_rays_py(
+    px: FloatArray,
+    py: FloatArray,
+    cx: float,
+    cy: float,
+    max_range_m: float,
+    n_rays: IntArray,
+    mm: NDArray[np.uint16],
+    rays: IntArray,
+) -> int:
+    """The points within ``max_range_m`` of ``(cx, cy)``, in order: their ranges rounded
+    to millimetres (clipped to ``[0, 65535]``) in ``mm`` and their closest rays in
+    ``rays[b]`` for sub-maps of ``n_rays[b]`` rays; returns how many."""
+    two_pi = 2.0 * math.pi
+    k = 0
+    for i in range(px.shape[0]):
+        dx = px[i] - cx
+        dy = py[i] - cy
+        dist = math.hypot(dx, dy)
+        if not dist <= max_range_m:
+            continue
+        ang = math.atan2(dy, dx) % two_pi
+        mm[k] = np.uint16(min(max(np.rint(dist * 1000.0), 0.0), 65535.0))
+        for b in range(n_rays.shape[0]):
+            nr = n_rays[b]
+            rays[b, k] = np.int64(np.rint(ang * (nr / two_pi))) % nr
+        k += 1
+    return k
+
+
+_polar_rays = compiled(_polar_rays_py)
+
+
+def polar_rays(
+    points_map: FloatArray,
+    centre: FloatArray,
+    max_range_m: float,
+    n_rays: IntArray,
+    python: bool = False,
+) -> tuple[NDArray[np.uint16], IntArray]:
+    """Millimetre ranges ``(K,)`` and rays ``(len(n_rays), K)`` of the ``K`` map-frame points
+    ``(N, 2)`` within ``max_range_m`` of ``centre`` (compiled; ``python``: the plain kernel)."""
+    if not python:
+        require_numba("backend")
+    n = len(points_map)
+    mm = np.empty(n, dtype=np.uint16)
+    rays = np.empty((len(n_rays), n), dtype=np.int64)
+    k = (_polar_rays_py if python else _polar_rays)(
+        np.ascontiguousarray(points_map[:, 0]),
+        np.ascontiguousarray(points_map[:, 1]),
+        float(centre[0]),
+        float(centre[1]),
+        float(max_range_m),
+        n_rays,
+        mm,
+        rays,
+    )
+    return mm[:k], rays[:, :k]
 
 
 def scan_log_likelihoods(

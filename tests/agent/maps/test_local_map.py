@@ -9,6 +9,7 @@ from dynmap_sim.agent.maps import local_map_numba
 from dynmap_sim.agent.maps.current_map import synthesize_current_map
 from dynmap_sim.agent.maps.dynamic_map import DynamicMap
 from dynmap_sim.agent.maps.local_map import TABLE1, LocalMap
+from tests.agent.maps.test_sample_set import UPDATE_KERNELS  # python, numba
 
 
 def test_table1_memory():
@@ -161,3 +162,29 @@ def test_snapshot_points_are_the_sub_map_medians(room, scan_fn):
             got = snap.points(i, level)
             assert got.shape == want.shape and len(got) > 0
             assert np.abs(got - want).max() < 1e-3
+
+
+@pytest.mark.parametrize("backend", UPDATE_KERNELS)
+@pytest.mark.parametrize("seed", range(6))
+def test_compiled_projection_learns_the_numpy_samples(backend, seed):
+    """learn_levels with the compiled projection (local_map_numba.polar_rays) leaves every
+    sub-map's samples and the generator as the numpy projection does: points beyond the
+    maximum range, on ray boundaries and at 2π, ranges past 65.535 m, levels sharing rays."""
+    rng = np.random.default_rng(seed)
+    a = LocalMap(rng.normal(0, 1, 2), max_range_m=float(rng.choice([4.0, 80.0])))
+    b = LocalMap(a.centre, max_range_m=a.max_range_m)
+    ra, rb = np.random.default_rng(seed), np.random.default_rng(seed)
+    for step in range(8):
+        n = int(rng.integers(0, 900))
+        ang = rng.uniform(0, 2 * np.pi, n)
+        ang[: n // 4] = np.round(ang[: n // 4] * 720 / np.pi) * np.pi / 720  # on the rays
+        r = rng.uniform(0.0, 6.0, n) * (1.0 + 12.0 * (rng.random(n) < 0.05))
+        pts = a.centre + r[:, None] * np.column_stack([np.cos(ang), np.sin(ang)])
+        levels = [[0], [1], [2, 3, 4], [0, 1, 2, 3, 4]][step % 4]
+        fill = step == 0
+        a.learn_levels(levels, pts, ra, fill=fill, backend="numpy")
+        b.learn_levels(levels, pts, rb, fill=fill, backend=backend)
+        for sa, sb in zip(a.sub, b.sub, strict=True):
+            assert np.array_equal(sa.samples_mm, sb.samples_mm)
+            assert np.array_equal(sa.count, sb.count)
+    assert ra.random() == rb.random()
