@@ -27,13 +27,21 @@ FloatArray = NDArray[np.float64]
 
 
 def expected_ranges(
-    grid: OccupancyGrid, laser_pose: ArrayLike, angles_rad: ArrayLike, range_max_m: float
+    grid: OccupancyGrid,
+    laser_pose: ArrayLike,
+    angles_rad: ArrayLike,
+    range_max_m: float,
+    occupied: NDArray[np.bool_] | None = None,
 ) -> FloatArray:
     """Distance [m] from ``laser_pose`` (x, y, theta) to the first occupied cell along each
     beam at ``angles_rad`` (laser frame), stepping half a cell; ``inf`` when there is none
-    within ``range_max_m`` (unknown and off-grid cells do not stop a beam)."""
-    t, first = cast_rays(grid.occupancy == OCCUPIED, grid.origin_xy_m, grid.resolution_m,
-                         laser_pose, angles_rad, range_max_m)  # fmt: skip
+    within ``range_max_m`` (unknown and off-grid cells do not stop a beam). ``occupied``:
+    ``grid.occupancy == OCCUPIED``, for a caller that casts from many poses on one grid
+    (made here when not given)."""
+    if occupied is None:
+        occupied = grid.occupancy == OCCUPIED
+    t, first = cast_rays(occupied, grid.origin_xy_m, grid.resolution_m, laser_pose, angles_rad,
+                         range_max_m)  # fmt: skip
     return np.where(first >= 0, t[first], np.inf)
 
 

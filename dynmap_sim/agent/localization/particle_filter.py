@@ -60,7 +60,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from dynmap_sim import se2
-from dynmap_sim.agent.grid import OccupancyGrid
+from dynmap_sim.agent.grid import OCCUPIED, OccupancyGrid
 from dynmap_sim.agent.localization import mcl_numba
 from dynmap_sim.agent.localization.distance_filter import expected_ranges, short_readings
 from dynmap_sim.agent.localization.kld_sampling import ONE_BIN_RULES, bin_keys, kld_prefix_size
@@ -720,9 +720,11 @@ class AMCLFilter:
         if len(r) == 0:
             return np.zeros(len(poses))
         margin = self.config.recovery_through_margin_m
+        occupied = self.grid.occupancy == OCCUPIED  # once, not per pose
         out = np.empty(len(poses))
         for k, pose in enumerate(poses):
-            exp = expected_ranges(self.grid, se2.compose(pose, self.mount), a, self.range_max)
+            laser_pose = se2.compose(pose, self.mount)
+            exp = expected_ranges(self.grid, laser_pose, a, self.range_max, occupied)
             out[k] = np.count_nonzero(r > exp + margin) / len(r)
         return out
 
@@ -807,9 +809,8 @@ class AMCLFilter:
             poses = self.random_poses(len(at), rng)
             if c.recovery_through_max_share > 0:
                 ok = self.through_shares(poses) <= c.recovery_through_max_share
+                is_rand[at[~ok]] = False
                 at, poses = at[ok], poses[ok]
-                is_rand[:] = False
-                is_rand[at] = True
             cand[at] = poses
         is_new, is_local = is_rand, np.zeros(n_max, dtype=bool)
         p_loc = self.local_probability() if center is not None else 0.0
