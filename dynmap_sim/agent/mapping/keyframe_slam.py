@@ -89,9 +89,21 @@ class KeyframeSLAMConfig:
     #: ``C_O`` of one odometry increment of length ``d`` [m] and turn ``a`` [rad], as standard
     #: deviations ``(s_xy0, k_xy_d, k_xy_a, s_th0, k_th_a, k_th_d)``:
     #: ``sigma_xy = s_xy0 + k_xy_d d + k_xy_a a`` [m], ``sigma_th = s_th0 + k_th_a a + k_th_d d``
-    #: [rad]. Tight (5 % of the distance): the wheel odometry drifts 1-2 %.
+    #: [rad]. Tight (5 % of the distance): the wheel odometry drifts 1-2 %. The constant
+    #: ``s_xy0`` is paid on every scan, so it sets how loose the prior is per metre at a
+    #: given scan rate: at 10 Hz and 0.35 m/s the former 5 mm was 14 % of every 3.5 cm
+    #: step, the scan term ruled along blank corridors, and the scan-to-map ICP's forward
+    #: bias (a few mm per keyframe from the range-proportional lidar noise, the map's
+    #: surfaces ahead seen from farther than the scan sees them) stretched the map: +0.60 %
+    #: along the `corridor` world's corridor, first-run ATE 0.167 m. With 1 mm (2026-11-27,
+    #: ``benchmarks/slam_quality.py``, seeds 0 / 1, ATE of the optimized first run, before
+    #: -> after): corridor 0.167 -> 0.061 / 0.059 -> 0.043 m, lab 0.087 -> 0.063 / 0.160 ->
+    #: 0.057, office 0.035 -> 0.036 / 0.087 -> 0.029, hall 0.023 -> 0.015 / 0.024 -> 0.023,
+    #: apartment 0.024 -> 0.021 / 0.023 -> 0.022 m; real logs (relation error) FR079 0.042 ->
+    #: 0.045 m, CSAIL 0.029 -> 0.030 m (their large odometry errors are the correlative
+    #: seed's to catch). 0.5 mm or 2 mm, or ``s_th0`` 0.5 mrad, were worse on some worlds.
     odom_sigma: tuple[float, float, float, float, float, float] = (
-        0.005,
+        0.001,
         0.05,
         0.01,
         0.002,
