@@ -36,12 +36,14 @@ COLLISION_PERSON = 2
 CATEGORY_STATIC = 0b01
 CATEGORY_PERSON = 0b10
 _PEOPLE_TAG = 0x9E0913
-#: People's pymunk bodies farther than this from the robot (plus its radius, plus
-#: ``SYNC_SPEED_MPS`` times the step) [m] are moved lazily: on the next access to
-#: ``World.space``, or when they come this near the robot. The margin covers the robot's own
-#: next move (its collision query reaches its radius plus one step's travel) for robots up to
-#: ``SYNC_SPEED_MPS``.
-SYNC_MARGIN_M = 2.0
+#: People's pymunk bodies are moved at every step only near the robot (:func:`_near_m`);
+#: the others lazily: on the next access to ``World.space``, or when they come that near.
+#: The robot's next collision query is a box of half-width its radius plus one step's travel
+#: (at most ``SYNC_SPEED_MPS`` times the step) around it, and pymunk returns the shapes whose
+#: bounding box (a person's: centre +- radius) meets it: so a body that query can return lies
+#: within ``sqrt(2)`` times (robot radius + travel + the person's radius) of the robot,
+#: plus ``SYNC_MARGIN_M`` for the query's skin and rounding.
+SYNC_MARGIN_M = 0.01
 SYNC_SPEED_MPS = 4.0
 
 
@@ -56,8 +58,8 @@ class World:
       as static shapes, people as kinematic circles; the space is never stepped here;
       people's bodies are brought up to date on every access to ``space``, and at every
       step for those near the robot (``SYNC_MARGIN_M``), so a robot that holds the space and
-      queries around itself always sees people where they are; after moving the robot by
-      hand, call ``sync_space()``),
+      queries the box its next move can reach always sees people where they are; after
+      moving the robot by hand, call ``sync_space()``),
       ``wall_segments()``, ``people_poses()``, ``people_radii()``, ``objects`` (current
       :class:`ObjectState` tuple), ``route_blocked()``;
     * ``snapshot(day, run)``: the state at the start of any run, a pure function of (file,
@@ -153,6 +155,8 @@ class World:
             self._people_bodies.append(body)
         self._synced = self._crowd.pos.copy().view(np.complex128)[:, 0]  # bodies' positions
         self._stale = False  # some people's bodies lag behind the crowd
+        # the largest body radius of the run's people [m] (how near the robot bodies sync)
+        self._person_r_max = float(self._crowd.radius.max()) if self._crowd.n else 0.0
         n_obj = len(self._static.object_ids)
         self._people_ids = self._crowd.ids
         nl = 2 * self._crowd.n
@@ -176,11 +180,14 @@ class World:
         return out
 
     def __setstate__(self, state: dict[str, Any]) -> None:
-        """Restore (a world pickled before the circles' template existed gets one)."""
+        """Restore (a world pickled before the circles' template or the people's largest
+        radius existed gets them)."""
         self.__dict__.update(state)
         if "_circles_template" not in state:
             self._circles_template = self._circles_start()
         self.__dict__.setdefault("people_backend", "numpy")
+        if "_person_r_max" not in state:
+            self._person_r_max = float(self._crowd.radius.max()) if self._crowd.n else 0.0
 
     def _spawn(self, day: int, run: int, objects: tuple[ObjectState, ...]):
         edges = [polygon_edges(o.polygon) for o in objects]  # circles as their 16-gons
@@ -251,7 +258,8 @@ class World:
 
     def _sync_near(self, dt_s: float, rxy: FloatArray, robot_radius_m: float) -> None:
         """After the people moved: bring the bodies near the robot at ``rxy`` up to date."""
-        self._sync_bodies(complex(rxy[0], rxy[1]), _near_m(dt_s, robot_radius_m))
+        near_m = _near_m(dt_s, robot_radius_m, self._person_r_max)
+        self._sync_bodies(complex(rxy[0], rxy[1]), near_m)
 
     def _sync_bodies(self, robot_xy: complex | None, near_m: float = 0.0) -> None:
         """Move people's pymunk bodies to the crowd's state: all of them, or (with a robot)
@@ -354,9 +362,12 @@ class World:
         return snap
 
 
-def _near_m(dt_s: float, robot_radius_m: float) -> float:
-    """How near the robot a person's body is kept up to date [m] (``SYNC_MARGIN_M``)."""
-    return robot_radius_m + SYNC_MARGIN_M + SYNC_SPEED_MPS * dt_s
+def _near_m(dt_s: float, robot_radius_m: float, person_radius_m: float) -> float:
+    """How near the robot a person's body is kept up to date [m]: any body the robot's next
+    collision query can return (``SYNC_MARGIN_M``), for people of radius at most
+    ``person_radius_m``."""
+    reach = robot_radius_m + SYNC_SPEED_MPS * dt_s + person_radius_m
+    return math.sqrt(2.0) * reach + SYNC_MARGIN_M
 
 
 def _near(z: Any, synced: Any, robot_xy: Any, near_m: Any) -> NDArray[np.bool_]:
@@ -411,7 +422,7 @@ class WorldBatch:
         z = self._crowds.positions()
         counts = [w._crowd.n for w, _, _ in batch]
         rz = np.array([complex(xy[0], xy[1]) for _, xy, _ in batch]).repeat(counts)
-        near_m = np.array([_near_m(dt_s, rr) for _, _, rr in batch]).repeat(counts)
+        near_m = np.array([_near_m(dt_s, rr, w._person_r_max) for w, _, rr in batch]).repeat(counts)
         synced = np.concatenate([w._synced for w, _, _ in batch])
         near = _near(z, synced, rz, near_m)
         first = list(itertools.accumulate(counts, initial=0))  # each world's first row, end
