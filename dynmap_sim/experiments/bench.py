@@ -124,6 +124,9 @@ class RunHeader:
     last_of_day: bool
 
 
+#: Scans whose reported point classes a :class:`LocalizerRun` scores at once.
+SCORE_BATCH = 256
+
 #: Scans a chunk of a run's stream holds on its way to the localizers (10 s of robot time at
 #: the URG-04LX's 10 Hz): small enough that the workers follow the simulation closely,
 #: large enough that a message costs little beside the localizers' work on it.
@@ -269,6 +272,8 @@ class LocalizerRun:
         self.diagnostics = DiagnosticsRecorder(loc, cap)
         self.confusion = np.zeros((4, 4), dtype=np.int64)
         self.point_tally = PointClassTally()
+        #: reported point classes not scored yet: (beam classes, classes, ranges, truth)
+        self._unscored: list[tuple[Any, NDArray[np.int64], Any, Any]] = []
         self.update_s = 0.0
         self.n = 0
         with self._blame(None):
@@ -319,10 +324,46 @@ class LocalizerRun:
                 self.diagnostics.scan(step, ex)
                 pc = ex.get("point_classes")
                 if pc is not None:
-                    self.confusion += confusion_matrix(beam_class, pc)
-                    self.point_tally.add(pc, ranges_m, point_truth)
+                    self._score(beam_class, pc, ranges_m, point_truth)
         self.n += 1
         return e
+
+    def _score(
+        self,
+        beam_class: NDArray[np.int8],
+        classes: Any,
+        ranges_m: NDArray[np.float32],
+        point_truth: NDArray[np.int8] | None,
+    ) -> None:
+        """Score one scan's reported point classes against the truth (beam labels and the
+        seen-before classes): a scan like the last ones waits to be scored with them
+        (:meth:`_score_held`, the same sums), any other one is scored now."""
+        p = np.asarray(classes)
+        shape = np.shape(beam_class)
+        held = self._unscored
+        if (
+            p.ndim == 1
+            and p.shape == shape == np.shape(ranges_m)
+            and (point_truth is None or np.shape(point_truth) == shape)
+            and (not held or (held[-1][3] is None) == (point_truth is None))
+        ):
+            held.append((beam_class, p.astype(np.int64), ranges_m, point_truth))
+            if len(held) >= SCORE_BATCH:
+                self._score_held()
+            return
+        self._score_held()
+        self.confusion += confusion_matrix(beam_class, classes)
+        self.point_tally.add(classes, ranges_m, point_truth)
+
+    def _score_held(self) -> None:
+        """Score the held scans at once (:meth:`PointClassTally.add_scans`)."""
+        held, self._unscored = self._unscored, []
+        if not held:
+            return
+        p = np.stack([h[1] for h in held])
+        self.confusion += confusion_matrix(np.stack([h[0] for h in held]), p)
+        truth = None if held[0][3] is None else np.stack([h[3] for h in held])
+        self.point_tally.add_scans(p, np.stack([h[2] for h in held]), truth)
 
     @staticmethod
     def checked_estimate(
@@ -375,6 +416,8 @@ class LocalizerRun:
         n = self.n
         if n != len(self.est):
             self.diagnostics.resize(n)
+        with self._blame(n - 1):
+            self._score_held()
         with self._blame(None):
             self.loc.end_run()
             self.diagnostics.end_run(self.loc)
