@@ -9,7 +9,8 @@ metrics, the SQLite writes, the checkpoint after every run and the progress bar.
     python benchmarks/bench_runner.py                       # ci-apartment, whole route, days 1-7
     python benchmarks/bench_runner.py --scenario worlds/scenarios/ci-apartment-mcl.toml
 
-Prints absolute times and the ratios (wall clock and process CPU time; CPU time is the
+First the point-class scoring of a run (scan by scan against held scans scored at once, the
+same sums), then absolute times and the ratios (wall clock and process CPU time; CPU time is the
 steadier one on a shared machine); the best of ``--repeat`` runs of each loop counts. The
 parallel runner's estimates are compared with the sequential one's (they must be identical).
 """
@@ -129,6 +130,48 @@ def runner_loop(scenario, days, seed, workers=1):
     return wall, cpu, n, est
 
 
+def bench_scoring(repeat: int, n_scans: int = 1350, n_beams: int = 683) -> None:
+    """A run's point-class scoring (the bench's, for a localizer that reports point classes,
+    e.g. the steering adaptive-memory): scan by scan (``confusion_matrix`` and
+    ``PointClassTally.add``, the reference) against held scans scored at once
+    (``SCORE_BATCH`` at a time, ``add_scans``) on the same synthetic classes; the sums must
+    be identical."""
+    from dynmap_sim.experiments.bench import SCORE_BATCH
+    from dynmap_sim.metrics import PointClassTally, confusion_matrix
+
+    rng = np.random.default_rng(0)
+    shape = (n_scans, n_beams)
+    pred = rng.integers(0, 4, shape).astype(np.int8)
+    beam = rng.integers(0, 5, shape).astype(np.int8)
+    ranges = rng.uniform(0.1, 4.0, shape).astype(np.float32)
+    ranges[rng.random(shape) < 0.2] = np.inf
+    truth = rng.integers(0, 4, shape).astype(np.int8)
+    per_scan, batched = [], []
+    for _ in range(repeat):
+        c0 = time.process_time()
+        one, conf1 = PointClassTally(), np.zeros((4, 4), np.int64)
+        for k in range(n_scans):
+            conf1 += confusion_matrix(beam[k], pred[k])
+            one.add(pred[k], ranges[k], truth[k])
+        per_scan.append(time.process_time() - c0)
+        c0 = time.process_time()
+        many, conf2 = PointClassTally(), np.zeros((4, 4), np.int64)
+        for a in range(0, n_scans, SCORE_BATCH):
+            rows = range(a, min(n_scans, a + SCORE_BATCH))
+            p = np.stack([pred[k].astype(np.int64) for k in rows])
+            conf2 += confusion_matrix(np.stack([beam[k] for k in rows]), p)
+            many.add_scans(p, np.stack([ranges[k] for k in rows]),
+                           np.stack([truth[k] for k in rows]))  # fmt: skip
+        batched.append(time.process_time() - c0)
+    same = (conf1 == conf2).all() and one.fraction_sum.tobytes() == many.fraction_sum.tobytes()
+    a, b = min(per_scan), min(batched)
+    print(
+        f"point-class scoring, {n_scans} scans of {n_beams} beams: scan by scan "
+        f"{1e6 * a / n_scans:.1f} us/scan, {SCORE_BATCH} at a time {1e6 * b / n_scans:.1f} "
+        f"us/scan, ratio {a / b:.2f} (sums {'identical' if same else 'DIFFERENT'})"
+    )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", default=str(ROOT / "worlds/scenarios/ci-apartment.toml"))
@@ -144,6 +187,7 @@ def main() -> None:
         help="keep the scenario's max_run_s (default: drive whole routes)",
     )
     args = ap.parse_args()
+    bench_scoring(args.repeat)
     scn = load_scenario(args.scenario)
     if not args.keep_time_limit:
         scn = scn.model_copy(update={"driver": scn.driver.model_copy(update={"max_run_s": None})})

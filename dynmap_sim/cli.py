@@ -12,7 +12,7 @@ import json
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TypeVar
+from typing import Any, TypeVar
 
 Handler = Callable[[argparse.Namespace], int]
 
@@ -295,22 +295,22 @@ def _cmd_run(args: argparse.Namespace) -> int:
         workers=args.workers,
         keep_scans=args.keep_scans,
     )
-    if args.report:
-        _write_report(out)
+    overall = _write_report(out) if args.report else None
     print(f"results in {out}")
-    for line in _headline(out):
+    for line in _headline(out, overall=overall):
         print(line)
     return 0
 
 
-def _write_report(out: Path) -> None:
-    """Write the report of ``out`` and say what it wrote; a full disk is one clear line."""
-    from dynmap_sim.analysis.report import write_report
+def _write_report(out: Path) -> list[dict[str, Any]]:
+    """Write the report of ``out`` and say what it wrote; a full disk is one clear line. The
+    whole-experiment figures it computed (:func:`dynmap_sim.analysis.report.overall_stats`)."""
+    from dynmap_sim.analysis.report import make_report
     from dynmap_sim.errors import InputError
     from dynmap_sim.experiments.results import is_disk_full
 
     try:
-        written = write_report(out)
+        report = make_report(out)
     except (OSError, RuntimeError, ValueError) as exc:  # matplotlib wraps some OSErrors
         if not (is_disk_full(exc) or is_disk_full(exc.__context__ or exc)):
             raise
@@ -318,15 +318,19 @@ def _write_report(out: Path) -> None:
             f"the disk is full (writing the report into {out}); the results are kept: free "
             f"some space, then `dynmap-sim report {out}` writes the report"
         ) from None
-    for path in written:
+    for path in report.written:
         print(f"wrote {path}")
+    return report.overall
 
 
-def _headline(out: Path, timing: bool = False) -> list[str]:
+def _headline(
+    out: Path, timing: bool = False, overall: list[dict[str, Any]] | None = None
+) -> list[str]:
     """The headline numbers of a results folder: per localizer ATE RMSE, mean and max
-    position error and the lost fraction (:func:`dynmap_sim.analysis.report.overall_stats`),
-    with ``timing`` the time per scan too; goals reached and collisions when the results hold
-    navigation measures. Without any ground truth: that line and the time per scan only."""
+    position error and the lost fraction (:func:`dynmap_sim.analysis.report.overall_stats`;
+    ``overall``: those, when the report just computed them), with ``timing`` the time per
+    scan too; goals reached and collisions when the results hold navigation measures.
+    Without any ground truth: that line and the time per scan only."""
     import math
 
     from dynmap_sim.analysis.navigation import goals_reached_line
@@ -336,7 +340,7 @@ def _headline(out: Path, timing: bool = False) -> list[str]:
     with ResultsDB.open(out) as db:
         if not db.query("SELECT 1 FROM runs LIMIT 1"):
             return []
-        stats = overall_stats(db)
+        stats = overall_stats(db) if overall is None else overall
         nav = db.nav_runs()
         goals = goals_reached_line(db)
         truth = has_ground_truth(db)

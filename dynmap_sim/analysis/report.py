@@ -14,6 +14,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -187,7 +188,14 @@ def overall_of(db: ResultsDB, loc: int) -> OverallSummary:
     return overall_summary(d["truth"], d["estimate"], d["t_s"], runs)
 
 
-def _summary_md(db: ResultsDB, path: Path, figures: list[Path], studies: list[StudyReport]) -> Path:
+def _summary_md(
+    db: ResultsDB,
+    path: Path,
+    figures: list[Path],
+    studies: list[StudyReport],
+    overall: list[dict[str, Any]],
+) -> Path:
+    """``summary.md``; ``overall``: :func:`overall_stats` of ``db``."""
     meta = db.meta()
     labels = db.labels()
     runs = db.query(
@@ -196,7 +204,6 @@ def _summary_md(db: ResultsDB, path: Path, figures: list[Path], studies: list[St
         "coalesce(sum(wall_s),0), coalesce(avg(route_progress),0) FROM runs"
     )[0]
     n_runs, n_steps, robot_s, coll, skipped, wall_s, prog = runs
-    overall = overall_stats(db)
     rpe = overall[0]["rpe_label"] if overall else rpe_label(RUN_RPE_DELTA, RUN_RPE_UNIT)
     lines = [
         f"# {meta.get('scenario_name', 'experiment')}",
@@ -592,8 +599,22 @@ def _studies_beside() -> Any:
 
 def write_report(out_dir: str | Path) -> list[Path]:
     """Write figures, ``summary.md`` and ``per_day.csv`` (and ``point_classes_per_day.csv``
-    when a localizer reported point classes) into a results folder. The paper studies' part
-    runs in a second process meanwhile (:func:`_studies_beside`)."""
+    when a localizer reported point classes) into a results folder; the files written. The
+    paper studies' part runs in a second process meanwhile (:func:`_studies_beside`)."""
+    return make_report(out_dir).written
+
+
+@dataclass(frozen=True)
+class Report:
+    """What :func:`make_report` wrote, and the whole-experiment figures it computed on the
+    way (:func:`overall_stats`, for a caller that prints them too)."""
+
+    written: list[Path]
+    overall: list[dict[str, Any]]
+
+
+def make_report(out_dir: str | Path) -> Report:
+    """:func:`write_report`, with the :func:`overall_stats` it computed."""
     import matplotlib
 
     matplotlib.use("Agg", force=True)
@@ -611,7 +632,7 @@ def write_report(out_dir: str | Path) -> list[Path]:
         pool.shutdown(wait=True)
 
 
-def _write_report_beside(out: Path, reports: Any) -> list[Path]:
+def _write_report_beside(out: Path, reports: Any) -> Report:
     """:func:`write_report`'s own part; ``reports``: the studies' reports to come."""
     with ResultsDB.open(out) as db:
         db.remember_per_scan()
@@ -639,6 +660,7 @@ def _write_report_beside(out: Path, reports: Any) -> list[Path]:
         for rep in studies:
             figs += rep.figures
             written += rep.files
-        written.append(_summary_md(db, out / "summary.md", figs, studies))
+        overall = overall_stats(db)
+        written.append(_summary_md(db, out / "summary.md", figs, studies, overall))
         written += figs
-    return written
+    return Report(written, overall)

@@ -1,21 +1,26 @@
 """Localizers in worker processes, pipelined with the simulation (docs/architecture.md §6).
 
 A run's sensor stream does not depend on the localizers: the tour driver follows the *true*
-pose and kidnappings come from the runner's RNG. So the runner records a run's whole stream
+pose and kidnappings come from the runner's RNG. So the runner records a run's stream
 (:class:`RunStream`: odometry, scans, time stamps and the true beam classes) and hands it to
-the localizers afterwards, either in-process (:class:`InProcessLocalizers`, ``workers=1``) or
-spread over persistent worker processes (:class:`LocalizerPool`) while the main process
-simulates the next run. Both run every localizer through :func:`localize_run`, which makes
-the calls the sequential runner always made (``begin_run(prior)``, ``update(odom, scan)`` per
-scan in order, ``end_run()``, ``end_day()`` after the day's last run) on copies of the same
-arrays, so the numbers are bit-identical whichever way they were computed.
+the localizers as it is recorded, in chunks of scans (:meth:`~LocalizerPool.begin`,
+:meth:`~LocalizerPool.feed`, :meth:`~LocalizerPool.end`; or a whole recorded run at once,
+:meth:`~LocalizerPool.submit`), either in-process (:class:`InProcessLocalizers`,
+``workers=1``) or spread over persistent worker processes (:class:`LocalizerPool`), which
+localize a run while the main process is still simulating it and the next ones. Both run
+every localizer through :class:`LocalizerRun`, which makes the calls the sequential runner
+always made (``begin_run(prior)``, ``update(odom, scan)`` per scan in order, ``end_run()``,
+``end_day()`` after the day's last run) on copies of the same arrays, so the numbers are
+bit-identical whichever way (and in whatever chunks) they were computed.
 
 After each run every localizer is pickled (:attr:`LocalizerOutput.state`): that is the
 checkpoint's copy, and the pool moves a localizer to another worker by sending it that
 state (it balances the workers by the busy time each localizer took in the last run).
-Up to :attr:`LocalizerPool.depth` runs are in flight at once: a worker takes the next run's
-stream as it arrives (a reader thread) and starts on it as soon as it is done with the one
-before, so the simulation and the localizers never wait for each other within a run.
+Up to :attr:`LocalizerPool.depth` runs are in flight at once: a worker takes the chunks as
+they arrive (a reader thread) and works on them in order as soon as it is done with the ones
+before, so the simulation and the localizers never wait for each other within a run, and the
+workers neither idle while the first run is simulated nor have whole runs left when the last
+one is.
 Worker processes use the ``spawn`` start method, ignore SIGINT (the main process stops them),
 exit when the main process goes away, and report a failing localizer by its label; a dead
 worker is noticed through its process sentinel, so the main process never hangs on it.
@@ -87,6 +92,45 @@ class RunStream:
     beam_class: NDArray[np.int8]
     last_of_day: bool
     point_truth: NDArray[np.int8] | None = None
+
+    def chunks(self, size: int) -> Iterator[ScanChunk]:
+        """The stream's scans in chunks of at most ``size`` (views)."""
+        n = len(self.stamps_s)
+        for a in range(0, n, max(1, int(size))):
+            b = min(n, a + size)
+            truth = None if self.point_truth is None else self.point_truth[a:b]
+            yield ScanChunk(self.stamps_s[a:b], self.odom[a:b], self.scans[a:b],
+                            self.beam_class[a:b], truth)  # fmt: skip
+
+
+@dataclass
+class ScanChunk:
+    """Consecutive scans of a run's stream (the fields of :class:`RunStream`, ``K`` rows)."""
+
+    stamps_s: NDArray[np.float64]
+    odom: NDArray[np.float64]
+    scans: NDArray[np.float32]
+    beam_class: NDArray[np.int8]
+    point_truth: NDArray[np.int8] | None = None
+
+
+@dataclass(frozen=True)
+class RunHeader:
+    """What the localizers need before a run's first scan: its index in the experiment, its
+    prior and whether ``end_day()`` follows its ``end_run()``."""
+
+    index: int
+    prior: Prior
+    last_of_day: bool
+
+
+#: Scans whose reported point classes a :class:`LocalizerRun` scores at once.
+SCORE_BATCH = 256
+
+#: Scans a chunk of a run's stream holds on its way to the localizers (10 s of robot time at
+#: the URG-04LX's 10 Hz): small enough that the workers follow the simulation closely,
+#: large enough that a message costs little beside the localizers' work on it.
+CHUNK_SCANS = 100
 
 
 @dataclass
@@ -177,7 +221,7 @@ class DiagnosticsRecorder:
         self.out.artifacts = dict(loc.day_artifacts())
 
 
-def _day_run(stream: RunStream) -> str:
+def _day_run(stream: RunStream | RunHeader) -> str:
     return f"day {stream.prior.day} run {stream.prior.run}"
 
 
@@ -216,7 +260,9 @@ class LocalizerRun:
     """
 
     def __init__(self, label: str, loc: Localizer, prior: Prior, capacity: int = 1024) -> None:
-        self.busy0 = time.perf_counter()
+        busy0 = time.perf_counter()
+        #: wall time spent in this run's calls so far (not waiting for scans) [s]
+        self.busy_s = 0.0
         self.label = label
         self.loc = loc
         self.prior = prior
@@ -226,10 +272,13 @@ class LocalizerRun:
         self.diagnostics = DiagnosticsRecorder(loc, cap)
         self.confusion = np.zeros((4, 4), dtype=np.int64)
         self.point_tally = PointClassTally()
+        #: reported point classes not scored yet: (beam classes, classes, ranges, truth)
+        self._unscored: list[tuple[Any, NDArray[np.int64], Any, Any]] = []
         self.update_s = 0.0
         self.n = 0
         with self._blame(None):
             loc.begin_run(prior)
+        self.busy_s += time.perf_counter() - busy0
 
     @contextmanager
     def _blame(self, step: int | None) -> Iterator[None]:
@@ -275,10 +324,46 @@ class LocalizerRun:
                 self.diagnostics.scan(step, ex)
                 pc = ex.get("point_classes")
                 if pc is not None:
-                    self.confusion += confusion_matrix(beam_class, pc)
-                    self.point_tally.add(pc, ranges_m, point_truth)
+                    self._score(beam_class, pc, ranges_m, point_truth)
         self.n += 1
         return e
+
+    def _score(
+        self,
+        beam_class: NDArray[np.int8],
+        classes: Any,
+        ranges_m: NDArray[np.float32],
+        point_truth: NDArray[np.int8] | None,
+    ) -> None:
+        """Score one scan's reported point classes against the truth (beam labels and the
+        seen-before classes): a scan like the last ones waits to be scored with them
+        (:meth:`_score_held`, the same sums), any other one is scored now."""
+        p = np.asarray(classes)
+        shape = np.shape(beam_class)
+        held = self._unscored
+        if (
+            p.ndim == 1
+            and p.shape == shape == np.shape(ranges_m)
+            and (point_truth is None or np.shape(point_truth) == shape)
+            and (not held or (held[-1][3] is None) == (point_truth is None))
+        ):
+            held.append((beam_class, p.astype(np.int64), ranges_m, point_truth))
+            if len(held) >= SCORE_BATCH:
+                self._score_held()
+            return
+        self._score_held()
+        self.confusion += confusion_matrix(beam_class, classes)
+        self.point_tally.add(classes, ranges_m, point_truth)
+
+    def _score_held(self) -> None:
+        """Score the held scans at once (:meth:`PointClassTally.add_scans`)."""
+        held, self._unscored = self._unscored, []
+        if not held:
+            return
+        p = np.stack([h[1] for h in held])
+        self.confusion += confusion_matrix(np.stack([h[0] for h in held]), p)
+        truth = None if held[0][3] is None else np.stack([h[3] for h in held])
+        self.point_tally.add_scans(p, np.stack([h[2] for h in held]), truth)
 
     @staticmethod
     def checked_estimate(
@@ -311,11 +396,28 @@ class LocalizerRun:
             raise broke("a PoseEstimate with a finite (3, 3) covariance", got)
         return mean, cov
 
+    def feed(self, chunk: ScanChunk) -> None:
+        """:meth:`update` with each scan of ``chunk`` in order."""
+        t0 = time.perf_counter()
+        truth = chunk.point_truth
+        for j in range(len(chunk.stamps_s)):
+            self.update(
+                float(chunk.stamps_s[j]),
+                chunk.odom[j],
+                chunk.scans[j],
+                chunk.beam_class[j],
+                None if truth is None else truth[j],
+            )
+        self.busy_s += time.perf_counter() - t0
+
     def finish(self, last_of_day: bool) -> LocalizerOutput:
         """End the run (and the day), pickle the localizer; the run's output."""
+        t0 = time.perf_counter()
         n = self.n
         if n != len(self.est):
             self.diagnostics.resize(n)
+        with self._blame(n - 1):
+            self._score_held()
         with self._blame(None):
             self.loc.end_run()
             self.diagnostics.end_run(self.loc)
@@ -328,7 +430,7 @@ class LocalizerRun:
             self.cov_diag[:n].copy(),
             self.confusion,
             self.update_s,
-            time.perf_counter() - self.busy0,
+            self.busy_s + time.perf_counter() - t0,
             state,
             diagnostics=self.diagnostics.out,
             point_tally=self.point_tally,
@@ -337,22 +439,53 @@ class LocalizerRun:
 
 def localize_run(label: str, loc: Localizer, stream: RunStream) -> LocalizerOutput:
     """Feed one run's recorded stream to one localizer (:class:`LocalizerRun`)."""
-    n = len(stream.stamps_s)
-    run = LocalizerRun(label, loc, stream.prior, capacity=n)
-    truth = stream.point_truth
-    for step in range(n):
-        run.update(
-            float(stream.stamps_s[step]),
-            stream.odom[step],
-            stream.scans[step],
-            stream.beam_class[step],
-            None if truth is None else truth[step],
-        )
+    run = LocalizerRun(label, loc, stream.prior, capacity=len(stream.stamps_s))
+    run.feed(ScanChunk(stream.stamps_s, stream.odom, stream.scans, stream.beam_class,
+                       stream.point_truth))  # fmt: skip
     return run.finish(stream.last_of_day)
 
 
+class StreamedRuns:
+    """Some localizers through runs streamed in chunks: :meth:`begin` a run (``begin_run``
+    of each), :meth:`feed` chunks (each localizer takes the chunk's scans in order),
+    :meth:`end` (their outputs). A localizer that failed is reported at :meth:`end`, after
+    the run's remaining chunks were skipped (the caller reads one answer per run)."""
+
+    def __init__(self) -> None:
+        self._runs: list[tuple[int, LocalizerRun]] = []
+        self._header: RunHeader | None = None
+        self._error: Exception | None = None
+
+    def begin(self, header: RunHeader, locs: dict[int, tuple[str, Localizer]], n: int) -> None:
+        self._header, self._error, self._runs = header, None, []
+        try:
+            for k, (label, loc) in locs.items():
+                self._runs.append((k, LocalizerRun(label, loc, header.prior, capacity=n)))
+        except Exception as exc:  # noqa: BLE001 - reported at end()
+            self._error = exc
+
+    def feed(self, chunk: ScanChunk) -> None:
+        if self._error is not None:
+            return
+        try:
+            for _, run in self._runs:
+                run.feed(chunk)
+        except Exception as exc:  # noqa: BLE001 - reported at end()
+            self._error = exc
+
+    def end(self) -> dict[int, LocalizerOutput]:
+        header, error, runs = self._header, self._error, self._runs
+        self._header, self._error, self._runs = None, None, []
+        if header is None:
+            raise RuntimeError("end() without begin()")
+        if error is not None:
+            raise error
+        return {k: run.finish(header.last_of_day) for k, run in runs}
+
+
 class InProcessLocalizers:
-    """All localizers in the calling process (``workers=1``): :meth:`submit` does the work."""
+    """All localizers in the calling process (``workers=1``): :meth:`feed` does the work as
+    the chunks come (:meth:`submit`: a whole recorded run)."""
 
     pipelined = False
     depth = 1
@@ -360,12 +493,25 @@ class InProcessLocalizers:
     def __init__(self, labels: Sequence[str], localizers: Sequence[Localizer]) -> None:
         self.labels = list(labels)
         self.locs = list(localizers)
+        self._runs = StreamedRuns()
         self._out: list[LocalizerOutput] | None = None
 
+    def begin(self, header: RunHeader, capacity: int = 1024) -> None:
+        if self._out is not None:
+            raise RuntimeError(f"begin() with {self.depth} runs not collected")
+        locs = dict(enumerate(zip(self.labels, self.locs, strict=True)))
+        self._runs.begin(header, locs, capacity)
+
+    def feed(self, chunk: ScanChunk) -> None:
+        self._runs.feed(chunk)
+
+    def end(self) -> None:
+        out = self._runs.end()
+        self._out = [out[k] for k in range(len(self.labels))]
+
     def submit(self, stream: RunStream) -> None:
-        self._out = [
-            localize_run(lab, loc, stream) for lab, loc in zip(self.labels, self.locs, strict=True)
-        ]
+        """:meth:`begin`, :meth:`feed` and :meth:`end` with a whole recorded run."""
+        submit_stream(self, stream)
 
     def result(self) -> list[LocalizerOutput]:
         out, self._out = self._out, None
@@ -375,6 +521,14 @@ class InProcessLocalizers:
 
     def close(self) -> None:
         pass
+
+
+def submit_stream(engine: InProcessLocalizers | LocalizerPool, stream: RunStream) -> None:
+    """A whole recorded run into ``engine``: begin, its scans in chunks, end."""
+    engine.begin(RunHeader(stream.index, stream.prior, stream.last_of_day), len(stream.stamps_s))
+    for chunk in stream.chunks(CHUNK_SCANS):
+        engine.feed(chunk)
+    engine.end()
 
 
 # ---------------------------------------------------------------------- worker processes
@@ -405,15 +559,17 @@ def _worker_main(conn: Connection, parent_pid: int) -> None:
     """A worker's loop: hold some localizers, run each submitted stream through them.
 
     Messages: ``("adopt", {k: (label, pickled)})``, ``("drop", [k, ...])``,
-    ``("run", RunStream)``, ``("stop",)``, handled in order (:func:`_receive` reads them as
-    they come). Each gets one reply: ``("ok", payload)`` or ``("error", kind, message,
-    traceback)``.
+    ``("begin", RunHeader, n_scans)``, ``("scans", ScanChunk)``, ``("end",)``, ``("stop",)``,
+    handled in order (:func:`_receive` reads them as they come). ``adopt``, ``drop`` and
+    ``end`` get one reply each: ``("ok", payload)`` (after ``end``: the run's outputs) or
+    ``("error", kind, message, traceback)``; ``begin`` and ``scans`` none.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the main process's business
     threading.Thread(target=_exit_with_parent, args=(parent_pid,), daemon=True).start()
     inbox: queue.SimpleQueue = queue.SimpleQueue()
     threading.Thread(target=_receive, args=(conn, inbox), daemon=True).start()
     locs: dict[int, tuple[str, Localizer]] = {}
+    runs = StreamedRuns()
     while True:
         msg = inbox.get()
         if msg is None:
@@ -421,6 +577,12 @@ def _worker_main(conn: Connection, parent_pid: int) -> None:
         kind = msg[0]
         if kind == "stop":
             return
+        if kind == "begin":
+            runs.begin(msg[1], locs, msg[2])
+            continue
+        if kind == "scans":
+            runs.feed(msg[1])
+            continue
         try:
             if kind == "adopt":
                 for k, (label, blob) in msg[1].items():
@@ -430,11 +592,8 @@ def _worker_main(conn: Connection, parent_pid: int) -> None:
                 for k in msg[1]:
                     locs.pop(k, None)
                 reply = ("ok", None)
-            elif kind == "run":
-                reply = (
-                    "ok",
-                    {k: localize_run(lab, loc, msg[1]) for k, (lab, loc) in locs.items()},
-                )
+            elif kind == "end":
+                reply = ("ok", runs.end())
             else:
                 reply = ("error", "protocol", f"unknown message {kind!r}", "")
         except InputError as exc:
@@ -458,15 +617,17 @@ class LocalizerPool:
     """Localizers spread over ``n_workers`` persistent worker processes (see module doc).
 
     ``states`` are the pickled localizers (fresh or from a checkpoint), index-aligned with
-    ``labels``. Use as: ``submit(stream)`` per run and ``result()`` per run, in order, with
-    at most :attr:`depth` runs submitted and not yet collected; ``close()`` at the end (also
-    on errors: it terminates the workers).
+    ``labels``. Use as: per run ``begin(header)``, ``feed(chunk)`` per chunk of its scans and
+    ``end()`` (or ``submit(stream)`` with a whole recorded run), and ``result()`` per run, in
+    order, with at most :attr:`depth` runs begun and not yet collected; ``close()`` at the
+    end (also on errors: it terminates the workers).
     """
 
     pipelined = True
-    #: Runs in flight at most: the main process simulates the next run while the workers
-    #: localize the last two (one each would leave a core idle whenever one side waits).
-    depth = 2
+    #: Runs in flight at most: the workers localize the run being simulated as it comes and
+    #: may still be on the two before it (one would leave a core idle whenever one side
+    #: waits).
+    depth = 3
 
     def __init__(self, labels: Sequence[str], states: Sequence[bytes], n_workers: int) -> None:
         if n_workers < 1:
@@ -474,7 +635,7 @@ class LocalizerPool:
         self.labels = list(labels)
         self.states = list(states)
         self.busy_s = [0.0] * len(self.labels)  # per localizer, last run
-        self._in_flight: deque[RunStream] = deque()  # submitted, not collected, oldest first
+        self._in_flight: deque[RunHeader] = deque()  # begun, not collected, oldest first
         self._collected: deque[list[LocalizerOutput]] = deque()  # collected, not returned
         n_workers = min(n_workers, max(1, len(self.labels)))
         ctx = mp.get_context("spawn")
@@ -587,19 +748,34 @@ class LocalizerPool:
             w.locs = target[i]
 
     # ------------------------------------------------------------------ runs
-    def submit(self, stream: RunStream) -> None:
-        """Start localizing ``stream`` in the workers (returns at once; a worker busy with an
-        earlier run starts on it when done)."""
-        if len(self._in_flight) + len(self._collected) >= self.depth:
-            raise RuntimeError(f"submit() with {self.depth} runs not collected")
-        self._rebalance()
-        self._in_flight.append(stream)
+    def _send_all(self, msg: tuple[Any, ...]) -> None:
         for w in self.workers:
             if w.locs:
                 try:
-                    w.conn.send(("run", stream))
+                    w.conn.send(msg)
                 except (BrokenPipeError, OSError):
                     pass  # it died: result() says so
+
+    def begin(self, header: RunHeader, capacity: int = 1024) -> None:
+        """Start a run in the workers (returns at once; a worker busy with an earlier run
+        starts on it when done); ``capacity``: a first guess of its scans."""
+        if len(self._in_flight) + len(self._collected) >= self.depth:
+            raise RuntimeError(f"begin() with {self.depth} runs not collected")
+        self._rebalance()
+        self._in_flight.append(header)
+        self._send_all(("begin", header, int(capacity)))
+
+    def feed(self, chunk: ScanChunk) -> None:
+        """The next scans of the run begun last."""
+        self._send_all(("scans", chunk))
+
+    def end(self) -> None:
+        """The run begun last has no more scans: the workers finish it."""
+        self._send_all(("end",))
+
+    def submit(self, stream: RunStream) -> None:
+        """:meth:`begin`, :meth:`feed` and :meth:`end` with a whole recorded run."""
+        submit_stream(self, stream)
 
     def result(self) -> list[LocalizerOutput]:
         """Wait for the oldest submitted run's outputs (index-aligned with the labels)."""

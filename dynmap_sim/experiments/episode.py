@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -34,7 +34,14 @@ from numpy.typing import NDArray
 from dynmap_sim.agent.localizer import Localizer
 from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
 from dynmap_sim.agent.planning.grid_dijkstra import GridDijkstra
-from dynmap_sim.experiments.bench import LocalizerOutput, LocalizerRun, RunStream
+from dynmap_sim.experiments.bench import (
+    CHUNK_SCANS,
+    LocalizerOutput,
+    LocalizerRun,
+    RunHeader,
+    RunStream,
+    ScanChunk,
+)
 from dynmap_sim.experiments.drivers import Driver, RunStart, StepInput
 from dynmap_sim.experiments.drivers.tour import plan_through_waypoints, static_clearance_grid
 from dynmap_sim.experiments.results import PeopleTrack
@@ -63,6 +70,37 @@ KIDNAP_SEARCH_M = 1.0
 PREFERRED_EXTRA_M = 0.07
 #: A route waypoint inside an obstacle counts if free space is this near [m] (the tour's).
 SNAP_WAYPOINT_M = 0.4
+
+
+class StreamSink(Protocol):
+    """Where :meth:`EpisodeLoop.run` hands a run's stream as it is recorded (the localizer
+    bench: :class:`~dynmap_sim.experiments.bench.LocalizerPool`,
+    :class:`~dynmap_sim.experiments.bench.InProcessLocalizers`)."""
+
+    def begin(self, header: RunHeader, capacity: int = 1024) -> None: ...
+
+    def feed(self, chunk: ScanChunk) -> None: ...
+
+    def end(self) -> None: ...
+
+
+def _chunk(
+    t_l: list[float],
+    odom_l: list[FloatArray],
+    scan_l: list[NDArray[np.float32]],
+    class_l: list[NDArray[np.int8]],
+    point_l: list[NDArray[np.int8]],
+    start: int,
+) -> ScanChunk:
+    """The recorded scans from ``start`` on, as the stream's arrays hold them."""
+    n = len(t_l) - start
+    return ScanChunk(
+        np.asarray(t_l[start:], dtype=np.float64),
+        np.asarray(odom_l[start:], dtype=np.float64).reshape(n, 3),
+        np.asarray(scan_l[start:], dtype=np.float32).reshape(n, -1),
+        np.asarray(class_l[start:], dtype=np.int8).reshape(n, -1),
+        np.asarray(point_l[start:], dtype=np.int8).reshape(n, -1),
+    )
 
 
 @dataclass
@@ -191,11 +229,17 @@ class EpisodeLoop:
         return np.array([xy[0], xy[1], rng.uniform(-math.pi, math.pi)])
 
     def run(
-        self, i: int, state: EngineState, steer: tuple[str, Localizer] | None = None
+        self,
+        i: int,
+        state: EngineState,
+        steer: tuple[str, Localizer] | None = None,
+        bench: StreamSink | None = None,
     ) -> Episode:
         """Drive run ``i`` of :attr:`slots` and record it; ``state`` carries on. ``steer``:
         the (label, localizer) the driver steers on, updated here scan by scan in lock-step
-        (its estimate goes to the driver; its output to :attr:`Episode.steered`)."""
+        (its estimate goes to the driver; its output to :attr:`Episode.steered`). ``bench``:
+        the other localizers, handed the stream in chunks of
+        :data:`~dynmap_sim.experiments.bench.CHUNK_SCANS` scans as it is recorded."""
         slot = self.slots[i]
         cfg = self.config
         driver, rng = state.driver, state.rng
@@ -230,9 +274,13 @@ class EpisodeLoop:
         events: list[tuple[int, float, str, str]] = []
         max_steps = int(round(cfg.max_run_s / self.dt_s)) if cfg.max_run_s is not None else None
         lockstep = None
+        limit = max_steps if max_steps is not None else getattr(self.u, "max_episode_steps", 0)
         if steer is not None:
-            limit = max_steps if max_steps is not None else getattr(self.u, "max_episode_steps", 0)
             lockstep = LocalizerRun(steer[0], steer[1], prior, capacity=int(limit) + 1)
+        last_of_day = i + 1 == len(self.slots) or self.slots[i + 1].day != slot.day
+        if bench is not None:
+            bench.begin(RunHeader(i, prior, last_of_day), int(limit) + 1)
+        sent = 0  # scans handed to the bench
         estimate = None
         t_l: list[float] = []
         odom_l: list[FloatArray] = []
@@ -267,6 +315,9 @@ class EpisodeLoop:
             if lockstep is not None:
                 estimate = lockstep.update(t_s, odom_l[-1], scan_l[-1], class_l[-1], point_l[-1])
             progress_frac = float(info.get("route_progress", progress_frac))
+            if bench is not None and len(t_l) - sent >= CHUNK_SCANS:
+                bench.feed(_chunk(t_l, odom_l, scan_l, class_l, point_l, sent))
+                sent = len(t_l)
             if terminated or truncated or driver.done:
                 break
             if max_steps is not None and step >= max_steps:
@@ -318,7 +369,10 @@ class EpisodeLoop:
         # its leading part (route_fraction)
         share = path_length_m(cfg.route) / max(path_length_m(facts.route), 1e-12)
         progress_on_route = min(1.0, progress_frac / max(share, 1e-12))
-        last_of_day = i + 1 == len(self.slots) or self.slots[i + 1].day != slot.day
+        if bench is not None:
+            if len(t_l) > sent:
+                bench.feed(_chunk(t_l, odom_l, scan_l, class_l, point_l, sent))
+            bench.end()
         steered = lockstep.finish(last_of_day) if lockstep is not None else None
         stream = RunStream(
             index=i,

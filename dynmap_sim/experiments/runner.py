@@ -1,11 +1,12 @@
 """The calendar loop: a scenario's days and runs, localizers side by side (docs/architecture.md §6).
 
 For every run of the chosen days: ``env.reset(seed, day, run)``, build the :class:`Prior`, let
-the driver drive (it follows the true pose) and record the run's (odometry, scan) stream; then
-the *same* stream feeds every localizer: ``begin_run``, ``update`` per scan, ``end_run``, and
-``end_day`` after the day's last run (:mod:`.workers`). With ``workers > 1`` the localizers
-work in worker processes on runs ``i - 1`` and ``i`` while this process simulates run
-``i + 1``; the numbers are the same as with ``workers=1`` (all in this process).
+the driver drive (it follows the true pose) and record the run's (odometry, scan) stream; the
+*same* stream feeds every localizer, in chunks as it is recorded: ``begin_run``, ``update``
+per scan, ``end_run``, and ``end_day`` after the day's last run (:mod:`.bench`). With
+``workers > 1`` the localizers work in worker processes on run ``i`` as this process
+simulates it (and may still be on runs ``i - 2`` and ``i - 1``); the numbers are the same as
+with ``workers=1`` (all in this process).
 
 Each run's rows, summaries and a checkpoint (localizers, driver, RNG states, next run) are
 committed to the results store in one transaction, so an experiment killed at any moment
@@ -319,8 +320,8 @@ class ExperimentRunner:
     def run(self, progress: bool = True, stop_after: int | None = None) -> Path:
         """Run the remaining slots; return the results folder.
 
-        With ``workers > 1`` the localizers of runs ``i - 1`` and ``i`` work in worker
-        processes while this process simulates run ``i + 1``. ``stop_after`` (for tests)
+        With ``workers > 1`` the localizers work in worker processes on each run as this
+        process simulates it (and on the two before, if not done). ``stop_after`` (for tests)
         stops after that many slots as if the process were killed: the experiment is left
         incomplete.
         """
@@ -350,15 +351,11 @@ class ExperimentRunner:
             for i in range(self.start_index, last):
                 slot = self.slots[i]
                 bar.set_postfix_str(f"day {slot.day} run {slot.run}")
-                sim = self._simulate(i)
-                # pipelined: store the oldest run when as many are in flight as the bench
-                # holds, then start this one (the workers may still be on the one before)
-                if len(pending) >= engine.depth:
-                    done_at = self._store(pending.popleft(), engine.result(), done_at)
-                    bar.update(1)
-                engine.submit(sim[0].stream)
+                sim = self._simulate(i, engine)  # the bench takes the scans as they come
                 pending.append(sim)
-                if not engine.pipelined:
+                # store the oldest run when as many are in flight as the bench holds (the
+                # workers may still be on the ones before this)
+                if len(pending) >= engine.depth:
                     done_at = self._store(pending.popleft(), engine.result(), done_at)
                     bar.update(1)
             while pending:
@@ -383,10 +380,13 @@ class ExperimentRunner:
         """:meth:`_write` a simulated run with its bench outputs (and the steered one's)."""
         return self._write(*sim, self._with_steered(sim[0], outs), since)
 
-    def _simulate(self, i: int) -> tuple[Episode, EngineState]:
-        """Drive run ``i`` through the episode loop; the state to checkpoint after it (copied
-        now: the next run is simulated before this one is written)."""
-        episode = self.loop.run(i, self.state, self._steer)
+    def _simulate(
+        self, i: int, bench: InProcessLocalizers | LocalizerPool | None = None
+    ) -> tuple[Episode, EngineState]:
+        """Drive run ``i`` through the episode loop (``bench``: the localizers it streams the
+        scans to as they are recorded); the state to checkpoint after it (copied now: the
+        next run is simulated before this one is written)."""
+        episode = self.loop.run(i, self.state, self._steer, bench)
         return episode, pickle.loads(pickle.dumps(self.state, pickle.HIGHEST_PROTOCOL))
 
     def _write(

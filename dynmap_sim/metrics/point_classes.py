@@ -207,6 +207,25 @@ class PointClassTally:
         if truth is not None:
             self.confusion += point_confusion(truth, p)
 
+    def add_scans(
+        self, predicted: NDArray[np.int64], ranges_m: NDArray[np.floating], truth: ArrayLike | None
+    ) -> None:
+        """:meth:`add` of each row of ``predicted`` ``(T, B)`` with the same row of
+        ``ranges_m`` ``(T, B)`` and of ``truth`` ``(T, B)`` (None: not known), in order: the
+        same sums, the shares added scan by scan as :meth:`add` does."""
+        p = np.asarray(predicted, dtype=np.int64)
+        valid = np.isfinite(np.asarray(ranges_m, dtype=np.float64))
+        n_valid = valid.sum(axis=1)
+        rows = np.nonzero(n_valid)[0]
+        n = len(p)
+        key = (np.arange(n)[:, None] * 4 + np.clip(p, 0, 3))[valid]
+        counts = np.bincount(key, minlength=4 * n).reshape(n, 4)
+        for share in counts[rows] / n_valid[rows, None]:
+            self.fraction_sum += share
+        self.n_scans += len(rows)
+        if truth is not None:
+            self.confusion += point_confusion(truth, p)
+
     def merge(self, other: PointClassTally) -> None:
         self.confusion += other.confusion
         self.fraction_sum += other.fraction_sum

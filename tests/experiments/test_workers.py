@@ -173,15 +173,15 @@ def test_rebalancing_moves_localizers_and_keeps_the_numbers(tmp_path):
     assert not mp.active_children()
 
 
-def test_two_runs_in_flight_and_a_rebalance_between_keep_the_numbers(tmp_path):
-    """The pool takes a second run before the first is collected (LocalizerPool.depth); a
+def test_three_runs_in_flight_and_a_rebalance_between_keep_the_numbers(tmp_path):
+    """The pool takes further runs before the first is collected (LocalizerPool.depth); a
     rebalance then collects the runs in flight first and moves the localizers' states after
     them: the outputs are the in-process ones, in order."""
     from dynmap_sim.experiments.bench import LocalizerPool
 
-    scn = scenario(tmp_path)
+    scn = scenario(tmp_path, days=[1, 4])
     r = ExperimentRunner(scn, tmp_path / "o", scn.days, 0, resume=False, env=FakeEnv())
-    sims = [r._simulate(i)[0] for i in range(3)]
+    sims = [r._simulate(i)[0] for i in range(4)]
     seq = r._start_localizers()
     ref = []
     for s in sims:
@@ -190,16 +190,16 @@ def test_two_runs_in_flight_and_a_rebalance_between_keep_the_numbers(tmp_path):
     fresh = ExperimentRunner(scn, tmp_path / "o2", scn.days, 0, resume=False, env=FakeEnv())
     pool = LocalizerPool(scn.labels, [pickle.dumps(loc) for loc in fresh.localizers()], 2)
     try:
-        assert pool.depth == 2
-        pool.submit(sims[0].stream)
-        pool.submit(sims[1].stream)
+        assert pool.depth == 3
+        for s in sims[:3]:
+            pool.submit(s.stream)
         with pytest.raises(RuntimeError, match="not collected"):
-            pool.submit(sims[2].stream)
+            pool.submit(sims[3].stream)
         got = [pool.result()]
-        pool.busy_s = [6.0, 1.0, 5.0]  # calls for a move while run 2 is in flight
-        pool.submit(sims[2].stream)
+        pool.busy_s = [6.0, 1.0, 5.0]  # calls for a move while runs 2 and 3 are in flight
+        pool.submit(sims[3].stream)
         assert sorted(sorted(w.locs) for w in pool.workers) == [[0], [1, 2]]
-        got += [pool.result(), pool.result()]
+        got += [pool.result(), pool.result(), pool.result()]
     finally:
         pool.close()
     for a, b in zip(ref, got, strict=True):

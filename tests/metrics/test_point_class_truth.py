@@ -72,3 +72,24 @@ def test_tally_shares_of_valid_readings_and_scores_against_the_truth():
     assert sc.precision[1] == 0.0 and sc.recall[1] == 0.0  # semi-static
     assert np.isnan(PointClassTally().fractions()).all()
     np.testing.assert_array_equal(point_confusion([3, 2], [3, 3])[3], [0, 0, 0, 1])
+
+
+def test_add_scans_is_add_of_each_row_bit_for_bit():
+    """The batched tally (the bench scores held scans at once) has the per-scan sums: the
+    confusion counts and the shares added in the same order, scans without valid readings
+    and out-of-range classes included."""
+    rng = np.random.default_rng(5)
+    for with_truth in (True, False):
+        one, many = PointClassTally(), PointClassTally()
+        pred = rng.integers(-1, 5, (300, 50))
+        ranges = rng.uniform(0.1, 5.0, (300, 50)).astype(np.float32)
+        ranges[rng.random((300, 50)) < 0.3] = np.inf
+        ranges[7] = np.nan  # a scan without a valid reading
+        truth = rng.integers(0, 4, (300, 50)).astype(np.int8) if with_truth else None
+        for k in range(300):
+            one.add(pred[k], ranges[k], None if truth is None else truth[k])
+        many.add_scans(pred[:120], ranges[:120], None if truth is None else truth[:120])
+        many.add_scans(pred[120:], ranges[120:], None if truth is None else truth[120:])
+        assert one.n_scans == many.n_scans == 299
+        assert one.fraction_sum.tobytes() == many.fraction_sum.tobytes()
+        np.testing.assert_array_equal(one.confusion, many.confusion)

@@ -142,29 +142,33 @@ class LTMMap:
         flat_all = []
         add_all = []
         # Occupied: peak-normalized Gaussian on a (2k+1)^2 stencil around each point.
-        ox, oy = _stencil(params.stencil_cells)
-        ix, iy = self.cells(points)
-        cx = ix[:, None] + ox[None, :]
-        cy = iy[:, None] + oy[None, :]
-        dx = self.origin[0] + (cx + 0.5) * res - points[:, 0:1]
-        dy = self.origin[1] + (cy + 0.5) * res - points[:, 1:2]
-        cov = covs + np.eye(2) * params.cov_floor_m**2
-        inv = np.linalg.inv(cov)
-        m2 = inv[:, 0, 0, None] * dx * dx + 2 * inv[:, 0, 1, None] * dx * dy
-        m2 += inv[:, 1, 1, None] * dy * dy
+        i_xx, i_xy, i_yy, c_xx, c_xy, c_yy = floored_inverse(covs, params.cov_floor_m**2)
+        hit = np.ones(len(points), bool) if occupied is None else np.asarray(occupied, bool)
+        if kernel:
+            flat, m2, ix, iy = ltm_numba.stencil(points, i_xx, i_xy, i_yy, hit, self.origin,
+                                                 res, params.stencil_cells, h, w,
+                                                 python=kernel == "python")  # fmt: skip
+        else:
+            ox, oy = _stencil(params.stencil_cells)
+            ix, iy = self.cells(points)
+            cx = ix[:, None] + ox[None, :]
+            cy = iy[:, None] + oy[None, :]
+            dx = self.origin[0] + (cx + 0.5) * res - points[:, 0:1]
+            dy = self.origin[1] + (cy + 0.5) * res - points[:, 1:2]
+            m2 = i_xx[:, None] * dx * dx + 2 * i_xy[:, None] * dx * dy
+            m2 += i_yy[:, None] * dy * dy
+            ok = (cx >= 0) & (cx < w) & (cy >= 0) & (cy < h) & (m2 < 9.0) & hit[:, None]
+            flat, m2 = (cy * w + cx)[ok], m2[ok]
         p = 0.5 + (params.p_hit - 0.5) * np.exp(-0.5 * m2)
-        ok = (cx >= 0) & (cx < w) & (cy >= 0) & (cy < h) & (m2 < 9.0)
-        if occupied is not None:
-            ok &= np.asarray(occupied, dtype=bool)[:, None]
-        flat_all.append((cy * w + cx)[ok])
-        add_all.append(np.log(p / (1.0 - p))[ok])
+        flat_all.append(flat)
+        add_all.append(np.log(p / (1.0 - p)))
         free = None
         if params.free_space:
             d = points - laser_xy[None, :]
             r = np.hypot(d[:, 0], d[:, 1])
-            sig = np.sqrt(
-                np.maximum(np.einsum("nij,ni,nj->n", cov, d, d) / np.maximum(r, 1e-9) ** 2, 0)
-            )
+            d0, d1 = d[:, 0], d[:, 1]
+            dd = (c_xx * d0 * d0 + 2.0 * c_xy * d0 * d1) + c_yy * d1 * d1  # dᵀ Σ d
+            sig = np.sqrt(np.maximum(dd / np.maximum(r, 1e-9) ** 2, 0))
             stop = r - np.maximum(params.free_stop_sigma * sig, res)
             step = 0.5 * res
             t = np.arange(0.0, float(stop.max(initial=0.0)), step)
@@ -277,6 +281,21 @@ class LTMMap:
         return np.where(first >= 0, t[first], range_max)
 
 
+def floored_inverse(
+    covs: FloatArray, floor2_m2: float
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The inverses of ``covs + floor2_m2·I`` (``(n, 2, 2)``, symmetric) in closed form:
+    ``(inv_xx, inv_xy, inv_yy)`` and the floored entries ``(xx, xy, yy)``. The floor bounds
+    the smallest eigenvalue from below, so the determinant ``xx·yy - xy²`` is at least
+    ``floor2_m2²`` and its relative rounding error stays below eps times the condition
+    number (at most ``(σ_max / cov_floor_m)²``)."""
+    a = covs[:, 0, 0] + floor2_m2
+    c = covs[:, 1, 1] + floor2_m2
+    b = covs[:, 0, 1]
+    det = a * c - b * b
+    return c / det, -b / det, a / det, a, b, c
+
+
 def point_covariances(
     pose: FloatArray,
     cov_pose: FloatArray,
@@ -289,7 +308,11 @@ def point_covariances(
     """Eqs. 12-14: world points ``(n, 2)`` of readings ``(r, α)`` taken at robot ``pose``
     (laser ``mount`` in the robot frame) and their covariances ``(n, 2, 2)``
     ``Σ'' = ∇F blockdiag(Σ_p, Σ_s) ∇Fᵀ``. The pose part's ∂/∂φ is the lever arm from the
-    robot's centre to the point (the paper's ``-r sin(φ+α), r cos(φ+α)`` with the mount)."""
+    robot's centre to the point (the paper's ``-r sin(φ+α), r cos(φ+α)`` with the mount).
+
+    The products are written out element by element (:func:`point_covariance_terms`), each
+    an IEEE operation on arrays of points (no BLAS), so a compiled kernel can repeat them
+    exactly; the result is symmetric by construction."""
     x, y, phi = pose
     c, s = np.cos(phi), np.sin(phi)
     lx = x + c * mount[0] - s * mount[1]
@@ -297,16 +320,42 @@ def point_covariances(
     b = phi + mount[2] + angles
     cb, sb = np.cos(b), np.sin(b)
     px, py = lx + ranges * cb, ly + ranges * sb
-    n = len(ranges)
-    jp = np.zeros((n, 2, 3))
-    jp[:, 0, 0] = jp[:, 1, 1] = 1.0
-    jp[:, 0, 2] = -(py - y)
-    jp[:, 1, 2] = px - x
-    js = np.empty((n, 2, 2))  # columns: alpha, r
-    js[:, 0, 0], js[:, 1, 0] = -ranges * sb, ranges * cb
-    js[:, 0, 1], js[:, 1, 1] = cb, sb
-    ss = np.zeros((n, 2, 2))
-    ss[:, 0, 0] = sigma_alpha**2
-    ss[:, 1, 1] = np.asarray(sigma_r) ** 2
-    cov = jp @ cov_pose @ jp.transpose(0, 2, 1) + js @ ss @ js.transpose(0, 2, 1)
+    cov = np.empty((len(ranges), 2, 2))
+    cxx, cxy, cyy = point_covariance_terms(
+        np.asarray(cov_pose, dtype=np.float64), -(py - y), px - x, ranges, cb, sb,
+        sigma_alpha * sigma_alpha, np.square(np.asarray(sigma_r, dtype=np.float64)),
+    )  # fmt: skip
+    cov[:, 0, 0] = cxx
+    cov[:, 0, 1] = cov[:, 1, 0] = cxy
+    cov[:, 1, 1] = cyy
     return np.column_stack([px, py]), cov
+
+
+def point_covariance_terms(
+    cov_pose: FloatArray,
+    ax: FloatArray,
+    ay: FloatArray,
+    ranges: FloatArray,
+    cb: FloatArray,
+    sb: FloatArray,
+    var_alpha: float,
+    var_r: FloatArray,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The entries ``(xx, xy, yy)`` of eq. 14's ``Σ''`` with the pose Jacobian
+    ``J_p = [[1, 0, ax], [0, 1, ay]]`` (``ax = -(p_y - y)``, ``ay = p_x - x``: the lever
+    arm) and the reading Jacobian ``J_s = [[-r sin β, cos β], [r cos β, sin β]]`` (columns
+    α, r), ``Σ_s = diag(var_alpha, var_r)``:
+    ``J_p Σ_p J_pᵀ + J_s Σ_s J_sᵀ`` written out (row ``i`` of ``J_p Σ_p`` is
+    ``Σ_p[i] + a_i Σ_p[2]``; the off-diagonal entry is computed once)."""
+    p = cov_pose
+    r0x = p[0, 0] + ax * p[2, 0]  # row x of J_p Σ_p, columns 0 and 2
+    r2x = p[0, 2] + ax * p[2, 2]
+    r1y = p[1, 1] + ay * p[2, 1]  # row y, columns 1 and 2
+    r2y = p[1, 2] + ay * p[2, 2]
+    r1x = p[0, 1] + ax * p[2, 1]  # row x, column 1
+    rs, rc = ranges * sb, ranges * cb
+    ta, tr = rs * var_alpha, cb * var_r  # row x of J_s Σ_s: (-r sin β σ_α², cos β σ_r²)
+    xx = (r0x + ax * r2x) + (rs * ta + cb * tr)
+    xy = (r1x + ay * r2x) + (sb * tr - rc * ta)
+    yy = (r1y + ay * r2y) + (rc * (rc * var_alpha) + sb * (sb * var_r))
+    return xx, xy, yy

@@ -5,6 +5,8 @@
   eigenvalue, the point's cell and its offset in it, as the numpy code computes them), the
   3 x 3 cells around it first, then its whole search square, stopping at the first occupied
   cell within its circle; the numpy code builds ``(points x cells)`` arrays instead.
+* :func:`stencil`: eq. 15's stencil cells around each point with their squared Mahalanobis
+  distances (the numpy code builds ``(points x cells)`` arrays and keeps the near ones);
 * :func:`fuse`: the end of eq. 15's update: the occupied log-odds of the stencils added in
   the numpy code's order, then ``l_free`` once per cell along each sampled beam (the free
   space before the point, walked sample by sample); the numpy code collects every ray
@@ -148,6 +150,39 @@ def _fuse_py(  # type: ignore[no-untyped-def]
                     prev = c
 
 
+def _stencil_py(  # type: ignore[no-untyped-def]
+    points, i_xx, i_xy, i_yy, hit, origin_x_m, origin_y_m, res_m, k, h, w, ix, iy, flat, m2
+):
+    """Eq. 15's stencil: for point ``j`` (if ``hit[j]``) the cells ``(ix + ox, iy + oy)``,
+    ``oy`` then ``ox`` from ``-k`` to ``k`` (the numpy code's raveled order), inside the
+    ``h x w`` grid with the squared Mahalanobis distance ``m2 < 9`` of the cell centre
+    under the inverse covariance ``(i_xx, i_xy, i_yy)``; fills ``ix, iy`` (each point's
+    cell) and the first entries of ``flat`` (flat cell index) and ``m2``, returns how many."""
+    n_out = 0
+    for j in range(points.shape[0]):
+        px = points[j, 0]
+        py = points[j, 1]
+        ix[j] = int(math.floor((px - origin_x_m) / res_m))
+        iy[j] = int(math.floor((py - origin_y_m) / res_m))
+        if not hit[j]:
+            continue
+        two_xy = 2 * i_xy[j]
+        for oy in range(-k, k + 1):
+            cy = iy[j] + oy
+            dy = origin_y_m + (cy + 0.5) * res_m - py
+            for ox in range(-k, k + 1):
+                cx = ix[j] + ox
+                dx = origin_x_m + (cx + 0.5) * res_m - px
+                d2 = i_xx[j] * dx * dx + two_xy * dx * dy
+                d2 += i_yy[j] * dy * dy
+                if 0 <= cx < w and 0 <= cy < h and d2 < 9.0:
+                    flat[n_out] = cy * w + cx
+                    m2[n_out] = d2
+                    n_out += 1
+    return n_out
+
+
+_stencil = compiled(_stencil_py)
 _explained = compiled(_explained_py)
 _fuse = compiled(_fuse_py)
 
@@ -200,3 +235,32 @@ def fuse(
     kernel(logodds, occ_flat, occ_add32, free is not None, float(lx), float(ly), ux, uy, stop,
            t, float(origin_m[0]), float(origin_m[1]), float(res_m),
            np.float32(l_free))  # fmt: skip
+
+
+def stencil(
+    points: FloatArray,
+    i_xx: FloatArray,
+    i_xy: FloatArray,
+    i_yy: FloatArray,
+    hit: NDArray[np.bool_],
+    origin_m: FloatArray,
+    res_m: float,
+    k: int,
+    h: int,
+    w: int,
+    python: bool = False,
+) -> tuple[IntArray, FloatArray, IntArray, IntArray]:
+    """:func:`_stencil_py` compiled (needs numba; ``python``: the plain kernel): the flat
+    cells and squared Mahalanobis distances of the kept stencil cells, and each point's
+    cell ``ix, iy``."""
+    kernel = _stencil_py if python else _stencil
+    if kernel is None:
+        require_numba("long-term map")
+    n = len(points)
+    ix, iy = np.empty(n, dtype=np.intp), np.empty(n, dtype=np.intp)
+    flat = np.empty(n * (2 * k + 1) ** 2, dtype=np.intp)
+    m2 = np.empty(len(flat))
+    m = kernel(np.ascontiguousarray(points, dtype=np.float64), i_xx, i_xy, i_yy, hit,
+               float(origin_m[0]), float(origin_m[1]), float(res_m), int(k), int(h), int(w),
+               ix, iy, flat, m2)  # fmt: skip
+    return flat[:m], m2[:m], ix, iy

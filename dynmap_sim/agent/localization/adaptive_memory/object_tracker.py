@@ -177,17 +177,25 @@ def _segment_scan_kernels(
 
 class ObjectTracker:
     """Constant-velocity Kalman filters on box centres in the odometry frame (§4.2), all tracks
-    as arrays: state ``(x, y, vx, vy)``, covariance ``(N, 4, 4)``."""
+    as arrays: state ``x`` ``(N, 4)`` = ``(x, y, vx, vy)``.
+
+    The model is separable: position and velocity along x and along y with the same white
+    acceleration, measurement noise and initial covariance (and ``H = [I 0]``), so the two
+    axes never correlate and share one covariance ``[[p, c], [c, v]]`` (position, velocity)
+    per track: ``P`` ``(N, 3)`` holds ``(p, c, v)``, the 4 x 4 covariance being
+    ``blockdiag`` of it per axis. Prediction and update are written out in closed form, IEEE
+    operations on the arrays of tracks (no BLAS), so a compiled kernel can repeat them."""
 
     def __init__(self, params: TrackerParams) -> None:
         self.params = params
-        #: A new track's covariance.
-        self.P0 = np.diag([params.sigma_meas_m**2] * 2 + [params.sigma_v0**2] * 2)
         self.reset()
 
     def reset(self) -> None:
+        params = self.params
+        #: A new track's covariance ``(p, c, v)`` (each axis).
+        self.P0 = np.array([params.sigma_meas_m**2, 0.0, params.sigma_v0**2])
         self.x = np.zeros((0, 4))
-        self.P = np.zeros((0, 4, 4))
+        self.P = np.zeros((0, 3))
         self.hits = np.zeros(0, np.int32)
         self.misses = np.zeros(0, np.int32)
         self.fast = np.zeros(0, np.int32)
@@ -200,29 +208,65 @@ class ObjectTracker:
         return len(self.x)
 
     def _predict(self, dt: float) -> None:
+        """``x' = F x``, ``P' = F P Fᵀ + Q`` with ``F = [[1, dt], [0, 1]]`` and
+        ``Q = σ_a² g gᵀ``, ``g = (dt²/2, dt)`` per axis (white acceleration)."""
         if self.n_tracks == 0 or dt <= 0:
             return
-        F = np.eye(4)
-        F[0, 2] = F[1, 3] = dt
         q = self.params.sigma_accel**2
-        g = np.array([0.5 * dt * dt, dt])
-        Q1 = q * np.outer(g, g)
-        Q = np.zeros((4, 4))
-        Q[0::2, 0::2] = Q1  # (x, vx)
-        Q[1::2, 1::2] = Q1  # (y, vy)
-        self.x = self.x @ F.T
-        self.P = F @ self.P @ F.T + Q
+        g0, g1 = 0.5 * dt * dt, dt
+        x, P = self.x, self.P
+        x[:, 0] += dt * x[:, 2]
+        x[:, 1] += dt * x[:, 3]
+        p, c, v = P[:, 0], P[:, 1], P[:, 2]
+        cv = c + dt * v  # (F P)[0, 1] = (F P Fᵀ)[0, 1] before Q
+        P[:, 0] = ((p + dt * c) + dt * cv) + q * (g0 * g0)
+        P[:, 1] = cv + q * (g0 * g1)
+        P[:, 2] = v + q * (g1 * g1)
 
     def update(
-        self, boxes: Boxes, odom_pose: FloatArray, t_s: float
+        self, boxes: Boxes, odom_pose: FloatArray, t_s: float, backend: str = "auto"
     ) -> tuple[NDArray[np.int8], NDArray[np.float64]]:
-        """Track one scan's boxes; returns each box's class (eq. 10) and speed [m/s]."""
+        """Track one scan's boxes; returns each box's class (eq. 10) and speed [m/s].
+        ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): the prediction, association,
+        update and classification in :func:`.tracker_numba.track` (the same numbers) or
+        in numpy."""
+        kernel = kernel_backend(backend)
         p = self.params
         dt = 0.0 if self.t_last is None or t_s < self.t_last else t_s - self.t_last
         self.t_last = t_s
-        self._predict(dt)
         nb = len(boxes.center_robot)
         z = se2.transform_points(odom_pose, boxes.center_robot) if nb else np.zeros((0, 2))
+        if kernel:
+            counters = (self.hits, self.misses, self.fast, self.slow)
+            match_box, cls, speed = tracker_numba.track(
+                self.x, self.P, counters, self.dynamic, z, boxes.never_dynamic, dt,
+                p.sigma_accel**2, p.sigma_meas_m**2, p.gate_m, p.v_thres, p.confirm_steps,
+                python=kernel == "python",
+            )  # fmt: skip
+            matched = match_box >= 0
+        else:
+            matched, cls, speed = self._update_numpy(boxes, z, dt)
+        # Drop lost tracks, start new ones for unmatched boxes (unknown until associated).
+        alive = self.misses <= p.max_misses
+        new = ~matched
+        n_new = int(new.sum())
+        self.x = np.concatenate([self.x[alive], np.column_stack([z[new], np.zeros((n_new, 2))])])
+        self.P = np.concatenate([self.P[alive], np.broadcast_to(self.P0, (n_new, 3))])
+        for name in ("hits", "misses", "fast", "slow"):
+            start = 1 if name == "hits" else 0  # a new track has been seen once
+            old = getattr(self, name)[alive]
+            setattr(self, name, np.concatenate([old, np.full(n_new, start, np.int32)]))
+        self.dynamic = np.concatenate([self.dynamic[alive], np.zeros(n_new, bool)])
+        return cls, speed
+
+    def _update_numpy(
+        self, boxes: Boxes, z: FloatArray, dt: float
+    ) -> tuple[NDArray[np.bool_], NDArray[np.int8], FloatArray]:
+        """:meth:`update`'s filter steps in numpy: which boxes matched a track, their
+        classes and speeds."""
+        p = self.params
+        self._predict(dt)
+        nb = len(z)
         match_box = np.full(nb, -1, dtype=np.intp)  # track index of each box
         nt = self.n_tracks
         if nt and nb:
@@ -234,13 +278,19 @@ class ObjectTracker:
             match_box[nn_box[mutual]] = ti[mutual]
         matched = match_box >= 0
         tr = match_box[matched]
-        if len(tr):  # batched Kalman update, H = [I 0]
+        if len(tr):  # Kalman update, H = [1 0] per axis: gain (p, c) / (p + σ_m²)
             P = self.P[tr]
-            S = P[:, :2, :2] + np.eye(2) * p.sigma_meas_m**2
-            K = P[:, :, :2] @ np.linalg.inv(S)
-            innov = z[matched] - self.x[tr, :2]
-            self.x[tr] += np.einsum("nij,nj->ni", K, innov)
-            self.P[tr] = P - K @ P[:, :2, :]
+            s = P[:, 0] + p.sigma_meas_m**2
+            kp, kv = P[:, 0] / s, P[:, 1] / s
+            ix = z[matched, 0] - self.x[tr, 0]
+            iy = z[matched, 1] - self.x[tr, 1]
+            self.x[tr, 0] += kp * ix
+            self.x[tr, 1] += kp * iy
+            self.x[tr, 2] += kv * ix
+            self.x[tr, 3] += kv * iy
+            self.P[tr] = np.column_stack(
+                [P[:, 0] - kp * P[:, 0], P[:, 1] - kp * P[:, 1], P[:, 2] - kv * P[:, 1]]
+            )
             self.hits[tr] += 1
             self.misses[tr] = 0
         unmatched_tracks = np.ones(nt, bool)
@@ -260,18 +310,7 @@ class ObjectTracker:
             self.dynamic[tr] = dyn
             speed[matched] = v
             cls[matched] = np.where(dyn, DYNAMIC, STATIC)
-        # Drop lost tracks, start new ones for unmatched boxes (unknown until associated).
-        alive = self.misses <= p.max_misses
-        new = ~matched
-        n_new = int(new.sum())
-        self.x = np.concatenate([self.x[alive], np.column_stack([z[new], np.zeros((n_new, 2))])])
-        self.P = np.concatenate([self.P[alive], np.broadcast_to(self.P0, (n_new, 4, 4))])
-        for name in ("hits", "misses", "fast", "slow"):
-            start = 1 if name == "hits" else 0  # a new track has been seen once
-            old = getattr(self, name)[alive]
-            setattr(self, name, np.concatenate([old, np.full(n_new, start, np.int32)]))
-        self.dynamic = np.concatenate([self.dynamic[alive], np.zeros(n_new, bool)])
-        return cls, speed
+        return matched, cls, speed
 
 
 def point_classes_of(boxes: Boxes, box_class: NDArray[np.int8]) -> NDArray[np.int8]:

@@ -9,7 +9,12 @@ segment at a time instead of some thirty numpy calls on arrays of a few hundred 
 * :func:`segment_boxes`: each point's coordinates along and across its segment's principal
   axis, the segments' extents, oriented boxes and the sliding-wall trap.
 
-The arithmetic is the numpy code's, operation for operation, so the results are identical;
+* :func:`track`: one scan of :class:`.object_tracker.ObjectTracker` (the Kalman prediction,
+  the mutual nearest-neighbour association, the update and the speed classification) over
+  the tracks in place, instead of some forty numpy calls on arrays of a few dozen tracks.
+
+The arithmetic is the numpy code's, operation for operation, so the results are identical
+(``np.hypot`` is the C library's in numba as in numpy; Python's ``math.hypot`` is not);
 the transcendental functions (``cos``, ``sin``, ``hypot``, ``arctan2``) stay in numpy, whose
 results the kernels take. The tests check the plain-Python kernels (what numba compiles) and
 the compiled ones against the numpy code.
@@ -175,6 +180,104 @@ def _segment_boxes_py(  # type: ignore[no-untyped-def]
     return n_box
 
 
+def _argmin_py(d, n):  # type: ignore[no-untyped-def]
+    """``np.argmin`` of the first ``n`` values of ``d`` (the first minimum; the first NaN)."""
+    k = 0
+    m = d[0]
+    for i in range(1, n):
+        if m != m:  # NaN: numpy's argmin stops at the first one
+            break
+        if d[i] < m or d[i] != d[i]:
+            m = d[i]
+            k = i
+    return k
+
+
+def _track_py(  # type: ignore[no-untyped-def]
+    x, P, hits, misses, fast, slow, dynamic, z, never, dt, q, r2, gate_m, v_thres,
+    confirm_steps, match_box, cls, speed, dist, col,
+):  # fmt: skip
+    """One scan of :meth:`.object_tracker.ObjectTracker.update` on the tracks ``x`` ``(N, 4)``,
+    ``P`` ``(N, 3)`` and their counters (in place), the boxes' centres ``z`` ``(M, 2)`` and
+    ``never`` (the sliding-wall trap): the prediction by ``dt`` (``q`` = σ_a², skipped for
+    ``dt <= 0``), each box's mutual nearest track within ``gate_m`` (``match_box``, -1 none),
+    the update with measurement variance ``r2`` and each matched box's class and speed
+    (``cls``, ``speed``; the others keep theirs). ``dist`` ``(N, M)`` and ``col`` ``(N,)`` are
+    scratch space."""
+    nt = x.shape[0]
+    nb = z.shape[0]
+    if nt > 0 and dt > 0:
+        g0 = 0.5 * dt * dt
+        g1 = dt
+        q00 = q * (g0 * g0)
+        q01 = q * (g0 * g1)
+        q11 = q * (g1 * g1)
+        for t in range(nt):
+            x[t, 0] += dt * x[t, 2]
+            x[t, 1] += dt * x[t, 3]
+            p = P[t, 0]
+            c = P[t, 1]
+            v = P[t, 2]
+            cv = c + dt * v
+            P[t, 0] = ((p + dt * c) + dt * cv) + q00
+            P[t, 1] = cv + q01
+            P[t, 2] = v + q11
+    for b in range(nb):
+        match_box[b] = -1
+    if nt > 0 and nb > 0:
+        for t in range(nt):
+            for b in range(nb):
+                dist[t, b] = np.hypot(x[t, 0] - z[b, 0], x[t, 1] - z[b, 1])
+        for t in range(nt):
+            nn = _argmin(dist[t], nb)
+            for u in range(nt):
+                col[u] = dist[u, nn]
+            if _argmin(col, nt) == t and dist[t, nn] < gate_m:
+                match_box[nn] = t
+    for t in range(nt):
+        misses[t] += 1  # undone for the matched ones below
+    for b in range(nb):
+        t = match_box[b]
+        if t < 0:
+            continue
+        p = P[t, 0]
+        c = P[t, 1]
+        v = P[t, 2]
+        s = p + r2
+        kp = p / s
+        kv = c / s
+        ix = z[b, 0] - x[t, 0]
+        iy = z[b, 1] - x[t, 1]
+        x[t, 0] += kp * ix
+        x[t, 1] += kp * iy
+        x[t, 2] += kv * ix
+        x[t, 3] += kv * iy
+        P[t, 0] = p - kp * p
+        P[t, 1] = c - kp * c
+        P[t, 2] = v - kv * c
+        hits[t] += 1
+        misses[t] = 0
+        sp = np.hypot(x[t, 2], x[t, 3])
+        is_fast = sp >= v_thres and not never[b] and hits[t] >= 2
+        if is_fast:
+            fast[t] += 1
+            slow[t] = 0
+        else:
+            fast[t] = 0
+            slow[t] += 1
+        dyn = dynamic[t]
+        if fast[t] >= confirm_steps:
+            dyn = True
+        if slow[t] >= confirm_steps:
+            dyn = False
+        dyn = dyn and not never[b]
+        dynamic[t] = dyn
+        speed[b] = sp
+        cls[b] = 1 if dyn else 3  # DYNAMIC, STATIC (object_tracker's codes)
+
+
+_argmin = compiled(_argmin_py) or _argmin_py
+_track = compiled(_track_py)
 _pairwise_sum = compiled(_pairwise_sum_py) or _pairwise_sum_py
 _reduceat = compiled(_reduceat_py) or _reduceat_py
 _segment_sums = compiled(_segment_sums_py)
@@ -239,3 +342,36 @@ def segment_boxes(
            float(max_dynamic_length_m), bool(occlusion_never_dynamic), center, length, width,
            never, box_of_seg)  # fmt: skip
     return center, length, width, never, box_of_seg, box_of_seg >= 0
+
+
+def track(
+    x: FloatArray,
+    P: FloatArray,
+    counters: tuple[NDArray[np.int32], NDArray[np.int32], NDArray[np.int32], NDArray[np.int32]],
+    dynamic: NDArray[np.bool_],
+    z: FloatArray,
+    never: NDArray[np.bool_],
+    dt: float,
+    q: float,
+    r2: float,
+    gate_m: float,
+    v_thres: float,
+    confirm_steps: int,
+    python: bool = False,
+) -> tuple[IntArray, NDArray[np.int8], FloatArray]:
+    """:func:`_track_py` compiled (needs numba; ``python``: the plain kernel), in place on the
+    tracks (``counters``: hits, misses, fast, slow); each box's track (-1: none), class
+    (``UNKNOWN`` when unmatched) and speed."""
+    kernel = _track_py if python else _track
+    if kernel is None:
+        require_numba("object tracker")
+    nb = len(z)
+    match_box = np.empty(nb, dtype=np.intp)
+    cls = np.zeros(nb, dtype=np.int8)
+    speed = np.zeros(nb)
+    hits, misses, fast, slow = counters
+    kernel(x, P, hits, misses, fast, slow, dynamic, np.ascontiguousarray(z, dtype=np.float64),
+           never, float(dt), float(q), float(r2), float(gate_m), float(v_thres),
+           int(confirm_steps), match_box, cls, speed, np.empty((len(x), nb)),
+           np.empty(len(x)))  # fmt: skip
+    return match_box, cls, speed
