@@ -22,6 +22,8 @@ the compiled ones against the numpy code.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -284,6 +286,15 @@ _segment_sums = compiled(_segment_sums_py)
 _segment_boxes = compiled(_segment_boxes_py)
 
 
+def _pick(plain: Any, jitted: Any, python: bool, what: str) -> Any:
+    """The plain kernel if ``python``, else its compiled twin (a clear error without numba)."""
+    if python:
+        return plain
+    if jitted is None:
+        require_numba(what)
+    return jitted
+
+
 def segment_sums(
     x: FloatArray,
     y: FloatArray,
@@ -299,9 +310,7 @@ def segment_sums(
            FloatArray, FloatArray, FloatArray]:  # fmt: skip
     """:func:`_segment_sums_py` compiled (needs numba; ``python``: the plain kernel):
     ``seg, starts, counts, mx, my, cxx, cxy, cyy, dx, dy``."""
-    kernel = _segment_sums_py if python else _segment_sums
-    if kernel is None:
-        require_numba("scan segmentation")
+    kernel = _pick(_segment_sums_py, _segment_sums, python, "scan segmentation")
     n = len(x)
     seg = np.empty(n, dtype=np.intp)
     starts = np.empty(n, dtype=np.intp)
@@ -330,9 +339,7 @@ def segment_boxes(
 ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_], IntArray, NDArray[np.bool_]]:
     """:func:`_segment_boxes_py` compiled (needs numba; ``python``: the plain kernel):
     ``center (m, 2), length, width, never, box_of_seg`` of every segment and ``keep``."""
-    kernel = _segment_boxes_py if python else _segment_boxes
-    if kernel is None:
-        require_numba("scan segmentation")
+    kernel = _pick(_segment_boxes_py, _segment_boxes, python, "scan segmentation")
     m = len(starts)
     center = np.empty((m, 2))
     length, width = np.empty(m), np.empty(m)
@@ -362,9 +369,7 @@ def track(
     """:func:`_track_py` compiled (needs numba; ``python``: the plain kernel), in place on the
     tracks (``counters``: hits, misses, fast, slow); each box's track (-1: none), class
     (``UNKNOWN`` when unmatched) and speed."""
-    kernel = _track_py if python else _track
-    if kernel is None:
-        require_numba("object tracker")
+    kernel = _pick(_track_py, _track, python, "object tracker")
     nb = len(z)
     match_box = np.empty(nb, dtype=np.intp)
     cls = np.zeros(nb, dtype=np.int8)
