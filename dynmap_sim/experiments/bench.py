@@ -487,7 +487,7 @@ class InProcessLocalizers:
     """All localizers in the calling process (``workers=1``): :meth:`feed` does the work as
     the chunks come (:meth:`submit`: a whole recorded run)."""
 
-    pipelined = False
+    #: Runs in flight at most (the runner stores each as soon as it is simulated).
     depth = 1
 
     def __init__(self, labels: Sequence[str], localizers: Sequence[Localizer]) -> None:
@@ -623,7 +623,6 @@ class LocalizerPool:
     end (also on errors: it terminates the workers).
     """
 
-    pipelined = True
     #: Runs in flight at most: the workers localize the run being simulated as it comes and
     #: may still be on the two before it (one would leave a core idle whenever one side
     #: waits).
