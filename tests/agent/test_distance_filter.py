@@ -53,7 +53,8 @@ def test_a_crowd_in_front_does_not_look_like_a_kidnapping():
     crowd[cut] = np.minimum(crowd[cut], 0.6)
     ratios = {}
     for margin in (0.0, TUNED.recovery_distance_filter_m):
-        f = AMCLFilter(grid, LASER, replace(TUNED, recovery_distance_filter_m=margin))
+        cfg = replace(TUNED, recovery_distance_filter_m=margin, distance_filter_weights=margin > 0)
+        f = AMCLFilter(grid, LASER, cfg)
         rng = np.random.default_rng(7)
         f.init_gaussian(pose, np.diag([0.02**2, 0.02**2, 0.01**2]), rng)
         for _ in range(20):

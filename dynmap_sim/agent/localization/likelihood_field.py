@@ -168,10 +168,15 @@ def likelihood_field_weights_beams(p: NDArray[np.float32]) -> FloatArray:
 
 
 def likelihood_field_prob_beams(
-    logp: NDArray[np.float32], table: LikelihoodTable, params: LikelihoodFieldParams
+    logp: NDArray[np.float32],
+    table: LikelihoodTable,
+    params: LikelihoodFieldParams,
+    scored: NDArray[np.float32] | None = None,
 ) -> tuple[FloatArray, NDArray[np.bool_]]:
     """:func:`likelihood_field_prob_logweights` from the per-beam ``log p`` ``(P, B)`` of the
-    end-point cells (``np.take(table.logp, cells)``, precomputed table).
+    end-point cells (``np.take(table.logp, cells)``, precomputed table). ``scored``: the
+    ``(P, B)`` values to sum instead (e.g. see-through readings rescored,
+    :mod:`.see_through`); beam skipping still decides on ``logp``.
 
     ``d < beam_skip_distance`` is ``log p > log p(beam_skip_distance)`` (p falls with d).
     """
@@ -182,7 +187,8 @@ def likelihood_field_prob_beams(
         use = frac_close > params.beam_skip_threshold
         if int(np.sum(~use)) >= n_beams * params.beam_skip_error_threshold:
             use[:] = True
-    kept = logp if use.all() else logp[:, use]
+    values = logp if scored is None else scored
+    kept = values if use.all() else values[:, use]
     return kept.sum(axis=1, dtype=np.float64), use
 
 

@@ -11,6 +11,8 @@
 * :func:`first_occupied`: the ray casting of the expected ranges (Fox et al.'s distance
   filter, H&W §6.1's map selection), beam by beam up to its first occupied sample, where the
   numpy code samples every beam to the end;
+* :func:`wall_depths`: the walks of :mod:`.see_through` (sphere tracing on the distance
+  field), beam by beam, where the numpy code moves all beams in lockstep;
 * :func:`bin_clusters`: the particle clusters of ``AMCLFilter.estimate`` (``pf_cluster_stats``)
   by union-find over the occupied bins, numbered as scipy's ``connected_components`` numbers
   them.
@@ -166,4 +168,58 @@ def first_occupied(
     out = np.empty(len(cos_sin[0]), dtype=np.intp)
     kernel(occupied, float(laser_xy[0]), float(laser_xy[1]), cos_sin[0], cos_sin[1], t,
            float(origin_xy[0]), float(origin_xy[1]), float(res), out)  # fmt: skip
+    return out
+
+
+def _wall_depths_py(dist, ox, oy, res, lx, ly, c, s, cb, sb, length, out):  # type: ignore[no-untyped-def]
+    """``out[i, j]``: the first sample ``t < length_j`` [m] at which the walk from particle
+    ``i``'s laser ``(lx_i, ly_i)`` (heading ``c_i, s_i``) along beam ``j`` (``cb_j, sb_j`` in
+    the robot frame) is in an occupied cell, ``inf`` for none; samples from ``res / 2`` on,
+    each step ``max(dist - 1.5 res, res / 2)`` with ``dist`` [m] the distance field at the
+    sample's cell; a sample off the grid ends the walk (:mod:`.see_through`). A cell is
+    occupied where ``dist`` is 0."""
+    h, w = dist.shape
+    inv_res = 1.0 / res
+    for i in range(c.shape[0]):
+        for j in range(cb.shape[0]):
+            out[i, j] = np.inf
+            ca = c[i] * cb[j] - s[i] * sb[j]
+            sa = s[i] * cb[j] + c[i] * sb[j]
+            t = 0.5 * res
+            while t < length[j]:
+                fx = np.floor((lx[i] + ca * t - ox) * inv_res)
+                fy = np.floor((ly[i] + sa * t - oy) * inv_res)
+                if not (0 <= fx < w and 0 <= fy < h):
+                    break
+                d = float(dist[int(fy), int(fx)])
+                if d == 0.0:  # an occupied cell: its distance to the nearest is 0
+                    out[i, j] = t
+                    break
+                t = t + max(d - 1.5 * res, 0.5 * res)
+
+
+_wall_depths = compiled(_wall_depths_py)
+
+
+def wall_depths(
+    dist: Float32Array,
+    ox: float,
+    oy: float,
+    res: float,
+    lx: NDArray[np.float64],
+    ly: NDArray[np.float64],
+    c: NDArray[np.float64],
+    s: NDArray[np.float64],
+    cb: NDArray[np.float64],
+    sb: NDArray[np.float64],
+    length: NDArray[np.float64],
+    python: bool = False,
+) -> NDArray[np.float64]:
+    """:func:`_wall_depths_py` compiled (needs numba; ``python``: the plain kernel): the
+    ``(P, B)`` wall depths of :func:`.see_through.wall_depths`."""
+    kernel = _wall_depths_py if python else _wall_depths
+    if kernel is None:
+        require_numba("see-through test")
+    out = np.empty((len(c), len(cb)), dtype=np.float64)
+    kernel(dist, float(ox), float(oy), float(res), lx, ly, c, s, cb, sb, length, out)
     return out

@@ -76,6 +76,7 @@ from dynmap_sim.agent.localization.likelihood_field import (
 )
 from dynmap_sim.agent.localization.motion_model import sample_odometry_motion
 from dynmap_sim.agent.localization.resampling import low_variance_resample
+from dynmap_sim.agent.localization.see_through import see_through_logp, wall_depths
 from dynmap_sim.agent.localization.verified_recovery import VerifiedRecovery
 from dynmap_sim.agent.localizer import Localizer, MapUser, register_localizer
 from dynmap_sim.agent.maps.map_source import MapSource, PriorWallsMap, make_map_source
@@ -263,6 +264,51 @@ class MCLConfig:
     recovery_accept_ratio: float = 0.7
     #: ``verify``: ... for this many consecutive filter updates.
     recovery_accept_updates: int = 3
+    #: Negative information in the sensor update (0 off, as nav2; ``likelihood_field_prob``
+    #: only): a particle's reading that ends ``delta`` more than this [m] beyond the first
+    #: occupied cell of the map along its beam scores at most the beam model's ``z_hit
+    #: exp(-(delta - margin)^2 / 2 sigma_hit^2) + z_rand / range_max`` (*Probabilistic
+    #: Robotics* Table 6.1), whatever its end point hits (:mod:`.see_through`; Fox et al. 1999
+    #: §4.2: a reading longer than the map allows can only be a wrong pose or a removed
+    #: object). The score is continuous at the margin: a hard penalty there (every
+    #: see-through reading at ``z_rand / range_max``) split the apartment's tight clouds at
+    #: readings that graze door frames and doubled ``ci-apartment-mcl``'s day-2 error (8.5 ->
+    #: 18.6 mm, the cloud twice as confident).
+    #: Beam skipping still decides on the end points, and the recovery averages stay the
+    #: likelihood field's (so a removed object does not look like a kidnapping). Why: the
+    #: likelihood field lets a cloud slide along a corridor or through a doorway while beams
+    #: that cross mapped walls end near other walls (the lab's day 15 after lunch: the
+    #: estimate slid 0.8 m in 8 s with 30-38 % of its readings passing through walls, against
+    #: 12-18 % at the true pose, then a random pose won 19 m away).
+    see_through_margin_m: float = 0.0
+    #: ... except for a reading that sees through at more than this share of the particles
+    #: (unweighted, as AMCL's beam skipping counts): one the whole cloud sees through says
+    #: "removed object", not "wrong pose" (a chair moved away from in front of a wall); only
+    #: readings some particles see through and others do not tell particles apart. Without
+    #: it (1.0) the office's day 7-8 (furniture moved) kept the estimate 0.5-0.8 m back from
+    #: the removed pieces, lost on 6-8 % of the scans, against 0 % without the term. The
+    #: price of 0.5: ``ci-apartment-mcl``'s day-2 error doubles (8.5 -> 18.2 mm, the cloud
+    #: half again to twice as confident): a reading that a fifth to a half of a tight cloud
+    #: sees through grazes a door frame or a furniture edge, and scoring it cuts the cloud.
+    #: 0.2 keeps 9.7 mm there but lets the lab and the corridor slide further (lab: a 1.31 m
+    #: drift on day 12 run 1 against 0.93 m; corridor: lost 1.5 % against 0.4 %).
+    see_through_max_share: float = 0.5
+    #: Fox et al. 1999's distance filter in the sensor update itself (False: as nav2, the
+    #: weights use every valid beam; ``likelihood_field_prob`` only): readings more than
+    #: ``recovery_distance_filter_m`` shorter than the map predicts at the weighted mean
+    #: particle (a person, a parked bed, a moved chair in front of a mapped wall) are left
+    #: out of this update's weights, as Fox et al. (§4.2) leave them out of the sensor model,
+    #: if at least ``recovery_min_beam_share`` of the readings remain (else all count), and
+    #: only while the recovery gate is not counting (``n_low_updates == 0``: "short" is
+    #: measured against the mean particle, which is wrong after a kidnapping; with the filter
+    #: in the weights throughout, one of the apartment's 20 kidnappings took 38 s). Beam
+    #: skipping handles readings that fit *no* particle; a short reading can fit a wrong
+    #: particle well. Why: in the corridor world's ward (beds and trolleys parked in the
+    #: corridor, day 5) the estimate fell up to 1.4 m behind the robot along the corridor,
+    #: 10-23 % of the readings short at the estimate and at the truth alike, no reading seen
+    #: through, both poses fitting about equally (-0.4 to -0.9 per beam); then a random pose
+    #: won 20 m away (README, "Worlds nobody tuned for").
+    distance_filter_weights: bool = False
     resample_interval: int = 1
     update_min_d: float = 0.25
     update_min_a: float = 0.2
@@ -285,12 +331,13 @@ class MCLConfig:
                 "recovery_local_sigma_xy", "recovery_local_sigma_theta",
                 "recovery_local_max_updates", "recovery_accept_updates",
                 "recovery_through_margin_m", "update_min_a", "init_sigma_xy", "init_sigma_theta",
+                "see_through_margin_m",
             ),
             fraction=(
                 "beam_skip_threshold", "beam_skip_error_threshold", "recovery_alpha_slow",
                 "recovery_alpha_fast", "recovery_max_fraction", "recovery_local_ratio",
                 "recovery_local_max_fraction", "recovery_accept_ratio",
-                "recovery_min_beam_share", "recovery_through_max_share",
+                "recovery_min_beam_share", "recovery_through_max_share", "see_through_max_share",
             ),
             finite=("laser_max_range", "laser_min_range"),
             not_nan=("recovery_floor_loglik",),
@@ -325,6 +372,17 @@ class MCLConfig:
                 f"static-mcl: laser_model_type must be one of {LASER_MODELS}, "
                 f"got {self.laser_model_type!r}"
             )
+        prob = self.laser_model_type == "likelihood_field_prob"
+        if (self.see_through_margin_m > 0 or self.distance_filter_weights) and not prob:
+            raise ValueError(
+                "static-mcl: see_through_margin_m > 0 and distance_filter_weights rescore "
+                "single readings; they need laser_model_type = 'likelihood_field_prob'"
+            )
+        if self.distance_filter_weights and self.recovery_distance_filter_m <= 0:
+            raise ValueError(
+                "static-mcl: distance_filter_weights uses the distance filter's margin; "
+                "it needs recovery_distance_filter_m > 0"
+            )
 
 
 #: nav2's defaults (``nav2_params.yaml`` / ``amcl_node.cpp``): recovery off, no beam skipping.
@@ -345,7 +403,19 @@ NAV2_DEFAULT = MCLConfig()
 #: while the gate is not counting (``recovery_occluded = "hold"``), and a random pose at
 #: which more than half of the readings pass through mapped walls is not injected
 #: (``recovery_through_max_share``); both measured on the worlds nobody tuned for and the
-#: lab's five weeks (README, "Worlds nobody tuned for").
+#: lab's five weeks (README, "Worlds nobody tuned for"). While tracking, a particle's reading
+#: that passes more than 0.3 m through a mapped obstacle scores as unexplained unless most of
+#: the cloud sees it through (``see_through_margin_m``, ``see_through_max_share``: the
+#: likelihood field's cloud slid through the lab's hallway and a random pose won during the
+#: slide); readings much shorter than the map predicts at the mean particle are left out of
+#: the weights as well as of the recovery averages (``distance_filter_weights``: Fox et al.
+#: 1999's distance filter where they use it, in the sensor model; the corridor's parked beds
+#: dragged the cloud 1.4 m back); and a cloud inside one KLD bin keeps ``min_particles``
+#: (``kld_one_bin = "min"``, the textbook's bound, where nav2 takes ``max_particles``: 13 % of
+#: the office tour's updates had 8000 particles for it, which the see-through test made 3.5x
+#: the filter's time). Measured on the same recorded streams as the rules above, three filter
+#: generators (README, "Worlds nobody tuned for"); :data:`TUNED_END_POINTS` is ``tuned``
+#: without these three.
 #: Measured with benchmarks/mcl_apartment_week1.py and benchmarks/mcl_global_kidnap.py.
 TUNED = MCLConfig(
     alpha1=0.05,
@@ -383,6 +453,18 @@ TUNED = MCLConfig(
     update_min_a=0.1,
     init_sigma_xy=0.2,
     init_sigma_theta=0.1,
+    see_through_margin_m=0.3,
+    see_through_max_share=0.5,
+    distance_filter_weights=True,
+    kld_one_bin="min",
+)
+
+#: ``tuned`` as it was before the see-through term: the likelihood field on every valid
+#: reading's end point and nav2's one-bin rule. ``adaptive-memory``'s filter on the static
+#: points (H&W §6.1) and :data:`WALLS_ONLY` were measured with it (the see-through term and
+#: the distance filter in the weights were not measured there).
+TUNED_END_POINTS = replace(
+    TUNED, see_through_margin_m=0.0, distance_filter_weights=False, kld_one_bin="max"
 )
 
 #: ``tuned`` for a map that lacks the furniture: the walls-only prior (H&W Fig. 4, their
@@ -415,7 +497,7 @@ TUNED = MCLConfig(
 #: ``hold`` would leave the recovery signal out on most scans; it was measured on maps that
 #: hold the furniture only.
 WALLS_ONLY = replace(
-    TUNED,
+    TUNED_END_POINTS,
     z_hit=0.5,
     z_rand=0.5,
     beam_skip_distance=0.3,
@@ -426,6 +508,7 @@ WALLS_ONLY = replace(
 CONFIGS: dict[str, MCLConfig] = {
     "nav2-default": NAV2_DEFAULT,
     "tuned": TUNED,
+    "tuned-end-points": TUNED_END_POINTS,
     "walls-only": WALLS_ONLY,
 }
 
@@ -645,10 +728,26 @@ class AMCLFilter:
         self._last_beams = (r, a)
         if len(r) == 0:
             return
+        c = self.config
+        # the distance filter's beams at the mean particle (Fox et al. 1999): for the weights
+        # (distance_filter_weights) and the recovery averages (recovery_w_avg_per_beam)
+        keep = (
+            self._recovery_beams(self.weights, r, a)
+            if c.distance_filter_weights or c.recovery_w_avg_per_beam
+            else None
+        )
         beam_logp = None  # (P, B) log p of the end points
-        if self.config.laser_model_type == "likelihood_field_prob":
+        if c.laser_model_type == "likelihood_field_prob":
             beam_logp = self._endpoint_values(self.table.logp, self.particles, r, a)
-            logp, _ = likelihood_field_prob_beams(beam_logp, self.table, self.lf)
+            scored = self._see_through_scored(beam_logp, r, a)
+            # ... only while the recovery gate is not counting: the filter measures "short"
+            # against the mean particle, which a kidnapping makes wrong
+            filtered = c.distance_filter_weights and self.n_low_updates == 0
+            if filtered and keep is not None and len(keep) < len(r):
+                kept = None if scored is None else scored[:, keep]
+                logp, _ = likelihood_field_prob_beams(beam_logp[:, keep], self.table, self.lf, kept)
+            else:
+                logp, _ = likelihood_field_prob_beams(beam_logp, self.table, self.lf, scored)
         else:
             p = self._endpoint_values(self.table.p, self.particles, r, a)
             logp = np.log(likelihood_field_weights_beams(p))
@@ -659,16 +758,14 @@ class AMCLFilter:
         total_scaled = float(np.sum(np.exp(logw - m)))
         total = np.exp(m) * total_scaled
         self.weights = np.exp(logw - m) / total_scaled
-        c = self.config
         if c.recovery_w_avg_per_beam:
             # Per-beam geometric mean over the beams the distance filter keeps (all valid
             # beams without it), beam skipping not applied.
-            use = self._recovery_beams(w_prev, r, a)
-            if use is None:  # an occluded scan, recovery_occluded = "hold"
+            if keep is None:  # an occluded scan, recovery_occluded = "hold"
                 return
             if beam_logp is None:
                 beam_logp = self._endpoint_values(self.table.logp, self.particles, r, a)
-            total = per_beam_average(lw_prev, beam_logp[:, use])
+            total = per_beam_average(lw_prev, beam_logp[:, keep])
             # This update's average feeds local resetting; a fit back at w_ref ends a
             # local-resetting episode.
             self.w_last = total
@@ -680,6 +777,29 @@ class AMCLFilter:
             w_ref = self.reference_weight()
             low = w_ref > 0 and self.w_fast < c.recovery_ratio_threshold * w_ref
             self.n_low_updates = self.n_low_updates + 1 if low else 0
+
+    def _see_through_scored(
+        self, beam_logp: NDArray[np.float32], ranges_m: FloatArray, angles_rad: FloatArray
+    ) -> NDArray[np.float32] | None:
+        """``beam_logp`` with each see-through reading scored by how far it ends beyond its
+        wall, where that is lower (:mod:`.see_through`; :attr:`MCLConfig.see_through_margin_m`,
+        only readings at most ``see_through_max_share`` of the particles see through); None
+        when that is off or changes nothing."""
+        c = self.config
+        if c.see_through_margin_m <= 0:
+            return None
+        depth = wall_depths(
+            self.grid, self.particles, ranges_m, angles_rad, self.mount, c.see_through_margin_m
+        )
+        through = np.isfinite(depth)
+        through &= through.mean(axis=0) <= c.see_through_max_share
+        if not through.any():
+            return None
+        lf = self.lf
+        score = see_through_logp(np.where(through, depth, np.inf), ranges_m,
+                                 c.see_through_margin_m, lf.z_hit, lf.z_rand, lf.sigma_hit,
+                                 lf.range_max)  # fmt: skip
+        return np.minimum(beam_logp, score.astype(np.float32))
 
     def _endpoint_values(
         self,
@@ -868,7 +988,8 @@ class AMCLFilter:
 class StaticMCL(Localizer, MapUser):
     """AMCL-faithful MCL on a map that never changes (the baseline of every comparison).
 
-    ``config``: ``"tuned"``, ``"nav2-default"`` or ``"walls-only"`` (``tuned`` for a map that
+    ``config``: ``"tuned"``, ``"tuned-end-points"`` (``tuned`` without the see-through term:
+    :data:`TUNED_END_POINTS`), ``"nav2-default"`` or ``"walls-only"`` (``tuned`` for a map that
     lacks the furniture, e.g. the walls-only prior: :data:`WALLS_ONLY`); ``map_source``: where
     the map comes from, a :class:`~dynmap_sim.agent.maps.map_source.MapSource` or its name:
     ``"first-run"`` (built by static SLAM on the experiment's first run) or ``"prior-walls"``

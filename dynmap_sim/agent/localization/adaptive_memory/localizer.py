@@ -210,9 +210,11 @@ class AdaptiveMemoryConfig:
     confirm_steps: int = 2
     max_misses: int = 2
     # -- localization (§6.1) -----------------------------------------------------------------
-    #: The project's AMCL configuration (``tuned`` | ``nav2-default`` | ``walls-only``) and
-    #: field overrides.
-    mcl_config: str = "tuned"
+    #: The project's AMCL configuration (``tuned-end-points`` | ``tuned`` | ``nav2-default`` |
+    #: ``walls-only``) and field overrides. ``tuned-end-points``: the likelihood field on the
+    #: static points' end points as §6.1 has it, the configuration this model was measured
+    #: with (``tuned``'s see-through term was not measured here).
+    mcl_config: str = "tuned-end-points"
     mcl_overrides: dict[str, Any] = field(default_factory=dict)
     #: Below this many static points, the explained unknown ones join (ours).
     min_static_points: int = 20
