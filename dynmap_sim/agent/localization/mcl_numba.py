@@ -203,23 +203,16 @@ _wall_depths = compiled(_wall_depths_py)
 
 def wall_depths(
     dist: Float32Array,
-    ox: float,
-    oy: float,
-    res: float,
-    lx: NDArray[np.float64],
-    ly: NDArray[np.float64],
-    c: NDArray[np.float64],
-    s: NDArray[np.float64],
-    cb: NDArray[np.float64],
-    sb: NDArray[np.float64],
-    length: NDArray[np.float64],
+    grid_frame: tuple[float, float, float],
+    terms: tuple[NDArray[np.float64], ...],
     python: bool = False,
 ) -> NDArray[np.float64]:
-    """:func:`_wall_depths_py` compiled (needs numba; ``python``: the plain kernel): the
-    ``(P, B)`` wall depths of :func:`.see_through.wall_depths`."""
+    """:func:`_wall_depths_py` compiled (needs numba; ``python``: the plain kernel) on the
+    distance field ``dist`` of a grid ``(ox, oy, res)``, ``terms`` ``(lx, ly, c, s, cb, sb,
+    length)``: the ``(P, B)`` wall depths of :func:`.see_through.wall_depths`."""
     kernel = _wall_depths_py if python else _wall_depths
     if kernel is None:
         require_numba("see-through test")
-    out = np.empty((len(c), len(cb)), dtype=np.float64)
-    kernel(dist, float(ox), float(oy), float(res), lx, ly, c, s, cb, sb, length, out)
+    out = np.empty((len(terms[2]), len(terms[4])), dtype=np.float64)
+    kernel(dist, *(float(v) for v in grid_frame), *terms, out)
     return out

@@ -66,26 +66,11 @@ def wall_depths(
     cb, sb = np.cos(a + myaw), np.sin(a + myaw)
     length = r - margin_m
     kernel = kernel_backend(backend)
-    args = (grid.dist_m, float(grid.origin_xy_m[0]), float(grid.origin_xy_m[1]),
-            float(grid.resolution_m), lx, ly, c, s, cb, sb, length)  # fmt: skip
+    frame = (float(grid.origin_xy_m[0]), float(grid.origin_xy_m[1]), float(grid.resolution_m))
+    terms = (lx, ly, c, s, cb, sb, length)
     if kernel:
-        return mcl_numba.wall_depths(*args, python=kernel == "python")
-    return _wall_depths_numpy(*args)
-
-
-def see_through_beams(
-    grid: OccupancyGrid,
-    particles: ArrayLike,
-    ranges_m: ArrayLike,
-    angles_rad: ArrayLike,
-    mount_pose: ArrayLike,
-    margin_m: float,
-    backend: str = "auto",
-) -> NDArray[np.bool_]:
-    """``(P, B)``: the reading sees through (ends more than ``margin_m`` beyond the first
-    occupied cell along its beam; :func:`wall_depths`)."""
-    return np.isfinite(wall_depths(grid, particles, ranges_m, angles_rad, mount_pose, margin_m,
-                                   backend))  # fmt: skip
+        return mcl_numba.wall_depths(grid.dist_m, frame, terms, python=kernel == "python")
+    return _wall_depths_numpy(grid.dist_m, *frame, *terms)
 
 
 def see_through_logp(
