@@ -270,10 +270,9 @@ class MCLConfig:
     #: exp(-(delta - margin)^2 / 2 sigma_hit^2) + z_rand / range_max`` (*Probabilistic
     #: Robotics* Table 6.1), whatever its end point hits (:mod:`.see_through`; Fox et al. 1999
     #: §4.2: a reading longer than the map allows can only be a wrong pose or a removed
-    #: object). The score is continuous at the margin: a hard penalty there (every
-    #: see-through reading at ``z_rand / range_max``) split the apartment's tight clouds at
-    #: readings that graze door frames and doubled ``ci-apartment-mcl``'s day-2 error (8.5 ->
-    #: 18.6 mm, the cloud twice as confident).
+    #: object). The score is continuous at the margin, so a particle just past it is not
+    #: cut off from one just short of it (a hard score, every see-through reading at
+    #: ``z_rand / range_max``, was measured first: README, "Worlds nobody tuned for").
     #: Beam skipping still decides on the end points, and the recovery averages stay the
     #: likelihood field's (so a removed object does not look like a kidnapping). Why: the
     #: likelihood field lets a cloud slide along a corridor or through a doorway while beams
@@ -406,18 +405,18 @@ NAV2_DEFAULT = MCLConfig()
 #: which more than half of the readings pass through mapped walls is not injected
 #: (``recovery_through_max_share``); both measured on the worlds nobody tuned for and the
 #: lab's five weeks (README, "Worlds nobody tuned for"). While tracking, a particle's reading
-#: that passes more than 0.3 m through a mapped obstacle scores as unexplained unless most of
-#: the cloud sees it through (``see_through_margin_m``, ``see_through_max_share``: the
-#: likelihood field's cloud slid through the lab's hallway and a random pose won during the
-#: slide); readings much shorter than the map predicts at the mean particle are left out of
-#: the weights as well as of the recovery averages (``distance_filter_weights``: Fox et al.
-#: 1999's distance filter where they use it, in the sensor model; the corridor's parked beds
-#: dragged the cloud 1.4 m back); and a cloud inside one KLD bin keeps ``min_particles``
-#: (``kld_one_bin = "min"``, the textbook's bound, where nav2 takes ``max_particles``: 13 % of
-#: the office tour's updates had 8000 particles for it, which the see-through test made 3.5x
-#: the filter's time). Measured on the same recorded streams as the rules above, three filter
-#: generators (README, "Worlds nobody tuned for"); :data:`TUNED_END_POINTS` is ``tuned``
-#: without these three.
+#: that ends more than 0.3 m beyond a mapped obstacle scores by the beam model's distance past
+#: it unless most of the cloud sees it through (``see_through_margin_m``,
+#: ``see_through_max_share``: the likelihood field's cloud slid through the lab's hallway and
+#: a random pose won during the slide); readings much shorter than the map predicts at the
+#: mean particle are left out of the weights as well as of the recovery averages
+#: (``distance_filter_weights``: Fox et al. 1999's distance filter where they use it, in the
+#: sensor model; the corridor's parked beds dragged the cloud 1.4 m back); and a cloud inside
+#: one KLD bin keeps ``min_particles`` (``kld_one_bin = "min"``, the textbook's bound, where
+#: nav2 takes ``max_particles``: 13 % of the office tour's updates had 8000 particles for it,
+#: which the see-through walks made 3.5x the filter's time). Measured on the same recorded
+#: streams as the rules above, three filter generators (README, "Worlds nobody tuned for");
+#: :data:`TUNED_END_POINTS` is ``tuned`` without these three.
 #: Measured with benchmarks/mcl_apartment_week1.py and benchmarks/mcl_global_kidnap.py.
 TUNED = MCLConfig(
     alpha1=0.05,
