@@ -290,7 +290,7 @@ class MCLConfig:
     #: half again to twice as confident): a reading that a fifth to a half of a tight cloud
     #: sees through grazes a door frame or a furniture edge, and scoring it cuts the cloud.
     #: 0.2 keeps 9.7 mm there and FR079's max at 0.84 m (0.5: 0.93 m), but the corridor is
-    #: lost on 1.5 % of its scans (0.5: 0.8 %, generator 2, ATE 0.119 against 0.101 m); in
+    #: lost on 1.5 % of its scans (0.5: 0.8 %, generator 0, ATE 0.119 against 0.101 m); in
     #: the lab, stopped after day 13, its worst drift was 1.31 m (0.5: 1.56 m, day 12 run 1).
     #: Not a clear ranking; the office and the hall were measured with 0.5 only.
     see_through_max_share: float = 0.5
