@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from dynmap_sim import se2
-from dynmap_sim.agent.localization.particle_filter import StaticMCL
+from dynmap_sim.agent.localization.particle_filter import CONFIGS, StaticMCL
 from dynmap_sim.experiments.replay import json_or_text
 from dynmap_sim.experiments.runner import ExperimentRunner
 from dynmap_sim.experiments.scenario import parse_scenario
@@ -74,10 +74,16 @@ def settle_time(err: np.ndarray, dt_s: float = 0.1, hold_s: float = 10.0) -> flo
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--config", default="tuned")
-    ap.add_argument("--days", type=int, default=4)
-    ap.add_argument("--trials", type=int, default=20)
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--config",
+        default="tuned",
+        choices=sorted(CONFIGS),
+        help="static-mcl configuration (default: tuned; tuned-end-points: tuned before its "
+        "see-through term)",
+    )
+    ap.add_argument("--days", type=int, default=4, help="apartment runs to record (default: 4)")
+    ap.add_argument("--trials", type=int, default=20, help="trials of each kind (default: 20)")
+    ap.add_argument("--seed", type=int, default=0, help="world and noise seed (default: 0)")
     ap.add_argument(
         "--override",
         action="append",
@@ -85,6 +91,10 @@ def main() -> None:
         help="MCLConfig field=value (repeatable; the value as JSON, else as text)",
     )
     args = ap.parse_args()
+    if args.days < 1 or args.trials < 1:
+        ap.error("--days and --trials must be at least 1")
+    if args.seed < 0:
+        ap.error("--seed must be >= 0")
     overrides = {k: json_or_text(v) for k, _, v in (o.partition("=") for o in args.override)}
     t0 = time.perf_counter()
     laser, runs = record("apartment", args.days, args.seed)
