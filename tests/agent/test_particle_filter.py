@@ -594,7 +594,7 @@ def test_local_resetting_yields_to_the_global_recovery():
     the local draws find a pose in this small room, 2.3 m from the kidnapped one, whose
     readings fit at -0.70 per beam (log) on the beams the distance filter keeps, inside the
     gate (-0.81), and the filter stays there; of the apartment's kidnappings
-    (benchmarks/mcl_global_kidnap.py) it recovers 19/20 within 30 s."""
+    (benchmarks/mcl_global_kidnap.py) it recovers 20/20 within 30 s."""
     segs = room()
     grid = OccupancyGrid.from_segments(segs, free_seed_xy_m=(1, 1))
     rng = np.random.default_rng(8)
