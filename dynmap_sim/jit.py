@@ -45,3 +45,13 @@ def require_numba(what: str) -> None:
     """Raise a clear error when the numba backend of ``what`` is asked for without numba."""
     if numba is None:
         raise RuntimeError(f'the numba {what} needs numba: pip install "dynmap-sim[fast]"')
+
+
+def pick_kernel(plain: Any, jitted: Any, python: bool, what: str) -> Any:
+    """The plain kernel ``plain`` if ``python``, else its compiled twin ``jitted`` (from
+    :func:`compiled`); a clear error (:func:`require_numba`) when that is None."""
+    if python:
+        return plain
+    if jitted is None:
+        require_numba(what)
+    return jitted

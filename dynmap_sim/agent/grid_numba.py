@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from dynmap_sim.jit import compiled, require_numba
+from dynmap_sim.jit import compiled, pick_kernel
 from dynmap_sim.jit import numba_available as numba_available  # re-exported
 
 #: Stands for "no occupied cell in this column" (far beyond any grid's squared distances).
@@ -70,9 +70,7 @@ _squared_distances = compiled(_squared_distances_py)
 def squared_distances(occupied: NDArray[np.bool_], python: bool = False) -> NDArray[np.float64]:
     """:func:`_squared_distances_py` compiled (needs numba; ``python``: the plain kernel):
     ``(H, W)`` squared distances [cells²] to the nearest of ``occupied`` (at least one)."""
-    kernel = _squared_distances_py if python else _squared_distances
-    if kernel is None:
-        require_numba("distance field")
+    kernel = pick_kernel(_squared_distances_py, _squared_distances, python, "distance field")
     h, w = occupied.shape
     out = np.empty((h, w), dtype=np.float64)
     kernel(np.ascontiguousarray(occupied), np.empty((h, w)), np.empty(w), np.empty(w, np.intp),

@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from dynmap_sim.jit import compiled, require_numba
+from dynmap_sim.jit import compiled, pick_kernel
 from dynmap_sim.jit import numba_available as numba_available  # re-exported
 
 Float32Array = NDArray[np.float32]
@@ -60,9 +60,7 @@ def endpoint_values(
     """:func:`_endpoint_values_py` compiled (needs numba; ``python``: the plain kernel) on a
     grid of ``shape`` ``(H, W)``, ``terms`` ``(lx, ly, c, s, bx, by)``: the ``(P, B)`` values
     (``values``' dtype)."""
-    kernel = _endpoint_values_py if python else _endpoint_values
-    if kernel is None:
-        require_numba("likelihood field")
+    kernel = pick_kernel(_endpoint_values_py, _endpoint_values, python, "likelihood field")
     h, w = shape
     out = np.empty((len(terms[0]), len(terms[4])), dtype=values.dtype)
     kernel(*terms, values, int(h), int(w), out)
@@ -124,9 +122,7 @@ def bin_clusters(
 ) -> NDArray[np.intp]:
     """:func:`_bin_clusters_py` compiled (needs numba; ``python``: the plain kernel): the
     cluster label of each occupied bin."""
-    kernel = _bin_clusters_py if python else _bin_clusters
-    if kernel is None:
-        require_numba("particle clusters")
+    kernel = pick_kernel(_bin_clusters_py, _bin_clusters, python, "particle clusters")
     parent = np.empty(len(ukeys), dtype=np.intp)
     label = np.empty(len(ukeys), dtype=np.intp)
     kernel(ukeys, int(ny), int(n_th), parent, label)
@@ -162,9 +158,7 @@ def first_occupied(
     """:func:`_first_occupied_py` compiled (needs numba; ``python``: the plain kernel): per
     beam (direction ``cos_sin``), the index into ``t`` of its first occupied sample, -1 for
     none."""
-    kernel = _first_occupied_py if python else _first_occupied
-    if kernel is None:
-        require_numba("ray casting")
+    kernel = pick_kernel(_first_occupied_py, _first_occupied, python, "ray casting")
     out = np.empty(len(cos_sin[0]), dtype=np.intp)
     kernel(occupied, float(laser_xy[0]), float(laser_xy[1]), cos_sin[0], cos_sin[1], t,
            float(origin_xy[0]), float(origin_xy[1]), float(res), out)  # fmt: skip
@@ -210,9 +204,7 @@ def wall_depths(
     """:func:`_wall_depths_py` compiled (needs numba; ``python``: the plain kernel) on the
     distance field ``dist`` of a grid ``(ox, oy, res)``, ``terms`` ``(lx, ly, c, s, cb, sb,
     length)``: the ``(P, B)`` wall depths of :func:`.see_through.wall_depths`."""
-    kernel = _wall_depths_py if python else _wall_depths
-    if kernel is None:
-        require_numba("see-through test")
+    kernel = pick_kernel(_wall_depths_py, _wall_depths, python, "see-through test")
     out = np.empty((len(terms[2]), len(terms[4])), dtype=np.float64)
     kernel(dist, *(float(v) for v in grid_frame), *terms, out)
     return out

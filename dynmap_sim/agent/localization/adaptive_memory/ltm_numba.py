@@ -27,7 +27,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from dynmap_sim.jit import compiled, require_numba
+from dynmap_sim.jit import compiled, pick_kernel
 from dynmap_sim.jit import numba_available as numba_available  # re-exported
 
 FloatArray = NDArray[np.float64]
@@ -201,9 +201,7 @@ def explained(
 ) -> NDArray[np.bool_]:
     """:func:`_explained_py` compiled (needs numba; ``python``: the plain kernel) on points
     ``(n, 2)`` [m] with covariances ``(n, 2, 2)`` [m²] (float64)."""
-    kernel = _explained_py if python else _explained
-    if kernel is None:
-        require_numba("long-term map")
+    kernel = pick_kernel(_explained_py, _explained, python, "long-term map")
     n = len(points)
     out = np.zeros(n, dtype=np.bool_)
     ix, iy = np.empty(n, dtype=np.intp), np.empty(n, dtype=np.intp)
@@ -228,9 +226,7 @@ def fuse(
     """:func:`_fuse_py` compiled (needs numba; ``python``: the plain kernel), in place on
     ``logodds`` (C-contiguous); ``free``: ``(laser_x_m, laser_y_m, ux, uy, stop_m, t_m)`` or
     None."""
-    kernel = _fuse_py if python else _fuse
-    if kernel is None:
-        require_numba("long-term map")
+    kernel = pick_kernel(_fuse_py, _fuse, python, "long-term map")
     lx, ly, ux, uy, stop, t = free if free is not None else (0.0, 0.0, *([np.zeros(0)] * 4))
     kernel(logodds, occ_flat, occ_add32, free is not None, float(lx), float(ly), ux, uy, stop,
            t, float(origin_m[0]), float(origin_m[1]), float(res_m),
@@ -253,9 +249,7 @@ def stencil(
     """:func:`_stencil_py` compiled (needs numba; ``python``: the plain kernel): the flat
     cells and squared Mahalanobis distances of the kept stencil cells, and each point's
     cell ``ix, iy``."""
-    kernel = _stencil_py if python else _stencil
-    if kernel is None:
-        require_numba("long-term map")
+    kernel = pick_kernel(_stencil_py, _stencil, python, "long-term map")
     n = len(points)
     ix, iy = np.empty(n, dtype=np.intp), np.empty(n, dtype=np.intp)
     flat = np.empty(n * (2 * k + 1) ** 2, dtype=np.intp)

@@ -22,12 +22,10 @@ the compiled ones against the numpy code.
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 from numpy.typing import NDArray
 
-from dynmap_sim.jit import compiled, require_numba
+from dynmap_sim.jit import compiled, pick_kernel
 from dynmap_sim.jit import numba_available as numba_available  # re-exported
 
 FloatArray = NDArray[np.float64]
@@ -286,15 +284,6 @@ _segment_sums = compiled(_segment_sums_py)
 _segment_boxes = compiled(_segment_boxes_py)
 
 
-def _pick(plain: Any, jitted: Any, python: bool, what: str) -> Any:
-    """The plain kernel if ``python``, else its compiled twin (a clear error without numba)."""
-    if python:
-        return plain
-    if jitted is None:
-        require_numba(what)
-    return jitted
-
-
 def segment_sums(
     x: FloatArray,
     y: FloatArray,
@@ -310,7 +299,7 @@ def segment_sums(
            FloatArray, FloatArray, FloatArray]:  # fmt: skip
     """:func:`_segment_sums_py` compiled (needs numba; ``python``: the plain kernel):
     ``seg, starts, counts, mx, my, cxx, cxy, cyy, dx, dy``."""
-    kernel = _pick(_segment_sums_py, _segment_sums, python, "scan segmentation")
+    kernel = pick_kernel(_segment_sums_py, _segment_sums, python, "scan segmentation")
     n = len(x)
     seg = np.empty(n, dtype=np.intp)
     starts = np.empty(n, dtype=np.intp)
@@ -339,7 +328,7 @@ def segment_boxes(
 ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_], IntArray, NDArray[np.bool_]]:
     """:func:`_segment_boxes_py` compiled (needs numba; ``python``: the plain kernel):
     ``center (m, 2), length, width, never, box_of_seg`` of every segment and ``keep``."""
-    kernel = _pick(_segment_boxes_py, _segment_boxes, python, "scan segmentation")
+    kernel = pick_kernel(_segment_boxes_py, _segment_boxes, python, "scan segmentation")
     m = len(starts)
     center = np.empty((m, 2))
     length, width = np.empty(m), np.empty(m)
@@ -369,7 +358,7 @@ def track(
     """:func:`_track_py` compiled (needs numba; ``python``: the plain kernel), in place on the
     tracks (``counters``: hits, misses, fast, slow); each box's track (-1: none), class
     (``UNKNOWN`` when unmatched) and speed."""
-    kernel = _pick(_track_py, _track, python, "object tracker")
+    kernel = pick_kernel(_track_py, _track, python, "object tracker")
     nb = len(z)
     match_box = np.empty(nb, dtype=np.intp)
     cls = np.zeros(nb, dtype=np.int8)
