@@ -80,13 +80,13 @@ def test_a_scan_mostly_shorter_than_the_map_is_not_filtered():
     f.init_gaussian(pose, np.diag([0.02**2, 0.02**2, 0.01**2]), np.random.default_rng(0))
     good = raycast(pose, LASER.angles(), segs, LASER.range_max_m)
     r, a = f._beams_of(good)
-    assert len(f._recovery_beams(f.weights, r, a)) == len(r)  # nothing short
+    assert len(f._distance_filter_beams(f.weights, r, a)) == len(r)  # nothing short
     few = r.copy()
     few[: len(r) // 3] = 0.3
-    assert len(f._recovery_beams(f.weights, few, a)) == len(r) - len(r) // 3
+    assert len(f._distance_filter_beams(f.weights, few, a)) == len(r) - len(r) // 3
     most = r.copy()
     most[: 2 * len(r) // 3] = 0.3
-    assert len(f._recovery_beams(f.weights, most, a)) == len(r)
+    assert len(f._distance_filter_beams(f.weights, most, a)) == len(r)
 
 
 def test_hold_leaves_the_recovery_averages_of_an_occluded_scan_alone():
@@ -108,7 +108,7 @@ def test_hold_leaves_the_recovery_averages_of_an_occluded_scan_alone():
     r, a = f._beams_of(good)
     occluded = good.copy()
     occluded[f.beams[: 2 * len(f.beams) // 3]] = 0.3
-    assert f._recovery_beams(f.weights, *f._beams_of(occluded)) is None
+    assert f._distance_filter_beams(f.weights, *f._beams_of(occluded)) is None
     held = (f.w_slow, f.w_fast, f.w_last, f.n_low_updates)
     for _ in range(10):
         f.correct(occluded)
@@ -116,13 +116,13 @@ def test_hold_leaves_the_recovery_averages_of_an_occluded_scan_alone():
     assert (f.w_slow, f.w_fast, f.w_last, f.n_low_updates) == held
     few = good.copy()
     few[f.beams[: len(f.beams) // 3]] = 0.3
-    kept = f._recovery_beams(f.weights, *f._beams_of(few))
+    kept = f._distance_filter_beams(f.weights, *f._beams_of(few))
     assert kept is not None and len(r) // 2 <= len(kept) < len(r)
     f.correct(few)
     assert f.w_fast != held[1]
     f.n_low_updates = 1  # the gate counts: the fit had fallen before
     ro, ao = f._beams_of(occluded)
-    assert len(f._recovery_beams(f.weights, ro, ao)) == len(ro)
+    assert len(f._distance_filter_beams(f.weights, ro, ao)) == len(ro)
 
 
 def test_recovery_occluded_and_min_share_are_checked():

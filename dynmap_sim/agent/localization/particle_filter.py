@@ -733,22 +733,22 @@ class AMCLFilter:
         # the distance filter's beams at the mean particle (Fox et al. 1999): for the weights
         # (distance_filter_weights) and the recovery averages (recovery_w_avg_per_beam)
         keep = (
-            self._recovery_beams(self.weights, r, a)
+            self._distance_filter_beams(self.weights, r, a)
             if c.distance_filter_weights or c.recovery_w_avg_per_beam
             else None
         )
         beam_logp = None  # (P, B) log p of the end points
         if c.laser_model_type == "likelihood_field_prob":
             beam_logp = self._endpoint_values(self.table.logp, self.particles, r, a)
-            scored = self._see_through_scored(beam_logp, r, a)
-            # ... only while the recovery gate is not counting: the filter measures "short"
-            # against the mean particle, which a kidnapping makes wrong
-            filtered = c.distance_filter_weights and self.n_low_updates == 0
-            if filtered and keep is not None and len(keep) < len(r):
-                kept = None if scored is None else scored[:, keep]
-                logp, _ = likelihood_field_prob_beams(beam_logp[:, keep], self.table, self.lf, kept)
-            else:
-                logp, _ = likelihood_field_prob_beams(beam_logp, self.table, self.lf, scored)
+            # the weights' beams: the distance filter's only while the recovery gate is not
+            # counting (it measures "short" against the mean particle, which a kidnapping
+            # makes wrong)
+            w = slice(None)
+            if c.distance_filter_weights and self.n_low_updates == 0 and keep is not None:
+                w = keep
+            lp = beam_logp[:, w]
+            scored = self._see_through_scored(lp, r[w], a[w])
+            logp, _ = likelihood_field_prob_beams(lp, self.table, self.lf, scored)
         else:
             p = self._endpoint_values(self.table.p, self.particles, r, a)
             logp = np.log(likelihood_field_weights_beams(p))
@@ -812,14 +812,15 @@ class AMCLFilter:
         """``values`` of the likelihood table at the beams' end points ``(P, B)``."""
         return endpoint_values(values, particles, ranges_m, angles_rad, self.mount, self.grid)
 
-    def _recovery_beams(
+    def _distance_filter_beams(
         self, weights: FloatArray, ranges_m: FloatArray, angles_rad: FloatArray
     ) -> NDArray[np.intp] | None:
-        """Indices of the beams that feed the recovery average: all, or with
-        ``recovery_distance_filter_m`` those not much shorter than the map predicts at the
-        weighted mean particle (Fox et al. 1999), if at least ``recovery_min_beam_share``
-        of them remain; else all (``recovery_occluded = "all-beams"``) or None (``hold``:
-        this scan does not feed the averages)."""
+        """Indices of the beams that feed the recovery average (and, with
+        ``distance_filter_weights``, the weights): all, or with ``recovery_distance_filter_m``
+        those not much shorter than the map predicts at the weighted mean particle (Fox et
+        al. 1999), if at least ``recovery_min_beam_share`` of them remain; else all
+        (``recovery_occluded = "all-beams"``) or None (``hold``: this scan does not feed the
+        averages, and the weights take every beam)."""
         all_beams = np.arange(len(ranges_m))
         margin = self.config.recovery_distance_filter_m
         if margin <= 0:
