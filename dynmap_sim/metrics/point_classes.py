@@ -197,14 +197,13 @@ class PointClassTally:
     n_scans: int = 0
 
     def add(self, predicted: ArrayLike, ranges_m: ArrayLike, truth: ArrayLike | None) -> None:
-        """One scan's predicted classes, its readings and (when known) its true classes."""
+        """One scan's predicted classes, its readings and (when known) its true classes
+        (:meth:`add_scans` of one row; readings of another size add no shares)."""
         p = np.asarray(predicted, dtype=np.int64).ravel()
-        valid = np.isfinite(np.asarray(ranges_m, dtype=np.float64).ravel())
-        if valid.shape == p.shape and valid.any():
-            counts = np.bincount(np.clip(p[valid], 0, 3), minlength=4)
-            self.fraction_sum += counts / valid.sum()
-            self.n_scans += 1
-        if truth is not None:
+        r = np.asarray(ranges_m, dtype=np.float64).ravel()
+        if r.shape == p.shape:
+            self.add_scans(p[None], r[None], truth)
+        elif truth is not None:
             self.confusion += point_confusion(truth, p)
 
     def add_scans(

@@ -156,7 +156,7 @@ class World:
         self._synced = self._crowd.pos.copy().view(np.complex128)[:, 0]  # bodies' positions
         self._stale = False  # some people's bodies lag behind the crowd
         # the largest body radius of the run's people [m] (how near the robot bodies sync)
-        self._person_r_max = float(self._crowd.radius.max()) if self._crowd.n else 0.0
+        self._person_r_max = self._largest_person_radius()
         n_obj = len(self._static.object_ids)
         self._people_ids = self._crowd.ids
         nl = 2 * self._crowd.n
@@ -187,7 +187,11 @@ class World:
             self._circles_template = self._circles_start()
         self.__dict__.setdefault("people_backend", "numpy")
         if "_person_r_max" not in state:
-            self._person_r_max = float(self._crowd.radius.max()) if self._crowd.n else 0.0
+            self._person_r_max = self._largest_person_radius()
+
+    def _largest_person_radius(self) -> float:
+        """The largest body radius [m] of the run's people (0 without people)."""
+        return float(self._crowd.radius.max()) if self._crowd.n else 0.0
 
     def _spawn(self, day: int, run: int, objects: tuple[ObjectState, ...]):
         edges = [polygon_edges(o.polygon) for o in objects]  # circles as their 16-gons
