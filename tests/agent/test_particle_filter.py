@@ -289,11 +289,12 @@ def test_walls_only_is_tuned_for_a_map_without_the_furniture():
 
 def test_tuned_end_points_is_tuned_without_the_see_through_term():
     """``adaptive-memory`` and ``walls-only`` were measured on it: the see-through term, the
-    distance filter in the weights and the textbook's one-bin rule are the only
-    differences."""
+    distance filter in the weights, the textbook's one-bin rule and the tighter translation
+    noise are the only differences."""
     assert CONFIGS["tuned-end-points"] is TUNED_END_POINTS
     changed = {k for k in vars(TUNED) if getattr(TUNED, k) != getattr(TUNED_END_POINTS, k)}
-    assert changed == {"see_through_margin_m", "distance_filter_weights", "kld_one_bin"}
+    assert changed == {"see_through_margin_m", "distance_filter_weights", "kld_one_bin", "alpha3"}
+    assert TUNED.alpha3 < TUNED_END_POINTS.alpha3 == TUNED.alpha1 == 0.05
     assert TUNED_END_POINTS.see_through_margin_m == 0.0
     assert TUNED_END_POINTS.kld_one_bin == NAV2_DEFAULT.kld_one_bin == "max"
     assert TUNED.see_through_margin_m > 0 and TUNED.kld_one_bin == "min"

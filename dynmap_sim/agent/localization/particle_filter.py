@@ -392,9 +392,16 @@ NAV2_DEFAULT = MCLConfig()
 #: Tuned to the simulated sensors and maps: URG-04LX noise (1 cm / 1 %) on a 5 cm grid built
 #: by first-run SLAM (a few cm of map error) -> sigma_hit 0.12 m with the proper product model;
 #: wheel odometry that drifts ~1-2 % -> alphas 0.05 (in the corrected model a standard
-#: deviation of sqrt(0.05) = 22 % of every step, far looser than that drift; 0.01 was measured
-#: on the untuned worlds and FR079 and is not the default: README, "Worlds nobody tuned
-#: for", benchmarks/mcl_untuned_variants.py); people and unmapped objects -> beam
+#: deviation of sqrt(0.05) = 22 % of every step, far looser than that drift; all four at 0.01
+#: were measured on the untuned worlds and FR079 and are not the default: README, "Worlds
+#: nobody tuned for", benchmarks/mcl_untuned_variants.py), but ``alpha3`` (translation noise
+#: per metre driven) 0.02: a standard deviation of 14 % of each step, still ~100x the
+#: simulated encoders' (2 mm sqrt(d / 1 m) a wheel) but tight enough that the cloud does not
+#: follow a scan that fits poses 0.3-1 m along a corridor equally well (the corridor world's
+#: parked bed: 0.94 m behind with 0.05, 0.37 m with 0.02; the lab's hallway drift 1.56 ->
+#: 0.72 m; README, "Worlds nobody tuned for"). Its price is on real wheels: FR079's mean
+#: 0.055 -> 0.058 m (Pioneer odometry slips; heading alphas 0.1 as well gave 0.056 m, and all
+#: four at 0.1 0.051 m with a 1.19 m maximum); people and unmapped objects -> beam
 #: skipping; kidnapping and global localization -> Table 8.3 recovery, 8000 particles at most
 #: and the real 99 % normal quantile as pf_z; updates every 0.1 m / 0.1 rad; local resetting
 #: before the global recovery (``recovery_local_*``: real odometry glitches, FR079). The
@@ -421,7 +428,7 @@ NAV2_DEFAULT = MCLConfig()
 TUNED = MCLConfig(
     alpha1=0.05,
     alpha2=0.05,
-    alpha3=0.05,
+    alpha3=0.02,
     alpha4=0.05,
     laser_model_type="likelihood_field_prob",
     max_beams=60,
@@ -461,11 +468,16 @@ TUNED = MCLConfig(
 )
 
 #: ``tuned`` as it was before the see-through term: the likelihood field on every valid
-#: reading's end point and nav2's one-bin rule. ``adaptive-memory``'s filter on the static
-#: points (H&W §6.1) and :data:`WALLS_ONLY` were measured with it (the see-through term and
-#: the distance filter in the weights were not measured there).
+#: reading's end point, nav2's one-bin rule and ``alpha3`` 0.05. ``adaptive-memory``'s
+#: filter on the static points (H&W §6.1) and :data:`WALLS_ONLY` were measured with it (the
+#: see-through term, the distance filter in the weights and the tighter translation noise
+#: were not measured there).
 TUNED_END_POINTS = replace(
-    TUNED, see_through_margin_m=0.0, distance_filter_weights=False, kld_one_bin="max"
+    TUNED,
+    see_through_margin_m=0.0,
+    distance_filter_weights=False,
+    kld_one_bin="max",
+    alpha3=0.05,
 )
 
 #: ``tuned`` for a map that lacks the furniture: the walls-only prior (H&W Fig. 4, their
