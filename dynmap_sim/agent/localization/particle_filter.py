@@ -389,42 +389,40 @@ class MCLConfig:
 #: nav2's defaults (``nav2_params.yaml`` / ``amcl_node.cpp``): recovery off, no beam skipping.
 NAV2_DEFAULT = MCLConfig()
 
-#: Tuned to the simulated sensors and maps: URG-04LX noise (1 cm / 1 %) on a 5 cm grid built
-#: by first-run SLAM (a few cm of map error) -> sigma_hit 0.12 m with the proper product model;
-#: wheel odometry that drifts ~1-2 % -> alphas 0.05 (in the corrected model a standard
-#: deviation of sqrt(0.05) = 22 % of every step, far looser than that drift; all four at 0.01
-#: were measured on the untuned worlds and FR079 and are not the default: README, "Worlds
-#: nobody tuned for", benchmarks/mcl_untuned_variants.py), but ``alpha3`` (translation noise
-#: per metre driven) 0.02: a standard deviation of 14 % of each step, still ~100x the
-#: simulated encoders' (2 mm sqrt(d / 1 m) a wheel) but tight enough that the cloud does not
-#: follow a scan that fits poses 0.3-1 m along a corridor equally well (the corridor world's
-#: parked bed: 0.94 m behind with 0.05, 0.37 m with 0.02; the lab's hallway drift 1.56 ->
-#: 0.72 m; README, "Worlds nobody tuned for"). Its price is on real wheels: FR079's mean
-#: 0.055 -> 0.058 m (Pioneer odometry slips; heading alphas 0.1 as well gave 0.056 m, and all
-#: four at 0.1 0.051 m with a 1.19 m maximum); people and unmapped objects -> beam
-#: skipping; kidnapping and global localization -> Table 8.3 recovery, 8000 particles at most
-#: and the real 99 % normal quantile as pf_z; updates every 0.1 m / 0.1 rad; local resetting
-#: before the global recovery (``recovery_local_*``: real odometry glitches, FR079). The
-#: global recovery injects (Table 8.3); ``recovery_global = "verify"`` (an override) was
-#: measured against it and is not the default (see :attr:`MCLConfig.recovery_global`). A
-#: scan the distance filter leaves fewer than half the beams of holds the recovery averages
-#: while the gate is not counting (``recovery_occluded = "hold"``), and a random pose at
-#: which more than half of the readings pass through mapped walls is not injected
-#: (``recovery_through_max_share``); both measured on the worlds nobody tuned for and the
-#: lab's five weeks (README, "Worlds nobody tuned for"). While tracking, a particle's reading
-#: that ends more than 0.3 m beyond a mapped obstacle scores by the beam model's distance past
-#: it unless most of the cloud sees it through (``see_through_margin_m``,
-#: ``see_through_max_share``: the likelihood field's cloud slid through the lab's hallway and
-#: a random pose won during the slide); readings much shorter than the map predicts at the
-#: mean particle are left out of the weights as well as of the recovery averages
-#: (``distance_filter_weights``: Fox et al. 1999's distance filter where they use it, in the
-#: sensor model; the corridor's parked beds dragged the cloud 1.4 m back); and a cloud inside
-#: one KLD bin keeps ``min_particles`` (``kld_one_bin = "min"``, the textbook's bound, where
-#: nav2 takes ``max_particles``: 13 % of the office tour's updates had 8000 particles for it,
-#: which the see-through walks made 3.5x the filter's time). Measured on the same recorded
+#: Tuned to the simulated sensors and maps: URG-04LX noise (1 cm / 1 %) on a 5 cm grid built by
+#: first-run SLAM (a few cm of map error) -> sigma_hit 0.12 m with the proper product model; wheel
+#: odometry that drifts ~1-2 % -> alphas 0.05 (in the corrected model a standard deviation of
+#: sqrt(0.05) = 22 % of every step, far looser than that drift; all four at 0.01 were measured on
+#: the untuned worlds and FR079 and are not the default: README, "Worlds nobody tuned for",
+#: benchmarks/mcl_untuned_variants.py), but ``alpha3`` (translation noise coefficient) 0.02: a
+#: standard deviation of 14 % of each step (14 mm a 0.1 m update, still ~20x the simulated encoders'
+#: 2 mm sqrt(d / 1 m) a wheel) but tight enough that the cloud does not follow a scan that fits
+#: poses 0.3-1 m apart along a corridor equally well (the corridor world's parked bed: 0.94 m off
+#: along it with 0.05, 0.37 m with 0.02; the lab's hallway drift 1.56 -> 0.85 m; README, "Worlds
+#: nobody tuned for"). Its price is on real wheels: FR079's mean 0.055 -> 0.058 m (Pioneer odometry
+#: slips; heading alphas 0.1 as well gave 0.056 m, and all four at 0.1 0.051 m with a 1.19 m
+#: maximum); people and unmapped objects -> beam skipping; kidnapping and global localization ->
+#: Table 8.3 recovery, 8000 particles at most and the real 99 % normal quantile as pf_z; updates
+#: every 0.1 m / 0.1 rad; local resetting before the global recovery (``recovery_local_*``: real
+#: odometry glitches, FR079). The global recovery injects (Table 8.3); ``recovery_global =
+#: "verify"`` (an override) was measured against it and is not the default (see
+#: :attr:`MCLConfig.recovery_global`). A scan the distance filter leaves fewer than half the beams
+#: of holds the recovery averages while the gate is not counting (``recovery_occluded = "hold"``),
+#: and a random pose at which more than half of the readings pass through mapped walls is not
+#: injected (``recovery_through_max_share``); both measured on the worlds nobody tuned for and the
+#: lab's five weeks (README, "Worlds nobody tuned for"). While tracking, a particle's reading that
+#: ends more than 0.3 m beyond a mapped obstacle scores by the beam model's distance past it unless
+#: most of the cloud sees it through (``see_through_margin_m``, ``see_through_max_share``: the
+#: likelihood field's cloud slid through the lab's hallway and a random pose won during the slide);
+#: readings much shorter than the map predicts at the mean particle are left out of the weights as
+#: well as of the recovery averages (``distance_filter_weights``: Fox et al. 1999's distance filter
+#: where they use it, in the sensor model; the corridor's parked beds dragged the cloud 1.4 m back);
+#: and a cloud inside one KLD bin keeps ``min_particles`` (``kld_one_bin = "min"``, the textbook's
+#: bound, where nav2 takes ``max_particles``: 13 % of the office tour's updates had 8000 particles
+#: for it, which the see-through walks made 3.5x the filter's time). Measured on the same recorded
 #: streams as the rules above, three filter generators (README, "Worlds nobody tuned for");
-#: :data:`TUNED_END_POINTS` is ``tuned`` without these three.
-#: Measured with benchmarks/mcl_apartment_week1.py and benchmarks/mcl_global_kidnap.py.
+#: :data:`TUNED_END_POINTS` is ``tuned`` without these three, with ``alpha3`` 0.05. Measured with
+#: benchmarks/mcl_apartment_week1.py and benchmarks/mcl_global_kidnap.py.
 TUNED = MCLConfig(
     alpha1=0.05,
     alpha2=0.05,
