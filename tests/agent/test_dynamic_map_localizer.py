@@ -14,6 +14,7 @@ from dynmap_sim.agent.localization.dynamic_map_localizer import (
     DynamicMapConfig,
     DynamicMapLocalizer,
     lambda_min,
+    odometry_covariance,
 )
 from dynmap_sim.agent.localizer import LOCALIZERS, make_localizer
 from dynmap_sim.types import Prior
@@ -217,3 +218,21 @@ def test_long_term_anchor_overrides_a_short_term_slide_only(learned):
     assert anchored < 0.2
     # off by default: the paper has no anchor
     assert DynamicMapConfig().ltm_anchor_tol_m == 0
+
+
+def test_odometry_covariance_grows_with_the_motion_from_a_small_floor():
+    """``C_O`` (eq. 9): std ``sigma0 + k (d + a/2)`` in x, y and ``sigma0 + k (a + d/2)`` in
+    theta; at rest the floors. With the defaults, eq. 9's two-sigma gate lets one match move a
+    3.5 cm step (10 Hz, 0.35 m/s) by 3.4 mm at most, where 1 cm + 10 % allowed 2.7 cm."""
+    c = DynamicMapConfig()
+    np.testing.assert_allclose(
+        odometry_covariance(np.zeros(3), *c.odom_params),
+        np.diag([c.odom_sigma_xy0_m**2] * 2 + [c.odom_sigma_th0_rad**2]),
+    )
+    cov = odometry_covariance(np.array([0.03, 0.0, 0.2]), 0.001, 0.02, 0.01, 0.1)
+    np.testing.assert_allclose(np.sqrt(np.diag(cov)), [0.0036, 0.0036, 0.0315])
+    step = np.array([0.035, 0.0, 0.0])
+    assert 2 * np.sqrt(odometry_covariance(step, *c.odom_params)[0, 0]) == pytest.approx(0.0034)
+    assert 2 * np.sqrt(odometry_covariance(step, 0.01, 0.1, 0.01, 0.1)[0, 0]) == pytest.approx(
+        0.027
+    )

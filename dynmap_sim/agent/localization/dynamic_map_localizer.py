@@ -149,9 +149,9 @@ class DynamicMapConfig:
     #: estimate 1.5 m along the corridor world's corridor (README, "Worlds nobody tuned
     #: for"). Replays of the untuned worlds' tours (before -> after, ATE): corridor 0.81 ->
     #: 0.15 m (max 2.55 -> 0.32 m), office 0.27 -> 0.029 m, hall 0.053 -> 0.042 m, the lab's
-    #: five weeks 0.038 -> 0.035 m (max 0.39 -> 0.16 m). The heading
-    #: terms stay: 0.001 rad and 2 % there as well were worse in the corridor (day 2 run 1
-    #: mean 0.32 m, max 0.51 m, against a 0.32 m maximum over all runs with these).
+    #: five weeks 0.038 -> 0.035 m (max 0.39 -> 0.16 m). The heading terms stay: 0.001 rad
+    #: and 2 % there as well were worse in the corridor (day 2 run 1 mean 0.32 m, max 0.51
+    #: m, against a 0.32 m maximum over all runs with these).
     odom_k_xy: float = 0.02
     #: ... and in theta ``odom_sigma_th0_rad + odom_k_th (a + d/2)`` [rad] ...
     odom_sigma_th0_rad: float = 0.01
