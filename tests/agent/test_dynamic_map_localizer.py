@@ -236,3 +236,27 @@ def test_odometry_covariance_grows_with_the_motion_from_a_small_floor():
     assert 2 * np.sqrt(odometry_covariance(step, 0.01, 0.1, 0.01, 0.1)[0, 0]) == pytest.approx(
         0.027
     )
+
+
+def test_kappa_first_fuses_the_odometry_prior_from_the_first_match(learned):
+    """``kappa_first`` (not B&D, whose §4.3 scheme starts at κ = 0 and is the default): the
+    first match already minimises ``E_S + κ E_O``, so a prediction inside the two-sigma
+    region pulls the result towards it, where B&D's scheme returns the scan's own match."""
+    assert DynamicMapConfig().kappa_first == 0
+    loc = pickle.loads(pickle.dumps(learned[0]["dynamic-map"]))
+    truth = learned[2]
+    loc.begin_run(Prior(initial_pose=truth[0].copy(), day=2, run=1))
+    stream = list(_stream(truth, _world(False), np.random.default_rng(11)))
+    for o, s in stream[:30]:
+        loc.update(o, s)
+    pts = se2.scan_to_points(np.asarray(stream[30][1].ranges_m, float), LASER.angles())
+    target = loc._current_point_map()
+    c_o = np.diag([0.02**2, 0.02**2, 0.01**2])
+    pred = truth[30] + [0.032, 0.016, 0.0]  # Mahalanobis 1.8: inside two sigma
+    alone, _, kappa_alone, _ = loc._match(pts, pred, c_o, target)
+    loc.config = replace(loc.config, kappa_first=1.0)
+    fused, _, kappa_fused, _ = loc._match(pts, pred, c_o, target)
+    assert (kappa_alone, kappa_fused) == (0.0, 1.0)
+    assert np.hypot(*(alone[:2] - truth[30][:2])) < 0.01
+    pull = fused[:2] - alone[:2]
+    assert np.hypot(*pull) > 1e-4 and pull @ (pred[:2] - alone[:2]) > 0
