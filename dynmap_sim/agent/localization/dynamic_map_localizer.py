@@ -6,11 +6,12 @@ Per scan ``z_t`` (with odometry):
 1. **Prediction**: ``x̂⁻ = x̂_{t−1} ⊕ Δodom`` with an odometry covariance ``C_O`` that grows
    with the motion (the paper's was "acquired experimentally"; ours is a parameter).
 2. **Scan matching against the current map** built after the previous step, with the adaptive
-   odometry prior of eq. 9: minimise ``E_S + κ·E_O`` with κ = 0 first; while the result is not
-   within two standard deviations of the odometry prediction (Mahalanobis distance under
-   ``C_O`` ≤ 2), set κ to ``kappa0`` and double it. If no κ brings it back, the prediction is
-   used. The ICP is :func:`dynmap_sim.agent.mapping.scan_matcher.match_scan` (point-to-line,
-   its prior term is ``(x − x̂⁻)ᵀ κ C_O⁻¹ (x − x̂⁻)``).
+   odometry prior of eq. 9: minimise ``E_S + κ·E_O`` with κ = 0 first (``kappa_first``, an
+   option that is not B&D's, starts higher); while the result is not within two standard
+   deviations of the odometry prediction (Mahalanobis distance under ``C_O`` ≤ 2), set κ to
+   ``kappa0`` and double it. If no κ brings it back, the prediction is used. The ICP is
+   :func:`dynmap_sim.agent.mapping.scan_matcher.match_scan` (point-to-line, its prior term
+   is ``(x − x̂⁻)ᵀ κ C_O⁻¹ (x − x̂⁻)``).
 3. **Current map for t+1** from ``z_t`` at the posterior (:mod:`..maps.current_map`): greedy
    timescale selection over the local maps within 4 m, safe mode.
 4. **Learning** (§4.4): λ1 learns ``z_t`` in the local maps within 2.5 m (a new local map where
@@ -492,12 +493,9 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
             )
 
         kw = {"max_correspondence_m": c.max_correspondence_m}
-        kappa = c.kappa_first
-        if kappa > 0:
-            kw_prior = {"prior_mean": pred, "prior_info": kappa * info_o}
-        else:
-            kw_prior = {}
-        res = match_scan(pts, target, pred, max_iterations=c.max_iterations, **kw, **kw_prior)
+        kappa = c.kappa_first  # B&D: 0, the scan alone
+        prior = {"prior_mean": pred, "prior_info": kappa * info_o} if kappa > 0 else {}
+        res = match_scan(pts, target, pred, max_iterations=c.max_iterations, **kw, **prior)
         if not within(res):
             kappa = max(c.kappa0, 2.0 * kappa)
             for _ in range(c.max_kappa_doublings):
