@@ -483,6 +483,8 @@ def _cmd_check(args: argparse.Namespace) -> int:
 #: ``--odometry`` choices: :data:`dynmap_sim.io.carmen.ODOMETRY_SOURCES` (not imported here, so
 #: the CLI starts without numpy; a test keeps the two equal).
 ODOMETRY_CHOICES = ("auto", "odom-lines", "laser-lines")
+#: ``--odometry-reversals`` choices: :data:`dynmap_sim.io.carmen.REVERSAL_MODES` (the same).
+REVERSAL_CHOICES = ("repair", "keep")
 
 
 def _odometry_option(s: argparse.ArgumentParser) -> None:
@@ -494,6 +496,14 @@ def _odometry_option(s: argparse.ArgumentParser) -> None:
         help="the log's odometry: the ODOM lines where they agree with the laser lines' "
         "odometry fields, else those fields, with a warning (auto, default); or always the "
         "odom-lines or the laser-lines",
+    )
+    s.add_argument(
+        "--odometry-reversals",
+        choices=REVERSAL_CHOICES,
+        default="repair",
+        help="ODOM poses that move forward while the line's velocity tv says the base "
+        "reverses (integrated without the sign, e.g. FR079 raw): negate their translation "
+        "(repair, default) or take them as logged (keep); either way a warning counts them",
     )
 
 
@@ -518,6 +528,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         reference_offset_s=args.reference_offset,
         reference_tolerance_s=args.reference_tolerance or REFERENCE_TOLERANCE_S,
         odometry=args.odometry,
+        reversals=args.odometry_reversals,
     )
     print(f"results in {out}")
     for line in _headline(out, timing=True):
@@ -556,6 +567,7 @@ def _cmd_slam_eval(args: argparse.Namespace) -> int:
         progress=not args.quiet,
         note=lambda text: print(text, file=sys.stderr),
         odometry=args.odometry,
+        reversals=args.odometry_reversals,
     )
     for line in res.table():
         print(line)

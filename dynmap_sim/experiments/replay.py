@@ -218,6 +218,7 @@ def replay_log(
     reference_offset_s: float | None = None,
     reference_tolerance_s: float = REFERENCE_TOLERANCE_S,
     odometry: str = "auto",
+    reversals: str = "repair",
 ) -> Path:
     """Replay CARMEN ``log`` through ``localizers`` into a results store in ``out_dir``;
     ``note`` gets what the user should know (which localizers took the log's map, how the
@@ -225,8 +226,9 @@ def replay_log(
     matched by time stamp (:func:`~dynmap_sim.experiments.reference.load_reference`, with
     ``reference_offset_s`` ``None`` = estimated, and ``reference_tolerance_s``); ``None``:
     the log has no ground truth and no errors are stored. ``odometry``: which of the log's
-    odometry records the localizers get (:func:`~dynmap_sim.io.carmen.read_carmen`)."""
-    data = read_carmen(log, odometry=odometry)
+    odometry records the localizers get and ``reversals`` what to do with its unsigned
+    reversing (:func:`~dynmap_sim.io.carmen.read_carmen`)."""
+    data = read_carmen(log, odometry=odometry, reversals=reversals)
     if len(data) < 2:
         raise InputError(f"{log}: the log has fewer than 2 scans")
     ref: ReferenceMatch | None = None

@@ -102,12 +102,14 @@ def slam_eval(
     progress: bool = False,
     note: Callable[[str], None] | None = None,
     odometry: str = "auto",
+    reversals: str = "repair",
 ) -> SlamEval:
     """Map ``log`` with the first-run mapper and score it against ``relations``; ``odometry``
-    which of the log's odometry records to use (:func:`~dynmap_sim.io.carmen.read_carmen`)."""
+    which of the log's odometry records to use, ``reversals`` what to do with its unsigned
+    reversing (:func:`~dynmap_sim.io.carmen.read_carmen`)."""
     from tqdm.auto import tqdm
 
-    data = read_carmen(log, odometry=odometry)
+    data = read_carmen(log, odometry=odometry, reversals=reversals)
     if len(data) < 2:
         raise InputError(f"{log}: the log has fewer than 2 scans")
     try:

@@ -42,6 +42,17 @@ the laser lines' odometry (:data:`ODOM_AGREEMENT_SHARE` of the scans within
 odometry fields, warning (:class:`CarmenOdometryWarning`) with the measured disagreement and
 whether the laser lines carry one trajectory in both fields (a corrected log: its odometry
 is not raw wheel odometry). A log with only one of the two takes that one.
+
+Reversing (``read_carmen(reversals=...)``, ``--odometry-reversals``). An ``ODOM`` line also
+carries the base's signed translational velocity ``tv``. Where the lines' poses move
+*forward* along the heading while ``tv`` says the robot reverses, the poses were integrated
+without the sign (FR079 raw, written by ``bag2carmen``: 329 of its 8,951 increments, ~50 s of
+reversing at 0.5 m/s; no increment of its poses moves backward, and the scans and the
+corrected log agree with ``tv``: the robot backs away). ``"repair"`` (the default) negates
+the translation of those increments in the robot frame and integrates the poses again
+(heading increments as logged), warning (:class:`CarmenOdometryWarning`) with the count;
+``"keep"`` takes the poses as logged, also warning. A log whose increments agree with its
+``tv`` (CSAIL raw, any log reversing correctly) is not touched and gives no warning.
 """
 
 from __future__ import annotations
@@ -86,6 +97,16 @@ ODOM_AGREEMENT_RAD = 0.01
 #: Share of the scans (within the ``ODOM`` lines' time span) that must agree for ``"auto"``
 #: to take the ``ODOM`` lines as the raw odometry.
 ODOM_AGREEMENT_SHARE = 0.95
+
+#: Where an ``ODOM`` increment's poses contradict its line's velocity (module docstring):
+#: ``"repair"`` negates the increment's translation, ``"keep"`` takes it as logged.
+REVERSAL_MODES = ("repair", "keep")
+
+#: An ``ODOM`` increment counts as moving forward against a reversing base when its
+#: translation along the heading is over this [m] (the print precision of a raw log and a
+#: standing robot's jitter are far below) and its line's ``tv`` below minus this [m/s].
+REVERSAL_MIN_STEP_M = 1e-3
+REVERSAL_MIN_SPEED_MPS = 0.01
 
 #: Largest spread [m, rad] of the laser pose seen from the laser line's odometry for the
 #: two fields to be one trajectory (a fixed mount, zero in FR079 and CSAIL).
@@ -293,6 +314,31 @@ def odometry_agreement(
     )
 
 
+def unsigned_reversals(odom_p: FloatArray, odom_tv: FloatArray) -> NDArray[np.bool_]:
+    """``(N - 1,)``: which ``ODOM`` increments ``odom_p[k] -> odom_p[k + 1]`` move forward along
+    the heading by over :data:`REVERSAL_MIN_STEP_M` while the later line's velocity
+    ``odom_tv[k + 1]`` is below ``-REVERSAL_MIN_SPEED_MPS`` (a reversing base whose poses were
+    integrated without the sign; module docstring)."""
+    if len(odom_p) < 2:
+        return np.zeros(0, dtype=bool)
+    inc = se2.between(odom_p[:-1], odom_p[1:])
+    return (inc[:, 0] > REVERSAL_MIN_STEP_M) & (odom_tv[1:] < -REVERSAL_MIN_SPEED_MPS)
+
+
+def repair_reversals(odom_p: FloatArray, flagged: NDArray[np.bool_]) -> FloatArray:
+    """The ``ODOM`` poses integrated again from their increments, with the translation of the
+    ``flagged`` increments (:func:`unsigned_reversals`) negated in the robot frame."""
+    if len(odom_p) < 2:
+        return odom_p.copy()
+    inc = se2.between(odom_p[:-1], odom_p[1:])
+    inc[flagged, :2] *= -1.0
+    out = np.empty_like(odom_p)
+    out[0] = odom_p[0]
+    for k in range(len(inc)):
+        out[k + 1] = se2.compose(out[k], inc[k])
+    return out
+
+
 def one_trajectory(laser_pose: FloatArray, laser_odo: FloatArray) -> bool:
     """Whether the laser lines' pose is their odometry plus a fixed mount (a raw log, or a
     corrected one that wrote its poses into both fields), to :data:`ONE_TRAJECTORY_TOL`."""
@@ -311,18 +357,24 @@ def choose_odometry(
     stamps: FloatArray,
     laser_odo: FloatArray | None,
     laser_pose: FloatArray | None,
+    odom_out: FloatArray | None = None,
 ) -> tuple[FloatArray, str, str | None]:
     """The odometry at the scan ``stamps``, its source and, when ``mode`` is ``"auto"`` and
     the ``ODOM`` lines are not shown to be raw, the warning to give (module docstring).
 
     ``odom_t``/``odom_p`` the ``ODOM`` lines (may be empty), ``laser_odo``/``laser_pose`` the
-    ``kind`` lines' odometry and pose fields (``None``: the lines carry none).
+    ``kind`` lines' odometry and pose fields (``None``: the lines carry none); ``odom_out``
+    the ``ODOM`` poses to interpolate when those lines are taken (default ``odom_p``; e.g.
+    with reversals repaired, :func:`repair_reversals`: ``odom_p`` as logged is what is
+    compared with the laser lines).
     """
+    if odom_out is None:
+        odom_out = odom_p
     have_odom = len(odom_t) > 0
     if mode == "odom-lines" or (mode == "auto" and laser_odo is None and have_odom):
         if not have_odom:
             raise CarmenLogError(path, [("odometry", "odom-lines: the log has no ODOM lines")])
-        return interpolate_poses(odom_t, odom_p, stamps), "odom-lines", None
+        return interpolate_poses(odom_t, odom_out, stamps), "odom-lines", None
     if laser_odo is None:
         why = "no ODOM lines and " if mode == "auto" else "laser-lines: "
         raise CarmenLogError(path, [("odometry", f"{why}{kind} lines carry no odometry")])
@@ -330,7 +382,7 @@ def choose_odometry(
         return laser_odo, "laser-lines", None
     agreement = odometry_agreement(odom_t, odom_p, stamps, laser_odo)
     if agreement.agrees:  # one raw stream: the ODOM lines, as CARMEN's logger wrote them
-        return interpolate_poses(odom_t, odom_p, stamps), "odom-lines", None
+        return interpolate_poses(odom_t, odom_out, stamps), "odom-lines", None
     note = (
         f"{path}: odometry from the {kind} lines' odometry fields, not the ODOM lines: "
         f"interpolated to the scan times, the ODOM lines are not the laser lines' odometry "
@@ -347,10 +399,16 @@ def choose_odometry(
 
 
 def read_carmen(
-    path: str | Path, laser_id: int = 1, max_errors: int = 20, odometry: str = "auto"
+    path: str | Path,
+    laser_id: int = 1,
+    max_errors: int = 20,
+    odometry: str = "auto",
+    reversals: str = "repair",
 ) -> CarmenLog:
     """Read one laser (``laser_id`` 1 = front, 2 = rear, 3/4 raw) of a CARMEN log, its
-    odometry from ``odometry`` (one of :data:`ODOMETRY_SOURCES`, :func:`choose_odometry`)."""
+    odometry from ``odometry`` (one of :data:`ODOMETRY_SOURCES`, :func:`choose_odometry`),
+    ``ODOM`` increments that move forward while the base reverses repaired or kept as
+    ``reversals`` says (:data:`REVERSAL_MODES`, module docstring)."""
     p = Path(path)
     if laser_id not in LASER_TYPES:
         raise CarmenLogError(p, [("laser_id", f"must be one of {sorted(LASER_TYPES)}")])
@@ -358,10 +416,15 @@ def read_carmen(
         raise CarmenLogError(
             p, [("odometry", f"must be one of {', '.join(ODOMETRY_SOURCES)}, not {odometry!r}")]
         )
+    if reversals not in REVERSAL_MODES:
+        raise CarmenLogError(
+            p, [("reversals", f"must be one of {', '.join(REVERSAL_MODES)}, not {reversals!r}")]
+        )
     lines = _open_text(p)
     errs: list[tuple[str, str]] = []
     odom_t: list[float] = []
     odom_p: list[FloatArray] = []
+    odom_tv: list[float] = []
     by_kind: dict[str, list[_LaserMsg]] = {k: [] for k in LASER_TYPES[laser_id]}
     for ln, line in enumerate(lines, start=1):
         tok = line.split()
@@ -374,6 +437,7 @@ def read_carmen(
                 errs.append((where, "ODOM needs x y theta tv rv accel timestamp"))
                 continue
             odom_p.append(v[:3])
+            odom_tv.append(float(v[3]))
             odom_t.append(float(v[6]))
         elif tok[0] in by_kind:
             msg = _parse_laser(tok, where, errs)
@@ -432,11 +496,32 @@ def read_carmen(
     ranges = np.where(ranges <= 0.0, np.nan, ranges).astype(np.float32)
     laser_odo = np.array([m.odom_pose for m in msgs]) if msgs[0].odom_pose is not None else None
     lp = np.array([m.laser_pose for m in msgs]) if msgs[0].laser_pose is not None else None
+    odom_arr = np.array(odom_p).reshape(-1, 3)
+    flagged = unsigned_reversals(odom_arr, np.array(odom_tv))
+    repair = reversals == "repair" and bool(flagged.any())
+    odom_out = repair_reversals(odom_arr, flagged) if repair else odom_arr
     odo, source, note = choose_odometry(
-        p, kind, odometry, np.array(odom_t), np.array(odom_p), stamps, laser_odo, lp
+        p, kind, odometry, np.array(odom_t), odom_arr, stamps, laser_odo, lp, odom_out
     )
     if note is not None:
         warnings.warn(note, CarmenOdometryWarning, stacklevel=2)
+    if flagged.any():
+        n_flag = int(flagged.sum())
+        text = (
+            f"{p}: {n_flag} of {len(flagged)} ODOM increments move forward along the heading "
+            "while their line's velocity tv is negative (the base reversing): the poses were "
+            "integrated without the sign. "
+        )
+        if source != "odom-lines":
+            text += f"The odometry comes from the {kind} lines, which are kept as logged."
+        elif reversals == "repair":
+            text += (
+                "Their translation is negated (reversals='repair'); "
+                "--odometry-reversals keep takes them as logged."
+            )
+        else:
+            text += "They are kept as logged (reversals='keep')."
+        warnings.warn(text, CarmenOdometryWarning, stacklevel=2)
     reference = None
     if lp is not None:
         reference = se2.compose(lp, np.broadcast_to(se2.inverse(np.array(mount)), lp.shape))
