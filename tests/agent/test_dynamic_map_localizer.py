@@ -15,6 +15,7 @@ from dynmap_sim.agent.localization.dynamic_map_localizer import (
     DynamicMapLocalizer,
     lambda_min,
     odometry_covariance,
+    remap_degenerate,
 )
 from dynmap_sim.agent.localizer import LOCALIZERS, make_localizer
 from dynmap_sim.types import Prior
@@ -260,3 +261,25 @@ def test_kappa_first_fuses_the_odometry_prior_from_the_first_match(learned):
     assert np.hypot(*(alone[:2] - truth[30][:2])) < 0.01
     pull = fused[:2] - alone[:2]
     assert np.hypot(*pull) > 1e-4 and pull @ (pred[:2] - alone[:2]) > 0
+
+
+def test_remap_degenerate_keeps_the_prediction_only_where_the_scan_is_blind():
+    """``degenerate_sigma_m`` (not B&D; off by default): along a corridor (x) the scan term
+    pins y and the heading but not x, so the match's move in x is dropped, y and θ kept."""
+    assert DynamicMapConfig().degenerate_sigma_m == 0
+    pred = np.array([5.0, 1.0, 0.1])
+    pose = np.array([5.3, 1.02, 0.12])
+    corridor = np.diag([1.0, 1e5, 1e4])  # sigma_x 1 m, sigma_y 3 mm
+    out = remap_degenerate(pose, pred, corridor, sigma_max_m=0.05)
+    np.testing.assert_allclose(out, [5.0, 1.02, 0.12], atol=1e-12)
+    # rotated by 30°: the blind direction is the corridor's, not an axis
+    c, s = np.cos(np.pi / 6), np.sin(np.pi / 6)
+    rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    out = remap_degenerate(pose, pred, rot @ corridor @ rot.T, sigma_max_m=0.05)
+    along = np.array([c, s])
+    assert abs(along @ (out[:2] - pred[:2])) < 1e-12
+    across = np.array([-s, c])
+    assert across @ (out[:2] - pred[:2]) == pytest.approx(across @ (pose[:2] - pred[:2]))
+    # a room: both directions pinned, nothing changes
+    room = np.diag([1e5, 1e5, 1e4])
+    np.testing.assert_array_equal(remap_degenerate(pose, pred, room, 0.05), pose)

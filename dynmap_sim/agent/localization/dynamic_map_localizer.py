@@ -105,6 +105,27 @@ def odometry_covariance(
     return np.diag([sxy**2, sxy**2, sth**2])
 
 
+def remap_degenerate(
+    pose: FloatArray, pred: FloatArray, scan_info: FloatArray, sigma_max_m: float
+) -> FloatArray:
+    """``pose`` with its move from ``pred`` dropped along each position direction in which the
+    scan term ``scan_info`` (3x3, x y θ; the heading marginalized out) leaves a standard
+    deviation over ``sigma_max_m`` [m] (Zhang, Kaess & Singh 2016, solution remapping)."""
+    h = 0.5 * (scan_info + scan_info.T)
+    hxy = h[:2, :2]
+    if h[2, 2] > 0.0:
+        hxy = hxy - np.outer(h[:2, 2], h[:2, 2]) / h[2, 2]
+    lam, vec = np.linalg.eigh(hxy)
+    move = pose[:2] - pred[:2]
+    for k in range(2):
+        if not lam[k] > 1.0 / sigma_max_m**2:
+            v = vec[:, k]
+            move = move - float(v @ move) * v
+    out = pose.copy()
+    out[:2] = pred[:2] + move
+    return out
+
+
 @dataclass(frozen=True)
 class DynamicMapConfig:
     """Parameters of the dynamic-map localizer and its static variants (lengths in m,
@@ -172,6 +193,14 @@ class DynamicMapConfig:
     #: the lab's five weeks 0.030 / 0.16 / 0.035 -> 0.029 / 0.16 / 0.033 m (README, "Worlds
     #: nobody tuned for").
     kappa_first: float = 0.0
+    #: Degenerate directions (not B&D; 0 = off, the paper): where the scan term of the
+    #: accepted match constrains the position along a direction only to a standard deviation
+    #: over this [m] (the heading marginalized out, :func:`worst_position_sigma`; e.g. along a
+    #: corridor whose walls are blank), the match's move along that direction is dropped and
+    #: the odometry prediction kept there (Zhang, Kaess & Singh 2016, "On degeneracy of
+    #: optimization-based state estimation problems": solution remapping); in the other
+    #: directions the scan alone decides, as in B&D. Why offered: see ``kappa_first``.
+    degenerate_sigma_m: float = 0.0
     #: At most this many doublings of κ; if none brings the result within two standard
     #: deviations of the odometry prediction, the prediction is used (0.25 * 2^12 = 1024).
     max_kappa_doublings: int = 12
@@ -226,7 +255,8 @@ class DynamicMapConfig:
             ),
             non_negative=(
                 "min_readings", "max_select_readings", "explained_density", "odom_k_xy",
-                "kappa_first", "odom_k_th", "max_kappa_doublings", "min_matched", "map_voxel_m",
+                "kappa_first", "degenerate_sigma_m", "odom_k_th", "max_kappa_doublings",
+                "min_matched", "map_voxel_m",
                 "ltm_scans_per_run", "min_update_dist_m", "min_update_angle_rad",
                 "ltm_day_scans_per_run", "ltm_anchor_tol_m", "ltm_anchor_max_sigma_m",
             ),
@@ -513,7 +543,10 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
                 kappa *= 2.0
             else:
                 return pred, self._propagated_cov(c_o), float("inf"), float("inf")
-        return res.pose, res.cov, kappa, worst_position_sigma(res.scan_info)
+        pose = res.pose
+        if c.degenerate_sigma_m > 0:
+            pose = remap_degenerate(pose, pred, res.scan_info, c.degenerate_sigma_m)
+        return pose, res.cov, kappa, worst_position_sigma(res.scan_info)
 
     @property
     def _anchoring(self) -> bool:
