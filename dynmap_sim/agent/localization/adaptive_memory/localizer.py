@@ -53,6 +53,7 @@ from dynmap_sim.agent.localization.adaptive_memory.object_tracker import (
     Boxes,
     ObjectTracker,
     TrackerParams,
+    beam_trig,
     point_classes_of,
     segment_scan,
 )
@@ -432,6 +433,17 @@ class AdaptiveMemoryLocalizer(Localizer):
         self._est_at_update = np.zeros(3)
         self._n_scans = 0
         self._day = 0
+        #: The beams' cosines and sines for the segmentation (lazy; not pickled).
+        self._beam_trig: tuple[FloatArray, FloatArray] | None = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_beam_trig"] = None
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        state.setdefault("_beam_trig", None)  # pickled before it was kept
+        self.__dict__.update(state)
 
     # -- run ------------------------------------------------------------------------------
     def begin_run(self, prior: Prior) -> None:
@@ -488,8 +500,10 @@ class AdaptiveMemoryLocalizer(Localizer):
         ranges = np.asarray(scan.ranges_m, dtype=np.float64)
         self.sm.put(t, ranges)  # sensory memory (§4.1)
         # 2. objects (§4.2)
+        if self._beam_trig is None:
+            self._beam_trig = beam_trig(self.angles, self.mount)
         boxes = segment_scan(ranges, self.angles, self.mount, self.range_max,
-                             self.tracker.params)  # fmt: skip
+                             self.tracker.params, beam_trig=self._beam_trig)  # fmt: skip
         box_cls, _ = self.tracker.update(boxes, pose_odom, t)
         # 3. long-term map update (§4.3) with u of the tracker's static points
         vi, rv, sig_r, cls_v, lab, stat = self._scan_points(ranges, boxes, box_cls)

@@ -77,10 +77,13 @@ def segment_scan(
     range_max_m: float,
     params: TrackerParams,
     backend: str = "auto",
+    beam_trig: tuple[FloatArray, FloatArray] | None = None,
 ) -> Boxes:
     """Segment one scan into oriented boxes (eqs. 8-9), vectorized (no per-point loop).
     ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): the arithmetic in
-    :func:`.tracker_numba.segment`'s kernels (the same numbers) or in numpy."""
+    :func:`.tracker_numba.segment`'s kernels (the same numbers) or in numpy.
+    ``beam_trig``: :func:`beam_trig` of ``angles_rad`` and ``mount``, if at hand (the
+    kernels take it instead of computing the returns' cosines and sines)."""
     kernel = kernel_backend(backend)
     r_all = np.asarray(ranges_m, dtype=np.float64)
     n_beams = len(r_all)
@@ -90,7 +93,7 @@ def segment_scan(
             r_all, np.asarray(angles_rad, dtype=np.float64), mount, range_max_m,
             float(np.deg2rad(params.breakpoint_lambda_deg)), params.sigma_r_m, params.min_points,
             params.max_gap_beams, params.max_dynamic_length_m, params.occlusion_never_dynamic,
-            python=kernel == "python",
+            beam_trig, python=kernel == "python",
         )  # fmt: skip
         if got is None:
             labels = np.full(n_beams, -1, dtype=np.intp)
@@ -150,6 +153,13 @@ def segment_scan(
     box_of_seg[keep] = np.arange(int(keep.sum()))
     labels[idx] = box_of_seg[seg]
     return Boxes(center[keep], phi[keep], length[keep], width[keep], never[keep], labels)
+
+
+def beam_trig(angles_rad: FloatArray, mount: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The cosines and sines of every beam's angle in the robot frame (``angles_rad`` plus
+    the mount's yaw), for :func:`segment_scan`."""
+    a = np.asarray(angles_rad, dtype=np.float64) + mount[2]
+    return np.cos(a), np.sin(a)
 
 
 class ObjectTracker:

@@ -423,14 +423,16 @@ def segment(
     max_gap_beams: int,
     max_dynamic_length_m: float,
     occlusion_never_dynamic: bool,
+    beam_trig: tuple[FloatArray, FloatArray] | None = None,
     python: bool = False,
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, NDArray[np.bool_], IntArray] | None:
     """:func:`.object_tracker.segment_scan` of the scan ``r_all`` (float64) with the
     kernels (needs numba; ``python``: the plain kernels): ``center (n, 2), phi, length,
     width, never, labels``, or None when fewer than ``min_points`` returns are valid. The
-    transcendental functions in numpy: ``cos``, ``sin`` of the returns' angles and of the
-    breakpoint detector's angles, ``arctan2`` of the segments' moments, ``cos``, ``sin`` of
-    their axes."""
+    transcendental functions in numpy: ``cos``, ``sin`` of the returns' angles (``beam_trig``:
+    those of every beam's, ``angles + mount[2]``, if at hand; numpy's are elementwise, the
+    same numbers) and of the breakpoint detector's angles, ``arctan2`` of the segments'
+    moments, ``cos``, ``sin`` of their axes."""
     valid_k = pick_kernel(_valid_beams_py, _valid_beams, python, "scan segmentation")
     sums_k = pick_kernel(_segment_sums_py, _segment_sums, python, "scan segmentation")
     boxes_k = pick_kernel(_segment_boxes_py, _segment_boxes, python, "scan segmentation")
@@ -446,8 +448,12 @@ def segment(
     idx, r = idx[:n], r[:n]
     seg = np.empty(n, dtype=np.intp)
     starts = np.empty(n, dtype=np.intp)
+    if beam_trig is None:
+        cos_a, sin_a = np.cos(a[:n]), np.sin(a[:n])
+    else:
+        cos_a, sin_a = beam_trig[0][idx], beam_trig[1][idx]
     m, counts, mx, my, cxx, cxy, cyy, dx, dy = sums_k(
-        np.cos(a[:n]), np.sin(a[:n]), float(mount[0]), float(mount[1]), np.sin(da[: n - 1]),
+        cos_a, sin_a, float(mount[0]), float(mount[1]), np.sin(da[: n - 1]),
         np.sin(lda[: n - 1]), r, idx, float(sigma_r_m), int(max_gap_beams), seg, starts,
         np.empty(n),
     )  # fmt: skip
