@@ -13,7 +13,7 @@
   :func:`_fuse_py`, the occupied log-odds of the stencils added in the numpy code's order,
   then ``l_free`` once per cell along each sampled beam (walked sample by sample; the numpy
   code collects every ray sample, keeps one per (beam, cell) with ``np.unique`` and adds
-  with ``np.add.at``); :func:`_clamp_py`, the clamp and re-pin of the cells it can change.
+  with ``np.add.at``), and the clamp and re-pin of the cells it changed.
 * :func:`point_covariances`: eqs. 12-14's points and covariances after the cosines and
   sines (one loop instead of some twenty numpy calls).
 
@@ -116,6 +116,7 @@ def _explained_py(  # type: ignore[no-untyped-def]
 
 def _fuse_py(  # type: ignore[no-untyped-def]
     logodds,
+    pinned,
     occ_flat,
     occ_add,
     do_free,
@@ -129,47 +130,65 @@ def _fuse_py(  # type: ignore[no-untyped-def]
     origin_y_m,
     res_m,
     l_free32,
+    l_min32,
+    l_max32,
 ):
     """Add ``occ_add`` (float64, each rounded to float32 first) at the flat cells
     ``occ_flat`` in order, then (``do_free``) ``l_free32`` to every cell that beam ``j``'s
     samples ``laser + u_j t`` with ``t < stop_m[j]`` fall in, once per beam (a ray's
-    samples in a cell are consecutive: the cell indices along a ray are monotone)."""
+    samples in a cell are consecutive: the cell indices along a ray are monotone). Then
+    the cells it added to are clamped (:func:`_clamp_cell_py`): the numpy code clamps the
+    whole rectangle between the laser and the stencils, whose other cells are already
+    within the clamps (every map starts so), which changes nothing there."""
     h, w = logodds.shape
     flat = logodds.reshape(-1)
+    pin = pinned.reshape(-1)
     for i in range(occ_flat.shape[0]):
         flat[occ_flat[i]] += np.float32(occ_add[i])
-    if not do_free:
-        return
-    for j in range(ux.shape[0]):
-        prev = -1
-        for i in range(t_m.shape[0]):
-            t = t_m[i]
-            if not t < stop_m[j]:
-                break
-            fx = laser_x_m + ux[j] * t
-            fy = laser_y_m + uy[j] * t
-            cx = int(math.floor((fx - origin_x_m) / res_m))
-            cy = int(math.floor((fy - origin_y_m) / res_m))
-            if 0 <= cx < w and 0 <= cy < h:
-                c = cy * w + cx
-                if c != prev:
-                    flat[c] += l_free32
-                    prev = c
+    n_free = 0
+    touched = np.empty(ux.shape[0] * t_m.shape[0] if do_free else 0, dtype=np.intp)
+    if do_free:
+        for j in range(ux.shape[0]):
+            prev = -1
+            for i in range(t_m.shape[0]):
+                t = t_m[i]
+                if not t < stop_m[j]:
+                    break
+                fx = laser_x_m + ux[j] * t
+                fy = laser_y_m + uy[j] * t
+                cx = int(math.floor((fx - origin_x_m) / res_m))
+                cy = int(math.floor((fy - origin_y_m) / res_m))
+                if 0 <= cx < w and 0 <= cy < h:
+                    c = cy * w + cx
+                    if c != prev:
+                        flat[c] += l_free32
+                        prev = c
+                        touched[n_free] = c
+                        n_free += 1
+    for i in range(occ_flat.shape[0]):
+        _clamp_cell(flat, pin, occ_flat[i], l_min32, l_max32)
+    for i in range(n_free):
+        _clamp_cell(flat, pin, touched[i], l_min32, l_max32)
 
 
-def _clamp_py(logodds, pinned, x0, x1, y0, y1, l_min32, l_max32):  # type: ignore[no-untyped-def]
-    """``np.clip`` of the cells ``[y0:y1, x0:x1]`` (bounds within the grid) to
-    ``[l_min32, l_max32]`` and the ``pinned`` ones among them set to ``l_max32``. numpy's
-    clip is ``min(max(v, lo), hi)`` with each taking the bound unless ``v`` is strictly
-    beyond it or NaN (the same zero's sign)."""
-    for cy in range(y0, y1):
-        for cx in range(x0, x1):
-            if pinned[cy, cx]:
-                logodds[cy, cx] = l_max32
-            else:
-                v = logodds[cy, cx]
-                v = v if v > l_min32 or v != v else l_min32
-                logodds[cy, cx] = v if v < l_max32 or v != v else l_max32
+def _clamp_cell_py(flat, pin, c, l_min32, l_max32):  # type: ignore[no-untyped-def]
+    """``np.clip`` of cell ``c`` to ``[l_min32, l_max32]``, ``l_max32`` if ``pin[c]``
+    (numpy's clip is ``min(max(v, lo), hi)``, each taking the bound unless ``v`` is strictly
+    beyond it or NaN: the same zero's sign); idempotent."""
+    if pin[c]:
+        flat[c] = l_max32
+    else:
+        v = flat[c]
+        v = v if v > l_min32 or v != v else l_min32
+        flat[c] = v if v < l_max32 or v != v else l_max32
+
+
+def _odds_py(e, p_hit):  # type: ignore[no-untyped-def]
+    """In place: ``p = 0.5 + (p_hit - 0.5) e`` (``e``: ``exp(-m²/2)``, eq. 15's
+    peak-normalized Gaussian), then its odds ``p / (1 - p)``."""
+    for i in range(e.shape[0]):
+        p = 0.5 + (p_hit - 0.5) * e[i]
+        e[i] = p / (1.0 - p)
 
 
 def _stencil_py(  # type: ignore[no-untyped-def]
@@ -180,20 +199,13 @@ def _stencil_py(  # type: ignore[no-untyped-def]
     ``h x w`` grid with the squared Mahalanobis distance ``m2 < 9`` of the cell centre
     under the inverse of ``covs[j]`` plus ``floor2_m2`` on the diagonal (in closed form, as
     :func:`.ltm_map.floored_inverse`); fills the first entries of ``flat`` (flat cell
-    index) and ``m2``; returns how many, and the smallest and largest point cell
-    ``(ix_min, ix_max, iy_min, iy_max)``."""
+    index) and ``m2`` (``-m²/2``: the exponent of eq. 15's Gaussian); returns how many."""
     n_out = 0
-    ix_min = iy_min = 1 << 62
-    ix_max = iy_max = -(1 << 62)
     for j in range(points.shape[0]):
         px = points[j, 0]
         py = points[j, 1]
         ix = int(math.floor((px - origin_x_m) / res_m))
         iy = int(math.floor((py - origin_y_m) / res_m))
-        ix_min = min(ix_min, ix)
-        ix_max = max(ix_max, ix)
-        iy_min = min(iy_min, iy)
-        iy_max = max(iy_max, iy)
         if not hit[j]:
             continue
         a = covs[j, 0, 0] + floor2_m2
@@ -214,9 +226,9 @@ def _stencil_py(  # type: ignore[no-untyped-def]
                 d2 += i_yy * dy * dy
                 if 0 <= cx < w and 0 <= cy < h and d2 < 9.0:
                     flat[n_out] = cy * w + cx
-                    m2[n_out] = d2
+                    m2[n_out] = -0.5 * d2
                     n_out += 1
-    return n_out, ix_min, ix_max, iy_min, iy_max
+    return n_out
 
 
 def _free_rays_py(  # type: ignore[no-untyped-def]
@@ -294,9 +306,10 @@ def _point_covariances_py(  # type: ignore[no-untyped-def]
 _stencil = compiled(_stencil_py)
 _point_covariances = compiled(_point_covariances_py)
 _explained = compiled(_explained_py)
+_clamp_cell = compiled(_clamp_cell_py) or _clamp_cell_py
 _fuse = compiled(_fuse_py)
 _free_rays = compiled(_free_rays_py)
-_clamp = compiled(_clamp_py)
+_odds = compiled(_odds_py)
 
 
 def explained(
@@ -339,13 +352,13 @@ def update(
 ) -> None:
     """Eq. 15's update of :meth:`.ltm_map.LTMMap.update` with the kernels (needs numba;
     ``python``: the plain kernels), in place on ``logodds`` (C-contiguous): the stencils
-    (:func:`_stencil_py`), their log-odds in numpy (``exp``, ``log``), the free space
-    (``params.free_space``: :func:`_free_rays_py`, the ray samples from ``np.arange`` as
-    the numpy code's), :func:`_fuse_py`, and the clamp and re-pin (:func:`_clamp_py`) of
-    the cells between the laser and the stencils. ``params``: an ``LTMParams``."""
+    (:func:`_stencil_py`), their log-odds (``exp`` and ``log`` in numpy, the odds between
+    them by :func:`_odds_py`), the free space (``params.free_space``: :func:`_free_rays_py`,
+    the ray samples from ``np.arange`` as the numpy code's) and :func:`_fuse_py`, which adds
+    them and clamps and re-pins the cells it changed. ``params``: an ``LTMParams``."""
     stencil_k = pick_kernel(_stencil_py, _stencil, python, "long-term map")
+    odds_k = pick_kernel(_odds_py, _odds, python, "long-term map")
     fuse_k = pick_kernel(_fuse_py, _fuse, python, "long-term map")
-    clamp_k = pick_kernel(_clamp_py, _clamp, python, "long-term map")
     h, w = logodds.shape
     n = len(points)
     k = int(params.stencil_cells)
@@ -354,10 +367,12 @@ def update(
     pts = np.ascontiguousarray(points, dtype=np.float64)
     cv = np.ascontiguousarray(covs, dtype=np.float64)
     flat = np.empty(n * (2 * k + 1) ** 2, dtype=np.intp)
-    m2 = np.empty(len(flat))
-    m, x_lo, x_hi, y_lo, y_hi = stencil_k(pts, cv, floor2, hit, ox, oy, res, k, h, w, flat, m2)
-    p = 0.5 + (params.p_hit - 0.5) * np.exp(-0.5 * m2[:m])
-    add = np.log(p / (1.0 - p))
+    add = np.empty(len(flat))
+    m = stencil_k(pts, cv, floor2, hit, ox, oy, res, k, h, w, flat, add)
+    add = add[:m]
+    np.exp(add, out=add)
+    odds_k(add, float(params.p_hit))
+    np.log(add, out=add)
     lx, ly = float(laser_xy[0]), float(laser_xy[1])
     ux, uy, stop = np.empty(n), np.empty(n), np.empty(n)
     t = np.zeros(0)
@@ -365,14 +380,9 @@ def update(
         free_k = pick_kernel(_free_rays_py, _free_rays, python, "long-term map")
         top = free_k(pts, cv, floor2, lx, ly, float(params.free_stop_sigma), res, ux, uy, stop)
         t = np.arange(0.0, top, 0.5 * res)
-    fuse_k(logodds, flat[:m], add, len(t) > 0, lx, ly, ux, uy, stop, t, ox, oy, res,
-           np.float32(params.l_free))  # fmt: skip
-    # the cells between the laser and the points' stencils (LTMMap.update)
-    lcx = int(math.floor((lx - ox) / res))
-    lcy = int(math.floor((ly - oy) / res))
-    x0, x1 = max(min(x_lo - k, lcx), 0), min(max(x_hi + k, lcx) + 1, w)
-    y0, y1 = max(min(y_lo - k, lcy), 0), min(max(y_hi + k, lcy) + 1, h)
-    clamp_k(logodds, pinned, x0, x1, y0, y1, np.float32(params.l_min), np.float32(params.l_max))
+    fuse_k(logodds, pinned, flat[:m], add, len(t) > 0, lx, ly, ux, uy, stop, t, ox, oy, res,
+           np.float32(params.l_free), np.float32(params.l_min),
+           np.float32(params.l_max))  # fmt: skip
 
 
 def point_covariances(
