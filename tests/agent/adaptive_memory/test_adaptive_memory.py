@@ -40,6 +40,7 @@ from dynmap_sim.agent.localization.particle_filter import (
     regularized_covariance,
 )
 from dynmap_sim.agent.localizer import LOCALIZERS, make_localizer
+from dynmap_sim.jit import numba_available
 from dynmap_sim.types import Prior
 
 WALLS = np.concatenate(
@@ -399,3 +400,56 @@ def test_the_mcl_grid_is_rebuilt_only_when_the_map_cells_change():
     fresh = m.occupancy_grid(loc.lp)
     assert f.grid.dist_m.tobytes() == fresh.dist_m.tobytes()
     np.testing.assert_array_equal(f.table.logp, AMCLFilter(fresh, LASER, loc.mcl).table.logp)
+
+
+@pytest.mark.skipif(not numba_available(), reason="numba (extra 'fast') not installed")
+def test_the_kernels_and_numpy_give_the_same_run_bit_for_bit(monkeypatch):
+    """The whole localizer with adaptive-memory's numba kernels and with its numpy code
+    (segmentation, tracker, long-term map, point classes, MCL's beams), two days, a person
+    walking: the same estimates, extras and long-term grids; the free cells listed lazily
+    give the random poses of the grid at hand, and a pickled localizer goes on the same."""
+    from dynmap_sim.agent.localization.adaptive_memory import localizer, ltm_map, object_tracker
+
+    corners = np.array([[1.0, 1.0], [4.2, 1.0], [6.5, 1.5], [4.2, 1.2], [4.0, 3.8]])
+    truth = polyline_path(corners, step_m=0.05, turn_step_rad=0.15)
+    segs = room_segments(cupboard=True)
+
+    def person(k: int) -> np.ndarray:
+        x = 0.5 + (0.1 * k) % 4.0
+        return box(x, 4.0, x + 0.3, 4.3)
+
+    runs = []
+    for numpy_only in (False, True):
+        if numpy_only:
+            for mod in (localizer, ltm_map, object_tracker):
+                monkeypatch.setattr(mod, "kernel_backend", lambda backend: None)
+        loc = make_localizer("adaptive-memory", laser=LASER, rng=np.random.default_rng(1))
+        out = _run(loc, truth, segs, np.random.default_rng(0), day=1, person=person)[0]
+        loc = pickle.loads(pickle.dumps(loc))
+        out += _run(loc, truth, segs, np.random.default_rng(5), day=2, person=person)[0]
+        f = loc.filter
+        assert f.free_xy.tobytes() == f.grid.free_points().tobytes()
+        runs.append((out, loc.ltm.map().logodds.tobytes(), f.random_poses(50, loc.rng)))
+    (a, grid_a, poses_a), (b, grid_b, poses_b) = runs
+    assert grid_a == grid_b and poses_a.tobytes() == poses_b.tobytes()
+    assert sum(e.extras["n_dynamic"] for e in a) > 0
+    for ea, eb in zip(a, b, strict=True):
+        assert ea.mean.tobytes() == eb.mean.tobytes() and ea.cov.tobytes() == eb.cov.tobytes()
+        for k in ea.extras:
+            va, vb = np.asarray(ea.extras[k]), np.asarray(eb.extras[k])
+            assert va.tobytes() == vb.tobytes(), k
+
+
+def test_the_odometry_increment_is_se2s_bit_for_bit():
+    """The localizer's single-pose ``compose(a, between(b, c))`` on floats gives
+    :mod:`dynmap_sim.se2`'s numbers exactly (angles around ±pi, large and tiny ones)."""
+    from dynmap_sim import se2
+    from dynmap_sim.agent.localization.adaptive_memory.localizer import _compose_between
+
+    rng = np.random.default_rng(7)
+    for _ in range(20000):
+        a, b, c = (np.array([*rng.normal(0, 10, 2), th]) for th in rng.uniform(-4, 4, 3))
+        if rng.random() < 0.2:
+            b[2], c[2] = np.pi, -np.pi + rng.normal(0, 1e-12)
+        ref = se2.compose(a, se2.between(b, c))
+        assert _compose_between(a, b, c).tobytes() == ref.tobytes()

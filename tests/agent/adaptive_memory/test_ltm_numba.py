@@ -7,7 +7,11 @@ import numpy as np
 import pytest
 
 from dynmap_sim.agent.localization.adaptive_memory import ltm_numba
-from dynmap_sim.agent.localization.adaptive_memory.ltm_map import LTMMap, LTMParams
+from dynmap_sim.agent.localization.adaptive_memory.ltm_map import (
+    LTMMap,
+    LTMParams,
+    point_covariances,
+)
 
 needs_numba = pytest.mark.skipif(
     not ltm_numba.numba_available(), reason="numba (extra 'fast') not installed"
@@ -40,6 +44,7 @@ def random_params(rng: np.random.Generator) -> LTMParams:
         free_space=bool(rng.random() < 0.8),
         l_free=float(rng.choice([-0.4, -0.3])),
         l_occupied=float(rng.choice([2.5, 1.4, 0.7])),  # 1.4, 0.7: not float32 numbers
+        l_min=float(rng.choice([-2.0, -0.7, 0.0])),
         stencil_cells=int(rng.integers(1, 4)),
         semistatic_sigma=float(rng.uniform(1, 3)),
         semistatic_max_cells=int(rng.integers(1, 6)),
@@ -62,8 +67,11 @@ def test_update_of_the_kernel_equals_numpy_bit_for_bit(kernel: str) -> None:
     rng = np.random.default_rng(12)
     for _ in range(40 if kernel == "python" else 200):
         ref = random_map(rng, *(int(v) for v in rng.integers(3, 60, 2)))
-        fast = ref.copy()
         p = random_params(rng)
+        # within the clamps, the pinned cells at l_max, as every map starts (update's contract)
+        np.clip(ref.logodds, p.l_min, p.l_max, out=ref.logodds)
+        ref.logodds[ref.pinned] = p.l_max
+        fast = ref.copy()
         for _ in range(int(rng.integers(1, 6))):
             pts, covs = random_points(rng, ref, int(rng.integers(1, 40)))
             h, w = ref.shape
@@ -93,6 +101,23 @@ def test_update_clamps_as_a_clamp_of_the_whole_grid(kernel: str) -> None:
             whole = np.clip(m.logodds, p.l_min, p.l_max)
             whole[m.pinned] = p.l_max
             assert whole.tobytes() == m.logodds.tobytes()
+
+
+@pytest.mark.parametrize("kernel", KERNELS)
+def test_point_covariances_of_the_kernel_equal_numpy_bit_for_bit(kernel: str) -> None:
+    rng = np.random.default_rng(14)
+    for _ in range(50):
+        n = int(rng.integers(0, 300))
+        pose = np.array([*rng.uniform(-5, 5, 2), rng.uniform(-np.pi, np.pi)])
+        a = rng.normal(0, rng.choice([1e-3, 0.05]), (3, 3))
+        mount = np.array([*rng.uniform(-0.2, 0.2, 2), rng.uniform(-0.1, 0.1)])
+        ranges, angles = rng.uniform(0.02, 6.0, n), rng.uniform(-2.1, 2.1, n)
+        sig_r = np.maximum(0.01, 0.01 * ranges)
+        args = (pose, a @ a.T, mount, ranges, angles, 0.0018, sig_r)
+        ref = point_covariances(*args, backend="numpy")
+        out = point_covariances(*args, backend=kernel)
+        for r, o in zip(ref, out, strict=True):
+            assert r.shape == o.shape and r.tobytes() == o.tobytes()
 
 
 def test_an_unknown_backend_is_refused() -> None:

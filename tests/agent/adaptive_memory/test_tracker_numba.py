@@ -15,6 +15,7 @@ from dynmap_sim.agent.localization.adaptive_memory.object_tracker import (
     Boxes,
     ObjectTracker,
     TrackerParams,
+    beam_trig,
     segment_scan,
 )
 
@@ -71,10 +72,13 @@ def test_segment_scan_of_the_kernels_equals_numpy_bit_for_bit(kernel: str) -> No
         )
         ref = segment_scan(r, LASER.angles(), mount, LASER.range_max_m, params, backend="numpy")
         got = segment_scan(r, LASER.angles(), mount, LASER.range_max_m, params, backend=kernel)
+        trig = beam_trig(LASER.angles(), mount)  # the beams' cosines and sines at hand
+        got_t = segment_scan(r, LASER.angles(), mount, LASER.range_max_m, params,
+                             backend=kernel, beam_trig=trig)  # fmt: skip
         for name in ("center_robot", "phi", "length", "width", "never_dynamic", "labels"):
-            a, b = getattr(ref, name), getattr(got, name)
-            assert a.dtype == b.dtype and a.shape == b.shape, name
-            assert a.tobytes() == b.tobytes(), name
+            a, b, c = getattr(ref, name), getattr(got, name), getattr(got_t, name)
+            assert a.dtype == b.dtype == c.dtype and a.shape == b.shape == c.shape, name
+            assert a.tobytes() == b.tobytes() == c.tobytes(), name
 
 
 def test_an_unknown_backend_is_refused() -> None:

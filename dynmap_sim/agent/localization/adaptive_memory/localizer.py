@@ -33,6 +33,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynmap_sim import se2
+from dynmap_sim.agent.grid import FREE
+from dynmap_sim.agent.localization.adaptive_memory import classes_numba
 from dynmap_sim.agent.localization.adaptive_memory.ltm_map import (
     LTMMap,
     LTMParams,
@@ -48,8 +50,10 @@ from dynmap_sim.agent.localization.adaptive_memory.object_tracker import (
     SEMISTATIC,
     STATIC,
     UNKNOWN,
+    Boxes,
     ObjectTracker,
     TrackerParams,
+    beam_trig,
     point_classes_of,
     segment_scan,
 )
@@ -61,6 +65,7 @@ from dynmap_sim.agent.localization.particle_filter import (
 )
 from dynmap_sim.agent.localizer import Localizer, register_localizer
 from dynmap_sim.agent.params import check_fields, coerce_fields
+from dynmap_sim.jit import kernel_backend
 from dynmap_sim.types import Diagnostic, LaserSpec, Odometry, PoseEstimate, Prior, Scan
 
 FloatArray = NDArray[np.float64]
@@ -293,25 +298,96 @@ class AdaptiveMemoryConfig:
         )  # fmt: skip
 
 
+def _wrap(theta: float) -> float:
+    """:func:`dynmap_sim.se2.wrap_angle` of one float (the same operations: Python's float
+    ``%`` is numpy's, fmod with the divisor's sign)."""
+    return (theta + np.pi) % (2.0 * np.pi) - np.pi
+
+
+def _compose_between(a: FloatArray, b: FloatArray, c: FloatArray) -> FloatArray:
+    """``se2.compose(a, se2.between(b, c))`` of single poses (the odometry increment from
+    ``b`` to ``c`` applied to ``a``): :mod:`dynmap_sim.se2`'s operations in its order, on
+    floats (the same IEEE results; ``cos``, ``sin`` still numpy's) without its array
+    machinery: a few microseconds instead of some twenty, twice a scan."""
+    a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
+    b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
+    c0, c1, c2 = float(c[0]), float(c[1]), float(c[2])
+    cb, sb = float(np.cos(b2)), float(np.sin(b2))  # se2.inverse(b)
+    i0, i1, i2 = -cb * b0 - sb * b1, sb * b0 - cb * b1, _wrap(-b2)
+    ci, si = float(np.cos(i2)), float(np.sin(i2))  # se2.compose(inverse(b), c)
+    d0, d1, d2 = i0 + ci * c0 - si * c1, i1 + si * c0 + ci * c1, _wrap(i2 + c2)
+    ca, sa = float(np.cos(a2)), float(np.sin(a2))  # se2.compose(a, ...)
+    return np.array([a0 + ca * d0 - sa * d1, a1 + sa * d0 + ca * d1, _wrap(a2 + d2)])
+
+
 class StaticPointFilter(AMCLFilter):
     """The AMCL core fed only the beams of ``point_mask`` (the static points, §6.1): up to
     ``max_beams`` of them, evenly spread over the masked beams. Between :meth:`hold_beams`
-    and :meth:`release_beams` (one scan) the beams of that scan are picked once."""
+    and :meth:`release_beams` (one scan) the beams of that scan are picked once.
+
+    Two lazy things, neither pickled as such: the even spreads (``select_beams`` of each
+    number of masked beams, a pure function of it) and the free cells of the grid
+    (:attr:`free_xy`, listed only when random poses are drawn: rarely after a grid
+    change)."""
 
     point_mask: NDArray[np.bool_] | None = None
+    #: How the masked beams are picked (:data:`dynmap_sim.jit.KERNEL_BACKENDS`:
+    #: :func:`.classes_numba.masked_beams` or numpy, the same beams).
+    backend: str = "auto"
     _held: tuple[Any, NDArray[np.bool_] | None, FloatArray, FloatArray] | None = None
+    #: ``select_beams(n, max_beams)`` by ``n`` (dropped when pickled).
+    _spreads: dict[int, NDArray[np.intp]] | None = None
+    #: The grid whose free cells :attr:`free_xy` will list when next read (None: listed).
+    _free_grid: Any = None
+    _free_xy: FloatArray
+
+    @property  # type: ignore[override]
+    def free_xy(self) -> FloatArray:
+        """Centres of the free cells of the latest grid that has any (AMCL's random poses)."""
+        if self._free_grid is not None:
+            self._free_xy = self._free_grid.free_points()
+            self._free_grid = None
+        return self._free_xy
+
+    @free_xy.setter
+    def free_xy(self, value: FloatArray) -> None:
+        self._free_xy = value
+        self._free_grid = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_free_xy"] = self.free_xy
+        state.pop("_free_grid", None)
+        state.pop("_spreads", None)
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        if "free_xy" in state:  # pickled before free_xy was lazy
+            state["_free_xy"] = state.pop("free_xy")
+        self.__dict__.update(state)
 
     def _beams_of(self, ranges_m: Any) -> tuple[FloatArray, FloatArray]:
         held = self._held
         if held is not None and held[0] is ranges_m and held[1] is self.point_mask:
             return held[2], held[3]
         r = np.asarray(ranges_m, dtype=np.float64)
-        ok = np.isfinite(r) & (r > 0) & (r < self.range_max) & (r >= self.range_min)
-        if self.point_mask is not None:
-            ok &= self.point_mask
-        idx = np.nonzero(ok)[0]
-        if len(idx) > self.config.max_beams > 0:
-            idx = idx[select_beams(len(idx), self.config.max_beams)]
+        kernel = kernel_backend(self.backend)
+        if kernel:
+            idx = classes_numba.masked_beams(r, self.range_max, self.range_min, self.point_mask,
+                                             python=kernel == "python")  # fmt: skip
+        else:
+            ok = np.isfinite(r) & (r > 0) & (r < self.range_max) & (r >= self.range_min)
+            if self.point_mask is not None:
+                ok &= self.point_mask
+            idx = np.nonzero(ok)[0]
+        n, max_beams = len(idx), self.config.max_beams
+        if n > max_beams > 0:
+            if self._spreads is None:
+                self._spreads = {}
+            pick = self._spreads.get(n)
+            if pick is None:
+                pick = self._spreads[n] = select_beams(n, max_beams)
+            idx = idx[pick]
         return r[idx], self.all_angles[idx]
 
     def hold_beams(self, ranges_m: Any) -> None:
@@ -324,12 +400,12 @@ class StaticPointFilter(AMCLFilter):
         self._held = None
 
     def set_grid(self, grid: Any) -> None:
-        """Localize on ``grid`` from now on, keeping the particles."""
+        """Localize on ``grid`` from now on, keeping the particles (and the free cells of
+        the previous grid if this one has none)."""
         self.grid = grid
         self.table = LikelihoodTable(grid, self.lf)
-        free = grid.free_points()
-        if len(free):
-            self.free_xy = free
+        if np.any(grid.occupancy == FREE):  # grid.free_points() is not empty
+            self._free_grid = grid
 
 
 @register_localizer(NAME)
@@ -379,6 +455,17 @@ class AdaptiveMemoryLocalizer(Localizer):
         self._est_at_update = np.zeros(3)
         self._n_scans = 0
         self._day = 0
+        #: The beams' cosines and sines for the segmentation (lazy; not pickled).
+        self._beam_trig: tuple[FloatArray, FloatArray] | None = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_beam_trig"] = None
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        state.setdefault("_beam_trig", None)  # pickled before it was kept
+        self.__dict__.update(state)
 
     # -- run ------------------------------------------------------------------------------
     def begin_run(self, prior: Prior) -> None:
@@ -429,48 +516,34 @@ class AdaptiveMemoryLocalizer(Localizer):
         pred = (
             self._est
             if self._odom_prev is None
-            else se2.compose(self._est, se2.between(self._odom_prev, pose_odom))
+            else _compose_between(self._est, self._odom_prev, pose_odom)
         )
         self._odom_prev = pose_odom.copy()
         ranges = np.asarray(scan.ranges_m, dtype=np.float64)
         self.sm.put(t, ranges)  # sensory memory (§4.1)
-        valid = np.isfinite(ranges) & (ranges > 0) & (ranges < self.range_max)
         # 2. objects (§4.2)
+        if self._beam_trig is None:
+            self._beam_trig = beam_trig(self.angles, self.mount)
         boxes = segment_scan(ranges, self.angles, self.mount, self.range_max,
-                             self.tracker.params)  # fmt: skip
+                             self.tracker.params, beam_trig=self._beam_trig)  # fmt: skip
         box_cls, _ = self.tracker.update(boxes, pose_odom, t)
-        tracked = point_classes_of(boxes, box_cls)
         # 3. long-term map update (§4.3) with u of the tracker's static points
-        vi = np.nonzero(valid)[0]
-        rv = ranges[vi]
-        sig_r = np.maximum(c.sigma_r_min_m, c.sigma_r_rel * rv)
+        vi, rv, sig_r, cls_v, lab, stat = self._scan_points(ranges, boxes, box_cls)
         pts, covs = point_covariances(pred, self._cov, self.mount, rv, self.angles[vi],
                                       c.sigma_alpha_rad, sig_r)  # fmt: skip
         cur = ltm.map()
         explained = cur.explained(pts, covs, self.lp)  # for step 4, before this scan's points
-        tracked_v = tracked[vi]
-        stat = np.nonzero(tracked_v == STATIC)[0]
         n_take = int(round(c.u * len(stat)))
         if c.ltm_min_explained > 0 and len(stat) and np.mean(explained[stat]) < c.ltm_min_explained:
             n_take = 0  # the map disagrees with most of the scan: the pose is not trusted
         take = self.rng.choice(stat, size=n_take, replace=False) if n_take else stat[:0]
         if n_take and c.ltm_update_pose == "predicted":
             laser_xy = se2.compose(pred, self.mount)[:2]
-            cur.update(laser_xy, pts[take], covs[take], self.lp,
-                       self._hits(pts[take], covs[take]))  # fmt: skip
+            p_take, c_take = pts[take], covs[take]
+            cur.update(laser_xy, p_take, c_take, self.lp, self._hits(p_take, c_take))
         # 4. the semistatic test (§4.4)
-        cls_v = tracked_v.copy()
-        lab = boxes.labels[vi]
-        dyn = (cls_v == DYNAMIC) & (lab >= 0)
-        if dyn.any():  # the long-term map vetoes boxes it explains (ltm_veto_dynamic)
-            nb = len(boxes.length)
-            n_pts = np.bincount(lab[lab >= 0], minlength=nb)
-            n_expl = np.bincount(lab[(lab >= 0) & explained], minlength=nb)
-            veto = n_expl >= c.ltm_veto_dynamic * np.maximum(n_pts, 1)
-            cls_v[dyn & veto[np.maximum(lab, 0)]] = STATIC
-        cls_v[(cls_v != DYNAMIC) & ~explained] = SEMISTATIC
-        classes = np.full(len(ranges), UNKNOWN, dtype=np.int8)
-        classes[vi] = cls_v
+        classes, n_class = self._final_classes(cls_v, lab, explained, len(boxes.length), vi,
+                                               len(ranges))  # fmt: skip
         self.stm.put(t, classes)  # short-term memory: the classified scan
         # 5. map selection and MCL (§6.1) on the static points
         if self._n_scans % c.select_every_scans == 0:
@@ -479,14 +552,15 @@ class AdaptiveMemoryLocalizer(Localizer):
             self._use_map(self.used_slot)
         use = classes == STATIC
         if c.mcl_points == "non-dynamic":
-            use = valid & (classes != DYNAMIC)
-        elif int(use.sum()) < c.min_static_points:
+            use = np.zeros(len(ranges), dtype=bool)
+            use[vi] = classes[vi] != DYNAMIC
+        elif int(n_class[STATIC]) < c.min_static_points:
             use |= classes == UNKNOWN
         f.point_mask = use
         f.hold_beams(ranges)  # this scan's beams, picked once (released below)
         self._mcl_step(pose_odom, ranges)
         self._n_scans += 1
-        mean = se2.compose(self._est_at_update, se2.between(self._odom_at_update, pose_odom))
+        mean = _compose_between(self._est_at_update, self._odom_at_update, pose_odom)
         self._est = mean
         cov, lambda_min = self._reported_cov()
         if n_take and c.ltm_update_pose == "estimate":
@@ -495,7 +569,6 @@ class AdaptiveMemoryLocalizer(Localizer):
                                        c.sigma_alpha_rad, sig_r[take])  # fmt: skip
             cur.update(se2.compose(mean, self.mount)[:2], p2, c2, self.lp, self._hits(p2, c2))
         r_used, _ = f._beams_of(ranges)
-        n_class = np.bincount(cls_v, minlength=4)
         extras = {
             "point_classes": classes,
             "n_dynamic": int(n_class[DYNAMIC]),
@@ -509,6 +582,61 @@ class AdaptiveMemoryLocalizer(Localizer):
         }
         f.release_beams()
         return PoseEstimate(mean=mean, cov=cov, extras=extras)
+
+    def _scan_points(
+        self, ranges: FloatArray, boxes: Boxes, box_cls: NDArray[np.int8], backend: str = "auto"
+    ) -> tuple[NDArray[np.intp], FloatArray, FloatArray, NDArray[np.int8], NDArray[np.intp],
+               NDArray[np.intp]]:  # fmt: skip
+        """The valid returns of the scan (finite, ``0 < r < range_max``): beam indices
+        ``vi``, ranges, range noise (§4.1), tracker classes (eq. 11) and boxes, and the
+        positions among them of the static ones. ``backend``: :data:`dynmap_sim.jit.
+        KERNEL_BACKENDS` (:func:`.classes_numba.scan_points` or numpy, the same numbers)."""
+        c = self.config
+        kernel = kernel_backend(backend)
+        if kernel:
+            return classes_numba.scan_points(ranges, self.range_max, boxes.labels, box_cls,
+                                             c.sigma_r_min_m, c.sigma_r_rel,
+                                             python=kernel == "python")  # fmt: skip
+        valid = np.isfinite(ranges) & (ranges > 0) & (ranges < self.range_max)
+        tracked = point_classes_of(boxes, box_cls)
+        vi = np.nonzero(valid)[0]
+        rv = ranges[vi]
+        sig_r = np.maximum(c.sigma_r_min_m, c.sigma_r_rel * rv)
+        tracked_v = tracked[vi]
+        stat = np.nonzero(tracked_v == STATIC)[0]
+        return vi, rv, sig_r, tracked_v, boxes.labels[vi], stat
+
+    def _final_classes(
+        self,
+        cls_v: NDArray[np.int8],
+        lab: NDArray[np.intp],
+        explained: NDArray[np.bool_],
+        n_boxes: int,
+        vi: NDArray[np.intp],
+        n_beams: int,
+        backend: str = "auto",
+    ) -> tuple[NDArray[np.int8], NDArray[np.int64]]:
+        """§4.4 on the valid returns' tracker classes ``cls_v`` (boxes ``lab``, in place):
+        the long-term map's veto of the dynamic boxes it explains (``ltm_veto_dynamic``),
+        then the unexplained non-dynamic points semistatic; the classes of all
+        ``n_beams`` beams (unknown where not valid) and the count of each class.
+        ``backend``: as :meth:`_scan_points`' (:func:`.classes_numba.final_classes`)."""
+        c = self.config
+        kernel = kernel_backend(backend)
+        if kernel:
+            return classes_numba.final_classes(cls_v, lab, explained, n_boxes,
+                                               c.ltm_veto_dynamic, vi, n_beams,
+                                               python=kernel == "python")  # fmt: skip
+        dyn = (cls_v == DYNAMIC) & (lab >= 0)
+        if dyn.any():  # the long-term map vetoes boxes it explains (ltm_veto_dynamic)
+            n_pts = np.bincount(lab[lab >= 0], minlength=n_boxes)
+            n_expl = np.bincount(lab[(lab >= 0) & explained], minlength=n_boxes)
+            veto = n_expl >= c.ltm_veto_dynamic * np.maximum(n_pts, 1)
+            cls_v[dyn & veto[np.maximum(lab, 0)]] = STATIC
+        cls_v[(cls_v != DYNAMIC) & ~explained] = SEMISTATIC
+        classes = np.full(n_beams, UNKNOWN, dtype=np.int8)
+        classes[vi] = cls_v
+        return classes, np.bincount(cls_v, minlength=4)
 
     def _reported_cov(self) -> tuple[FloatArray, float]:
         """The reported covariance (regularized) and its information's smallest eigenvalue,

@@ -137,32 +137,31 @@ class LTMMap:
         kernel = kernel_backend(backend)
         if len(points) == 0:
             return
+        hit = np.ones(len(points), bool) if occupied is None else np.asarray(occupied, bool)
+        if kernel:
+            ltm_numba.update(self.logodds, self.pinned, laser_xy, points, covs, hit,
+                             self.origin, self.resolution, params,
+                             python=kernel == "python")  # fmt: skip
+            return
         h, w = self.shape
         res = self.resolution
         flat_all = []
         add_all = []
         # Occupied: peak-normalized Gaussian on a (2k+1)^2 stencil around each point.
         i_xx, i_xy, i_yy, c_xx, c_xy, c_yy = floored_inverse(covs, params.cov_floor_m**2)
-        hit = np.ones(len(points), bool) if occupied is None else np.asarray(occupied, bool)
-        if kernel:
-            flat, m2, ix, iy = ltm_numba.stencil(points, i_xx, i_xy, i_yy, hit, self.origin,
-                                                 res, params.stencil_cells, h, w,
-                                                 python=kernel == "python")  # fmt: skip
-        else:
-            ox, oy = _stencil(params.stencil_cells)
-            ix, iy = self.cells(points)
-            cx = ix[:, None] + ox[None, :]
-            cy = iy[:, None] + oy[None, :]
-            dx = self.origin[0] + (cx + 0.5) * res - points[:, 0:1]
-            dy = self.origin[1] + (cy + 0.5) * res - points[:, 1:2]
-            m2 = i_xx[:, None] * dx * dx + 2 * i_xy[:, None] * dx * dy
-            m2 += i_yy[:, None] * dy * dy
-            ok = (cx >= 0) & (cx < w) & (cy >= 0) & (cy < h) & (m2 < 9.0) & hit[:, None]
-            flat, m2 = (cy * w + cx)[ok], m2[ok]
+        ox, oy = _stencil(params.stencil_cells)
+        ix, iy = self.cells(points)
+        cx = ix[:, None] + ox[None, :]
+        cy = iy[:, None] + oy[None, :]
+        dx = self.origin[0] + (cx + 0.5) * res - points[:, 0:1]
+        dy = self.origin[1] + (cy + 0.5) * res - points[:, 1:2]
+        m2 = i_xx[:, None] * dx * dx + 2 * i_xy[:, None] * dx * dy
+        m2 += i_yy[:, None] * dy * dy
+        ok = (cx >= 0) & (cx < w) & (cy >= 0) & (cy < h) & (m2 < 9.0) & hit[:, None]
+        flat, m2 = (cy * w + cx)[ok], m2[ok]
         p = 0.5 + (params.p_hit - 0.5) * np.exp(-0.5 * m2)
         flat_all.append(flat)
         add_all.append(np.log(p / (1.0 - p)))
-        free = None
         if params.free_space:
             d = points - laser_xy[None, :]
             r = np.hypot(d[:, 0], d[:, 1])
@@ -172,11 +171,7 @@ class LTMMap:
             stop = r - np.maximum(params.free_stop_sigma * sig, res)
             step = 0.5 * res
             t = np.arange(0.0, float(stop.max(initial=0.0)), step)
-            if len(t) and kernel:
-                u = d / np.maximum(r, 1e-9)[:, None]
-                free = (float(laser_xy[0]), float(laser_xy[1]), np.ascontiguousarray(u[:, 0]),
-                        np.ascontiguousarray(u[:, 1]), stop, t)  # fmt: skip
-            elif len(t):
+            if len(t):
                 u = d / np.maximum(r, 1e-9)[:, None]
                 fx = laser_xy[0] + u[:, 0:1] * t[None, :]
                 fy = laser_xy[1] + u[:, 1:2] * t[None, :]
@@ -187,13 +182,9 @@ class LTMMap:
                 flat_all.append(key % (h * w))
                 add_all.append(np.full(len(key), params.l_free))
         lo = self.logodds.ravel()
-        if kernel:
-            ltm_numba.fuse(self.logodds, flat_all[0], add_all[0].astype(np.float32), free,
-                           self.origin, res, params.l_free, python=kernel == "python")  # fmt: skip
-        else:
-            flat = np.concatenate(flat_all)
-            add = np.concatenate(add_all)
-            np.add.at(lo, flat, add.astype(np.float32))
+        flat = np.concatenate(flat_all)
+        add = np.concatenate(add_all)
+        np.add.at(lo, flat, add.astype(np.float32))
         # Clamp and re-pin the cells this update can have changed: those between the laser
         # and the points' stencils (the others already are, as every map starts so).
         lc = self.cells(np.asarray(laser_xy, dtype=np.float64))
@@ -304,6 +295,7 @@ def point_covariances(
     angles: FloatArray,
     sigma_alpha: float,
     sigma_r: FloatArray,
+    backend: str = "auto",
 ) -> tuple[FloatArray, FloatArray]:
     """Eqs. 12-14: world points ``(n, 2)`` of readings ``(r, α)`` taken at robot ``pose``
     (laser ``mount`` in the robot frame) and their covariances ``(n, 2, 2)``
@@ -312,13 +304,19 @@ def point_covariances(
 
     The products are written out element by element (:func:`point_covariance_terms`), each
     an IEEE operation on arrays of points (no BLAS), so a compiled kernel can repeat them
-    exactly; the result is symmetric by construction."""
+    exactly; the result is symmetric by construction. ``backend``: :data:`BACKENDS` (the
+    kernel, :func:`.ltm_numba.point_covariances`, after the cosines and sines)."""
+    kernel = kernel_backend(backend)
     x, y, phi = pose
     c, s = np.cos(phi), np.sin(phi)
     lx = x + c * mount[0] - s * mount[1]
     ly = y + s * mount[0] + c * mount[1]
     b = phi + mount[2] + angles
     cb, sb = np.cos(b), np.sin(b)
+    if kernel:
+        return ltm_numba.point_covariances(x, y, lx, ly, cov_pose, ranges, cb, sb,
+                                           sigma_alpha * sigma_alpha, sigma_r,
+                                           python=kernel == "python")  # fmt: skip
     px, py = lx + ranges * cb, ly + ranges * sb
     cov = np.empty((len(ranges), 2, 2))
     cxx, cxy, cyy = point_covariance_terms(

@@ -77,24 +77,35 @@ def segment_scan(
     range_max_m: float,
     params: TrackerParams,
     backend: str = "auto",
+    beam_trig: tuple[FloatArray, FloatArray] | None = None,
 ) -> Boxes:
     """Segment one scan into oriented boxes (eqs. 8-9), vectorized (no per-point loop).
     ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): the arithmetic in
-    :mod:`.tracker_numba`'s kernels (the same numbers) or in numpy."""
+    :func:`.tracker_numba.segment`'s kernels (the same numbers) or in numpy.
+    ``beam_trig``: :func:`beam_trig` of ``angles_rad`` and ``mount``, if at hand (the
+    kernels take it instead of computing the returns' cosines and sines)."""
     kernel = kernel_backend(backend)
     r_all = np.asarray(ranges_m, dtype=np.float64)
     n_beams = len(r_all)
+    empty = np.zeros(0)
+    if kernel:
+        got = tracker_numba.segment(
+            r_all, np.asarray(angles_rad, dtype=np.float64), mount, range_max_m,
+            float(np.deg2rad(params.breakpoint_lambda_deg)), params.sigma_r_m, params.min_points,
+            params.max_gap_beams, params.max_dynamic_length_m, params.occlusion_never_dynamic,
+            beam_trig, python=kernel == "python",
+        )  # fmt: skip
+        if got is None:
+            labels = np.full(n_beams, -1, dtype=np.intp)
+            return Boxes(np.zeros((0, 2)), empty, empty, empty, np.zeros(0, bool), labels)
+        return Boxes(*got)
     labels = np.full(n_beams, -1, dtype=np.intp)
     valid = np.isfinite(r_all) & (r_all > 0) & (r_all < range_max_m)
     idx = np.nonzero(valid)[0]
-    empty = np.zeros(0)
     if len(idx) < params.min_points:
         return Boxes(np.zeros((0, 2)), empty, empty, empty, np.zeros(0, bool), labels)
     r = r_all[idx]
     a = angles_rad[idx] + mount[2]
-    if kernel:
-        return _segment_scan_kernels(r, a, angles_rad[idx], idx, mount, params, labels,
-                                     kernel == "python")  # fmt: skip
     xy = np.column_stack([mount[0] + r * np.cos(a), mount[1] + r * np.sin(a)])
     step = np.diff(xy, axis=0)
     dist = np.hypot(step[:, 0], step[:, 1])
@@ -144,35 +155,11 @@ def segment_scan(
     return Boxes(center[keep], phi[keep], length[keep], width[keep], never[keep], labels)
 
 
-def _segment_scan_kernels(
-    r: FloatArray,
-    a: FloatArray,
-    angles: FloatArray,
-    idx: NDArray[np.intp],
-    mount: FloatArray,
-    params: TrackerParams,
-    labels: NDArray[np.intp],
-    python: bool,
-) -> Boxes:
-    """:func:`segment_scan` of the valid returns ``r`` (beam angles ``angles``, plus the
-    mount's: ``a``; beam indices ``idx``) with :mod:`.tracker_numba`'s kernels; the
-    transcendental functions in numpy, as there."""
-    x = mount[0] + r * np.cos(a)
-    y = mount[1] + r * np.sin(a)
-    dist = np.hypot(np.diff(x), np.diff(y))
-    dalpha = np.abs(np.diff(angles))
-    lam = np.deg2rad(params.breakpoint_lambda_deg)
-    seg, starts, counts, mx, my, cxx, cxy, cyy, dx, dy = tracker_numba.segment_sums(
-        x, y, dist, np.sin(dalpha), np.sin(lam - dalpha), r, idx, params.sigma_r_m,
-        params.max_gap_beams, python=python,
-    )  # fmt: skip
-    phi = 0.5 * np.arctan2(2.0 * cxy, cxx - cyy)
-    center, length, width, never, box_of_seg, keep = tracker_numba.segment_boxes(
-        dx, dy, seg, starts, counts, mx, my, np.cos(phi), np.sin(phi), r, params.min_points,
-        params.max_dynamic_length_m, params.occlusion_never_dynamic, python=python,
-    )  # fmt: skip
-    labels[idx] = box_of_seg[seg]
-    return Boxes(center[keep], phi[keep], length[keep], width[keep], never[keep], labels)
+def beam_trig(angles_rad: FloatArray, mount: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The cosines and sines of every beam's angle in the robot frame (``angles_rad`` plus
+    the mount's yaw), for :func:`segment_scan`."""
+    a = np.asarray(angles_rad, dtype=np.float64) + mount[2]
+    return np.cos(a), np.sin(a)
 
 
 class ObjectTracker:
@@ -228,24 +215,24 @@ class ObjectTracker:
     ) -> tuple[NDArray[np.int8], NDArray[np.float64]]:
         """Track one scan's boxes; returns each box's class (eq. 10) and speed [m/s].
         ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): the prediction, association,
-        update and classification in :func:`.tracker_numba.track` (the same numbers) or
-        in numpy."""
+        update, classification and the tracks' renewal in :func:`.tracker_numba.track`
+        (the same numbers) or in numpy."""
         kernel = kernel_backend(backend)
         p = self.params
         dt = 0.0 if self.t_last is None or t_s < self.t_last else t_s - self.t_last
         self.t_last = t_s
-        nb = len(boxes.center_robot)
-        z = se2.transform_points(odom_pose, boxes.center_robot) if nb else np.zeros((0, 2))
         if kernel:
             counters = (self.hits, self.misses, self.fast, self.slow)
-            match_box, cls, speed = tracker_numba.track(
-                self.x, self.P, counters, self.dynamic, z, boxes.never_dynamic, dt,
-                p.sigma_accel**2, p.sigma_meas_m**2, p.gate_m, p.v_thres, p.confirm_steps,
-                python=kernel == "python",
+            cls, speed, state = tracker_numba.track(
+                self.x, self.P, counters, self.dynamic, odom_pose, boxes.center_robot,
+                boxes.never_dynamic, dt, p.sigma_accel**2, p.sigma_meas_m**2, p.gate_m,
+                p.v_thres, p.confirm_steps, p.max_misses, self.P0, python=kernel == "python",
             )  # fmt: skip
-            matched = match_box >= 0
-        else:
-            matched, cls, speed = self._update_numpy(boxes, z, dt)
+            self.x, self.P, self.hits, self.misses, self.fast, self.slow, self.dynamic = state
+            return cls, speed
+        nb = len(boxes.center_robot)
+        z = se2.transform_points(odom_pose, boxes.center_robot) if nb else np.zeros((0, 2))
+        matched, cls, speed = self._update_numpy(boxes, z, dt)
         # Drop lost tracks, start new ones for unmatched boxes (unknown until associated).
         alive = self.misses <= p.max_misses
         new = ~matched

@@ -1,26 +1,33 @@
 """Optional numba kernels of :func:`.object_tracker.segment_scan` (extra ``fast``).
 
-The segmentation's arithmetic after the points are in the laser frame, one point and one
-segment at a time instead of some thirty numpy calls on arrays of a few hundred points:
+The segmentation (H&W §4.2, eqs. 8-9) and the tracking one point, one segment and one
+track at a time instead of some seventy numpy calls on arrays of a few hundred points and a
+few dozen tracks:
 
-* :func:`segment_sums`: Borges & Aldon's breakpoints, the segments, their centroids and
-  second moments (the sums that ``np.add.reduceat`` makes, in its order: a segment's first
-  value plus numpy's pairwise sum of the rest, :func:`_pairwise_sum_py`);
-* :func:`segment_boxes`: each point's coordinates along and across its segment's principal
-  axis, the segments' extents, oriented boxes and the sliding-wall trap.
-
-* :func:`track`: one scan of :class:`.object_tracker.ObjectTracker` (the Kalman prediction,
-  the mutual nearest-neighbour association, the update and the speed classification) over
-  the tracks in place, instead of some forty numpy calls on arrays of a few dozen tracks.
+* :func:`segment`: :func:`_valid_beams_py`, the valid returns; :func:`_segment_sums_py`,
+  their points, Borges & Aldon's breakpoints, the segments, their centroids and second
+  moments (the sums that ``np.add.reduceat`` makes, in its order: a segment's first value
+  plus numpy's pairwise sum of the rest, :func:`_pairwise_sum_py`);
+  :func:`_segment_boxes_py`, each point's coordinates along and across its segment's
+  principal axis, the segments' extents, oriented boxes and the sliding-wall trap;
+  :func:`_kept_boxes_py`, the boxes of the segments kept and each return's box.
+* :func:`track`: one scan of :class:`.object_tracker.ObjectTracker`: the boxes into the
+  odometry frame (:func:`_transform_py`), the Kalman prediction, the mutual
+  nearest-neighbour association, the update and the speed classification over the tracks
+  in place (:func:`_track_py`), the lost tracks dropped and new ones started
+  (:func:`_renew_py`).
 
 The arithmetic is the numpy code's, operation for operation, so the results are identical
 (``np.hypot`` is the C library's in numba as in numpy; Python's ``math.hypot`` is not);
-the transcendental functions (``cos``, ``sin``, ``hypot``, ``arctan2``) stay in numpy, whose
+the other transcendental functions (``cos``, ``sin``, ``arctan2``) stay in numpy, whose
 results the kernels take. The tests check the plain-Python kernels (what numba compiles) and
 the compiled ones against the numpy code.
 """
 
 from __future__ import annotations
+
+import math
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -79,22 +86,30 @@ def _reduceat_py(a, starts, n_total, out):  # type: ignore[no-untyped-def]
 
 
 def _segment_sums_py(  # type: ignore[no-untyped-def]
-    x, y, dist, sin_da, sin_lam_da, r, idx, sigma_r_m, max_gap_beams, seg, starts, scratch
-):
-    """Breakpoints between points ``j`` and ``j + 1`` where ``dist[j]`` exceeds
-    ``r[j] sin_da[j] / max(sin_lam_da[j], 1e-6) + 3 max(sigma_r_m, 0.01 r[j])`` or more than
-    ``max_gap_beams`` beams are missing; fills ``seg`` (each point's segment) and ``starts``
-    and returns the number of segments ``m``, the centroids ``mx, my`` and the sums
-    ``cxx, cxy, cyy`` of the centred points' products (arrays of length ``m``), and the
-    centred points ``dx, dy``. ``scratch``: ``len(x)`` floats."""
-    n = x.shape[0]
+    cos_a, sin_a, mount_x, mount_y, sin_da, sin_lam_da, r, idx, sigma_r_m, max_gap_beams, seg,
+    starts, scratch,
+):  # fmt: skip
+    """The points ``x = mount_x + r cos_a``, ``y = mount_y + r sin_a``; breakpoints between
+    points ``j`` and ``j + 1`` where their distance ``hypot(x[j+1] - x[j], y[j+1] - y[j])``
+    exceeds ``r[j] sin_da[j] / max(sin_lam_da[j], 1e-6) + 3 max(sigma_r_m, 0.01 r[j])`` or
+    more than ``max_gap_beams`` beams are missing; fills ``seg`` (each point's segment) and
+    ``starts`` and returns the number of segments ``m``, the centroids ``mx, my``, the
+    sums ``cxx, cxy, cyy`` of the centred points' products (arrays of length ``m``) and the
+    centred points ``dx, dy``. ``scratch``: ``len(r)`` floats."""
+    n = r.shape[0]
+    x = np.empty(n)
+    y = np.empty(n)
+    for j in range(n):
+        x[j] = mount_x + r[j] * cos_a[j]
+        y[j] = mount_y + r[j] * sin_a[j]
     m = 1
     starts[0] = 0
     seg[0] = 0
     for j in range(n - 1):
         d_max = r[j] * sin_da[j] / max(sin_lam_da[j], 1e-6)
         d_max = d_max + 3.0 * max(sigma_r_m, 0.01 * r[j])
-        if dist[j] > d_max or idx[j + 1] - idx[j] > 1 + max_gap_beams:
+        dist = np.hypot(x[j + 1] - x[j], y[j + 1] - y[j])
+        if dist > d_max or idx[j + 1] - idx[j] > 1 + max_gap_beams:
             starts[m] = j + 1
             m += 1
         seg[j + 1] = m - 1
@@ -127,6 +142,27 @@ def _segment_sums_py(  # type: ignore[no-untyped-def]
         scratch[j] = dy[j] * dy[j]
     _reduceat(scratch, st, n, cyy)
     return m, counts, mx, my, cxx, cxy, cyy, dx, dy
+
+
+def _valid_beams_py(  # type: ignore[no-untyped-def]
+    r_all, angles, mount_yaw, range_max_m, lam, idx, r, a, dalpha, lam_da
+):
+    """The valid returns of a scan (finite, ``0 < r < range_max_m``): their beam indices
+    ``idx``, ranges ``r``, angles plus the mount's yaw ``a``, the angle steps to the next
+    valid return ``dalpha = |Δangle|`` and ``lam - dalpha``; returns how many."""
+    n = 0
+    for i in range(r_all.shape[0]):
+        v = r_all[i]
+        if math.isfinite(v) and v > 0 and v < range_max_m:
+            idx[n] = i
+            r[n] = v
+            a[n] = angles[i] + mount_yaw
+            n += 1
+    for j in range(n - 1):
+        d = abs(angles[idx[j + 1]] - angles[idx[j]])
+        dalpha[j] = d
+        lam_da[j] = lam - d
+    return n
 
 
 def _segment_boxes_py(  # type: ignore[no-untyped-def]
@@ -178,6 +214,30 @@ def _segment_boxes_py(  # type: ignore[no-untyped-def]
         else:
             box_of_seg[k] = -1
     return n_box
+
+
+def _kept_boxes_py(  # type: ignore[no-untyped-def]
+    center, phi, length, width, never, box_of_seg, seg, idx, n_box, labels
+):
+    """The kept segments' boxes (``box_of_seg >= 0``, in order) as new arrays ``(center,
+    phi, length, width, never)``, and each valid return's box in ``labels[idx]``."""
+    c = np.empty((n_box, 2))
+    ph = np.empty(n_box)
+    ln = np.empty(n_box)
+    wd = np.empty(n_box)
+    nv = np.empty(n_box, dtype=np.bool_)
+    for k in range(box_of_seg.shape[0]):
+        b = box_of_seg[k]
+        if b >= 0:
+            c[b, 0] = center[k, 0]
+            c[b, 1] = center[k, 1]
+            ph[b] = phi[k]
+            ln[b] = length[k]
+            wd[b] = width[k]
+            nv[b] = never[k]
+    for j in range(idx.shape[0]):
+        labels[idx[j]] = box_of_seg[seg[j]]
+    return c, ph, ln, wd, nv
 
 
 def _argmin_py(d, n):  # type: ignore[no-untyped-def]
@@ -276,68 +336,138 @@ def _track_py(  # type: ignore[no-untyped-def]
         cls[b] = 1 if dyn else 3  # DYNAMIC, STATIC (object_tracker's codes)
 
 
+def _transform_py(x0, y0, c, s, pts, out):  # type: ignore[no-untyped-def]
+    """:func:`dynmap_sim.se2.transform_points` of ``pts`` by the pose ``(x0, y0)`` whose
+    heading has cosine ``c`` and sine ``s``, into ``out``."""
+    for i in range(pts.shape[0]):
+        px = pts[i, 0]
+        py = pts[i, 1]
+        out[i, 0] = x0 + c * px - s * py
+        out[i, 1] = y0 + s * px + c * py
+
+
+def _renew_py(  # type: ignore[no-untyped-def]
+    x, P, hits, misses, fast, slow, dynamic, z, match_box, max_misses, p0, p1, p2
+):
+    """The tracks after a scan (:meth:`.object_tracker.ObjectTracker.update`): the lost
+    ones (``misses > max_misses``) dropped, a new track at each unmatched box ``z`` (at
+    rest, covariance ``(p0, p1, p2)``, seen once) appended; new arrays
+    ``(x, P, hits, misses, fast, slow, dynamic)``."""
+    nt = x.shape[0]
+    nb = z.shape[0]
+    n = 0
+    for t in range(nt):
+        if misses[t] <= max_misses:
+            n += 1
+    for b in range(nb):
+        if match_box[b] < 0:
+            n += 1
+    x2 = np.empty((n, 4))
+    P2 = np.empty((n, 3))
+    h2 = np.empty(n, dtype=np.int32)
+    m2 = np.empty(n, dtype=np.int32)
+    f2 = np.empty(n, dtype=np.int32)
+    s2 = np.empty(n, dtype=np.int32)
+    d2 = np.empty(n, dtype=np.bool_)
+    k = 0
+    for t in range(nt):
+        if misses[t] <= max_misses:
+            for i in range(4):
+                x2[k, i] = x[t, i]
+            for i in range(3):
+                P2[k, i] = P[t, i]
+            h2[k] = hits[t]
+            m2[k] = misses[t]
+            f2[k] = fast[t]
+            s2[k] = slow[t]
+            d2[k] = dynamic[t]
+            k += 1
+    for b in range(nb):
+        if match_box[b] < 0:
+            x2[k, 0] = z[b, 0]
+            x2[k, 1] = z[b, 1]
+            x2[k, 2] = 0.0
+            x2[k, 3] = 0.0
+            P2[k, 0] = p0
+            P2[k, 1] = p1
+            P2[k, 2] = p2
+            h2[k] = 1
+            m2[k] = 0
+            f2[k] = 0
+            s2[k] = 0
+            d2[k] = False
+            k += 1
+    return x2, P2, h2, m2, f2, s2, d2
+
+
 _argmin = compiled(_argmin_py) or _argmin_py
 _track = compiled(_track_py)
 _pairwise_sum = compiled(_pairwise_sum_py) or _pairwise_sum_py
 _reduceat = compiled(_reduceat_py) or _reduceat_py
 _segment_sums = compiled(_segment_sums_py)
 _segment_boxes = compiled(_segment_boxes_py)
+_valid_beams = compiled(_valid_beams_py)
+_kept_boxes = compiled(_kept_boxes_py)
+_transform = compiled(_transform_py)
+_renew = compiled(_renew_py)
 
 
-def segment_sums(
-    x: FloatArray,
-    y: FloatArray,
-    dist: FloatArray,
-    sin_da: FloatArray,
-    sin_lam_da: FloatArray,
-    r: FloatArray,
-    idx: IntArray,
+def segment(
+    r_all: FloatArray,
+    angles: FloatArray,
+    mount: FloatArray,
+    range_max_m: float,
+    lam: float,
     sigma_r_m: float,
-    max_gap_beams: int,
-    python: bool = False,
-) -> tuple[IntArray, IntArray, IntArray, FloatArray, FloatArray, FloatArray, FloatArray,
-           FloatArray, FloatArray, FloatArray]:  # fmt: skip
-    """:func:`_segment_sums_py` compiled (needs numba; ``python``: the plain kernel):
-    ``seg, starts, counts, mx, my, cxx, cxy, cyy, dx, dy``."""
-    kernel = pick_kernel(_segment_sums_py, _segment_sums, python, "scan segmentation")
-    n = len(x)
-    seg = np.empty(n, dtype=np.intp)
-    starts = np.empty(n, dtype=np.intp)
-    m, counts, mx, my, cxx, cxy, cyy, dx, dy = kernel(
-        x, y, dist, sin_da, sin_lam_da, r, idx, float(sigma_r_m), int(max_gap_beams), seg,
-        starts, np.empty(n),
-    )  # fmt: skip
-    return seg, starts[:m], counts, mx, my, cxx, cxy, cyy, dx, dy
-
-
-def segment_boxes(
-    dx: FloatArray,
-    dy: FloatArray,
-    seg: IntArray,
-    starts: IntArray,
-    counts: IntArray,
-    mx: FloatArray,
-    my: FloatArray,
-    cphi: FloatArray,
-    sphi: FloatArray,
-    r: FloatArray,
     min_points: int,
+    max_gap_beams: int,
     max_dynamic_length_m: float,
     occlusion_never_dynamic: bool,
+    beam_trig: tuple[FloatArray, FloatArray] | None = None,
     python: bool = False,
-) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.bool_], IntArray, NDArray[np.bool_]]:
-    """:func:`_segment_boxes_py` compiled (needs numba; ``python``: the plain kernel):
-    ``center (m, 2), length, width, never, box_of_seg`` of every segment and ``keep``."""
-    kernel = pick_kernel(_segment_boxes_py, _segment_boxes, python, "scan segmentation")
-    m = len(starts)
-    center = np.empty((m, 2))
-    length, width = np.empty(m), np.empty(m)
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, NDArray[np.bool_], IntArray] | None:
+    """:func:`.object_tracker.segment_scan` of the scan ``r_all`` (float64) with the
+    kernels (needs numba; ``python``: the plain kernels): ``center (n, 2), phi, length,
+    width, never, labels``, or None when fewer than ``min_points`` returns are valid. The
+    transcendental functions in numpy: ``cos``, ``sin`` of the returns' angles (``beam_trig``:
+    those of every beam's, ``angles + mount[2]``, if at hand; numpy's are elementwise, the
+    same numbers) and of the breakpoint detector's angles, ``arctan2`` of the segments'
+    moments, ``cos``, ``sin`` of their axes."""
+    valid_k = pick_kernel(_valid_beams_py, _valid_beams, python, "scan segmentation")
+    sums_k = pick_kernel(_segment_sums_py, _segment_sums, python, "scan segmentation")
+    boxes_k = pick_kernel(_segment_boxes_py, _segment_boxes, python, "scan segmentation")
+    kept_k = pick_kernel(_kept_boxes_py, _kept_boxes, python, "scan segmentation")
+    n_beams = len(r_all)
+    idx = np.empty(n_beams, dtype=np.intp)
+    r, a, da, lda = np.empty(n_beams), np.empty(n_beams), np.empty(n_beams), np.empty(n_beams)
+    n = valid_k(r_all, angles, float(mount[2]), float(range_max_m), float(lam), idx, r, a, da,
+                lda)  # fmt: skip
+    labels = np.full(n_beams, -1, dtype=np.intp)
+    if n < min_points:
+        return None
+    idx, r = idx[:n], r[:n]
+    seg = np.empty(n, dtype=np.intp)
+    starts = np.empty(n, dtype=np.intp)
+    if beam_trig is None:
+        cos_a, sin_a = np.cos(a[:n]), np.sin(a[:n])
+    else:
+        cos_a, sin_a = beam_trig[0][idx], beam_trig[1][idx]
+    m, counts, mx, my, cxx, cxy, cyy, dx, dy = sums_k(
+        cos_a, sin_a, float(mount[0]), float(mount[1]), np.sin(da[: n - 1]),
+        np.sin(lda[: n - 1]), r, idx, float(sigma_r_m), int(max_gap_beams), seg, starts,
+        np.empty(n),
+    )  # fmt: skip
+    starts = starts[:m]
+    phi = 0.5 * np.arctan2(2.0 * cxy, cxx - cyy)
+    center, length, width = np.empty((m, 2)), np.empty(m), np.empty(m)
     never = np.empty(m, dtype=np.bool_)
     box_of_seg = np.empty(m, dtype=np.intp)
-    kernel(dx, dy, seg, starts, counts, mx, my, cphi, sphi, r, int(min_points),
-           float(max_dynamic_length_m), bool(occlusion_never_dynamic), center, length, width,
-           never, box_of_seg)  # fmt: skip
-    return center, length, width, never, box_of_seg, box_of_seg >= 0
+    n_box = boxes_k(dx, dy, seg, starts, counts, mx, my, np.cos(phi), np.sin(phi), r,
+                    int(min_points), float(max_dynamic_length_m), bool(occlusion_never_dynamic),
+                    center, length, width, never, box_of_seg)  # fmt: skip
+    c, ph, ln, wd, nv = kept_k(center, phi, length, width, never, box_of_seg, seg, idx, n_box,
+                               labels)  # fmt: skip
+    return c, ph, ln, wd, nv, labels
 
 
 def track(
@@ -345,7 +475,8 @@ def track(
     P: FloatArray,
     counters: tuple[NDArray[np.int32], NDArray[np.int32], NDArray[np.int32], NDArray[np.int32]],
     dynamic: NDArray[np.bool_],
-    z: FloatArray,
+    odom_pose: FloatArray,
+    centers_robot: FloatArray,
     never: NDArray[np.bool_],
     dt: float,
     q: float,
@@ -353,19 +484,33 @@ def track(
     gate_m: float,
     v_thres: float,
     confirm_steps: int,
+    max_misses: int,
+    p_new: FloatArray,
     python: bool = False,
-) -> tuple[IntArray, NDArray[np.int8], FloatArray]:
-    """:func:`_track_py` compiled (needs numba; ``python``: the plain kernel), in place on the
-    tracks (``counters``: hits, misses, fast, slow); each box's track (-1: none), class
-    (``UNKNOWN`` when unmatched) and speed."""
+) -> tuple[NDArray[np.int8], FloatArray, tuple[Any, ...]]:
+    """One scan of :class:`.object_tracker.ObjectTracker` with the kernels (needs numba;
+    ``python``: the plain kernels): the boxes' centres ``centers_robot`` into the odometry
+    frame (the heading's ``cos``, ``sin`` in numpy), :func:`_track_py` in place on the
+    tracks (``counters``: hits, misses, fast, slow), then :func:`_renew_py` (lost tracks
+    dropped, a new one per unmatched box, covariance ``p_new``). Returns each box's class
+    (``UNKNOWN`` when unmatched) and speed, and the new track arrays ``(x, P, hits, misses,
+    fast, slow, dynamic)``."""
     kernel = pick_kernel(_track_py, _track, python, "object tracker")
-    nb = len(z)
+    transform = pick_kernel(_transform_py, _transform, python, "object tracker")
+    renew = pick_kernel(_renew_py, _renew, python, "object tracker")
+    nb = len(centers_robot)
+    z = np.empty((nb, 2))
+    if nb:
+        pose = np.asarray(odom_pose, dtype=np.float64)
+        transform(float(pose[0]), float(pose[1]), float(np.cos(pose[2])), float(np.sin(pose[2])),
+                  np.ascontiguousarray(centers_robot, dtype=np.float64), z)  # fmt: skip
     match_box = np.empty(nb, dtype=np.intp)
     cls = np.zeros(nb, dtype=np.int8)
     speed = np.zeros(nb)
     hits, misses, fast, slow = counters
-    kernel(x, P, hits, misses, fast, slow, dynamic, np.ascontiguousarray(z, dtype=np.float64),
-           never, float(dt), float(q), float(r2), float(gate_m), float(v_thres),
-           int(confirm_steps), match_box, cls, speed, np.empty((len(x), nb)),
-           np.empty(len(x)))  # fmt: skip
-    return match_box, cls, speed
+    kernel(x, P, hits, misses, fast, slow, dynamic, z, never, float(dt), float(q), float(r2),
+           float(gate_m), float(v_thres), int(confirm_steps), match_box, cls, speed,
+           np.empty((len(x), nb)), np.empty(len(x)))  # fmt: skip
+    state = renew(x, P, hits, misses, fast, slow, dynamic, z, match_box, int(max_misses),
+                  float(p_new[0]), float(p_new[1]), float(p_new[2]))  # fmt: skip
+    return cls, speed, state
