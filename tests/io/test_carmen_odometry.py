@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from carmen_helpers import read_warned
 
 from dynmap_sim import se2
 from dynmap_sim.cli import ODOMETRY_CHOICES, main
@@ -54,10 +55,7 @@ def _write(path, stamps, pose, odom, odom_t, odom_lines, kind="FLASER", in_time_
 
 
 def _read(path, **kw):
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        log = read_carmen(path, **kw)
-    return log, [str(w.message) for w in caught if issubclass(w.category, CarmenOdometryWarning)]
+    return read_warned(path, **kw)
 
 
 def test_raw_log_takes_the_odom_lines_without_a_warning(tmp_path):

@@ -3,17 +3,15 @@ FR079 raw, written by bag2carmen, moves forward wherever its ``tv`` says the rob
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 import pytest
+from carmen_helpers import read_warned
 
 from dynmap_sim import se2
 from dynmap_sim.cli import REVERSAL_CHOICES
 from dynmap_sim.io.carmen import (
     REVERSAL_MODES,
     CarmenLogError,
-    CarmenOdometryWarning,
     interpolate_poses,
     read_carmen,
     repair_reversals,
@@ -51,10 +49,7 @@ def _write(path, t, poses, tv):
 
 
 def _read(path, **kw):
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        log = read_carmen(path, **kw)
-    return log, [str(w.message) for w in caught if issubclass(w.category, CarmenOdometryWarning)]
+    return read_warned(path, **kw)
 
 
 def test_unsigned_reversing_is_found_and_repaired(tmp_path):
