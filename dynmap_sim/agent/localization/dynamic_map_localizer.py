@@ -88,9 +88,27 @@ _MODES = ("dynamic", "static", "static+stm")
 
 
 def lambda_min(cov: FloatArray) -> float:
-    """Smallest eigenvalue of the inverse of a 3x3 covariance (B&D §5.3, Fig. 11)."""
-    info = np.linalg.inv(0.5 * (cov + cov.T) + 1e-12 * np.eye(3))
-    return float(np.linalg.eigvalsh(0.5 * (info + info.T))[0])
+    """Smallest eigenvalue of the inverse of a 3x3 covariance (B&D §5.3, Fig. 11).
+
+    The inverse of ``0.5 (cov + covᵀ) + 10⁻¹² I``, symmetrized; the matrix is assembled from
+    scalars with the same operations as the array expression (``+ 0.0`` off the diagonal, as
+    adding ``10⁻¹² I`` does), so the same bits in fewer numpy calls.
+    """
+    (c00, c01, c02), (c10, c11, c12), (c20, c21, c22) = np.asarray(cov, dtype=np.float64).tolist()
+    m01, m02, m12 = 0.5 * (c01 + c10) + 0.0, 0.5 * (c02 + c20) + 0.0, 0.5 * (c12 + c21) + 0.0
+    m10, m20, m21 = 0.5 * (c10 + c01) + 0.0, 0.5 * (c20 + c02) + 0.0, 0.5 * (c21 + c12) + 0.0
+    info = np.linalg.inv(
+        np.array(
+            [
+                [0.5 * (c00 + c00) + 1e-12, m01, m02],
+                [m10, 0.5 * (c11 + c11) + 1e-12, m12],
+                [m20, m21, 0.5 * (c22 + c22) + 1e-12],
+            ]
+        )
+    )
+    sym = info + info.T
+    sym *= 0.5
+    return float(np.linalg.eigvalsh(sym)[0])
 
 
 def odometry_covariance(
