@@ -68,7 +68,11 @@ from dynmap_sim.agent.mapping.scan_matcher import (
     match_scan,
     worst_position_sigma,
 )
-from dynmap_sim.agent.mapping.scan_points import BeamDirections, scan_points_base
+from dynmap_sim.agent.mapping.scan_points import (
+    BeamDirections,
+    first_per_cell,
+    scan_points_base,
+)
 from dynmap_sim.agent.maps.current_map import CurrentMap, SynthesisParams, synthesize_current_map
 from dynmap_sim.agent.maps.dynamic_map import DynamicMap, MapSnapshot
 from dynmap_sim.agent.maps.local_map import TABLE1
@@ -568,9 +572,7 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
     def _thinned(self, pts: FloatArray) -> FloatArray:
         """``pts`` thinned to one per ``map_voxel_m`` cell (first in order)."""
         if len(pts) and self.config.map_voxel_m > 0:
-            key = np.floor(pts / self.config.map_voxel_m).astype(np.int64)
-            _, idx = np.unique(key[:, 0] * 1_000_003 + key[:, 1], return_index=True)
-            pts = pts[np.sort(idx)]
+            pts = pts[first_per_cell(pts, self.config.map_voxel_m)]
         return pts
 
     def _set_current_map(self, cur: CurrentMap) -> None:

@@ -234,7 +234,8 @@ class SampleSets:
     ) -> None:
         """:meth:`update` after its sort, with :func:`.sample_set_numba.update_kernels`: the
         same random draws in the same order (``u·n`` rounding, then the keys of the slots
-        to replace) and the same ``argsort`` of the keys."""
+        to replace), the keys put in the order of the numpy code's ``argsort`` by the
+        kernel."""
         ray_runs, plan_update, write_update = kernels
         first = np.empty(r_s.size, dtype=np.int64)
         first = first[: ray_runs(r_s, first)]
@@ -247,13 +248,8 @@ class SampleSets:
             r_s, first, self.count, self.initialized, self.n_samples,
             self.fills_first_step, fill, initialize, n_rule, n_new, n_add, rep_cnt,
         )  # fmt: skip
-        if n_rep:
-            keys = rng.random((n_rep, self.n_samples))
-            keys[np.arange(self.n_samples)[None, :] >= rep_cnt[:n_rep, None]] = 2.0
-            perm = np.argsort(keys, axis=1)
-        else:
-            perm = np.zeros((0, self.n_samples), dtype=np.int64)
-        write_update(r_s, v_s, first, n_new, n_add, perm, self.samples_mm, self.count)
+        keys = rng.random((n_rep, self.n_samples)) if n_rep else np.empty((0, self.n_samples))
+        write_update(r_s, v_s, first, n_new, n_add, keys, self.samples_mm, self.count)
         self._changed()
 
     def update_m(
