@@ -53,6 +53,7 @@ the short-term memory λ1 learning online.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -507,7 +508,8 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
 
         def within(res: MatchResult) -> bool:
             e = res.pose - pred
-            e[2] = float(se2.wrap_angle(e[2]))
+            # se2.wrap_angle in float arithmetic (the same operations: fmod-based remainder)
+            e[2] = (float(e[2]) + math.pi) % (2.0 * math.pi) - math.pi
             return (
                 res.n_matched >= c.min_matched
                 and np.all(np.isfinite(res.pose))

@@ -287,8 +287,9 @@ def match_scan(
     n_matched = 0
     rmse = float("inf")
     h_scan = np.zeros((3, 3))
-    world = np.empty((len(pts), 2))
-    jac = np.empty((len(pts), 3))
+    if grid is None:  # work arrays of the numpy iterations
+        world = np.empty((len(pts), 2))
+        jac = np.empty((len(pts), 3))
     floor2 = sigma_floor_m**2
     n_iter = max(1, int(max_iterations))
     if grid is not None:  # compiled iterations; hands over to the loop below if ill-conditioned
