@@ -53,6 +53,7 @@ the short-term memory λ1 learning online.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -68,7 +69,11 @@ from dynmap_sim.agent.mapping.scan_matcher import (
     match_scan,
     worst_position_sigma,
 )
-from dynmap_sim.agent.mapping.scan_points import BeamDirections, scan_points_base
+from dynmap_sim.agent.mapping.scan_points import (
+    BeamDirections,
+    first_per_cell,
+    scan_points_base,
+)
 from dynmap_sim.agent.maps.current_map import CurrentMap, SynthesisParams, synthesize_current_map
 from dynmap_sim.agent.maps.dynamic_map import DynamicMap, MapSnapshot
 from dynmap_sim.agent.maps.local_map import TABLE1
@@ -88,9 +93,27 @@ _MODES = ("dynamic", "static", "static+stm")
 
 
 def lambda_min(cov: FloatArray) -> float:
-    """Smallest eigenvalue of the inverse of a 3x3 covariance (B&D §5.3, Fig. 11)."""
-    info = np.linalg.inv(0.5 * (cov + cov.T) + 1e-12 * np.eye(3))
-    return float(np.linalg.eigvalsh(0.5 * (info + info.T))[0])
+    """Smallest eigenvalue of the inverse of a 3x3 covariance (B&D §5.3, Fig. 11).
+
+    The inverse of ``0.5 (cov + covᵀ) + 10⁻¹² I``, symmetrized; the matrix is assembled from
+    scalars with the same operations as the array expression (``+ 0.0`` off the diagonal, as
+    adding ``10⁻¹² I`` does), so the same bits in fewer numpy calls.
+    """
+    (c00, c01, c02), (c10, c11, c12), (c20, c21, c22) = np.asarray(cov, dtype=np.float64).tolist()
+    m01, m02, m12 = 0.5 * (c01 + c10) + 0.0, 0.5 * (c02 + c20) + 0.0, 0.5 * (c12 + c21) + 0.0
+    m10, m20, m21 = 0.5 * (c10 + c01) + 0.0, 0.5 * (c20 + c02) + 0.0, 0.5 * (c21 + c12) + 0.0
+    info = np.linalg.inv(
+        np.array(
+            [
+                [0.5 * (c00 + c00) + 1e-12, m01, m02],
+                [m10, 0.5 * (c11 + c11) + 1e-12, m12],
+                [m20, m21, 0.5 * (c22 + c22) + 1e-12],
+            ]
+        )
+    )
+    sym = info + info.T
+    sym *= 0.5
+    return float(np.linalg.eigvalsh(sym)[0])
 
 
 def odometry_covariance(
@@ -515,7 +538,8 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
 
         def within(res: MatchResult) -> bool:
             e = res.pose - pred
-            e[2] = float(se2.wrap_angle(e[2]))
+            # se2.wrap_angle in float arithmetic (the same operations: fmod-based remainder)
+            e[2] = (float(e[2]) + math.pi) % (2.0 * math.pi) - math.pi
             return (
                 res.n_matched >= c.min_matched
                 and np.all(np.isfinite(res.pose))
@@ -583,9 +607,7 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
     def _thinned(self, pts: FloatArray) -> FloatArray:
         """``pts`` thinned to one per ``map_voxel_m`` cell (first in order)."""
         if len(pts) and self.config.map_voxel_m > 0:
-            key = np.floor(pts / self.config.map_voxel_m).astype(np.int64)
-            _, idx = np.unique(key[:, 0] * 1_000_003 + key[:, 1], return_index=True)
-            pts = pts[np.sort(idx)]
+            pts = pts[first_per_cell(pts, self.config.map_voxel_m)]
         return pts
 
     def _set_current_map(self, cur: CurrentMap) -> None:

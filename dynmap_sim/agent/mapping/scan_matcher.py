@@ -41,11 +41,22 @@ _WELL_CONDITIONED = 1e-6
 _KNN_CELL_M = (0.02, 2.0)
 
 
-def _compact_grid(points: FloatArray, cell_m: float) -> BucketGrid | None:
+def _extent(points: FloatArray) -> tuple[float, float]:
+    """Width and height [m] of the bounding box of ``points`` ``(M, 2)``."""
+    x, y = points[:, 0], points[:, 1]
+    return float(x.max()) - float(x.min()), float(y.max()) - float(y.min())
+
+
+def _compact_grid(
+    points: FloatArray, cell_m: float, extent: tuple[float, float] | None = None
+) -> BucketGrid | None:
     """A :class:`.scan_matcher_numba.BucketGrid` of the points, or ``None`` when they spread
-    over too many cells (more than ``4 M + 250,000``) for one."""
-    span = (points.max(axis=0) - points.min(axis=0)) / cell_m + 2.0
-    if cell_m <= 0 or float(span[0]) * float(span[1]) > 4 * len(points) + 250_000:
+    over too many cells (more than ``4 M + 250,000``) for one; ``extent``: the points'
+    :func:`_extent` when known."""
+    if cell_m <= 0:
+        return None
+    w, h = _extent(points) if extent is None else extent
+    if (w / cell_m + 2.0) * (h / cell_m + 2.0) > 4 * len(points) + 250_000:
         return None
     return BucketGrid.build(points, cell_m)
 
@@ -75,18 +86,19 @@ class PointMap:
         k = int(min(k_normal, len(pts)))
         use_numba = backend != "numpy" and numba_available()
         grid = None
-        if use_numba:  # about one point per cell on average (spacing of the bounding box)
-            ext = pts.max(axis=0) - pts.min(axis=0)
-            cell = math.sqrt(max(float(ext[0] * ext[1]), 1e-6) / len(pts))
-            grid = _compact_grid(pts, min(max(cell, _KNN_CELL_M[0]), _KNN_CELL_M[1]))
+        self._extent = _extent(pts) if use_numba else None
+        if self._extent is not None:  # about one point per cell (spacing of the bounding box)
+            cell = math.sqrt(max(self._extent[0] * self._extent[1], 1e-6) / len(pts))
+            grid = _compact_grid(pts, min(max(cell, _KNN_CELL_M[0]), _KNN_CELL_M[1]), self._extent)
         if grid is not None:  # compiled exact k-NN on a bucket grid (same neighbours)
             idx = knn_indices(grid, k)
         else:
             _, idx = self.tree.query(pts, k=k)
         nx = pts[:, 0][idx]  # (M, k) neighbour coordinates
         ny = pts[:, 1][idx]
-        dx = nx - nx.mean(axis=1, keepdims=True)
-        dy = ny - ny.mean(axis=1, keepdims=True)
+        # the means as ``mean`` computes them (sum, then divide by the count), fewer calls
+        dx = nx - np.add.reduce(nx, axis=1, keepdims=True) / idx.shape[1]
+        dy = ny - np.add.reduce(ny, axis=1, keepdims=True) / idx.shape[1]
         sxx = np.einsum("mk,mk->m", dx, dx)
         syy = np.einsum("mk,mk->m", dy, dy)
         sxy = np.einsum("mk,mk->m", dx, dy)
@@ -131,7 +143,7 @@ class PointMap:
         key = float(cell_m)
         cache = self.__dict__.setdefault("_grids", {})
         if key not in cache:
-            cache[key] = _compact_grid(self.points, key)
+            cache[key] = _compact_grid(self.points, key, self.__dict__.get("_extent"))
         return cache[key]
 
     def __len__(self) -> int:
@@ -275,8 +287,9 @@ def match_scan(
     n_matched = 0
     rmse = float("inf")
     h_scan = np.zeros((3, 3))
-    world = np.empty((len(pts), 2))
-    jac = np.empty((len(pts), 3))
+    if grid is None:  # work arrays of the numpy iterations
+        world = np.empty((len(pts), 2))
+        jac = np.empty((len(pts), 3))
     floor2 = sigma_floor_m**2
     n_iter = max(1, int(max_iterations))
     if grid is not None:  # compiled iterations; hands over to the loop below if ill-conditioned

@@ -14,6 +14,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from dynmap_sim import se2
+from dynmap_sim.agent.mapping.scan_points_numba import first_per_cell_mask
+from dynmap_sim.jit import kernel_backend
 from dynmap_sim.types import LaserSpec
 
 FloatArray = NDArray[np.float64]
@@ -120,6 +122,19 @@ def range_weights(points_base: FloatArray, rel_noise: float = 0.01, min_sigma_m:
     range noise ``sigma(r) = max(min_sigma_m, rel_noise * r)`` (URG-04LX datasheet)."""
     r = np.hypot(points_base[:, 0], points_base[:, 1])
     return (min_sigma_m / np.maximum(min_sigma_m, rel_noise * r)) ** 2
+
+
+def first_per_cell(points: FloatArray, cell_m: float, backend: str = "auto") -> NDArray[np.intp]:
+    """Increasing indices of the first point of each ``cell_m`` square cell of ``points``
+    ``(N, 2)`` (finite). ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): ``"numba"``
+    (``"auto"`` when installed) or ``"python"`` finds them in one loop and a sort
+    (:mod:`.scan_points_numba`), the same indices."""
+    kind = kernel_backend(backend)
+    if kind is not None and len(points):
+        return np.flatnonzero(first_per_cell_mask(points, cell_m, kind == "python"))
+    key = np.floor(points / cell_m).astype(np.int64)
+    _, idx = np.unique(key[:, 0] * 1_000_003 + key[:, 1], return_index=True)
+    return np.sort(idx)
 
 
 def voxel_downsample(points: FloatArray, voxel_m: float, mean: bool = False) -> FloatArray:

@@ -90,25 +90,28 @@ def synthesize_current_map(
     # logp[m, l, i]: reading i under nearby map m at level l (all readings, computed once).
     logp = np.empty((nearby.size, len(levels), n))
     for a, i in enumerate(nearby):
-        lm = dmap.local_maps[int(i)]
-        logp[a] = lm.scan_log_likelihoods(
+        dmap.local_maps[int(i)].scan_log_likelihoods(
             levels,
             points_map,
             sigma_min_m=prm.sigma_min_m,
             min_outlier_ratio=prm.min_outlier_ratio,
+            out=logp[a],
         )
-    logp = np.maximum(logp, log_floor)
+    np.maximum(logp, log_floor, out=logp)
     good = logp >= np.log(prm.explained_density)
     remaining = np.ones(n, dtype=bool)
+    n_remaining = n
     available = np.ones(nearby.size, dtype=bool)
     chosen: list[tuple[int, int]] = []  # (row in nearby, column in levels)
-    while remaining.sum() >= prm.min_readings and available.any():
-        score = logp[:, :, remaining].sum(axis=2)  # (maps, levels)
+    while n_remaining >= prm.min_readings and len(chosen) < nearby.size:
+        # (maps, levels); all readings: logp itself, the same contiguous rows as the copy
+        score = (logp if n_remaining == n else logp[:, :, remaining]).sum(axis=2)
         score[~available] = -np.inf
-        a, b = np.unravel_index(int(np.argmax(score)), score.shape)
-        chosen.append((int(a), int(b)))
+        a, b = divmod(int(np.argmax(score)), len(levels))
+        chosen.append((a, b))
         available[a] = False
         remaining &= ~good[a, b]
+        n_remaining = int(np.count_nonzero(remaining))
     if chosen:
         rows = np.array([a for a, _ in chosen])
         cols = np.array([b for _, b in chosen])

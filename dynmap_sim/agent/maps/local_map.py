@@ -214,25 +214,29 @@ class LocalMap:
         """The levels' model tables stacked ``(sum of rays, 4)``, each level's first row and
         its number of rows (rays).
 
-        Cached per ``levels``: a level whose table changed since (λ1 after every online step)
-        has its rows copied into the stack in place, the others are kept."""
-        tabs = [
-            self.sub[level].model_table(self.max_range_m, sigma_min_m, min_outlier_ratio)
-            for level in levels
-        ]
-        key = tuple(levels)
+        Cached per ``levels`` and model floors: a level whose samples changed since
+        (:attr:`.SampleSets.version`; λ1 after every online step) has its table recomputed
+        and its rows copied into the stack in place, the others are kept."""
+        key = (tuple(levels), float(sigma_min_m), float(min_outlier_ratio))
         cached = self.__dict__.get("_stack")
-        if cached is None or cached[0] != key or len(cached[1]) != len(tabs):
+        if cached is None or cached[0] != key:
+            tabs = [
+                self.sub[level].model_table(self.max_range_m, sigma_min_m, min_outlier_ratio)
+                for level in levels
+            ]
             offsets = np.concatenate([[0], np.cumsum([len(t) for t in tabs])[:-1]])
             n_rays = np.array([len(t) for t in tabs], dtype=np.int64)
-            cached = (key, tabs, np.concatenate(tabs), offsets.astype(np.int64), n_rays)
+            versions = [self.sub[level].version for level in levels]
+            cached = (key, versions, np.concatenate(tabs), offsets.astype(np.int64), n_rays)
             self._stack = cached
             return cached[2], cached[3], cached[4]
-        held, stack, offsets, n_rays = cached[1:]
-        for b, tab in enumerate(tabs):
-            if held[b] is not tab:  # (a level's number of rays never changes)
+        versions, stack, offsets, n_rays = cached[1:]
+        for b, level in enumerate(levels):
+            sub = self.sub[level]
+            if sub.version != versions[b]:  # (a level's number of rays never changes)
+                tab = sub.model_table(self.max_range_m, sigma_min_m, min_outlier_ratio)
                 stack[offsets[b] : offsets[b] + len(tab)] = tab
-                held[b] = tab
+                versions[b] = sub.version
         return stack, offsets, n_rays
 
     def scan_log_likelihoods(
@@ -243,8 +247,10 @@ class LocalMap:
         sigma_min_m: float = 0.0,
         min_outlier_ratio: float = 0.0,
         backend: str = "auto",
+        out: FloatArray | None = None,
     ) -> FloatArray:
-        """:meth:`log_likelihoods` of map-frame points ``(N, 2)``, ``(len(levels), N)``.
+        """:meth:`log_likelihoods` of map-frame points ``(N, 2)``, ``(len(levels), N)``
+        (written into ``out`` when given).
 
         ``backend`` ``"numba"`` (extra ``fast``; ``"auto"``: when installed, for the floored
         model ``sigma_min_m > 0``) projects and scores in one compiled loop
@@ -258,25 +264,40 @@ class LocalMap:
         compiled = backend == "numba" or (backend == "auto" and numba_available())
         if compiled and sigma_min_m > 0.0 and levels:
             table, offsets, n_rays = self._model_stack(levels, sigma_min_m, min_outlier_ratio)
-            return scan_log_likelihoods(pts, self.centre, table, offsets, n_rays, self.max_range_m)
-        return self.log_likelihoods(
+            return scan_log_likelihoods(
+                pts, self.centre, table, offsets, n_rays, self.max_range_m, out
+            )
+        ll = self.log_likelihoods(
             levels,
             self.polar(pts),
             sigma_min_m=sigma_min_m,
             min_outlier_ratio=min_outlier_ratio,
         )
+        if out is None:
+            return ll
+        out[...] = ll
+        return out
 
     def __getstate__(self) -> dict:
         state = self.__dict__.copy()
-        state.pop("_stack", None)  # caches: copies of the model tables, ray directions
-        state.pop("_dirs", None)
+        # caches: copies of the model tables, ray directions, points
+        for name in ("_stack", "_dirs", "_points"):
+            state.pop(name, None)
         return state
 
     def points(self, level: int, sigma_max_m: float = 0.05) -> FloatArray:
-        """Map-frame points of the medians of sub-map ``level`` with ``σ ≤ sigma_max_m`` (§4.3)."""
+        """Map-frame points of the medians of sub-map ``level`` with ``σ ≤ sigma_max_m`` (§4.3);
+        read-only, cached until the sub-map learns."""
         est = self.sub[level].estimates()
+        cache = self.__dict__.setdefault("_points", {})
+        held = cache.get((level, sigma_max_m))
+        if held is not None and held[0] is est:  # the same estimates object: unchanged samples
+            return held[1]
         ok = (est.count > 0) & (est.sigma_m <= sigma_max_m)
-        return self.centre + est.rho_m[ok, None] * self.ray_directions(level)[ok]
+        pts = self.centre + est.rho_m[ok, None] * self.ray_directions(level)[ok]
+        pts.flags.writeable = False
+        cache[(level, sigma_max_m)] = (est, pts)
+        return pts
 
     def median_ranges_mm(self, level: int, sigma_max_m: float = 0.10) -> NDArray[np.uint16]:
         """Median range [mm] of every ray of sub-map ``level``, 0 where the ray has no

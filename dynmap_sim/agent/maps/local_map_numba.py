@@ -128,10 +128,13 @@ def scan_log_likelihoods(
     offsets: IntArray,
     n_rays: IntArray,
     max_range_m: float,
+    out: FloatArray | None = None,
 ) -> FloatArray:
-    """``(len(offsets), N)`` log-likelihoods of map-frame points (compiled; needs numba)."""
+    """``(len(offsets), N)`` log-likelihoods of map-frame points (compiled; needs numba),
+    written into ``out`` (C-contiguous) when given."""
     require_numba("backend")
-    out = np.empty((len(offsets), len(points_map)))
+    if out is None:
+        out = np.empty((len(offsets), len(points_map)))
     _scan_loglik(
         np.ascontiguousarray(points_map[:, 0]),
         np.ascontiguousarray(points_map[:, 1]),

@@ -86,6 +86,19 @@ class SampleSets:
         self.initialized = np.zeros(self.n_rays, dtype=bool)
         self._est: RayEstimates | None = None
         self._table: tuple[tuple[float, float, float], NDArray[np.float64]] | None = None
+        self._version = 0
+
+    @property
+    def version(self) -> int:
+        """Number of :meth:`update` steps so far (0 for sets pickled before it was counted):
+        a cache of anything derived from the samples is valid while it does not change."""
+        return self.__dict__.get("_version", 0)
+
+    def _changed(self) -> None:
+        """Drop the caches of the samples' statistics and count the change."""
+        self._est = None
+        self._table = None
+        self._version = self.version + 1
 
     @property
     def fills_first_step(self) -> bool:
@@ -208,8 +221,7 @@ class SampleSets:
         keep = rank < n_new[g]
         self.samples_mm[uniq[g[keep]], slot[keep]] = v_s[keep]
         self.count[uniq] = (cnt + n_add).astype(np.uint16)
-        self._est = None
-        self._table = None
+        self._changed()
 
     def _update_kernels(
         self,
@@ -222,7 +234,8 @@ class SampleSets:
     ) -> None:
         """:meth:`update` after its sort, with :func:`.sample_set_numba.update_kernels`: the
         same random draws in the same order (``u·n`` rounding, then the keys of the slots
-        to replace) and the same ``argsort`` of the keys."""
+        to replace), the keys put in the order of the numpy code's ``argsort`` by the
+        kernel."""
         ray_runs, plan_update, write_update = kernels
         first = np.empty(r_s.size, dtype=np.int64)
         first = first[: ray_runs(r_s, first)]
@@ -235,15 +248,9 @@ class SampleSets:
             r_s, first, self.count, self.initialized, self.n_samples,
             self.fills_first_step, fill, initialize, n_rule, n_new, n_add, rep_cnt,
         )  # fmt: skip
-        if n_rep:
-            keys = rng.random((n_rep, self.n_samples))
-            keys[np.arange(self.n_samples)[None, :] >= rep_cnt[:n_rep, None]] = 2.0
-            perm = np.argsort(keys, axis=1)
-        else:
-            perm = np.zeros((0, self.n_samples), dtype=np.int64)
-        write_update(r_s, v_s, first, n_new, n_add, perm, self.samples_mm, self.count)
-        self._est = None
-        self._table = None
+        keys = rng.random((n_rep, self.n_samples)) if n_rep else np.empty((0, self.n_samples))
+        write_update(r_s, v_s, first, n_new, n_add, keys, self.samples_mm, self.count)
+        self._changed()
 
     def update_m(
         self,

@@ -9,9 +9,10 @@ are identical. :func:`numba_available` says whether it can be used.
 The bookkeeping of one §3.1 update step (:meth:`.sample_set.SampleSets.update`: the runs of
 equal rays in the randomly ordered measurements, how many each ray takes, adds and replaces,
 which slots they go to) is here too, in three kernels between which the numpy code draws its
-random numbers and sorts (:func:`ray_runs`, :func:`plan_update`, :func:`write_update`): the
-draws keep their order and count, the sorts are numpy's, the integer arithmetic is the numpy
-code's, so the samples are identical.
+random numbers and sorts the measurements (:func:`ray_runs`, :func:`plan_update`,
+:func:`write_update`): the draws keep their order and count, the sort is numpy's, the slots
+to replace are those of numpy's ``argsort`` of their random keys, the integer arithmetic is
+the numpy code's, so the samples are identical.
 """
 
 from __future__ import annotations
@@ -145,14 +146,19 @@ def _write_update_py(
     first: NDArray[np.int64],
     n_new: NDArray[np.int64],
     n_add: NDArray[np.int64],
-    perm: NDArray[np.int64],
+    keys: NDArray[np.float64],
     samples_mm: NDArray[np.uint16],
     count: NDArray[np.uint16],
 ) -> None:
     """Each run's first ``n_add`` measurements into the next free slots, the next
-    ``n_new - n_add`` into the old slots ``perm[row, :]`` (``row``: the run's order among
-    those that replace), and the new counts."""
+    ``rep = n_new - n_add`` into its old slots ``[0, count)`` of the ``rep`` smallest random
+    ``keys[row]`` in increasing order (``row``: the run's order among those that replace), and
+    the new counts. Those slots are the first ``rep`` of the numpy code's ``argsort`` of the
+    row with the keys of the free slots set to 2 (above every key): equal keys, which a
+    generator's doubles practically never give, go lower slot first, as ``argsort`` orders
+    the few keys of a short row."""
     n_groups = first.shape[0]
+    slots = np.empty(samples_mm.shape[1], dtype=np.int64)
     row = 0
     for g in range(n_groups):
         start = first[g]
@@ -163,8 +169,20 @@ def _write_update_py(
             samples_mm[ray, cnt + j] = v_s[start + j]
         rep = n_new[g] - a
         if rep > 0:
+            n_kept = 0  # slots[:n_kept]: the smallest keys so far, increasing
+            for q in range(cnt):
+                kq = keys[row, q]
+                if n_kept == rep and kq >= keys[row, slots[n_kept - 1]]:
+                    continue
+                p = n_kept if n_kept < rep else rep - 1
+                while p > 0 and keys[row, slots[p - 1]] > kq:
+                    slots[p] = slots[p - 1]
+                    p -= 1
+                slots[p] = q
+                if n_kept < rep:
+                    n_kept += 1
             for j in range(rep):
-                samples_mm[ray, perm[row, j]] = v_s[start + a + j]
+                samples_mm[ray, slots[j]] = v_s[start + a + j]
             row += 1
         count[ray] = np.uint16(cnt + a)
 
