@@ -754,7 +754,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument(
         "--workers",
         type=_positive,
-        help="localizer worker processes (1: sequential in-process; default: up to 2)",
+        help="localizer worker processes (1: sequential in-process; default: up to 2, one per "
+        "core, or one per localizer when they are one more than that)",
     )
     s.add_argument(
         "--keep-scans",

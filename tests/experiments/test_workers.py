@@ -216,6 +216,15 @@ def test_default_workers(tmp_path, monkeypatch):
     assert default_workers(5, robot_time_s=120.0) == 1  # a CI-sized experiment: in-process
     assert default_workers(5, robot_time_s=121.0) == 2
     assert default_workers(2, robot_time_s=1e4) == 2
+    # one more localizer than the count: each its own worker (no rebalancing stalls)
+    monkeypatch.setattr("os.cpu_count", lambda: 2)
+    assert default_workers(4, robot_time_s=1e4, n_steered=1) == 3  # the H&W replica
+    assert default_workers(3, robot_time_s=1e4) == 3
+    assert default_workers(4, robot_time_s=1e4) == 2  # the main job: two more, shared
+    assert default_workers(6, robot_time_s=1e4) == 2  # the lab's six
+    monkeypatch.setattr("os.cpu_count", lambda: 1)
+    assert default_workers(3, robot_time_s=1e4) == 1
+    assert default_workers(3, robot_time_s=1e4, n_steered=1) == 1  # one worker holds both
     # the runner's automatic choice: 3 runs of at most 5 s each
     scn = scenario(tmp_path)
     runner = ExperimentRunner(scn, tmp_path / "o", scn.days, 0, False, env=FakeEnv(), workers=None)
