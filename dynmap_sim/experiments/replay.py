@@ -256,6 +256,7 @@ def replay_log(
     date, start_s = _log_date_and_start(data)
     ident = hashlib.sha256(Path(log).read_bytes())
     ident.update(json.dumps([localizers, bool(map_from_log_poses)]).encode())
+    ident.update(json.dumps([data.odometry_source, data.reversals]).encode())
     if ref is not None:
         ident.update(Path(ref.path).read_bytes())
         ident.update(json.dumps([ref.offset_s, ref.tolerance_s]).encode())
@@ -282,6 +283,9 @@ def replay_log(
             reference_matched=ref.n_matched if ref is not None else 0,
             reference_summary=ref.describe() if ref is not None else None,
             map_from_log_poses=bool(map_from_log_poses),
+            odometry_source=data.odometry_source,
+            odometry_reversals=data.reversals,
+            odometry_reversals_found=data.n_reversals,
             complete=False,
         )
         db.set_localizers(

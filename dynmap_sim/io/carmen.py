@@ -128,7 +128,9 @@ class CarmenLog:
     ``ranges_m`` ``(T, n_beams)`` float32 (REP-117); ``stamps_s`` ``(T,)``; ``odometry``
     ``(T, 3)`` in the odom frame; ``reference`` ``(T, 3)`` robot poses from the laser lines
     (corrected in "-corrected" logs) or ``None``; ``message`` the laser line type used;
-    ``odometry_source`` ``"odom-lines"`` or ``"laser-lines"`` (:func:`choose_odometry`).
+    ``odometry_source`` ``"odom-lines"`` or ``"laser-lines"`` (:func:`choose_odometry`);
+    ``n_reversals`` the ``ODOM`` increments found moving forward while the base reverses and
+    ``reversals`` what was done with them (:data:`REVERSAL_MODES`; module docstring).
     """
 
     path: Path
@@ -139,6 +141,8 @@ class CarmenLog:
     reference: FloatArray | None
     message: str
     odometry_source: str
+    n_reversals: int = 0
+    reversals: str = "repair"
 
     def __len__(self) -> int:
         return len(self.stamps_s)
@@ -525,4 +529,6 @@ def read_carmen(
     reference = None
     if lp is not None:
         reference = se2.compose(lp, np.broadcast_to(se2.inverse(np.array(mount)), lp.shape))
-    return CarmenLog(p, laser, stamps, ranges, odo, reference, kind, source)
+    return CarmenLog(
+        p, laser, stamps, ranges, odo, reference, kind, source, int(flagged.sum()), reversals
+    )

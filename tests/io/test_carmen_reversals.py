@@ -60,6 +60,7 @@ def test_unsigned_reversing_is_found_and_repaired(tmp_path):
     assert log.odometry_source == "odom-lines"
     assert len(caught) == 1 and "15 of 55 ODOM increments" in caught[0]
     assert "negated" in caught[0] and str(path) in caught[0]
+    assert (log.n_reversals, log.reversals) == (15, "repair")
     want = interpolate_poses(t, truth, scan_t)
     np.testing.assert_allclose(log.odometry, want, rtol=0, atol=2e-5)
     # the robot backed up 0.45 m: the repaired odometry ends 0.9 m short of the logged one
@@ -72,6 +73,7 @@ def test_keep_takes_the_poses_as_logged_and_still_warns(tmp_path):
     path, scan_t = _write(tmp_path / "unsigned.log", t, logged, tv)
     log, caught = _read(path, reversals="keep")
     assert len(caught) == 1 and "kept as logged" in caught[0]
+    assert (log.n_reversals, log.reversals) == (15, "keep")
     np.testing.assert_allclose(log.odometry, interpolate_poses(t, logged, scan_t), atol=2e-5)
 
 
@@ -79,7 +81,7 @@ def test_a_log_that_reverses_with_its_sign_is_untouched(tmp_path):
     t, truth, tv = _drive(signed=True)
     path, scan_t = _write(tmp_path / "signed.log", t, truth, tv)
     log, caught = _read(path)
-    assert caught == []
+    assert caught == [] and log.n_reversals == 0
     np.testing.assert_allclose(log.odometry, interpolate_poses(t, truth, scan_t), atol=2e-5)
 
 
