@@ -45,6 +45,11 @@ class SlamEval:
     n_loop_closures: int
     front_end_s: float
     back_end_s: float
+    #: the log's odometry source and its unsigned reversing
+    #: (:class:`~dynmap_sim.io.carmen.CarmenLog`)
+    odometry_source: str = "odom-lines"
+    n_reversals: int = 0
+    reversals: str = "repair"
 
     @property
     def scans_per_s(self) -> float:
@@ -69,6 +74,9 @@ class SlamEval:
             "front_end_s": self.front_end_s,
             "back_end_s": self.back_end_s,
             "scans_per_s": self.scans_per_s,
+            "odometry_source": self.odometry_source,
+            "odometry_reversals": self.reversals,
+            "odometry_reversals_found": self.n_reversals,
         }
 
     def table(self) -> list[str]:
@@ -157,4 +165,7 @@ def slam_eval(
         n_loop_closures=static.n_loop_closures,
         front_end_s=t1 - t0,
         back_end_s=t2 - t1,
+        odometry_source=data.odometry_source,
+        n_reversals=data.n_reversals,
+        reversals=data.reversals,
     )

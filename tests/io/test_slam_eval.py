@@ -90,6 +90,7 @@ def test_slam_eval_beats_odometry_and_writes_tum_and_json(tmp_path, capsys):
     ):
         assert key in d
     assert d["n_relations"] == n_rel
+    assert (d["odometry_reversals"], d["odometry_reversals_found"]) == ("repair", 0)
     assert d["translation_mean_m"] == pytest.approx(res.loop_closed.translation_mean_m, abs=1e-9)
     # refuses to overwrite without --force
     assert main(["slam-eval", str(log), "--relations", str(rel), "--json", str(out), "-q"]) != 0
