@@ -46,7 +46,7 @@ is not raw wheel odometry). A log with only one of the two takes that one.
 Reversing (``read_carmen(reversals=...)``, ``--odometry-reversals``). An ``ODOM`` line also
 carries the base's signed translational velocity ``tv``. Where the lines' poses move
 *forward* along the heading while ``tv`` says the robot reverses, the poses were integrated
-without the sign (FR079 raw, written by ``bag2carmen``: 329 of its 8,951 increments, ~50 s of
+without the sign (FR079 raw, written by ``bag2carmen``: 400 of its 8,950 increments, ~50 s of
 reversing at 0.5 m/s; no increment of its poses moves backward, and the scans and the
 corrected log agree with ``tv``: the robot backs away). ``"repair"`` (the default) negates
 the translation of those increments in the robot frame and integrates the poses again
