@@ -35,11 +35,12 @@ def _compose_one(a: FloatArray, b: FloatArray) -> FloatArray:
     a0, a1, a2 = a
     b0, b1, b2 = b
     c, s = np.cos(a2), np.sin(a2)
-    return np.array([a0 + c * b0 - s * b1, a1 + s * b0 + c * b1, _wrap_one(a2 + b2)])
+    return np.array([a0 + c * b0 - s * b1, a1 + s * b0 + c * b1, wrap_one(a2 + b2)])
 
 
-def _wrap_one(theta_rad: np.float64) -> np.float64:
-    """:func:`wrap_angle` of one numpy float64 scalar (the same operations)."""
+def wrap_one(theta_rad: float) -> float:
+    """:func:`wrap_angle` of one angle, a float or a numpy float64 scalar (the same
+    operations; Python's float ``%`` is numpy's, fmod with the divisor's sign)."""
     return (theta_rad + np.pi) % (2.0 * np.pi) - np.pi
 
 
@@ -49,11 +50,28 @@ def inverse(a: ArrayLike) -> FloatArray:
     if a.shape == (3,):
         a0, a1, a2 = a  # one pose on numpy scalars, as _compose_one
         c, s = np.cos(a2), np.sin(a2)
-        return np.array([-c * a0 - s * a1, s * a0 - c * a1, _wrap_one(-a2)])
+        return np.array([-c * a0 - s * a1, s * a0 - c * a1, wrap_one(-a2)])
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = -c * a[..., 0] - s * a[..., 1]
     y = s * a[..., 0] - c * a[..., 1]
     return np.stack([x, y, wrap_angle(-a[..., 2])], axis=-1)
+
+
+def apply_increment(a: FloatArray, b: FloatArray, c: FloatArray) -> FloatArray:
+    """``compose(a, between(b, c))`` of single poses (the odometry increment from ``b`` to
+    ``c`` applied to ``a``): :func:`inverse`'s and :func:`compose`'s operations in their
+    order on Python floats (the same IEEE results; ``cos``, ``sin`` still numpy's), without
+    the array machinery: a few microseconds instead of some twenty, for localizers that do
+    it every scan."""
+    a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
+    b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
+    c0, c1, c2 = float(c[0]), float(c[1]), float(c[2])
+    cb, sb = float(np.cos(b2)), float(np.sin(b2))  # inverse(b)
+    i0, i1, i2 = -cb * b0 - sb * b1, sb * b0 - cb * b1, wrap_one(-b2)
+    ci, si = float(np.cos(i2)), float(np.sin(i2))  # compose(inverse(b), c)
+    d0, d1, d2 = i0 + ci * c0 - si * c1, i1 + si * c0 + ci * c1, wrap_one(i2 + c2)
+    ca, sa = float(np.cos(a2)), float(np.sin(a2))  # compose(a, ...)
+    return np.array([a0 + ca * d0 - sa * d1, a1 + sa * d0 + ca * d1, wrap_one(a2 + d2)])
 
 
 def between(a: ArrayLike, b: ArrayLike) -> FloatArray:

@@ -53,7 +53,6 @@ the short-term memory λ1 learning online.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -67,6 +66,7 @@ from dynmap_sim.agent.mapping.scan_matcher import (
     MatchResult,
     PointMap,
     match_scan,
+    position_information,
     worst_position_sigma,
 )
 from dynmap_sim.agent.mapping.scan_points import (
@@ -100,14 +100,14 @@ def lambda_min(cov: FloatArray) -> float:
     adding ``10⁻¹² I`` does), so the same bits in fewer numpy calls.
     """
     (c00, c01, c02), (c10, c11, c12), (c20, c21, c22) = np.asarray(cov, dtype=np.float64).tolist()
+    # (IEEE addition commutes: c01 + c10 is c10 + c01, so each pair is one value)
     m01, m02, m12 = 0.5 * (c01 + c10) + 0.0, 0.5 * (c02 + c20) + 0.0, 0.5 * (c12 + c21) + 0.0
-    m10, m20, m21 = 0.5 * (c10 + c01) + 0.0, 0.5 * (c20 + c02) + 0.0, 0.5 * (c21 + c12) + 0.0
     info = np.linalg.inv(
         np.array(
             [
                 [0.5 * (c00 + c00) + 1e-12, m01, m02],
-                [m10, 0.5 * (c11 + c11) + 1e-12, m12],
-                [m20, m21, 0.5 * (c22 + c22) + 1e-12],
+                [m01, 0.5 * (c11 + c11) + 1e-12, m12],
+                [m02, m12, 0.5 * (c22 + c22) + 1e-12],
             ]
         )
     )
@@ -134,11 +134,7 @@ def remap_degenerate(
     """``pose`` with its move from ``pred`` dropped along each position direction in which the
     scan term ``scan_info`` (3x3, x y θ; the heading marginalized out) leaves a standard
     deviation over ``sigma_max_m`` [m] (Zhang, Kaess & Singh 2016, solution remapping)."""
-    h = 0.5 * (scan_info + scan_info.T)
-    hxy = h[:2, :2]
-    if h[2, 2] > 0.0:
-        hxy = hxy - np.outer(h[:2, 2], h[:2, 2]) / h[2, 2]
-    lam, vec = np.linalg.eigh(hxy)
+    lam, vec = np.linalg.eigh(position_information(scan_info))
     move = pose[:2] - pred[:2]
     for k in range(2):
         if not lam[k] > 1.0 / sigma_max_m**2:
@@ -538,8 +534,7 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
 
         def within(res: MatchResult) -> bool:
             e = res.pose - pred
-            # se2.wrap_angle in float arithmetic (the same operations: fmod-based remainder)
-            e[2] = (float(e[2]) + math.pi) % (2.0 * math.pi) - math.pi
+            e[2] = se2.wrap_one(float(e[2]))  # float arithmetic: fewer numpy calls
             return (
                 res.n_matched >= c.min_matched
                 and np.all(np.isfinite(res.pose))

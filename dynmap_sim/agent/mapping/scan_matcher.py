@@ -375,14 +375,20 @@ def match_scan(
     )
 
 
-def worst_position_sigma(scan_info: FloatArray) -> float:
-    """Standard deviation [m] of the position along its worst-constrained direction under a
-    scan match's information ``scan_info`` (3x3, x y θ) alone, the heading marginalized out
-    (Schur complement): large along a corridor whose walls are blank (the degeneracy measure
-    of Zhang, Kaess & Singh 2016, as a length). ``inf`` if a direction is unconstrained."""
+def position_information(scan_info: FloatArray) -> FloatArray:
+    """The 2x2 information of the position under a scan match's information ``scan_info``
+    (3x3, x y θ, symmetrized), the heading marginalized out (Schur complement)."""
     h = 0.5 * (scan_info + scan_info.T)
     htt = h[:2, :2]
     if h[2, 2] > 0.0:
         htt = htt - np.outer(h[:2, 2], h[:2, 2]) / h[2, 2]
-    lam = float(np.linalg.eigvalsh(htt)[0])
+    return htt
+
+
+def worst_position_sigma(scan_info: FloatArray) -> float:
+    """Standard deviation [m] of the position along its worst-constrained direction under a
+    scan match's information ``scan_info`` alone (:func:`position_information`): large along
+    a corridor whose walls are blank (the degeneracy measure of Zhang, Kaess & Singh 2016, as
+    a length). ``inf`` if a direction is unconstrained."""
+    lam = float(np.linalg.eigvalsh(position_information(scan_info))[0])
     return float(1.0 / np.sqrt(lam)) if lam > 0.0 else float("inf")

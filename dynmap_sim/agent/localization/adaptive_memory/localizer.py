@@ -298,28 +298,6 @@ class AdaptiveMemoryConfig:
         )  # fmt: skip
 
 
-def _wrap(theta: float) -> float:
-    """:func:`dynmap_sim.se2.wrap_angle` of one float (the same operations: Python's float
-    ``%`` is numpy's, fmod with the divisor's sign)."""
-    return (theta + np.pi) % (2.0 * np.pi) - np.pi
-
-
-def _compose_between(a: FloatArray, b: FloatArray, c: FloatArray) -> FloatArray:
-    """``se2.compose(a, se2.between(b, c))`` of single poses (the odometry increment from
-    ``b`` to ``c`` applied to ``a``): :mod:`dynmap_sim.se2`'s operations in its order, on
-    floats (the same IEEE results; ``cos``, ``sin`` still numpy's) without its array
-    machinery: a few microseconds instead of some twenty, twice a scan."""
-    a0, a1, a2 = float(a[0]), float(a[1]), float(a[2])
-    b0, b1, b2 = float(b[0]), float(b[1]), float(b[2])
-    c0, c1, c2 = float(c[0]), float(c[1]), float(c[2])
-    cb, sb = float(np.cos(b2)), float(np.sin(b2))  # se2.inverse(b)
-    i0, i1, i2 = -cb * b0 - sb * b1, sb * b0 - cb * b1, _wrap(-b2)
-    ci, si = float(np.cos(i2)), float(np.sin(i2))  # se2.compose(inverse(b), c)
-    d0, d1, d2 = i0 + ci * c0 - si * c1, i1 + si * c0 + ci * c1, _wrap(i2 + c2)
-    ca, sa = float(np.cos(a2)), float(np.sin(a2))  # se2.compose(a, ...)
-    return np.array([a0 + ca * d0 - sa * d1, a1 + sa * d0 + ca * d1, _wrap(a2 + d2)])
-
-
 class StaticPointFilter(AMCLFilter):
     """The AMCL core fed only the beams of ``point_mask`` (the static points, §6.1): up to
     ``max_beams`` of them, evenly spread over the masked beams. Between :meth:`hold_beams`
@@ -516,7 +494,7 @@ class AdaptiveMemoryLocalizer(Localizer):
         pred = (
             self._est
             if self._odom_prev is None
-            else _compose_between(self._est, self._odom_prev, pose_odom)
+            else se2.apply_increment(self._est, self._odom_prev, pose_odom)
         )
         self._odom_prev = pose_odom.copy()
         ranges = np.asarray(scan.ranges_m, dtype=np.float64)
@@ -560,7 +538,7 @@ class AdaptiveMemoryLocalizer(Localizer):
         f.hold_beams(ranges)  # this scan's beams, picked once (released below)
         self._mcl_step(pose_odom, ranges)
         self._n_scans += 1
-        mean = _compose_between(self._est_at_update, self._odom_at_update, pose_odom)
+        mean = se2.apply_increment(self._est_at_update, self._odom_at_update, pose_odom)
         self._est = mean
         cov, lambda_min = self._reported_cov()
         if n_take and c.ltm_update_pose == "estimate":
