@@ -190,7 +190,9 @@ def bench_memory() -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--seed", type=int, default=0, help="seed of the synthetic stream (scans and odometry)"
+    )
     ap.add_argument("--fingerprint", action="store_true",
                     help="print the SHA-256 of the outputs instead of timing them")  # fmt: skip
     args = ap.parse_args()

@@ -80,8 +80,8 @@ def best_of(fn, repeats: int) -> float:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scans", type=int, default=200)
-    ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--scans", type=int, default=200, help="scans along the drive")
+    ap.add_argument("--repeats", type=int, default=7, help="each time is the best of this many")
     args = ap.parse_args()
     segs = walls()
     world = np.concatenate([segs, clutter()])

@@ -66,7 +66,7 @@ def reference_weights(f: AMCLFilter, particles: np.ndarray, ranges: np.ndarray) 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeats", type=int, default=30)
+    ap.add_argument("--repeats", type=int, default=30, help="each time is the best of this many")
     args = ap.parse_args()
     grid = room_grid()
     rng = np.random.default_rng(0)

@@ -174,10 +174,14 @@ def bench_scoring(repeat: int, n_scans: int = 1350, n_beams: int = 683) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scenario", default=str(ROOT / "worlds/scenarios/ci-apartment.toml"))
-    ap.add_argument("--days", default="1-7")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument(
+        "--scenario",
+        default=str(ROOT / "worlds/scenarios/ci-apartment.toml"),
+        help="scenario TOML file both loops run",
+    )
+    ap.add_argument("--days", default="1-7", help="day range, e.g. 1-7")
+    ap.add_argument("--seed", type=int, default=0, help="world and noise seed")
+    ap.add_argument("--repeat", type=int, default=3, help="runs of each loop (the best counts)")
     ap.add_argument(
         "--workers", type=int, default=2, help="worker processes of the parallel runner (0: skip)"
     )

@@ -145,7 +145,12 @@ def main() -> None:
     ap.add_argument(
         "--repeats", type=int, default=3, help="each figure is the best of this many passes"
     )
-    ap.add_argument("--json", type=Path, default=Path("benchmarks/results/bench_sim.json"))
+    ap.add_argument(
+        "--json",
+        type=Path,
+        default=Path("benchmarks/results/bench_sim.json"),
+        help="where the figures are written as JSON",
+    )
     args = ap.parse_args()
 
     probe = DynMapEnv(world="lab")

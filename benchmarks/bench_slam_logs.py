@@ -44,7 +44,7 @@ DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "slam-b
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="folder of the logs")
-    ap.add_argument("--logs", nargs="+", default=list(LOGS), choices=list(LOGS))
+    ap.add_argument("--logs", nargs="+", default=list(LOGS), choices=list(LOGS), help="logs to map")
     ap.add_argument(
         "--mapper-params",
         type=json.loads,

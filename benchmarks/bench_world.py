@@ -137,7 +137,12 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=2000, help="world steps per measurement")
     ap.add_argument("--repeats", type=int, default=3, help="jumps to each run (best kept)")
-    ap.add_argument("--json", type=Path, default=Path("benchmarks/results/bench_world.json"))
+    ap.add_argument(
+        "--json",
+        type=Path,
+        default=Path("benchmarks/results/bench_world.json"),
+        help="where the figures are written as JSON",
+    )
     args = ap.parse_args()
     rng = np.random.default_rng(0)
     resets = [bench_reset(n, rng, args.repeats) for n in ("lab", "apartment")]

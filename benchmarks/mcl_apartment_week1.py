@@ -7,7 +7,7 @@ localizer, the mean and max position error over the week, the lost fraction (> 0
 per-day means, and checks the baseline's bar (tuned: mean <= 0.05 m, max <= 0.20 m, never
 lost).
 
-    python benchmarks/mcl_apartment_week1.py --out /tmp/mcl-week1 [--days 1-7] [--seed 0]
+    python benchmarks/mcl_apartment_week1.py --out /tmp/mcl-week1 [--days 1-7] [--force]
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dynmap_sim.errors import InputError
 from dynmap_sim.experiments.runner import run_experiment
 from dynmap_sim.experiments.scenario import parse_scenario
 
@@ -47,16 +48,20 @@ def scenario(days: tuple[int, int], seed: int, people: bool) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path, required=True)
-    ap.add_argument("--days", default="1-7")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--no-people", action="store_true")
+    ap.add_argument("--out", type=Path, required=True, help="results folder")
+    ap.add_argument("--days", default="1-7", help="day range, e.g. 1-7")
+    ap.add_argument("--seed", type=int, default=0, help="world and noise seed")
+    ap.add_argument("--no-people", action="store_true", help="the world without its people")
+    ap.add_argument("--force", action="store_true", help="replace earlier results in --out")
     args = ap.parse_args()
     a, _, b = args.days.partition("-")
     days = (int(a), int(b or a))
     sc = parse_scenario(scenario(days, args.seed, not args.no_people))
     t0 = time.perf_counter()
-    out = run_experiment(sc, args.out, seed=args.seed, progress=False, overwrite=True)
+    try:
+        out = run_experiment(sc, args.out, seed=args.seed, progress=False, overwrite=args.force)
+    except InputError as exc:  # e.g. earlier results in --out without --force
+        raise SystemExit(f"error: {exc}") from None
     print(f"ran days {days[0]}-{days[1]} in {time.perf_counter() - t0:.0f} s -> {out}")
     con = sqlite3.connect(Path(out) / "results.db")
     labels = [r[0] for r in con.execute("SELECT label FROM localizers ORDER BY idx")]
