@@ -56,6 +56,13 @@ from dynmap_sim.types import Diagnostic, Odometry, PoseEstimate, Prior, Scan
 #: A rebalanced assignment must shorten the slowest worker's busy time by this fraction.
 REBALANCE_GAIN = 0.15
 
+#: A worker of a pool with one localizer per worker whose last run took less than this
+#: share of the busiest worker's busy time gets :data:`LIGHT_WORKER_NICE` (once; see
+#: :meth:`LocalizerPool._yield_light_workers`).
+LIGHT_WORKER_SHARE = 0.5
+#: The niceness given to such a light worker (Unix ``nice``: 0 normal, 19 lowest).
+LIGHT_WORKER_NICE = 10
+
 #: Native thread pools in a worker: one thread each, unless the environment says otherwise.
 #: The worker processes are the parallelism; OpenBLAS's own threads in every worker would
 #: oversubscribe the cores (measured: the lab localizers ran ~1.4x slower that way).
@@ -611,6 +618,7 @@ class _Worker:
     proc: Any  # multiprocessing.Process of the spawn context
     conn: Connection
     locs: list[int]
+    niced: bool = False  # given LIGHT_WORKER_NICE (never undone: only root may)
 
 
 class LocalizerPool:
@@ -796,7 +804,36 @@ class LocalizerPool:
         for k, o in out.items():
             self.states[k] = o.state
             self.busy_s[k] = o.busy_s
+        self._yield_light_workers()
         return [out[k] for k in range(len(self.labels))]
+
+    def _yield_light_workers(self) -> None:
+        """Lower the CPU priority of workers that take less than :data:`LIGHT_WORKER_SHARE`
+        of the busiest one's time (to :data:`LIGHT_WORKER_NICE`), when every worker holds one
+        localizer (no rebalance can then give a light worker a heavy localizer).
+
+        Why: with more processes than cores the scheduler shares the cores equally, so the
+        heaviest localizer (the experiment's critical path) falls behind while light ones
+        finish early and leave a core idle at the end. Niced, the light ones take what the
+        simulation and the heavy worker leave (the simulation waits for runs in flight, the
+        worker for scans), and the pool's depth bounds how far they lag. Measured on the H&W
+        replica (main process, three workers, two cores): see ``default_workers``. Only the
+        schedule changes, never a number; ignored where the platform has no ``setpriority``
+        or refuses it."""
+        setpriority = getattr(os, "setpriority", None)
+        if setpriority is None or len(self.workers) < 2:
+            return
+        if any(len(w.locs) != 1 for w in self.workers):
+            return
+        load = [self.busy_s[w.locs[0]] for w in self.workers]
+        top = max(load)
+        for w, busy in zip(self.workers, load, strict=True):
+            if not w.niced and top > 0 and busy < LIGHT_WORKER_SHARE * top:
+                try:
+                    setpriority(os.PRIO_PROCESS, w.proc.pid, LIGHT_WORKER_NICE)
+                except OSError:
+                    return
+                w.niced = True
 
     def close(self) -> None:
         """Stop the workers (politely, then by force); safe to call more than once."""

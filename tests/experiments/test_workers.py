@@ -209,6 +209,31 @@ def test_three_runs_in_flight_and_a_rebalance_between_keep_the_numbers(tmp_path)
     assert not mp.active_children()
 
 
+@pytest.mark.skipif(not hasattr(os, "setpriority"), reason="no os.setpriority here")
+def test_light_workers_yield_the_cpu_once_and_only_with_one_localizer_each(tmp_path):
+    """A worker whose localizer took under LIGHT_WORKER_SHARE of the busiest one's time gets
+    LIGHT_WORKER_NICE; the busiest keeps its priority; workers sharing localizers never."""
+    from dynmap_sim.experiments.bench import LIGHT_WORKER_NICE, LocalizerPool
+
+    scn = scenario(tmp_path)
+    fresh = ExperimentRunner(scn, tmp_path / "o", scn.days, 0, resume=False, env=FakeEnv())
+    states = [pickle.dumps(loc) for loc in fresh.localizers()]
+    base = os.getpriority(os.PRIO_PROCESS, 0)
+    for n_workers, expect in ((3, [LIGHT_WORKER_NICE, base, base]), (2, [base, base])):
+        pool = LocalizerPool(scn.labels, states, n_workers)
+        try:
+            pool.busy_s = [1.0, 6.0, 3.5]  # rec light, pid over half the busiest
+            pool._yield_light_workers()
+            nice = [os.getpriority(os.PRIO_PROCESS, w.proc.pid) for w in pool.workers]
+            assert nice == [max(e, base) for e in expect]
+            pool.busy_s = [9.0, 6.0, 5.0]  # never undone (only root could)
+            pool._yield_light_workers()
+            assert [os.getpriority(os.PRIO_PROCESS, w.proc.pid) for w in pool.workers] == nice
+        finally:
+            pool.close()
+    assert not mp.active_children()
+
+
 def test_default_workers(tmp_path, monkeypatch):
     monkeypatch.setattr("os.cpu_count", lambda: 4)
     assert default_workers(1) == 1
