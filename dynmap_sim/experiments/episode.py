@@ -430,10 +430,19 @@ class EpisodeLoop:
         )
 
     def _person_clearance_m(self, pose: FloatArray, radius_m: float) -> float:
-        """True clearance [m] of the robot's disc to the nearest person's legs now."""
+        """True clearance [m] of the robot's disc to the nearest person's legs now: what
+        :func:`~dynmap_sim.metrics.clearances` gives for the legs alone (the same operations,
+        bit for bit), in a few numpy calls (it runs every step)."""
         obs = self.u.obstacles()
-        legs = obs.circles[obs.circle_class == BeamClass.PERSON]
-        return float(clearances(pose[:2], radius_m, np.zeros((0, 4)), legs)[0])
+        legs = obs.circles[obs.circle_class == _PERSON]
+        if not len(legs):
+            return math.inf
+        d = np.hypot(pose[0] - legs[:, 0], pose[1] - legs[:, 1]) - legs[:, 2]
+        return float(d.min()) - float(radius_m)
+
+
+#: the person beam class as a plain int (a faster comparison than with the enum member)
+_PERSON = int(BeamClass.PERSON)
 
 
 def _people(obstacles: Any) -> NDArray[np.bool_]:
