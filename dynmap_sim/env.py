@@ -3,7 +3,8 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+import operator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -614,9 +615,10 @@ class InfoRows:
         """The batched infos (fresh arrays), as Gymnasium's ``VectorEnv._add_info`` batches
         the sub-envs' info dicts: an array per key and a ``_key`` mask (all True)."""
         n = self.scan.shape[0]
-        time = np.full(n, fill_value=None, dtype=object)
+        time = np.empty(n, dtype=object)  # (None-filled, as np.full(n, None) but cheaper)
         for i, v in enumerate(self.time):
             time[i] = v
+        masks = iter(np.ones((11, n), dtype=np.bool_))  # the 11 masks: rows of one block
         truth = {
             "pose": self.pose.copy(),
             "beam_class": self.beam_class.copy(),
@@ -627,12 +629,12 @@ class InfoRows:
             "time": time,
         }
         out: dict[str, Any] = {
-            "truth": _with_masks(truth, n),
+            "truth": _with_masks(truth, masks),
             "collision": self.collision.copy(),
             "route_progress": self.route_progress.copy(),
             "stamp_s": self.stamp_s.copy(),
         }
-        return _with_masks(out, n)
+        return _with_masks(out, masks)
 
 
 class _LabelRows:
@@ -650,19 +652,19 @@ class _LabelRows:
         self.cls = np.concatenate([[0], *(cls for _, cls in tables)]).astype(np.int8)
 
     def holds(self, tables: list[tuple[NDArray[np.int32], NDArray[np.int8]]]) -> bool:
-        """True if these are the very tables laid out here (the same arrays, in order)."""
+        """True if these are the very tables laid out here (the same arrays, in order; a
+        lidar hands out the same tuple while its tables stay, so the tuples are compared)."""
         mine = self.tables
-        return len(mine) == len(tables) and all(
-            a[0] is b[0] and a[1] is b[1] for a, b in zip(mine, tables, strict=True)
-        )
+        return len(mine) == len(tables) and all(map(operator.is_, mine, tables))
 
 
-def _with_masks(d: dict[str, Any], n: int) -> dict[str, Any]:
-    """``d`` with a ``_key`` mask of ``n`` True after each key (``VectorEnv._add_info``)."""
+def _with_masks(d: dict[str, Any], masks: Iterator[NDArray[np.bool_]]) -> dict[str, Any]:
+    """``d`` with a ``_key`` mask after each key (``VectorEnv._add_info``): the next of
+    ``masks`` (all True, one per sub-env; rows of one array, each its own)."""
     out: dict[str, Any] = {}
     for key, value in d.items():
         out[key] = value
-        out[f"_{key}"] = np.ones(n, dtype=np.bool_)
+        out[f"_{key}"] = next(masks)
     return out
 
 

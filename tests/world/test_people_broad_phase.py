@@ -54,3 +54,36 @@ def test_empty_geometry_has_no_candidates_but_the_dummy():
     rows = grid.rows(np.array([0j, 5.0 + 5.0j]))
     assert rows.shape == (2, 1, 3)
     assert np.all(rows[..., 0] == 1e6 + 1e6j)
+
+
+def _inside_all_pairs(obs, pts):
+    """The crossing-parity test of every point against every segment (the reference)."""
+    s = obs.segments
+    py = pts[:, 1:2]
+    straddle = (s[:, 1] > py) != (s[:, 3] > py)
+    x_cross = s[:, 0] + (py - s[:, 1]) / obs._cross_den * obs._cross_dx
+    hits = straddle & (x_cross > pts[:, 0:1])
+    return np.logical_xor.reduceat(hits, obs.outline_starts, axis=1).any(axis=1)
+
+
+def test_inside_any_near_outlines_is_the_all_pairs_test():
+    # squares, a triangle and an open chain as outlines; points random, on corners, on edges
+    rng = np.random.default_rng(2)
+    outlines = []
+    for x, y, w in rng.uniform([0, 0, 0.3], [10, 10, 2.0], (12, 3)):
+        c = [(x, y), (x + w, y), (x + w, y + w), (x, y + w), (x, y)]
+        outlines.append([(*a, *b) for a, b in zip(c[:-1], c[1:], strict=True)])
+    outlines.append([(1.0, 1.0, 4.0, 2.0), (4.0, 2.0, 2.0, 5.0), (2.0, 5.0, 1.0, 1.0)])
+    outlines.append([(0.0, 3.0, 5.0, 3.0), (5.0, 3.0, 5.0, 8.0)])
+    segs = np.array([s for o in outlines for s in o])
+    starts = np.cumsum([0] + [len(o) for o in outlines[:-1]])
+    obs = Obstacles(segs, outline_starts=starts)
+    for k in range(50):
+        pts = rng.uniform(-1.0, 12.0, (int(rng.integers(1, 60)), 2))
+        j = rng.integers(len(segs), size=len(pts))
+        on = rng.random(len(pts)) < 0.3
+        pts[on] = segs[j[on], :2]  # on a corner
+        on = rng.random(len(pts)) < 0.2
+        t = rng.random(on.sum())[:, None]
+        pts[on] = segs[j[on], :2] + t * (segs[j[on], 2:] - segs[j[on], :2])  # on an edge
+        np.testing.assert_array_equal(obs.inside_any(pts), _inside_all_pairs(obs, pts), str(k))

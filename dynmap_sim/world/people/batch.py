@@ -117,7 +117,7 @@ class CrowdBatch:
         )
         lay = self._layout
         if lay is None or len(lay.ks) != len(ks) or any(map(_differ, lay.ks, ks)):
-            lay = self._layout = _build_layout(forces, ks)
+            lay = self._layout = _build_layout(forces, ks, lay)
         state = self._state
         if state is None or not state.holds(crowds):
             state = self._state = _State(crowds)
@@ -271,8 +271,13 @@ def _candidate_rows(lay: _Layout, z: NDArray[np.complex128]) -> NDArray[np.compl
     return lay.segrows.take(lay.cells.take(cell, axis=0), axis=0)  # (see SegmentGrid.rows)
 
 
-def _build_layout(forces: Sequence[SocialForce], ks: tuple[StepConstants, ...]) -> _Layout:
-    """The batch's constants from each crowd's :class:`StepConstants` and grid."""
+def _build_layout(
+    forces: Sequence[SocialForce], ks: tuple[StepConstants, ...], old: _Layout | None = None
+) -> _Layout:
+    """The batch's constants from each crowd's :class:`StepConstants` and grid. The joint
+    cell lists (megabytes for a few large worlds: a fresh array of them costs more in page
+    faults than the copy) are written into ``old``'s, the layout this one replaces, when
+    they have the same shape."""
     counts = np.array([k.n for k in ks], dtype=np.int64)
     starts = np.concatenate([[0], np.cumsum(counts)])
     n_rows = int(starts[-1])
@@ -288,7 +293,8 @@ def _build_layout(forces: Sequence[SocialForce], ks: tuple[StepConstants, ...]) 
     seg_at = cell_at = 0
     segrows, cell_first, origin, hi, ny = [], [], [], [], []
     # every grid's cell lists (into the joint segrows), padded with its far dummy
-    cells = np.empty((sum(g.cells.shape[0] for g in grids), kmax), dtype=np.int64)
+    shape = (sum(g.cells.shape[0] for g in grids), kmax)
+    cells = old.cells if old is not None and old.cells.shape == shape else np.empty(shape, np.int64)
     for k, g, r0 in zip(ks, grids, starts[:-1].tolist(), strict=True):
         p, kk = k.n, k.k_cols
         rs = slice(r0, r0 + p)

@@ -11,6 +11,9 @@ from dynmap_sim.world.people.broad_phase import SegmentGrid
 from dynmap_sim.world.people.params import REACH_M
 from dynmap_sim.world.polygons import FloatArray, point_segment_distance
 
+#: Below this many points :meth:`Obstacles.inside_any` tests each against every segment.
+_FEW_POINTS = 8
+
 
 class Obstacles:
     """Fixed ``segments`` ``(N, 4)`` of a run (closed outlines start at ``outline_starts``).
@@ -44,11 +47,33 @@ class Obstacles:
         y0, y1 = s[:, 1], s[:, 3]
         self._cross_den = np.where(y1 == y0, 1.0, y1 - y0)
         self._cross_dx = s[:, 2] - s[:, 0]
+        self._outline_box = self._outline_bounds()
+
+    def _outline_bounds(
+        self,
+    ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.int64]] | None:
+        """Per outline (the segment runs of ``outline_starts``), where a crossing test can
+        count at all: the lowest and highest ``y`` of its segments' ends and the largest
+        crossing ``x`` [m] (``max(x0, x0 + dx)``: the rounded ``x0 + t dx`` for ``0 <= t <=
+        1`` never exceeds it); a point with ``y`` below the lowest, at or above the highest,
+        or ``x`` at or beyond the largest crosses none of the outline's segments, exactly.
+        Also each outline's segment count. None without outlines (or with an empty one)."""
+        starts = self.outline_starts
+        s = self.segments
+        if starts is None or len(s) == 0 or len(starts) == 0 or starts[0] != 0:
+            return None
+        sizes = np.diff(np.append(starts, len(s)))
+        if (sizes <= 0).any():
+            return None
+        y_lo = np.minimum.reduceat(np.minimum(s[:, 1], s[:, 3]), starts)
+        y_hi = np.maximum.reduceat(np.maximum(s[:, 1], s[:, 3]), starts)
+        x_hi = np.maximum.reduceat(np.maximum(s[:, 0], s[:, 0] + self._cross_dx), starts)
+        return y_lo, y_hi, x_hi, sizes
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         """Restore (states pickled before the crossing constants existed get them)."""
         self.__dict__.update(state)
-        if "_cross_den" not in state:
+        if "_outline_box" not in state:
             self._crossing_constants()
 
     def rows(self, z: NDArray[np.complex128]) -> NDArray[np.complex128]:
@@ -66,16 +91,46 @@ class Obstacles:
         a ray toward +x, counted per outline)."""
         if self.outline_starts is None or len(self.segments) == 0:
             return np.zeros(len(points), dtype=bool)
+        if self._outline_box is None or len(points) < _FEW_POINTS:
+            # every point against every segment (few points: cheaper than sorting out pairs)
+            s = self.segments
+            y0, y1 = s[:, 1], s[:, 3]
+            py = points[:, 1:2]
+            straddle = (y0 > py) != (y1 > py)
+            t = (py - y0) / self._cross_den
+            x_cross = s[:, 0] + t * self._cross_dx
+            hits = straddle & (x_cross > points[:, 0:1])
+            # parity of the crossings of each outline
+            odd = np.logical_xor.reduceat(hits, self.outline_starts, axis=1)
+            return odd.any(axis=1)
+        return self._inside_near(points)
+
+    def _inside_near(self, points: FloatArray) -> NDArray[np.bool_]:
+        """:meth:`inside_any` testing each point only against the segments of the outlines
+        it can cross (:meth:`_outline_bounds`; the other outlines' parities are 0), each
+        (point, segment) pair with the same arithmetic as the all-pairs test."""
+        y_lo, y_hi, x_hi, sizes = self._outline_box  # type: ignore[misc]
+        inside = np.zeros(len(points), dtype=bool)
+        px, py = points[:, 0], points[:, 1]
+        pi, ki = ((y_lo <= py[:, None]) & (py[:, None] < y_hi) & (px[:, None] < x_hi)).nonzero()
+        if not pi.shape[0]:
+            return inside
+        # the (point, segment) pairs: each (point, outline) pair's run of segments
+        n_seg = sizes.take(ki)
+        first = n_seg.cumsum() - n_seg
+        seg = np.arange(int(first[-1] + n_seg[-1])) + (self.outline_starts.take(ki) - first).repeat(
+            n_seg
+        )
+        at = pi.repeat(n_seg)
         s = self.segments
-        y0, y1 = s[:, 1], s[:, 3]
-        py = points[:, 1:2]
-        straddle = (y0 > py) != (y1 > py)
-        t = (py - y0) / self._cross_den
-        x_cross = s[:, 0] + t * self._cross_dx
-        hits = straddle & (x_cross > points[:, 0:1])
-        # parity of the crossings of each outline
-        odd = np.logical_xor.reduceat(hits, self.outline_starts, axis=1)
-        return odd.any(axis=1)
+        y0, y1 = s[:, 1].take(seg), s[:, 3].take(seg)
+        pyv = py.take(at)
+        straddle = (y0 > pyv) != (y1 > pyv)
+        t = (pyv - y0) / self._cross_den.take(seg)
+        x_cross = s[:, 0].take(seg) + t * self._cross_dx.take(seg)
+        hits = straddle & (x_cross > px.take(at))
+        inside[pi[np.logical_xor.reduceat(hits, first)]] = True
+        return inside
 
     def free_mask(self, points: FloatArray, r: float) -> NDArray[np.bool_]:
         """True where a body of radius ``r`` fits at ``points`` ``(P, 2)`` (clear of outlines
