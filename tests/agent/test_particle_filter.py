@@ -14,7 +14,11 @@ from synthetic_scans import room_segments as room
 
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import OccupancyGrid
-from dynmap_sim.agent.localization.kld_sampling import kld_prefix_size, kld_sample_count
+from dynmap_sim.agent.localization.kld_sampling import (
+    kld_prefix_size,
+    kld_prefix_size_lazy,
+    kld_sample_count,
+)
 from dynmap_sim.agent.localization.likelihood_field import (
     LikelihoodFieldParams,
     likelihood_field_prob_logweights,
@@ -35,7 +39,7 @@ from dynmap_sim.agent.localization.particle_filter import (
     regularized_covariance,
     weighted_pose_stats,
 )
-from dynmap_sim.agent.localization.resampling import low_variance_resample
+from dynmap_sim.agent.localization.resampling import LowVarianceDraws, low_variance_resample
 from dynmap_sim.agent.localization.verified_recovery import VerifiedRecovery
 from dynmap_sim.agent.localizer import MapUser, make_localizer
 from dynmap_sim.agent.maps.map_source import FirstRunMap, PriorWallsMap, make_map_source
@@ -149,6 +153,40 @@ def test_kld_prefix_size_is_the_sequential_loop():
                 n = i + 1
                 break
         assert kld_prefix_size(keys, *args) == int(np.clip(n, min(20, len(keys)), 2500))
+
+
+def test_kld_prefix_size_lazy_is_kld_prefix_size():
+    """Asking only for the keys of a growing prefix of the draws gives the same size."""
+    rng = np.random.default_rng(4)
+    for _ in range(60):
+        keys = rng.integers(0, int(rng.integers(1, 400)), int(rng.integers(0, 3000)))
+        args = (float(rng.choice([0.01, 0.05])), float(rng.choice([0.99, 2.33])),
+                int(rng.integers(1, 600)), 3000, str(rng.choice(["max", "min"])))  # fmt: skip
+        asked = []
+
+        def keys_of(m, keys=keys, asked=asked):
+            asked.append(m)
+            return keys[:m]
+
+        first = int(rng.choice([1, 64, 1024]))
+        assert kld_prefix_size_lazy(keys_of, len(keys), *args, first=first) == kld_prefix_size(
+            keys, *args
+        )
+        assert all(m <= len(keys) for m in asked)
+
+
+def test_low_variance_draws_at_positions_are_the_resampled_ones():
+    """``LowVarianceDraws.at`` of shuffled positions is ``rng.permutation`` of the draws
+    (what ``AMCLFilter.resample`` relies on), the generator left in the same state."""
+    w = np.random.default_rng(5).random(700) ** 4
+    a, b = np.random.default_rng(6), np.random.default_rng(6)
+    shuffled = a.permutation(low_variance_resample(w, 8000, a))
+    draws = LowVarianceDraws(w, 8000, b)
+    order = b.permutation(8000)
+    np.testing.assert_array_equal(draws.at(order), shuffled)
+    np.testing.assert_array_equal(draws.at(order[:900]), shuffled[:900])
+    assert a.random() == b.random()
+    assert len(LowVarianceDraws(w, 0, b).all()) == 0
 
 
 # -- likelihood field --------------------------------------------------------------------
