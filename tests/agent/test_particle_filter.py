@@ -13,7 +13,7 @@ from synthetic_scans import LASER, box, raycast
 from synthetic_scans import room_segments as room
 
 from dynmap_sim import se2
-from dynmap_sim.agent.grid import OccupancyGrid
+from dynmap_sim.agent.grid import FREE, OCCUPIED, OccupancyGrid
 from dynmap_sim.agent.localization.kld_sampling import (
     kld_prefix_size,
     kld_prefix_size_lazy,
@@ -21,6 +21,7 @@ from dynmap_sim.agent.localization.kld_sampling import (
 )
 from dynmap_sim.agent.localization.likelihood_field import (
     LikelihoodFieldParams,
+    LikelihoodTable,
     likelihood_field_prob_logweights,
     select_beams,
 )
@@ -190,6 +191,30 @@ def test_low_variance_draws_at_positions_are_the_resampled_ones():
 
 
 # -- likelihood field --------------------------------------------------------------------
+
+
+def test_likelihood_table_from_previous_is_the_full_table():
+    """A table made from an earlier grid's (``previous``) recomputes only the cells whose
+    distance changed: the same arrays as one made from scratch; a previous table of other
+    parameters or another shape is not used."""
+    grid = OccupancyGrid.from_segments(room(), free_seed_xy_m=(1, 1))
+    occ = grid.occupancy.copy()
+    occ[10:14, 20:23] = OCCUPIED
+    occ[5, 5:9] = FREE
+    moved = OccupancyGrid(occ, grid.origin_xy_m, grid.resolution_m, grid.max_dist_m)
+    lf = LikelihoodFieldParams(z_hit=0.9, z_rand=0.1, sigma_hit=0.12, range_max=5.6)
+    for prev_params in (lf, replace(lf, sigma_hit=0.2)):
+        prev = LikelihoodTable(grid, prev_params)
+        for g in (moved, grid):
+            full, incr = LikelihoodTable(g, lf), LikelihoodTable(g, lf, previous=prev)
+            for k in ("dist", "p", "logp"):
+                np.testing.assert_array_equal(getattr(incr, k), getattr(full, k))
+            assert incr.logp_skip == full.logp_skip
+    small = OccupancyGrid(occ[:-3], grid.origin_xy_m, grid.resolution_m, grid.max_dist_m)
+    full = LikelihoodTable(small, lf)
+    np.testing.assert_array_equal(LikelihoodTable(small, lf, previous=prev).logp, full.logp)
+
+
 def test_select_beams_like_amcl():
     b = select_beams(683, 60)
     assert len(b) == 60 and b[0] == 0 and b[-1] == 682

@@ -131,8 +131,31 @@ class LikelihoodTable:
     The last entry is the value outside the grid (distance ``max_dist_m``): ``dist`` [m]
     float32, indexed by :func:`endpoint_cells`."""
 
-    def __init__(self, grid: OccupancyGrid, params: LikelihoodFieldParams) -> None:
+    def __init__(
+        self,
+        grid: OccupancyGrid,
+        params: LikelihoodFieldParams,
+        previous: LikelihoodTable | None = None,
+    ) -> None:
+        """``previous``: the table of an earlier grid of the same shape and ``params`` (e.g.
+        the same map a few scans before): only the cells whose distance changed are
+        computed anew, the others copied from it (the values are elementwise functions of
+        the distance: the same table either way)."""
+        self.params = params
         self.dist = np.append(grid.dist_m.ravel(), np.float32(grid.max_dist_m))
+        if (
+            previous is not None
+            and getattr(previous, "params", None) == params
+            and previous.dist.shape == self.dist.shape
+        ):
+            changed = np.flatnonzero(self.dist != previous.dist)
+            p = beam_likelihoods(self.dist[changed], params)
+            self.p = previous.p.copy()
+            self.p[changed] = p.astype(np.float32)
+            self.logp = previous.logp.copy()
+            self.logp[changed] = np.log(p).astype(np.float32)
+            self.logp_skip = previous.logp_skip
+            return
         p = beam_likelihoods(self.dist, params)
         self.p = p.astype(np.float32)
         self.logp = np.log(p).astype(np.float32)
