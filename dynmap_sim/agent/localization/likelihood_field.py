@@ -71,12 +71,19 @@ def _endpoint_terms(
     th = particles[:, 2]
     c64, s64 = np.cos(th), np.sin(th)
     inv_res = 1.0 / grid.resolution_m
-    lx = ((particles[:, 0] + c64 * mx - s64 * my - grid.origin_xy_m[0]) * inv_res).astype(
-        np.float32
-    )
-    ly = ((particles[:, 1] + s64 * mx + c64 * my - grid.origin_xy_m[1]) * inv_res).astype(
-        np.float32
-    )
+    if len(particles) == 1:  # one pose (a diagnostic): the same float64 operations in floats
+        x, y = float(particles[0, 0]), float(particles[0, 1])
+        c1, s1 = float(c64[0]), float(s64[0])
+        ox, oy = float(grid.origin_xy_m[0]), float(grid.origin_xy_m[1])
+        lx = np.array([(x + c1 * mx - s1 * my - ox) * inv_res], dtype=np.float32)
+        ly = np.array([(y + s1 * mx + c1 * my - oy) * inv_res], dtype=np.float32)
+    else:
+        lx = ((particles[:, 0] + c64 * mx - s64 * my - grid.origin_xy_m[0]) * inv_res).astype(
+            np.float32
+        )
+        ly = ((particles[:, 1] + s64 * mx + c64 * my - grid.origin_xy_m[1]) * inv_res).astype(
+            np.float32
+        )
     bx = (ranges_m * np.cos(angles_rad + myaw) * inv_res).astype(np.float32)
     by = (ranges_m * np.sin(angles_rad + myaw) * inv_res).astype(np.float32)
     return lx, ly, c64.astype(np.float32), s64.astype(np.float32), bx, by
