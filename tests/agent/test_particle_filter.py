@@ -13,10 +13,15 @@ from synthetic_scans import LASER, box, raycast
 from synthetic_scans import room_segments as room
 
 from dynmap_sim import se2
-from dynmap_sim.agent.grid import OccupancyGrid
-from dynmap_sim.agent.localization.kld_sampling import kld_prefix_size, kld_sample_count
+from dynmap_sim.agent.grid import FREE, OCCUPIED, OccupancyGrid
+from dynmap_sim.agent.localization.kld_sampling import (
+    kld_prefix_size,
+    kld_prefix_size_lazy,
+    kld_sample_count,
+)
 from dynmap_sim.agent.localization.likelihood_field import (
     LikelihoodFieldParams,
+    LikelihoodTable,
     likelihood_field_prob_logweights,
     select_beams,
 )
@@ -35,7 +40,7 @@ from dynmap_sim.agent.localization.particle_filter import (
     regularized_covariance,
     weighted_pose_stats,
 )
-from dynmap_sim.agent.localization.resampling import low_variance_resample
+from dynmap_sim.agent.localization.resampling import LowVarianceDraws, low_variance_resample
 from dynmap_sim.agent.localization.verified_recovery import VerifiedRecovery
 from dynmap_sim.agent.localizer import MapUser, make_localizer
 from dynmap_sim.agent.maps.map_source import FirstRunMap, PriorWallsMap, make_map_source
@@ -151,7 +156,65 @@ def test_kld_prefix_size_is_the_sequential_loop():
         assert kld_prefix_size(keys, *args) == int(np.clip(n, min(20, len(keys)), 2500))
 
 
+def test_kld_prefix_size_lazy_is_kld_prefix_size():
+    """Asking only for the keys of a growing prefix of the draws gives the same size."""
+    rng = np.random.default_rng(4)
+    for _ in range(60):
+        keys = rng.integers(0, int(rng.integers(1, 400)), int(rng.integers(0, 3000)))
+        args = (float(rng.choice([0.01, 0.05])), float(rng.choice([0.99, 2.33])),
+                int(rng.integers(1, 600)), 3000, str(rng.choice(["max", "min"])))  # fmt: skip
+        asked = []
+
+        def keys_of(m, keys=keys, asked=asked):
+            asked.append(m)
+            return keys[:m]
+
+        first = int(rng.choice([1, 64, 1024]))
+        assert kld_prefix_size_lazy(keys_of, len(keys), *args, first=first) == kld_prefix_size(
+            keys, *args
+        )
+        assert all(m <= len(keys) for m in asked)
+
+
+def test_low_variance_draws_at_positions_are_the_resampled_ones():
+    """``LowVarianceDraws.at`` of shuffled positions is ``rng.permutation`` of the draws
+    (what ``AMCLFilter.resample`` relies on), the generator left in the same state."""
+    w = np.random.default_rng(5).random(700) ** 4
+    a, b = np.random.default_rng(6), np.random.default_rng(6)
+    shuffled = a.permutation(low_variance_resample(w, 8000, a))
+    draws = LowVarianceDraws(w, 8000, b)
+    order = b.permutation(8000)
+    np.testing.assert_array_equal(draws.at(order), shuffled)
+    np.testing.assert_array_equal(draws.at(order[:900]), shuffled[:900])
+    assert a.random() == b.random()
+    assert len(LowVarianceDraws(w, 0, b).all()) == 0
+
+
 # -- likelihood field --------------------------------------------------------------------
+
+
+def test_likelihood_table_from_previous_is_the_full_table():
+    """A table made from an earlier grid's (``previous``) recomputes only the cells whose
+    distance changed: the same arrays as one made from scratch; a previous table of other
+    parameters or another shape is not used."""
+    grid = OccupancyGrid.from_segments(room(), free_seed_xy_m=(1, 1))
+    occ = grid.occupancy.copy()
+    occ[10:14, 20:23] = OCCUPIED
+    occ[5, 5:9] = FREE
+    moved = OccupancyGrid(occ, grid.origin_xy_m, grid.resolution_m, grid.max_dist_m)
+    lf = LikelihoodFieldParams(z_hit=0.9, z_rand=0.1, sigma_hit=0.12, range_max=5.6)
+    for prev_params in (lf, replace(lf, sigma_hit=0.2)):
+        prev = LikelihoodTable(grid, prev_params)
+        for g in (moved, grid):
+            full, incr = LikelihoodTable(g, lf), LikelihoodTable(g, lf, previous=prev)
+            for k in ("dist", "p", "logp"):
+                np.testing.assert_array_equal(getattr(incr, k), getattr(full, k))
+            assert incr.logp_skip == full.logp_skip
+    small = OccupancyGrid(occ[:-3], grid.origin_xy_m, grid.resolution_m, grid.max_dist_m)
+    full = LikelihoodTable(small, lf)
+    np.testing.assert_array_equal(LikelihoodTable(small, lf, previous=prev).logp, full.logp)
+
+
 def test_select_beams_like_amcl():
     b = select_beams(683, 60)
     assert len(b) == 60 and b[0] == 0 and b[-1] == 682

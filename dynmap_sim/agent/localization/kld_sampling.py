@@ -18,6 +18,8 @@ stops at the minimum (``one_bin = "min"``).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -57,6 +59,39 @@ def bin_keys(
     return (ix + 100_000) * 400_000_000 + (iy + 100_000) * 2_000 + (it + 1_000)
 
 
+def kld_stop(
+    keys_in_draw_order: ArrayLike,
+    pf_err: float,
+    pf_z: float,
+    min_particles: int,
+    max_particles: int,
+    one_bin: str = "max",
+) -> int | None:
+    """Index of the draw at which AMCL's sequential KLD loop stops (the first whose count
+    exceeds the bound for the bins occupied so far), None if none of ``keys_in_draw_order``
+    does. A prefix of the draws has the same bins so far at each of its draws, so its stop
+    (if any) is the whole sequence's: :func:`kld_prefix_size_lazy` relies on that."""
+    keys = np.asarray(keys_in_draw_order)
+    if len(keys) == 0:
+        return None
+    _, first = np.unique(keys, return_index=True)
+    new_bin = np.zeros(len(keys), dtype=np.int64)
+    new_bin[first] = 1
+    k = np.cumsum(new_bin)
+    count = np.arange(1, len(keys) + 1)
+    # the bound of each bin count 1..k[-1] once (elementwise: the same numbers as per draw)
+    bound = kld_sample_count(np.arange(1, k[-1] + 1), pf_err, pf_z, min_particles,
+                             max_particles, one_bin)  # fmt: skip
+    limit = bound[k - 1]
+    stop = np.nonzero(count > limit)[0]
+    return int(stop[0]) if len(stop) else None
+
+
+def _clipped_size(stop: int | None, n_draws: int, min_particles: int, max_particles: int) -> int:
+    n = stop + 1 if stop is not None else n_draws
+    return int(np.clip(n, min(min_particles, n_draws), max_particles))
+
+
 def kld_prefix_size(
     keys_in_draw_order: ArrayLike,
     pf_err: float,
@@ -75,15 +110,29 @@ def kld_prefix_size(
     keys = np.asarray(keys_in_draw_order)
     if len(keys) == 0:
         return 0
-    _, first = np.unique(keys, return_index=True)
-    new_bin = np.zeros(len(keys), dtype=np.int64)
-    new_bin[first] = 1
-    k = np.cumsum(new_bin)
-    count = np.arange(1, len(keys) + 1)
-    # the bound of each bin count 1..k[-1] once (elementwise: the same numbers as per draw)
-    bound = kld_sample_count(np.arange(1, k[-1] + 1), pf_err, pf_z, min_particles,
-                             max_particles, one_bin)  # fmt: skip
-    limit = bound[k - 1]
-    stop = np.nonzero(count > limit)[0]
-    n = int(stop[0] + 1) if len(stop) else len(keys)
-    return int(np.clip(n, min(min_particles, len(keys)), max_particles))
+    stop = kld_stop(keys, pf_err, pf_z, min_particles, max_particles, one_bin)
+    return _clipped_size(stop, len(keys), min_particles, max_particles)
+
+
+def kld_prefix_size_lazy(
+    keys_of: Callable[[int], NDArray[np.int64]],
+    n_draws: int,
+    pf_err: float,
+    pf_z: float,
+    min_particles: int,
+    max_particles: int,
+    one_bin: str = "max",
+    first: int = 1024,
+) -> int:
+    """:func:`kld_prefix_size` of ``keys_of(n_draws)``, asking ``keys_of(m)`` (the keys of
+    the first ``m`` draws) for ``m`` = ``first`` (at least ``min_particles + 1``: the loop
+    never stops before), doubled until the loop stops within them: the same size, without
+    the keys of the draws after the stop (usually most of them)."""
+    if n_draws <= 0:
+        return 0
+    m = min(n_draws, max(first, min_particles + 1))
+    while True:
+        stop = kld_stop(keys_of(m), pf_err, pf_z, min_particles, max_particles, one_bin)
+        if stop is not None or m == n_draws:
+            return _clipped_size(stop, n_draws, min_particles, max_particles)
+        m = min(n_draws, 2 * m)

@@ -71,12 +71,19 @@ def _endpoint_terms(
     th = particles[:, 2]
     c64, s64 = np.cos(th), np.sin(th)
     inv_res = 1.0 / grid.resolution_m
-    lx = ((particles[:, 0] + c64 * mx - s64 * my - grid.origin_xy_m[0]) * inv_res).astype(
-        np.float32
-    )
-    ly = ((particles[:, 1] + s64 * mx + c64 * my - grid.origin_xy_m[1]) * inv_res).astype(
-        np.float32
-    )
+    if len(particles) == 1:  # one pose (a diagnostic): the same float64 operations in floats
+        x, y = float(particles[0, 0]), float(particles[0, 1])
+        c1, s1 = float(c64[0]), float(s64[0])
+        ox, oy = float(grid.origin_xy_m[0]), float(grid.origin_xy_m[1])
+        lx = np.array([(x + c1 * mx - s1 * my - ox) * inv_res], dtype=np.float32)
+        ly = np.array([(y + s1 * mx + c1 * my - oy) * inv_res], dtype=np.float32)
+    else:
+        lx = ((particles[:, 0] + c64 * mx - s64 * my - grid.origin_xy_m[0]) * inv_res).astype(
+            np.float32
+        )
+        ly = ((particles[:, 1] + s64 * mx + c64 * my - grid.origin_xy_m[1]) * inv_res).astype(
+            np.float32
+        )
     bx = (ranges_m * np.cos(angles_rad + myaw) * inv_res).astype(np.float32)
     by = (ranges_m * np.sin(angles_rad + myaw) * inv_res).astype(np.float32)
     return lx, ly, c64.astype(np.float32), s64.astype(np.float32), bx, by
@@ -131,8 +138,31 @@ class LikelihoodTable:
     The last entry is the value outside the grid (distance ``max_dist_m``): ``dist`` [m]
     float32, indexed by :func:`endpoint_cells`."""
 
-    def __init__(self, grid: OccupancyGrid, params: LikelihoodFieldParams) -> None:
+    def __init__(
+        self,
+        grid: OccupancyGrid,
+        params: LikelihoodFieldParams,
+        previous: LikelihoodTable | None = None,
+    ) -> None:
+        """``previous``: the table of an earlier grid of the same shape and ``params`` (e.g.
+        the same map a few scans before): only the cells whose distance changed are
+        computed anew, the others copied from it (the values are elementwise functions of
+        the distance: the same table either way)."""
+        self.params = params
         self.dist = np.append(grid.dist_m.ravel(), np.float32(grid.max_dist_m))
+        if (
+            previous is not None
+            and getattr(previous, "params", None) == params
+            and previous.dist.shape == self.dist.shape
+        ):
+            changed = np.flatnonzero(self.dist != previous.dist)
+            p = beam_likelihoods(self.dist[changed], params)
+            self.p = previous.p.copy()
+            self.p[changed] = p.astype(np.float32)
+            self.logp = previous.logp.copy()
+            self.logp[changed] = np.log(p).astype(np.float32)
+            self.logp_skip = previous.logp_skip
+            return
         p = beam_likelihoods(self.dist, params)
         self.p = p.astype(np.float32)
         self.logp = np.log(p).astype(np.float32)

@@ -63,7 +63,12 @@ from dynmap_sim import se2
 from dynmap_sim.agent.grid import OCCUPIED, OccupancyGrid
 from dynmap_sim.agent.localization import mcl_numba
 from dynmap_sim.agent.localization.distance_filter import expected_ranges, short_readings
-from dynmap_sim.agent.localization.kld_sampling import ONE_BIN_RULES, bin_keys, kld_prefix_size
+from dynmap_sim.agent.localization.kld_sampling import (
+    ONE_BIN_RULES,
+    bin_keys,
+    kld_prefix_size,
+    kld_prefix_size_lazy,
+)
 from dynmap_sim.agent.localization.likelihood_field import (
     LikelihoodFieldParams,
     LikelihoodTable,
@@ -75,7 +80,7 @@ from dynmap_sim.agent.localization.likelihood_field import (
     valid_beams,
 )
 from dynmap_sim.agent.localization.motion_model import sample_odometry_motion
-from dynmap_sim.agent.localization.resampling import low_variance_resample
+from dynmap_sim.agent.localization.resampling import LowVarianceDraws, low_variance_resample
 from dynmap_sim.agent.localization.see_through import see_through_logp, wall_depths
 from dynmap_sim.agent.localization.verified_recovery import VerifiedRecovery
 from dynmap_sim.agent.localizer import Localizer, MapUser, register_localizer
@@ -932,10 +937,25 @@ class AMCLFilter:
         c = self.config
         w_diff = self.injection_probability()
         n_max = c.max_particles
-        # Candidate sequence in random draw order to size the set like AMCL's loop.
-        cand_idx = low_variance_resample(self.weights, n_max, rng)
-        cand = self.particles[rng.permutation(cand_idx)]
+        # Candidate sequence in random draw order to size the set like AMCL's loop: the
+        # low-variance draws, shuffled (``order``: what ``rng.permutation`` of the draws
+        # would do to them).
+        draws = LowVarianceDraws(self.weights, n_max, rng)
+        order = rng.permutation(n_max)
         is_rand = rng.random(n_max) < w_diff
+        if not is_rand.any() and (center is None or self.local_probability() <= 0):
+            # Nothing new among the candidates: only the draws up to the loop's stop count.
+            n = kld_prefix_size_lazy(
+                lambda m: bin_keys(self.particles[draws.at(order[:m])], c.kld_cell_m,
+                                   c.kld_angle_rad),
+                n_max, c.pf_err, c.pf_z, c.min_particles, c.max_particles, c.kld_one_bin,
+            )  # fmt: skip
+            self.particles = self.particles[low_variance_resample(self.weights, n, rng)]
+            self.weights = np.full(len(self.particles), 1.0 / len(self.particles))
+            if w_diff > 0 and self.config.recovery_reset:
+                self.reset_recovery()
+            return
+        cand = self.particles[draws.at(order)]
         if is_rand.any():
             at = np.flatnonzero(is_rand)
             poses = self.random_poses(len(at), rng)
@@ -993,7 +1013,8 @@ class AMCLFilter:
         if len(r) == 0:
             return float("nan")
         d = self._endpoint_values(self.table.dist, np.asarray(pose, float)[None, :], r, a)
-        return float(np.mean(np.log(beam_likelihoods(d, self.lf))))
+        logp = np.log(beam_likelihoods(d, self.lf))
+        return float(np.add.reduce(logp, axis=None) / logp.size)  # np.mean's sum, less overhead
 
 
 @register_localizer("static-mcl")

@@ -379,9 +379,10 @@ class StaticPointFilter(AMCLFilter):
 
     def set_grid(self, grid: Any) -> None:
         """Localize on ``grid`` from now on, keeping the particles (and the free cells of
-        the previous grid if this one has none)."""
+        the previous grid if this one has none); the likelihood table is recomputed where
+        the distance field changed only."""
         self.grid = grid
-        self.table = LikelihoodTable(grid, self.lf)
+        self.table = LikelihoodTable(grid, self.lf, previous=self.table)
         if np.any(grid.occupancy == FREE):  # grid.free_points() is not empty
             self._free_grid = grid
 
