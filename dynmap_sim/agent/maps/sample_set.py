@@ -175,13 +175,14 @@ class SampleSets:
             raise ValueError("ray index out of range")
         m = ray.size
         # Random order within each ray: "randomly chosen samples from M".
-        order = np.argsort(ray + rng.random(m))  # by ray, random within a ray
-        r_s = ray[order]
-        v_s = val[order]
+        keys = ray + rng.random(m)  # by ray, random within a ray
         kernels = update_kernels(backend)
         if kernels is not None:
-            self._update_kernels(kernels, r_s, v_s, rng, fill, initialize)
+            self._update_kernels(kernels, ray, keys, val, rng, fill, initialize)
             return
+        order = np.argsort(keys)
+        r_s = ray[order]
+        v_s = val[order]
         # Runs of equal rays in the sorted order (what np.unique would return, without a sort).
         starts = np.empty(m, dtype=bool)
         starts[0] = True
@@ -226,19 +227,30 @@ class SampleSets:
     def _update_kernels(
         self,
         kernels: tuple,
-        r_s: NDArray[np.int64],
-        v_s: NDArray[np.uint16],
+        ray: NDArray[np.int64],
+        keys: NDArray[np.float64],
+        val: NDArray[np.uint16],
         rng: np.random.Generator,
         fill: bool,
         initialize: bool,
     ) -> None:
-        """:meth:`update` after its sort, with :func:`.sample_set_numba.update_kernels`: the
-        same random draws in the same order (``u·n`` rounding, then the keys of the slots
-        to replace), the keys put in the order of the numpy code's ``argsort`` by the
-        kernel."""
-        ray_runs, plan_update, write_update = kernels
-        first = np.empty(r_s.size, dtype=np.int64)
-        first = first[: ray_runs(r_s, first)]
+        """:meth:`update` after its sort keys, with :func:`.sample_set_numba.update_kernels`:
+        the measurements in the order of the numpy code's ``argsort`` of ``keys`` (a compiled
+        bucket sort; ``argsort`` itself if two keys are equal), the same random draws in the
+        same order (``u·n`` rounding, then the keys of the slots to replace), the keys put
+        in the order of the numpy code's ``argsort`` by the kernel."""
+        sort_by_ray, ray_runs, plan_update, write_update = kernels
+        m = ray.size
+        r_s = np.empty(m, dtype=np.int64)
+        v_s = np.empty(m, dtype=np.uint16)
+        first = np.empty(m, dtype=np.int64)
+        n_runs = sort_by_ray(ray, keys, val, self.n_rays, r_s, v_s, first)
+        if n_runs < 0:  # equal keys: numpy's order
+            order = np.argsort(keys)
+            r_s = ray[order]
+            v_s = val[order]
+            n_runs = ray_runs(r_s, first)
+        first = first[:n_runs]
         n_groups = first.size
         n_rule = np.zeros(n_groups, dtype=np.int64) if fill else self._n_new(n_groups, rng)
         n_new = np.empty(n_groups, dtype=np.int64)
