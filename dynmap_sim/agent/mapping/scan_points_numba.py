@@ -1,8 +1,9 @@
 """Optional numba backend of :func:`.scan_points.first_per_cell` (extra ``fast``).
 
 The thinning of a point set to the first point of each square cell: the cell keys as the
-numpy code computes them (``floor(x / cell)``, as int64, ``kx * 1,000,003 + ky``), a stable
-sort of the keys, the first point of each run of equal keys. Which points are kept is a
+numpy code computes them (``floor(x / cell)``, as int64, ``kx * 1,000,003 + ky``), and the
+first point of each key -- from a dense table of the cells seen so far when the points'
+cells span a small box, else from a stable sort of the keys. Which points are kept is a
 property of the keys alone (the lowest index of each key), so the result is the numpy code's.
 :func:`numba_available` says whether it can be used.
 """
@@ -20,17 +21,48 @@ from dynmap_sim.jit import numba_available as numba_available  # re-exported
 FloatArray = NDArray[np.float64]
 
 
+#: Most cells of the bounding box for which :func:`_first_per_cell_py` marks the seen cells in
+#: a dense table (beyond: ``4 * N`` more), instead of sorting the keys.
+_DENSE_CELLS = 1 << 18
+#: Cell indices up to this size keep ``kx * 1,000,003 + ky`` clear of int64 overflow.
+_SAFE_INDEX = 1 << 40
+#: The key's multiplier: cells whose y indices differ by less than this have distinct keys.
+_KEY_STRIDE = 1_000_003
+
+
 def _first_per_cell_py(
     px: FloatArray, py: FloatArray, cell_m: float, keep: NDArray[np.bool_]
 ) -> None:
     """``keep[i]``: point ``i`` is the first (lowest index) of its cell (``keep`` all False
-    on entry)."""
+    on entry).
+
+    When the cells' bounding box is small (at most ``4 N + 2^18`` cells, fewer than
+    1,000,003 rows, so no two of its cells share a key), the points are visited in order
+    and a dense table of seen cells keeps the first of each; else the keys are sorted (a
+    stable sort: the first of each run of equal keys). Both keep the lowest index of each
+    key."""
     m = px.shape[0]
+    if m == 0:
+        return
+    kxs = np.empty(m, dtype=np.int64)
+    kys = np.empty(m, dtype=np.int64)
+    for i in range(m):
+        kxs[i] = np.int64(math.floor(px[i] / cell_m))
+        kys[i] = np.int64(math.floor(py[i] / cell_m))
+    x0, x1, y0, y1 = kxs.min(), kxs.max(), kys.min(), kys.max()
+    small = max(-x0, x1, -y0, y1) < _SAFE_INDEX
+    if small and y1 - y0 < _KEY_STRIDE and (x1 - x0 + 1) * (y1 - y0 + 1) <= 4 * m + _DENSE_CELLS:
+        ny = y1 - y0 + 1
+        seen = np.zeros((x1 - x0 + 1) * ny, dtype=np.bool_)
+        for i in range(m):
+            c = (kxs[i] - x0) * ny + (kys[i] - y0)
+            if not seen[c]:
+                seen[c] = True
+                keep[i] = True
+        return
     key = np.empty(m, dtype=np.int64)
     for i in range(m):
-        kx = np.int64(math.floor(px[i] / cell_m))
-        ky = np.int64(math.floor(py[i] / cell_m))
-        key[i] = kx * 1_000_003 + ky
+        key[i] = kxs[i] * _KEY_STRIDE + kys[i]
     order = np.argsort(key, kind="mergesort")
     for j in range(m):
         if j == 0 or key[order[j]] != key[order[j - 1]]:
