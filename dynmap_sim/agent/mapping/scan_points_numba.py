@@ -1,10 +1,15 @@
-"""Optional numba backend of :func:`.scan_points.first_per_cell` (extra ``fast``).
+"""Optional numba backends of :func:`.scan_points.first_per_cell` and
+:func:`.scan_points.scan_points_base` (extra ``fast``).
 
 The thinning of a point set to the first point of each square cell: the cell keys as the
 numpy code computes them (``floor(x / cell)``, as int64, ``kx * 1,000,003 + ky``), and the
 first point of each key -- from a dense table of the cells seen so far when the points'
 cells span a small box, else from a stable sort of the keys. Which points are kept is a
 property of the keys alone (the lowest index of each key), so the result is the numpy code's.
+
+:func:`_scan_points_py` is ``scan_points_base`` with precomputed beam directions in one loop:
+the valid readings times the beams' cosines and sines, moved by the laser's mount pose with
+the operations of :func:`dynmap_sim.se2.transform_points` in their order: the same points.
 :func:`numba_available` says whether it can be used.
 """
 
@@ -15,7 +20,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from dynmap_sim.jit import compiled, pick_kernel
+from dynmap_sim.jit import compiled, kernel_backend, pick_kernel
 from dynmap_sim.jit import numba_available as numba_available  # re-exported
 
 FloatArray = NDArray[np.float64]
@@ -86,3 +91,40 @@ def first_per_cell_mask(
         keep,
     )
     return keep
+
+
+def _scan_points_py(
+    ranges_m: FloatArray,
+    cos: FloatArray,
+    sin: FloatArray,
+    range_min_m: float,
+    range_max_m: float,
+    mount: FloatArray,
+    out: FloatArray,
+) -> int:
+    """Points ``out[:k]`` (robot frame) of the ``k`` valid readings (finite, in
+    ``[range_min_m, range_max_m)``), in beam order; ``mount`` is ``(x, y, cos, sin)`` of
+    the laser's mount pose. Returns ``k``."""
+    mx, my, mc, ms = mount[0], mount[1], mount[2], mount[3]
+    k = 0
+    for i in range(ranges_m.shape[0]):
+        r = ranges_m[i]
+        if math.isfinite(r) and r >= range_min_m and r < range_max_m:
+            x = r * cos[i]
+            y = r * sin[i]
+            out[k, 0] = mx + mc * x - ms * y
+            out[k, 1] = my + ms * x + mc * y
+            k += 1
+    return k
+
+
+_scan_points = compiled(_scan_points_py)
+
+
+def scan_points_kernel(backend: str):
+    """:func:`_scan_points_py` compiled (``"numba"``) or not (``"python"``) for a
+    ``backend`` argument (:data:`dynmap_sim.jit.KERNEL_BACKENDS`); None: the numpy code."""
+    kind = kernel_backend(backend)
+    if kind is None:
+        return None
+    return pick_kernel(_scan_points_py, _scan_points, kind == "python", "scan-points backend")
