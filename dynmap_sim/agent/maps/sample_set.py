@@ -92,7 +92,11 @@ class SampleSets:
     def version(self) -> int:
         """Number of :meth:`update` steps so far (0 for sets pickled before it was counted):
         a cache of anything derived from the samples is valid while it does not change."""
-        return self.__dict__.get("_version", 0)
+        return self._version
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self.__dict__.setdefault("_version", 0)  # (pickles from before it was counted)
 
     def _changed(self) -> None:
         """Drop the caches of the samples' statistics and count the change."""
@@ -171,15 +175,16 @@ class SampleSets:
             return
         if val.dtype != np.uint16:
             val = np.clip(val, 0, MAX_RANGE_MM).astype(np.uint16)
-        if ray.min() < 0 or ray.max() >= self.n_rays:
-            raise ValueError("ray index out of range")
         m = ray.size
-        # Random order within each ray: "randomly chosen samples from M".
-        keys = ray + rng.random(m)  # by ray, random within a ray
         kernels = update_kernels(backend)
-        if kernels is not None:
+        if kernels is not None:  # (the sort kernel checks the rays)
+            # Random order within each ray: "randomly chosen samples from M".
+            keys = ray + rng.random(m)  # by ray, random within a ray
             self._update_kernels(kernels, ray, keys, val, rng, fill, initialize)
             return
+        if ray.min() < 0 or ray.max() >= self.n_rays:
+            raise ValueError("ray index out of range")
+        keys = ray + rng.random(m)
         order = np.argsort(keys)
         r_s = ray[order]
         v_s = val[order]
@@ -238,13 +243,16 @@ class SampleSets:
         the measurements in the order of the numpy code's ``argsort`` of ``keys`` (a compiled
         bucket sort; ``argsort`` itself if two keys are equal), the same random draws in the
         same order (``u·n`` rounding, then the keys of the slots to replace), the keys put
-        in the order of the numpy code's ``argsort`` by the kernel."""
+        in the order of the numpy code's ``argsort`` by the kernel. (A ray out of range raises
+        here, after the draw of ``keys``; the numpy code raises before it.)"""
         sort_by_ray, ray_runs, plan_update, write_update = kernels
         m = ray.size
         r_s = np.empty(m, dtype=np.int64)
         v_s = np.empty(m, dtype=np.uint16)
         first = np.empty(m, dtype=np.int64)
         n_runs = sort_by_ray(ray, keys, val, self.n_rays, r_s, v_s, first)
+        if n_runs == -2:
+            raise ValueError("ray index out of range")
         if n_runs < 0:  # equal keys: numpy's order
             order = np.argsort(keys)
             r_s = ray[order]

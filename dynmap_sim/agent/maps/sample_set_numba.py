@@ -98,14 +98,17 @@ def _sort_by_ray_py(
 ) -> int:
     """The measurements ``(ray, val)`` in the order of ``np.argsort(keys)`` for the keys
     ``ray + U[0, 1)`` of :meth:`.sample_set.SampleSets.update` (``r_s``, ``v_s``) and the
-    starts of their runs of equal rays (``first``); returns the number of runs, or -1 when
+    starts of their runs of equal rays (``first``); returns the number of runs, -1 when
     two keys are equal (the order of ties is the sort algorithm's: the caller sorts with
-    numpy then).
+    numpy then), -2 when a ray is not in ``[0, n_rays)``.
 
     A counting sort by ray, then an insertion sort by key within each ray: a key of ray
     ``r`` lies in ``[r, r + 1]``, so with distinct keys this is their one increasing
     order -- the permutation ``argsort`` returns."""
     m = ray.shape[0]
+    for i in range(m):
+        if ray[i] < 0 or ray[i] >= n_rays:
+            return -2
     start = np.zeros(n_rays + 1, dtype=np.int64)
     for i in range(m):
         start[ray[i] + 1] += 1

@@ -291,3 +291,12 @@ def test_sort_by_ray_kernel_gives_the_argsort_order(backend, seed):
     n_ref = ray_runs(ray[order], ref)
     assert n_runs == n_ref
     np.testing.assert_array_equal(first[:n_runs], ref[:n_ref])
+
+
+@pytest.mark.parametrize("backend", ["numpy", *UPDATE_KERNELS])
+@pytest.mark.parametrize("bad", [-1, 7])
+def test_update_refuses_a_ray_out_of_range(backend, bad):
+    s = SampleSets(7, 5, 0.2)
+    with pytest.raises(ValueError, match="out of range"):
+        s.update([0, bad, 3], [1000, 1000, 1000], np.random.default_rng(0), backend=backend)
+    assert s.version == 0 and not s.count.any()
