@@ -102,9 +102,10 @@ def _sort_by_ray_py(
     two keys are equal (the order of ties is the sort algorithm's: the caller sorts with
     numpy then), -2 when a ray is not in ``[0, n_rays)``.
 
-    A counting sort by ray, then an insertion sort by key within each ray: a key of ray
-    ``r`` lies in ``[r, r + 1]``, so with distinct keys this is their one increasing
-    order -- the permutation ``argsort`` returns."""
+    A counting sort by ray, then a sort by key within each ray (insertion sort; ``argsort``
+    for more than 16 measurements, as the offline steps give): a key of ray ``r`` lies in
+    ``[r, r + 1]``, so with distinct keys this is their one increasing order -- the
+    permutation ``argsort`` returns."""
     m = ray.shape[0]
     for i in range(m):
         if ray[i] < 0 or ray[i] >= n_rays:
@@ -116,18 +117,28 @@ def _sort_by_ray_py(
         start[r + 1] += start[r]
     nxt = start[:-1].copy()
     ks = np.empty(m)
-    for i in range(m):
-        r = ray[i]
-        k = keys[i]
-        v = val[i]
-        q = nxt[r]
-        nxt[r] = q + 1
-        while q > start[r] and ks[q - 1] > k:
-            ks[q] = ks[q - 1]
-            v_s[q] = v_s[q - 1]
-            q -= 1
-        ks[q] = k
-        v_s[q] = v
+    for i in range(m):  # into the ray's bucket, in arrival order
+        q = nxt[ray[i]]
+        nxt[ray[i]] = q + 1
+        ks[q] = keys[i]
+        v_s[q] = val[i]
+    for r in range(n_rays):  # each bucket by key: insertion sort, or argsort if long
+        lo, hi = start[r], start[r + 1]
+        if hi - lo > 16:
+            o = np.argsort(ks[lo:hi]) + lo
+            ks[lo:hi] = ks[o]
+            v_s[lo:hi] = v_s[o]
+            continue
+        for p in range(lo + 1, hi):
+            k = ks[p]
+            v = v_s[p]
+            q = p
+            while q > lo and ks[q - 1] > k:
+                ks[q] = ks[q - 1]
+                v_s[q] = v_s[q - 1]
+                q -= 1
+            ks[q] = k
+            v_s[q] = v
     n = 0
     for r in range(n_rays):
         if start[r + 1] > start[r]:
