@@ -39,6 +39,11 @@ MAX_RANGE_MM = 65535
 #: 1/sqrt(2π)
 _INV_SQRT_2PI = 0.3989422804014327
 
+#: Up to this many measurements a ray on average, the numba update sorts them with its
+#: bucket sort (faster for the few of an online step), beyond with numpy's ``argsort``
+#: (faster for the hundreds of an offline step); the same order either way.
+_BUCKET_SORT_PER_RAY = 16
+
 
 @dataclass(frozen=True)
 class RayEstimates:
@@ -250,10 +255,15 @@ class SampleSets:
         r_s = np.empty(m, dtype=np.int64)
         v_s = np.empty(m, dtype=np.uint16)
         first = np.empty(m, dtype=np.int64)
-        n_runs = sort_by_ray(ray, keys, val, self.n_rays, r_s, v_s, first)
+        if m <= _BUCKET_SORT_PER_RAY * self.n_rays:  # a few a ray (online): the kernel
+            n_runs = sort_by_ray(ray, keys, val, self.n_rays, r_s, v_s, first)
+        elif ray.min() < 0 or ray.max() >= self.n_rays:  # many (offline): numpy's argsort
+            n_runs = -2
+        else:
+            n_runs = -1
         if n_runs == -2:
             raise ValueError("ray index out of range")
-        if n_runs < 0:  # equal keys: numpy's order
+        if n_runs < 0:  # equal keys, or many a ray: numpy's order
             order = np.argsort(keys)
             r_s = ray[order]
             v_s = val[order]
