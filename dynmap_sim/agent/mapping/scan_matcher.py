@@ -30,6 +30,7 @@ from dynmap_sim.agent.mapping.scan_matcher_numba import (
     icp_terms,
     knn_indices,
     numba_available,
+    point_normals,
 )
 from dynmap_sim.se2 import wrap_angle
 
@@ -69,8 +70,9 @@ class PointMap:
     in ``[0, 1]`` is ``1 - lambda_min / lambda_max`` (1 = a clean line). With numba (extra
     ``fast``) the neighbours come from a compiled search on a bucket grid
     (:func:`.scan_matcher_numba.knn_indices`, the same neighbours as the KD-tree's, nearest
-    first) and the KD-tree is only built if the numpy matcher asks for it; ``backend``
-    (``"auto"``, ``"numpy"``, ``"numba"``) chooses as in :func:`match_scan`.
+    first) and the KD-tree is only built if the numpy matcher asks for it, and the normals
+    from a compiled loop (:func:`.scan_matcher_numba.point_normals`, the same values);
+    ``backend`` (``"auto"``, ``"numpy"``, ``"numba"``) chooses as in :func:`match_scan`.
     """
 
     def __init__(self, points_map: ArrayLike, k_normal: int = 6, backend: str = "auto") -> None:
@@ -94,6 +96,10 @@ class PointMap:
             idx = knn_indices(grid, k)
         else:
             _, idx = self.tree.query(pts, k=k)
+        self._packed: dict[float, tuple[FloatArray, NDArray[np.bool_]]] = {}
+        if use_numba:  # the same numbers in one compiled loop
+            self.normals, self.planarity = point_normals(pts, idx.reshape(len(pts), k))
+            return
         nx = pts[:, 0][idx]  # (M, k) neighbour coordinates
         ny = pts[:, 1][idx]
         # the means as ``mean`` computes them (sum, then divide by the count), fewer calls
@@ -111,7 +117,6 @@ class PointMap:
         phi = 0.5 * np.arctan2(2.0 * sxy, sxx - syy)
         self.normals = np.stack([-np.sin(phi), np.cos(phi)], axis=1)
         self.planarity = np.where(lam_max > 1e-12, 1.0 - lam_min / np.maximum(lam_max, 1e-12), 0.0)
-        self._packed: dict[float, tuple[FloatArray, NDArray[np.bool_]]] = {}
 
     def packed(self, min_planarity: float) -> tuple[FloatArray, NDArray[np.bool_]]:
         """Rows ``(M + 1, 4)`` ``[n_x, n_y, q_x, q_y]`` (normal, point) of the points at least

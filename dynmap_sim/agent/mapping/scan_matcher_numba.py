@@ -361,6 +361,87 @@ def knn_indices(grid: BucketGrid, k: int) -> IntArray:
     return out
 
 
+def _normals_py(
+    px: FloatArray,
+    py: FloatArray,
+    idx: IntArray,
+    normals: FloatArray,
+    planarity: FloatArray,
+) -> None:
+    """Line normals ``(M, 2)`` and planarity ``(M,)`` of points ``(px, py)`` from the
+    covariance of their neighbours ``idx`` ``(M, k)`` (:class:`.scan_matcher.PointMap`): the
+    numpy code's operations in its order -- the neighbours' mean summed from 0 in index
+    order (``add.reduce``), the moment sums of ``einsum`` in its two lanes (even and odd
+    neighbours, an odd count's last lane padded with ``0 * 0``), ``libm``'s ``atan2``,
+    ``sin`` and ``cos``, which numpy's call -- so the same values."""
+    k = idx.shape[1]
+    dx = np.empty(k)
+    dy = np.empty(k)
+    for m in range(idx.shape[0]):
+        sx = 0.0
+        sy = 0.0
+        for j in range(k):
+            sx += px[idx[m, j]]
+            sy += py[idx[m, j]]
+        mx = sx / k
+        my = sy / k
+        for j in range(k):
+            dx[j] = px[idx[m, j]] - mx
+            dy[j] = py[idx[m, j]] - my
+        xx0 = xx1 = yy0 = yy1 = xy0 = xy1 = 0.0
+        for j in range(0, k, 2):
+            xx0 += dx[j] * dx[j]
+            yy0 += dy[j] * dy[j]
+            xy0 += dx[j] * dy[j]
+            if j + 1 < k:
+                xx1 += dx[j + 1] * dx[j + 1]
+                yy1 += dy[j + 1] * dy[j + 1]
+                xy1 += dx[j + 1] * dy[j + 1]
+            else:
+                xx1 += 0.0 * 0.0
+                yy1 += 0.0 * 0.0
+                xy1 += 0.0 * 0.0
+        sxx = xx0 + xx1
+        syy = yy0 + yy1
+        sxy = xy0 + xy1
+        # closed-form eigenvalues of [[sxx, sxy], [sxy, syy]]
+        tr = sxx + syy
+        h = (sxx - syy) * 0.5
+        v = h * h + sxy * sxy
+        disc = math.sqrt(0.0 if v < 0.0 else v)
+        lam_min = tr * 0.5 - disc
+        lam_max = tr * 0.5 + disc
+        phi = 0.5 * math.atan2(2.0 * sxy, sxx - syy)
+        normals[m, 0] = -math.sin(phi)
+        normals[m, 1] = math.cos(phi)
+        if lam_max > 1e-12:
+            planarity[m] = 1.0 - lam_min / (lam_max if lam_max >= 1e-12 else 1e-12)
+        else:
+            planarity[m] = 0.0
+
+
+_normals = compiled(_normals_py)
+
+
+def point_normals(
+    points: FloatArray, idx: IntArray, python: bool = False
+) -> tuple[FloatArray, FloatArray]:
+    """``(normals (M, 2), planarity (M,))`` of :func:`_normals_py` for the points ``(M, 2)``
+    and their neighbours ``idx`` ``(M, k)`` (compiled; ``python``: the plain kernel)."""
+    if not python:
+        require_numba("normals backend")
+    normals = np.empty((len(points), 2))
+    planarity = np.empty(len(points))
+    (_normals_py if python else _normals)(
+        np.ascontiguousarray(points[:, 0]),
+        np.ascontiguousarray(points[:, 1]),
+        np.ascontiguousarray(idx, dtype=np.int64),
+        normals,
+        planarity,
+    )
+    return normals, planarity
+
+
 def _condition3_py(h: FloatArray) -> float:
     """``|lambda|_min / |lambda|_max`` of a symmetric 3x3 (as ``scan_matcher._sym3_condition``)."""
     a00, a01, a02 = h[0, 0], h[0, 1], h[0, 2]

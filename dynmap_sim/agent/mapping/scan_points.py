@@ -14,7 +14,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from dynmap_sim import se2
-from dynmap_sim.agent.mapping.scan_points_numba import first_per_cell_mask
+from dynmap_sim.agent.mapping.scan_points_numba import first_per_cell_mask, scan_points_kernel
 from dynmap_sim.jit import kernel_backend
 from dynmap_sim.types import LaserSpec
 
@@ -30,16 +30,37 @@ class BeamDirections:
         self.cos = np.cos(angles)
         self.sin = np.sin(angles)
 
+    def mount(self) -> FloatArray:
+        """``(x, y, cos, sin)`` of the laser's mount pose, as :func:`se2.transform_points`
+        computes them (cached; rebuilt for pickles made before the cache)."""
+        m = self.__dict__.get("_mount")
+        if m is None:
+            pose = np.asarray(self.laser.mount_pose, dtype=np.float64)
+            m = self._mount = np.array([pose[0], pose[1], np.cos(pose[2]), np.sin(pose[2])])
+        return m
+
 
 def scan_points_base(
-    laser: LaserSpec, ranges_m: ArrayLike, beams: BeamDirections | None = None
+    laser: LaserSpec,
+    ranges_m: ArrayLike,
+    beams: BeamDirections | None = None,
+    backend: str = "auto",
 ) -> FloatArray:
     """Valid readings of a scan as points ``(N, 2)`` in the robot (``base_link``) frame.
 
     ``beams`` (the laser's :class:`BeamDirections`, optional) saves recomputing the beam
-    directions for every scan; the points are the same.
+    directions for every scan; the points are the same. With ``beams``, ``backend``
+    (:data:`dynmap_sim.jit.KERNEL_BACKENDS`) ``"numba"`` (``"auto"`` when installed) or
+    ``"python"`` computes them in one loop (:func:`.scan_points_numba.scan_points_kernel`),
+    the same values.
     """
     r = np.asarray(ranges_m, dtype=np.float64)
+    kernel = scan_points_kernel(backend) if beams is not None else None
+    if kernel is not None and (beams.laser is laser or beams.laser == laser):
+        out = np.empty((len(r), 2))
+        k = kernel(r, beams.cos, beams.sin, float(laser.range_min_m), float(laser.range_max_m),
+                   beams.mount(), out)  # fmt: skip
+        return out[:k]
     ok = np.isfinite(r) & (r >= laser.range_min_m) & (r < laser.range_max_m)
     if beams is None:
         pts = se2.scan_to_points(np.where(ok, r, np.nan), laser.angles())

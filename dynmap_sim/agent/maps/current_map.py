@@ -26,7 +26,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from dynmap_sim.agent.maps.current_map_numba import select_timescales
 from dynmap_sim.agent.maps.dynamic_map import DynamicMap
+from dynmap_sim.jit import kernel_backend
 
 FloatArray = NDArray[np.float64]
 
@@ -67,16 +69,44 @@ class CurrentMap:
         return self.selections[0][1] if self.selections else -1
 
 
+def _select_numpy(
+    logp: FloatArray, log_floor: float, prm: SynthesisParams
+) -> tuple[NDArray[np.bool_], list[tuple[int, int]]]:
+    """Steps 2-5 on ``logp[m, l, i]`` (floored in place): the readings each model explains
+    and the selections (row of ``logp``, column) in order."""
+    np.maximum(logp, log_floor, out=logp)
+    good = logp >= np.log(prm.explained_density)
+    n = logp.shape[2]
+    remaining = np.ones(n, dtype=bool)
+    n_remaining = n
+    available = np.ones(len(logp), dtype=bool)
+    chosen: list[tuple[int, int]] = []  # (row in nearby, column in levels)
+    while n_remaining >= prm.min_readings and len(chosen) < len(logp):
+        # (maps, levels); all readings: logp itself, the same contiguous rows as the copy
+        score = (logp if n_remaining == n else logp[:, :, remaining]).sum(axis=2)
+        score[~available] = -np.inf
+        a, b = divmod(int(np.argmax(score)), logp.shape[1])
+        chosen.append((a, b))
+        available[a] = False
+        remaining &= ~good[a, b]
+        n_remaining = int(np.count_nonzero(remaining))
+    return good, chosen
+
+
 def synthesize_current_map(
     dmap: DynamicMap,
     pose: FloatArray,
     points_map: FloatArray,
     levels: Sequence[int],
     params: SynthesisParams | None = None,
+    backend: str = "auto",
 ) -> CurrentMap:
     """Run the §4.3 selection for the scan ``points_map`` (map frame) taken at ``pose``.
 
     ``levels`` are the timescales allowed (indices into the map's timescales, short to long).
+    ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): ``"numba"`` (``"auto"`` when
+    installed) or ``"python"`` selects in one loop (:mod:`.current_map_numba`), the same
+    selections as the numpy code.
     """
     prm = SynthesisParams() if params is None else params
     levels = sorted(levels)  # ascending: the last one is the most long-term
@@ -89,29 +119,24 @@ def synthesize_current_map(
     log_floor = np.log(prm.density_floor)
     # logp[m, l, i]: reading i under nearby map m at level l (all readings, computed once).
     logp = np.empty((nearby.size, len(levels), n))
-    for a, i in enumerate(nearby):
-        dmap.local_maps[int(i)].scan_log_likelihoods(
+    # the x and y columns once for all nearby maps (read by the compiled scoring)
+    columns = (np.ascontiguousarray(points_map[:, 0]), np.ascontiguousarray(points_map[:, 1]))
+    for a, i in enumerate(nearby.tolist()):
+        dmap.local_maps[i].scan_log_likelihoods(
             levels,
             points_map,
             sigma_min_m=prm.sigma_min_m,
             min_outlier_ratio=prm.min_outlier_ratio,
             out=logp[a],
+            columns=columns,
         )
-    np.maximum(logp, log_floor, out=logp)
-    good = logp >= np.log(prm.explained_density)
-    remaining = np.ones(n, dtype=bool)
-    n_remaining = n
-    available = np.ones(nearby.size, dtype=bool)
-    chosen: list[tuple[int, int]] = []  # (row in nearby, column in levels)
-    while n_remaining >= prm.min_readings and len(chosen) < nearby.size:
-        # (maps, levels); all readings: logp itself, the same contiguous rows as the copy
-        score = (logp if n_remaining == n else logp[:, :, remaining]).sum(axis=2)
-        score[~available] = -np.inf
-        a, b = divmod(int(np.argmax(score)), len(levels))
-        chosen.append((a, b))
-        available[a] = False
-        remaining &= ~good[a, b]
-        n_remaining = int(np.count_nonzero(remaining))
+    kernel = kernel_backend(backend)
+    if kernel is not None:  # steps 2-5 in one compiled loop, the same selections
+        good, chosen = select_timescales(
+            logp, log_floor, np.log(prm.explained_density), prm.min_readings, kernel == "python"
+        )
+    else:
+        good, chosen = _select_numpy(logp, log_floor, prm)
     if chosen:
         rows = np.array([a for a, _ in chosen])
         cols = np.array([b for _, b in chosen])

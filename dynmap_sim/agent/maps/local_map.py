@@ -248,6 +248,7 @@ class LocalMap:
         min_outlier_ratio: float = 0.0,
         backend: str = "auto",
         out: FloatArray | None = None,
+        columns: tuple[FloatArray, FloatArray] | None = None,
     ) -> FloatArray:
         """:meth:`log_likelihoods` of map-frame points ``(N, 2)``, ``(len(levels), N)``
         (written into ``out`` when given).
@@ -255,7 +256,9 @@ class LocalMap:
         ``backend`` ``"numba"`` (extra ``fast``; ``"auto"``: when installed, for the floored
         model ``sigma_min_m > 0``) projects and scores in one compiled loop
         (:mod:`.local_map_numba`, the same values to rounding); ``"numpy"``:
-        :meth:`polar` and :meth:`log_likelihoods`.
+        :meth:`polar` and :meth:`log_likelihoods`. ``columns`` (optional): the points' x
+        and y as contiguous arrays, which the compiled loop reads (a scan scored under
+        several local maps is split once).
         """
         if backend not in ("auto", "numpy", "numba"):
             raise ValueError(f'backend must be "auto", "numpy" or "numba", got {backend!r}')
@@ -265,7 +268,7 @@ class LocalMap:
         if compiled and sigma_min_m > 0.0 and levels:
             table, offsets, n_rays = self._model_stack(levels, sigma_min_m, min_outlier_ratio)
             return scan_log_likelihoods(
-                pts, self.centre, table, offsets, n_rays, self.max_range_m, out
+                pts, self.centre, table, offsets, n_rays, self.max_range_m, out, columns
             )
         ll = self.log_likelihoods(
             levels,

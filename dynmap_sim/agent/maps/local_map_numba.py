@@ -129,15 +129,19 @@ def scan_log_likelihoods(
     n_rays: IntArray,
     max_range_m: float,
     out: FloatArray | None = None,
+    columns: tuple[FloatArray, FloatArray] | None = None,
 ) -> FloatArray:
     """``(len(offsets), N)`` log-likelihoods of map-frame points (compiled; needs numba),
-    written into ``out`` (C-contiguous) when given."""
+    written into ``out`` (C-contiguous) when given; ``columns``: the points' x and y as
+    contiguous arrays, when the caller has them (``points_map`` is then not read)."""
     require_numba("backend")
+    if columns is None:
+        columns = (np.ascontiguousarray(points_map[:, 0]), np.ascontiguousarray(points_map[:, 1]))
     if out is None:
-        out = np.empty((len(offsets), len(points_map)))
+        out = np.empty((len(offsets), len(columns[0])))
     _scan_loglik(
-        np.ascontiguousarray(points_map[:, 0]),
-        np.ascontiguousarray(points_map[:, 1]),
+        columns[0],
+        columns[1],
         float(centre[0]),
         float(centre[1]),
         table,

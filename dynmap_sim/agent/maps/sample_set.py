@@ -39,6 +39,11 @@ MAX_RANGE_MM = 65535
 #: 1/sqrt(2π)
 _INV_SQRT_2PI = 0.3989422804014327
 
+#: Up to this many measurements a ray on average, the numba update sorts them with its
+#: bucket sort (faster for the few of an online step), beyond with numpy's ``argsort``
+#: (faster for the hundreds of an offline step); the same order either way.
+_BUCKET_SORT_PER_RAY = 16
+
 
 @dataclass(frozen=True)
 class RayEstimates:
@@ -92,7 +97,11 @@ class SampleSets:
     def version(self) -> int:
         """Number of :meth:`update` steps so far (0 for sets pickled before it was counted):
         a cache of anything derived from the samples is valid while it does not change."""
-        return self.__dict__.get("_version", 0)
+        return self._version
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+        self.__dict__.setdefault("_version", 0)  # (pickles from before it was counted)
 
     def _changed(self) -> None:
         """Drop the caches of the samples' statistics and count the change."""
@@ -171,17 +180,19 @@ class SampleSets:
             return
         if val.dtype != np.uint16:
             val = np.clip(val, 0, MAX_RANGE_MM).astype(np.uint16)
+        m = ray.size
+        kernels = update_kernels(backend)
+        if kernels is not None:  # (the sort kernel checks the rays)
+            # Random order within each ray: "randomly chosen samples from M".
+            keys = ray + rng.random(m)  # by ray, random within a ray
+            self._update_kernels(kernels, ray, keys, val, rng, fill, initialize)
+            return
         if ray.min() < 0 or ray.max() >= self.n_rays:
             raise ValueError("ray index out of range")
-        m = ray.size
-        # Random order within each ray: "randomly chosen samples from M".
-        order = np.argsort(ray + rng.random(m))  # by ray, random within a ray
+        keys = ray + rng.random(m)
+        order = np.argsort(keys)
         r_s = ray[order]
         v_s = val[order]
-        kernels = update_kernels(backend)
-        if kernels is not None:
-            self._update_kernels(kernels, r_s, v_s, rng, fill, initialize)
-            return
         # Runs of equal rays in the sorted order (what np.unique would return, without a sort).
         starts = np.empty(m, dtype=bool)
         starts[0] = True
@@ -226,19 +237,38 @@ class SampleSets:
     def _update_kernels(
         self,
         kernels: tuple,
-        r_s: NDArray[np.int64],
-        v_s: NDArray[np.uint16],
+        ray: NDArray[np.int64],
+        keys: NDArray[np.float64],
+        val: NDArray[np.uint16],
         rng: np.random.Generator,
         fill: bool,
         initialize: bool,
     ) -> None:
-        """:meth:`update` after its sort, with :func:`.sample_set_numba.update_kernels`: the
-        same random draws in the same order (``u·n`` rounding, then the keys of the slots
-        to replace), the keys put in the order of the numpy code's ``argsort`` by the
-        kernel."""
-        ray_runs, plan_update, write_update = kernels
-        first = np.empty(r_s.size, dtype=np.int64)
-        first = first[: ray_runs(r_s, first)]
+        """:meth:`update` after its sort keys, with :func:`.sample_set_numba.update_kernels`:
+        the measurements in the order of the numpy code's ``argsort`` of ``keys`` (a compiled
+        bucket sort; ``argsort`` itself if two keys are equal), the same random draws in the
+        same order (``u·n`` rounding, then the keys of the slots to replace), the keys put
+        in the order of the numpy code's ``argsort`` by the kernel. (A ray out of range raises
+        here, after the draw of ``keys``; the numpy code raises before it.)"""
+        sort_by_ray, ray_runs, plan_update, write_update = kernels
+        m = ray.size
+        r_s = np.empty(m, dtype=np.int64)
+        v_s = np.empty(m, dtype=np.uint16)
+        first = np.empty(m, dtype=np.int64)
+        if m <= _BUCKET_SORT_PER_RAY * self.n_rays:  # a few a ray (online): the kernel
+            n_runs = sort_by_ray(ray, keys, val, self.n_rays, r_s, v_s, first)
+        elif ray.min() < 0 or ray.max() >= self.n_rays:  # many (offline): numpy's argsort
+            n_runs = -2
+        else:
+            n_runs = -1
+        if n_runs == -2:
+            raise ValueError("ray index out of range")
+        if n_runs < 0:  # equal keys, or many a ray: numpy's order
+            order = np.argsort(keys)
+            r_s = ray[order]
+            v_s = val[order]
+            n_runs = ray_runs(r_s, first)
+        first = first[:n_runs]
         n_groups = first.size
         n_rule = np.zeros(n_groups, dtype=np.int64) if fill else self._n_new(n_groups, rng)
         n_new = np.empty(n_groups, dtype=np.int64)

@@ -87,6 +87,71 @@ def robust_rows(
     return rho, sig, out
 
 
+def _sort_by_ray_py(
+    ray: NDArray[np.int64],
+    keys: NDArray[np.float64],
+    val: NDArray[np.uint16],
+    n_rays: int,
+    r_s: NDArray[np.int64],
+    v_s: NDArray[np.uint16],
+    first: NDArray[np.int64],
+) -> int:
+    """The measurements ``(ray, val)`` in the order of ``np.argsort(keys)`` for the keys
+    ``ray + U[0, 1)`` of :meth:`.sample_set.SampleSets.update` (``r_s``, ``v_s``) and the
+    starts of their runs of equal rays (``first``); returns the number of runs, -1 when
+    two keys are equal (the order of ties is the sort algorithm's: the caller sorts with
+    numpy then), -2 when a ray is not in ``[0, n_rays)``.
+
+    A counting sort by ray, then a sort by key within each ray (insertion sort; ``argsort``
+    for more than 16 measurements, as the offline steps give): a key of ray ``r`` lies in
+    ``[r, r + 1]``, so with distinct keys this is their one increasing order -- the
+    permutation ``argsort`` returns."""
+    m = ray.shape[0]
+    for i in range(m):
+        if ray[i] < 0 or ray[i] >= n_rays:
+            return -2
+    start = np.zeros(n_rays + 1, dtype=np.int64)
+    for i in range(m):
+        start[ray[i] + 1] += 1
+    for r in range(n_rays):
+        start[r + 1] += start[r]
+    nxt = start[:-1].copy()
+    ks = np.empty(m)
+    for i in range(m):  # into the ray's bucket, in arrival order
+        q = nxt[ray[i]]
+        nxt[ray[i]] = q + 1
+        ks[q] = keys[i]
+        v_s[q] = val[i]
+    for r in range(n_rays):  # each bucket by key: insertion sort, or argsort if long
+        lo, hi = start[r], start[r + 1]
+        if hi - lo > 16:
+            o = np.argsort(ks[lo:hi]) + lo
+            ks[lo:hi] = ks[o]
+            v_s[lo:hi] = v_s[o]
+            continue
+        for p in range(lo + 1, hi):
+            k = ks[p]
+            v = v_s[p]
+            q = p
+            while q > lo and ks[q - 1] > k:
+                ks[q] = ks[q - 1]
+                v_s[q] = v_s[q - 1]
+                q -= 1
+            ks[q] = k
+            v_s[q] = v
+    n = 0
+    for r in range(n_rays):
+        if start[r + 1] > start[r]:
+            first[n] = start[r]
+            n += 1
+        for q in range(start[r], start[r + 1]):
+            r_s[q] = r
+    for q in range(1, m):
+        if ks[q] == ks[q - 1]:
+            return -1
+    return n
+
+
 def _ray_runs_py(r_s: NDArray[np.int64], first: NDArray[np.int64]) -> int:
     """Starts of the runs of equal values in ``r_s`` (sorted by ray) into ``first``; their
     number."""
@@ -187,21 +252,23 @@ def _write_update_py(
         count[ray] = np.uint16(cnt + a)
 
 
+_sort_by_ray = compiled(_sort_by_ray_py)
 _ray_runs = compiled(_ray_runs_py)
 _plan_update = compiled(_plan_update_py)
 _write_update = compiled(_write_update_py)
 
 
 def update_kernels(backend: str) -> tuple | None:
-    """The three update kernels, compiled (``"numba"``) or not (``"python"``), for a
-    ``backend`` argument (:data:`dynmap_sim.jit.KERNEL_BACKENDS`); None: the numpy code."""
+    """The update kernels (:func:`_sort_by_ray_py`, then the three above), compiled
+    (``"numba"``) or not (``"python"``), for a ``backend`` argument
+    (:data:`dynmap_sim.jit.KERNEL_BACKENDS`); None: the numpy code."""
     kind = kernel_backend(backend)
     if kind is None:
         return None
     if kind == "numba":
         require_numba("sample-set backend")
-        return _ray_runs, _plan_update, _write_update
-    return _ray_runs_py, _plan_update_py, _write_update_py
+        return _sort_by_ray, _ray_runs, _plan_update, _write_update
+    return _sort_by_ray_py, _ray_runs_py, _plan_update_py, _write_update_py
 
 
 def _table_rows_py(

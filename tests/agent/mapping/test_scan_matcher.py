@@ -22,6 +22,7 @@ from dynmap_sim.agent.mapping.scan_matcher_numba import (
     _icp_terms_py,
     knn_indices,
     numba_available,
+    point_normals,
 )
 
 
@@ -358,3 +359,28 @@ def test_bucket_grid_kernel_builds_the_numpy_grid(backend, seed):
     for f in ("start", "order", "xs", "ys"):
         a, b = getattr(ref, f), getattr(got, f)
         assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
+
+
+@pytest.mark.parametrize(
+    "backend",
+    [
+        "python",
+        pytest.param(
+            "numba", marks=pytest.mark.skipif(not numba_available(), reason="numba not installed")
+        ),
+    ],
+)
+@pytest.mark.parametrize("seed", range(16))
+def test_normals_kernel_gives_the_numpy_normals(backend, seed):
+    """point_normals (one compiled loop) gives PointMap's numpy normals and planarity bit for
+    bit from the same neighbours: 3 to 6 neighbours, lines, duplicates, scattered points."""
+    rng = np.random.default_rng(seed)
+    m = int(rng.choice([3, 4, 5, 6, 7, 50, 400, 2000]))
+    pts = rng.uniform(-7.0, 9.0, (m, 2)) * 10.0 ** rng.integers(-3, 2)
+    pts[: m // 3, 1] = 1.5  # a line
+    pts[m // 3 : m // 2] = pts[: m // 2 - m // 3]  # duplicates
+    ref = PointMap(pts, backend="numpy")
+    _, idx = cKDTree(pts).query(pts, k=min(6, m))
+    normals, planarity = point_normals(pts, idx, python=backend == "python")
+    assert normals.tobytes() == ref.normals.tobytes()
+    assert planarity.tobytes() == ref.planarity.tobytes()

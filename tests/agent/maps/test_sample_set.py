@@ -259,3 +259,44 @@ def test_model_table_kernel_gives_the_numpy_table(backend, seed):
         s._table = None
         got = s.model_table(max_range, sig_min, po_min, backend=backend)
         assert ref.tobytes() == got.tobytes()
+
+
+@pytest.mark.parametrize("backend", UPDATE_KERNELS)
+@pytest.mark.parametrize("seed", range(30))
+def test_sort_by_ray_kernel_gives_the_argsort_order(backend, seed):
+    """The update's compiled bucket sort (sample_set_numba._sort_by_ray_py) puts the
+    measurements in the order of numpy's argsort of the keys ``ray + U[0, 1)`` with their
+    runs of equal rays, and reports equal keys (-1) instead of ordering them."""
+    sort_by_ray, ray_runs, _, _ = sample_set_numba.update_kernels(backend)
+    rng = np.random.default_rng(seed)
+    n_rays = int(rng.choice([1, 7, 360, 1440]))
+    m = int(rng.integers(1, 3000)) * (1 if seed % 3 else 20)  # long buckets: argsort
+    ray = rng.integers(0, n_rays, m)
+    val = rng.integers(0, 65536, m).astype(np.uint16)
+    keys = ray + rng.random(m)
+    if seed % 5 == 4:  # a tie: two equal keys
+        i, j = rng.choice(m, 2, replace=m < 2)
+        ray[j], keys[j] = ray[i], keys[i]
+    r_s = np.empty(m, dtype=np.int64)
+    v_s = np.empty(m, dtype=np.uint16)
+    first = np.empty(m, dtype=np.int64)
+    n_runs = sort_by_ray(ray, keys, val, n_rays, r_s, v_s, first)
+    if len(np.unique(keys)) < m:
+        assert n_runs == -1
+        return
+    order = np.argsort(keys)
+    np.testing.assert_array_equal(r_s, ray[order])
+    np.testing.assert_array_equal(v_s, val[order])
+    ref = np.empty(m, dtype=np.int64)
+    n_ref = ray_runs(ray[order], ref)
+    assert n_runs == n_ref
+    np.testing.assert_array_equal(first[:n_runs], ref[:n_ref])
+
+
+@pytest.mark.parametrize("backend", ["numpy", *UPDATE_KERNELS])
+@pytest.mark.parametrize("bad", [-1, 7])
+def test_update_refuses_a_ray_out_of_range(backend, bad):
+    s = SampleSets(7, 5, 0.2)
+    with pytest.raises(ValueError, match="out of range"):
+        s.update([0, bad, 3], [1000, 1000, 1000], np.random.default_rng(0), backend=backend)
+    assert s.version == 0 and not s.count.any()
