@@ -816,10 +816,11 @@ class LocalizerPool:
         heaviest localizer (the experiment's critical path) falls behind while light ones
         finish early and leave a core idle at the end. Niced, the light ones take what the
         simulation and the heavy worker leave (the simulation waits for runs in flight, the
-        worker for scans), and the pool's depth bounds how far they lag. Measured on the H&W
-        replica (main process, three workers, two cores): see ``default_workers``. Only the
-        schedule changes, never a number; ignored where the platform has no ``setpriority``
-        or refuses it."""
+        worker for scans), and the pool's depth bounds how far they lag. On the H&W replica
+        (main process, three workers, two cores) the heaviest worker used to finish 15 s
+        after the others with one core idle; niced, 5 s (measured together with other speed
+        work, not alone). Only the schedule changes, never a number; ignored where the
+        platform has no ``setpriority`` or refuses it."""
         setpriority = getattr(os, "setpriority", None)
         if setpriority is None or len(self.workers) < 2:
             return
