@@ -432,8 +432,10 @@ def _days(text: str) -> tuple[int, int]:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--repeats", type=int, default=200)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--repeats", type=int, default=200, help="--synthetic: repetitions of each timed kernel"
+    )
+    p.add_argument("--seed", type=int, default=0, help="--synthetic: seed of the synthetic data")
     p.add_argument("--synthetic", action="store_true", help="the synthetic sections 1-4")
     p.add_argument(
         "--fingerprint",
@@ -441,7 +443,11 @@ def main() -> None:
         help="print the SHA-256 of the replay's outputs instead of timing them",
     )
     p.add_argument("--profile", action="store_true", help="also the CPU per stage (cProfile)")
-    p.add_argument("--scenario", default="worlds/scenarios/apartment-28d-hw.toml")
+    p.add_argument(
+        "--scenario",
+        default="worlds/scenarios/apartment-28d-hw.toml",
+        help="scenario whose stream is recorded and replayed",
+    )
     p.add_argument("--days", type=_days, default=(1, 4), help="day range of the replay")
     p.add_argument("--timed-from", type=int, default=2, help="first timed day (see doc)")
     p.add_argument("--runs", type=int, default=3, help="timed replays (each with reference)")

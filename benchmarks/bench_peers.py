@@ -361,7 +361,10 @@ def vector(steps: int, rounds: int, n: int = 8) -> None:
         return timed(loop, steps * n)
 
     a, b, ratio = alternate(run_vec(vec), run_seq, rounds)
-    print(f"vector env, {n} lab envs (with people), env-steps/s:")
+    print(
+        f"vector env, {n} lab envs (with people; the numpy backend, which the vector env "
+        "batches), env-steps/s:"
+    )
     print(f"  make_vec {a:,.0f}, {n} sequential envs {b:,.0f}: {ratio:.2f}x (target 3x)")
     a, b, ratio = alternate(run_vec(vec), run_vec(sync), rounds)
     print(f"  make_vec {a:,.0f}, SyncVectorEnv {b:,.0f}: {ratio:.2f}x")
@@ -439,8 +442,16 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=300, help="steps per round")
     ap.add_argument("--rounds", type=int, default=5, help="alternating rounds (median kept)")
-    ap.add_argument("--backend", choices=("numpy", "numba", "both"), default="both")
-    ap.add_argument("--only", choices=("peers", "lab", "vector"), default=None)
+    ap.add_argument(
+        "--backend",
+        choices=("numpy", "numba", "both"),
+        default="both",
+        help="the sensor and people backend of the peers and lab cases (the vector case runs"
+        " numpy: the vector env batches the numpy backend)",
+    )
+    ap.add_argument(
+        "--only", choices=("peers", "lab", "vector"), default=None, help="one case (default: all)"
+    )
     ap.add_argument(
         "--envs", default="8", help="vector case: comma-separated numbers of envs (e.g. 8,16)"
     )
