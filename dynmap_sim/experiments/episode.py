@@ -70,6 +70,8 @@ KIDNAP_SEARCH_M = 1.0
 PREFERRED_EXTRA_M = 0.07
 #: A route waypoint inside an obstacle counts if free space is this near [m] (the tour's).
 SNAP_WAYPOINT_M = 0.4
+#: The person beam class as a plain int (a faster comparison than with the enum member).
+_PERSON = int(BeamClass.PERSON)
 
 
 class StreamSink(Protocol):
@@ -439,10 +441,6 @@ class EpisodeLoop:
             return math.inf
         d = np.hypot(pose[0] - legs[:, 0], pose[1] - legs[:, 1]) - legs[:, 2]
         return float(d.min()) - float(radius_m)
-
-
-#: the person beam class as a plain int (a faster comparison than with the enum member)
-_PERSON = int(BeamClass.PERSON)
 
 
 def _people(obstacles: Any) -> NDArray[np.bool_]:
