@@ -943,17 +943,15 @@ class AMCLFilter:
         draws = LowVarianceDraws(self.weights, n_max, rng)
         order = rng.permutation(n_max)
         is_rand = rng.random(n_max) < w_diff
-        if not is_rand.any() and (center is None or self.local_probability() <= 0):
+        p_loc = self.local_probability() if center is not None else 0.0
+        if not is_rand.any() and p_loc <= 0:
             # Nothing new among the candidates: only the draws up to the loop's stop count.
             n = kld_prefix_size_lazy(
                 lambda m: bin_keys(self.particles[draws.at(order[:m])], c.kld_cell_m,
                                    c.kld_angle_rad),
                 n_max, c.pf_err, c.pf_z, c.min_particles, c.max_particles, c.kld_one_bin,
             )  # fmt: skip
-            self.particles = self.particles[low_variance_resample(self.weights, n, rng)]
-            self.weights = np.full(len(self.particles), 1.0 / len(self.particles))
-            if w_diff > 0 and self.config.recovery_reset:
-                self.reset_recovery()
+            self._take_resampled(n, None, w_diff, rng)
             return
         cand = self.particles[draws.at(order)]
         if is_rand.any():
@@ -965,7 +963,6 @@ class AMCLFilter:
                 at, poses = at[ok], poses[ok]
             cand[at] = poses
         is_new, is_local = is_rand, np.zeros(n_max, dtype=bool)
-        p_loc = self.local_probability() if center is not None else 0.0
         if p_loc > 0:
             is_local = ~is_rand & (rng.random(n_max) < p_loc)
             cand[is_local] = self.local_poses(center, int(is_local.sum()), rng)
@@ -975,14 +972,19 @@ class AMCLFilter:
         n = kld_prefix_size(keys, c.pf_err, c.pf_z, c.min_particles, c.max_particles,
                             c.kld_one_bin)  # fmt: skip
         n_new = int(is_new[:n].sum())
-        idx = low_variance_resample(self.weights, n - n_new, rng)
-        parts = [self.particles[idx]]
-        if n_new:
-            parts.append(cand[:n][is_new[:n]])
-        self.particles = np.concatenate(parts)
-        self.weights = np.full(len(self.particles), 1.0 / len(self.particles))
         self.n_random_injected += int(is_rand[:n].sum())
         self.n_local_injected += int(is_local[:n].sum())
+        self._take_resampled(n - n_new, cand[:n][is_new[:n]] if n_new else None, w_diff, rng)
+
+    def _take_resampled(
+        self, n_drawn: int, new: FloatArray | None, w_diff: float, rng: np.random.Generator
+    ) -> None:
+        """:meth:`resample`'s new set: ``n_drawn`` low-variance draws of the particles, then
+        the ``new`` poses (random and local), all weighted equally; the recovery averages
+        forgotten after an injection step (``recovery_reset``)."""
+        drawn = self.particles[low_variance_resample(self.weights, n_drawn, rng)]
+        self.particles = drawn if new is None else np.concatenate([drawn, new])
+        self.weights = np.full(len(self.particles), 1.0 / len(self.particles))
         if w_diff > 0 and self.config.recovery_reset:
             self.reset_recovery()
 
