@@ -102,9 +102,18 @@ class ScanMapUser(ABC):
     """
 
     @abstractmethod
-    def set_map_from_scans(self, poses: np.ndarray, ranges_m: Sequence[np.ndarray]) -> None:
+    def set_map_from_scans(
+        self,
+        poses: np.ndarray,
+        ranges_m: Sequence[np.ndarray],
+        run_poses: np.ndarray | None = None,
+        run_odometry: np.ndarray | None = None,
+    ) -> None:
         """Make the first map from scans ``ranges_m`` (each ``(n_beams,)`` [m], ``inf``: no
-        return) taken at robot ``poses`` ``(K, 3)`` in the map frame; no first-run SLAM."""
+        return) taken at robot ``poses`` ``(K, 3)`` in the map frame; no first-run SLAM.
+        ``run_poses`` and ``run_odometry`` ``(N, 3)``, when known: the poses (NaN: unknown)
+        and the odometry of every scan of the run the map stands for, from which the
+        localizer may acquire its odometry model (B&D §4.3's ``C_O``)."""
 
 
 #: The localizer registry (built-in localizers register themselves on first lookup).

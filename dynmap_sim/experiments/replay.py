@@ -125,11 +125,14 @@ def _give_maps(
             f"--map-from-log-poses: none of the localizers takes a map ({', '.join(localizers)}"
             "); give one that does (e.g. static-mcl, dynamic-map) or drop the option"
         )
+    run_poses = ref.poses if ref is not None else log.reference
     kf_poses, kf_ranges = keyframe_scans(log, ref.poses if ref is not None else None)
     grid = OccupancyGrid.from_scans(kf_poses, kf_ranges, log.laser) if any(grids) else None
     for loc, g, m in zip(locs, grids, scans, strict=True):
         if g:
             loc.set_map(grid)
+        elif m and run_poses is not None:  # the map's run: its poses and the log's odometry
+            loc.set_map_from_scans(kf_poses, kf_ranges, run_poses, log.odometry)
         elif m:
             loc.set_map_from_scans(kf_poses, kf_ranges)
     others = [a for a, t in zip(localizers, takes, strict=True) if not t]

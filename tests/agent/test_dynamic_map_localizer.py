@@ -17,6 +17,7 @@ from dynmap_sim.agent.localization.dynamic_map_localizer import (
     odometry_covariance,
     remap_degenerate,
 )
+from dynmap_sim.agent.localization.odometry_calibration import odometry_error_rates
 from dynmap_sim.agent.localizer import LOCALIZERS, make_localizer
 from dynmap_sim.types import Prior
 
@@ -237,6 +238,47 @@ def test_odometry_covariance_grows_with_the_motion_from_a_small_floor():
     assert 2 * np.sqrt(odometry_covariance(step, 0.01, 0.1, 0.01, 0.1)[0, 0]) == pytest.approx(
         0.027
     )
+
+
+def test_odometry_covariance_is_acquired_from_a_given_maps_run():
+    """``odom_calibration`` (B&D §4.3: ``C_O`` "acquired experimentally"): a map given with
+    the poses (NaN: unknown) and odometry of its run sets ``C_O``'s rates to the odometry's
+    error rates against those poses; a map without them, a first run mapped by the
+    localizer's own SLAM, or the option off leave the configured rates."""
+    truth = _path()
+    stream = _stream(truth, _world(False), np.random.default_rng(3))
+    odo = np.array([o.pose for o, _ in stream])
+    ranges = [s.ranges_m for _, s in stream]
+    ref = truth.copy()
+    ref[::7] = np.nan
+    c = DynamicMapConfig()
+    assert c.odom_calibration
+
+    def localizer(**params):
+        return make_localizer("dynamic-map", laser=LASER, rng=np.random.default_rng(1), **params)
+
+    loc = localizer()
+    loc.set_map_from_scans(truth[::10], ranges[::10], ref, odo)
+    rates = loc.odom_rates
+    assert rates == odometry_error_rates(
+        odo, ref, c.odom_calibration_window, c.odom_calibration_quantile
+    )
+    # the stream's odometry: 2 % long, 3 % heading scale plus 3 % of the distance
+    assert 0.01 < rates.k_xy < 0.1 and 0.02 < rates.k_th < 0.3
+    assert loc._odom_params() == (c.odom_sigma_xy0_m, rates.k_xy, c.odom_sigma_th0_rad, rates.k_th)
+    with pytest.raises(ValueError, match="run_poses and run_odometry together"):
+        loc.set_map_from_scans(truth[::10], ranges[::10], truth)
+    off = localizer(odom_calibration=False)
+    off.set_map_from_scans(truth[::10], ranges[::10], ref, odo)
+    bare = localizer()
+    bare.set_map_from_scans(truth[::10], ranges[::10])
+    own = localizer()
+    own.begin_run(Prior(initial_pose=truth[0].copy(), day=1, run=1, first_run=True))
+    for o, s in stream[:30]:
+        own.update(o, s)
+    own.end_run()
+    for other in (off, bare, own):
+        assert other.odom_rates is None and other._odom_params() == c.odom_params
 
 
 def test_kappa_first_fuses_the_odometry_prior_from_the_first_match(learned):

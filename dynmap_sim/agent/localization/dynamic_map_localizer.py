@@ -58,8 +58,13 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from dynmap_sim import se2
+from dynmap_sim.agent.localization.odometry_calibration import (
+    OdometryRates,
+    odometry_error_rates,
+)
 from dynmap_sim.agent.localizer import Localizer, ScanMapUser, register_localizer
 from dynmap_sim.agent.mapping.first_run import FirstRunMapper
 from dynmap_sim.agent.mapping.scan_matcher import (
@@ -198,6 +203,21 @@ class DynamicMapConfig:
     odom_sigma_th0_rad: float = 0.01
     #: ... (10 % of the motion, as in x and y).
     odom_k_th: float = 0.1
+    #: ``C_O`` "acquired experimentally" (§4.3; :mod:`.odometry_calibration`) for a given
+    #: map: when the map comes with the poses and odometry of every scan of its run
+    #: (:meth:`DynamicMapLocalizer.set_map_from_scans`, e.g. replay's
+    #: ``--map-from-log-poses``), ``odom_k_xy`` and ``odom_k_th`` are replaced by the
+    #: odometry's error rates against those poses (the ``σ0`` terms stay): a real robot's
+    #: odometry is its own (the FR079 log's Pioneer: 16 % and 18 %, where the simulated
+    #: robots have 0.8 % and 5 %). Not from the first-run SLAM's trajectory: its per-scan
+    #: jitter is larger than the simulated odometry's error (corridor world, windows of 10
+    #: scans: 4.3 % against 0.77 % from the truth), and ``C_O`` that wide let the corridor's
+    #: estimate slide (0.36 m mean on day 2). False: the rates above, always.
+    odom_calibration: bool = True
+    #: ... over windows of this many scans (1 s at 10 Hz) ...
+    odom_calibration_window: int = 10
+    #: ... taking this quantile of the windows' error rates.
+    odom_calibration_quantile: float = 0.9
     #: First non-zero κ of eq. 9 (§4.3 step 4 doubles it from here).
     kappa0: float = 0.25
     #: κ of the first match. B&D §4.3: 0 (the scan alone; "in most cases the result from
@@ -271,6 +291,7 @@ class DynamicMapConfig:
                 "freeze_after_day", "select_radius_m", "update_radius_m", "local_map_spacing_m",
                 "sigma_max_m", "sigma_min_m", "odom_sigma_xy0_m", "odom_sigma_th0_rad", "kappa0",
                 "max_match_points", "max_correspondence_m", "max_iterations",
+                "odom_calibration_window", "odom_calibration_quantile",
             ),
             non_negative=(
                 "min_readings", "max_select_readings", "explained_density", "odom_k_xy",
@@ -279,6 +300,7 @@ class DynamicMapConfig:
                 "ltm_scans_per_run", "min_update_dist_m", "min_update_angle_rad",
                 "ltm_day_scans_per_run", "ltm_anchor_tol_m", "ltm_anchor_max_sigma_m",
             ),
+            at_most={"odom_calibration_quantile": 1.0},
         )  # fmt: skip
 
     @property
@@ -382,6 +404,9 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
         self._day = 0
         #: the first map came from scans at given poses (:meth:`set_map_from_scans`)
         self._map_given = False
+        #: ``C_O``'s rates acquired from a given map's run (``odom_calibration``); None: the
+        #: configured ones
+        self.odom_rates: OdometryRates | None = None
 
     # ------------------------------------------------------------------ pickling
     def __getstate__(self) -> dict[str, Any]:
@@ -391,6 +416,28 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
         return state
 
     # ------------------------------------------------------------------ levels
+    def _odom_params(self) -> tuple[float, float, float, float]:
+        """The arguments of :func:`odometry_covariance` after ``delta``: the configured ones,
+        with the rates acquired from the map's run when there are any."""
+        c = self.config
+        rates = self.__dict__.get("odom_rates")  # None in pickles made before calibration
+        if rates is None:
+            return c.odom_params
+        return (c.odom_sigma_xy0_m, rates.k_xy, c.odom_sigma_th0_rad, rates.k_th)
+
+    def _calibrate_odometry(self, odometry: ArrayLike, poses: ArrayLike) -> None:
+        """``C_O`` acquired from a given map's run (``odom_calibration``): the odometry's
+        error rates against its poses (:func:`odometry_error_rates`); kept as configured when
+        the run has too few windows that moved."""
+        c = self.config
+        if not c.odom_calibration:
+            return
+        rates = odometry_error_rates(
+            odometry, poses, c.odom_calibration_window, c.odom_calibration_quantile
+        )
+        if rates is not None:
+            self.odom_rates = rates
+
     @property
     def selectable_levels(self) -> list[int]:
         """Timescales the localization may select (static-map: λ2–λ5 only)."""
@@ -466,7 +513,7 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
                 np.hypot(delta[0], delta[1]) < self.config.min_update_dist_m
                 and abs(delta[2]) < self.config.min_update_angle_rad
             ):  # not moved enough: odometry only, the scan is not used (like AMCL's update_min_*)
-                c_o = odometry_covariance(delta, *self.config.odom_params)
+                c_o = odometry_covariance(delta, *self._odom_params())
                 return PoseEstimate(
                     mean=se2.compose(self._pose, delta),
                     cov=self._propagated_cov(c_o),
@@ -478,7 +525,7 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
         else:
             self._last_odom = opose.copy()
             pred = se2.compose(self._pose, delta)
-            c_o = odometry_covariance(delta, *self.config.odom_params)
+            c_o = odometry_covariance(delta, *self._odom_params())
             pose, cov, kappa, sigma_m = self._match(pts_base, pred, c_o, self._current_point_map())
             if self._anchoring:
                 anchored = self._anchor(pts_base, pred, c_o, pose)
@@ -684,12 +731,22 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
             return {"map_snapshot": self.day_snapshots[-1][1].to_arrays()}
         return {}
 
-    def set_map_from_scans(self, poses: np.ndarray, ranges_m: Sequence[np.ndarray]) -> None:
+    def set_map_from_scans(
+        self,
+        poses: np.ndarray,
+        ranges_m: Sequence[np.ndarray],
+        run_poses: np.ndarray | None = None,
+        run_odometry: np.ndarray | None = None,
+    ) -> None:
         """The first map from scans at given poses (:class:`ScanMapUser`; e.g. a log's
         corrected poses): the end of a first run (§4, §4.4) with the poses given instead of
         the first-run SLAM's — initial local maps from the scans, then :meth:`end_run` and
         :meth:`end_day` learn them as the run and the day they stand for (a static variant
-        freezes as after its first day)."""
+        freezes as after its first day). ``run_poses`` and ``run_odometry`` (both or neither,
+        ``(N, 3)`` for every scan of that run, NaN poses unknown): ``C_O`` is acquired from
+        them (``odom_calibration``)."""
+        if (run_poses is None) != (run_odometry is None):
+            raise ValueError("set_map_from_scans: give run_poses and run_odometry together")
         poses = np.asarray(poses, dtype=np.float64).reshape(-1, 3)
         if len(poses) == 0 or len(poses) != len(ranges_m):
             raise ValueError(
@@ -698,6 +755,8 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
         self._init_local_maps(poses, ranges_m)
         for pose, r in zip(poses, ranges_m, strict=True):
             self._store(pose, np.asarray(r, dtype=np.float64))
+        if run_poses is not None and run_odometry is not None:
+            self._calibrate_odometry(run_odometry, run_poses)
         self.end_run()
         self.end_day()
         self._map_given = True
