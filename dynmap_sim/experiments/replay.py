@@ -116,7 +116,9 @@ def _give_maps(
 ) -> list[bool]:
     """``--map-from-log-poses``: the map from the log's poses (the reference's when given) to
     every localizer that takes one — a grid to a :class:`MapUser`, the keyframe scans at
-    those poses to a :class:`ScanMapUser`; which localizers got one."""
+    those poses to a :class:`ScanMapUser` (with a reference also its poses of every scan and
+    the log's odometry, from which ``dynamic-map`` acquires ``C_O``); which localizers got
+    one."""
     grids = [isinstance(loc, MapUser) for loc in locs]
     scans = [isinstance(loc, ScanMapUser) and not g for loc, g in zip(locs, grids, strict=True)]
     takes = [g or m for g, m in zip(grids, scans, strict=True)]
@@ -125,7 +127,9 @@ def _give_maps(
             f"--map-from-log-poses: none of the localizers takes a map ({', '.join(localizers)}"
             "); give one that does (e.g. static-mcl, dynamic-map) or drop the option"
         )
-    run_poses = ref.poses if ref is not None else log.reference
+    # the poses of the map's run, for a localizer that acquires its odometry model from them:
+    # a reference's only (the log's own laser-line poses may be the very odometry)
+    run_poses = ref.poses if ref is not None else None
     kf_poses, kf_ranges = keyframe_scans(log, ref.poses if ref is not None else None)
     grid = OccupancyGrid.from_scans(kf_poses, kf_ranges, log.laser) if any(grids) else None
     for loc, g, m in zip(locs, grids, scans, strict=True):

@@ -153,6 +153,28 @@ def test_dynamic_map_takes_the_scans_at_the_reference_poses(tmp_path, capsys):
         assert mean_e < 0.15, day
 
 
+def test_dynamic_map_acquires_c_o_from_the_reference_run_only(tmp_path):
+    """With a reference, --map-from-log-poses also hands dynamic-map the reference's poses of
+    every scan and the log's odometry, from which it acquires ``C_O`` (B&D §4.3); without
+    one it keeps its configured rates (the laser lines' poses may be the odometry itself)."""
+    from dynmap_sim.agent.localization.odometry_calibration import odometry_error_rates
+    from dynmap_sim.agent.localizer import make_localizer
+    from dynmap_sim.experiments.reference import load_reference
+    from dynmap_sim.experiments.replay import _give_maps
+    from dynmap_sim.io.carmen import read_carmen
+
+    raw, ref_path, _ = write_logs(tmp_path, drop_every=0)
+    log = read_carmen(raw)
+    ref = load_reference(ref_path, log, None, REFERENCE_TOLERANCE_S)
+    with_ref = make_localizer("dynamic-map", laser=log.laser, rng=np.random.default_rng(0))
+    assert _give_maps(log, ref, [with_ref], ["dynamic-map"], None) == [True]
+    expected = odometry_error_rates(log.odometry, ref.poses)
+    assert expected is not None and with_ref.odom_rates == expected
+    without = make_localizer("dynamic-map", laser=log.laser, rng=np.random.default_rng(0))
+    assert _give_maps(log, None, [without], ["dynamic-map"], None) == [True]
+    assert without.odom_rates is None
+
+
 def test_dynamic_map_given_scans_maps_no_first_run():
     """``set_map_from_scans``: local maps at the given poses, none of the first-run mapper;
     a static variant freezes as after its first day; mismatched input is refused."""

@@ -197,11 +197,11 @@ class DynamicMapConfig:
     #: blank corridor, where the matches against λ1 (the robot's own recent scans) are
     #: biased by about 1 % and the long-term maps learn what they pass. History (replays of
     #: the untuned worlds' tours, RMSE): 1 cm + 10 % slid 1.5 m along the corridor world's
-    #: corridor (0.81 m); 2 % and 10 % (a wheel odometry's order, 2026-11-28) left the
-    #: corridor at 0.152 m on one of three filter generators (0.060 and 0.050 m on the
-    #: others); these rates give 0.045 / 0.050 / 0.047 m there, the office 0.029 / 0.029 m
-    #: (0.029 / 0.029), the hall 0.047 / 0.044 m (0.042 / 0.043) (README, "Odometry
-    #: covariance acquired experimentally").
+    #: corridor (0.81 m); 2 % and 10 % (a wheel odometry's order, 2026-11-28) gave the
+    #: corridor 0.060 / 0.050 / 0.152 m on filter generators 1 / 2 / 3, these rates 0.050 /
+    #: 0.047 / 0.045 m; the office 0.029 / 0.029 m on generators 1 / 3 either way, the hall
+    #: 0.043 / 0.042 -> 0.044 / 0.047 m, the lab's five weeks 0.035 -> 0.034 m (README,
+    #: "Odometry covariance acquired experimentally").
     odom_k_xy: float = 0.008
     #: ... and in theta ``odom_sigma_th0_rad + odom_k_th (a + d/2)`` [rad] ...
     odom_sigma_th0_rad: float = 0.01
