@@ -889,7 +889,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="build the map from the log's scans at the reference poses (--reference; without "
         "it, at the poses on the log's laser lines, which on a raw log are its odometry) and "
         "give it to every localizer that accepts a map (static-mcl: as a grid; dynamic-map: "
-        "its keyframe scans); the others still map on day 1",
+        "its keyframe scans, and with --reference its odometry covariance acquired from the "
+        "reference poses and the log's odometry); the others still map on day 1",
     )
     s.add_argument(
         "--reference",
