@@ -49,6 +49,7 @@ from dynmap_sim.agent.mapping.scan_points import scan_points_base, voxel_downsam
 from dynmap_sim.agent.maps.dynamic_map import DynamicMap
 from dynmap_sim.agent.maps.local_map import LocalMap
 from dynmap_sim.agent.maps.sample_set import SampleSets, robust_estimates
+from dynmap_sim.cli import day_range
 from dynmap_sim.types import LaserSpec, Prior
 
 # the synthetic geometry the agent tests use (one exact ray caster, one drifting stream)
@@ -425,11 +426,6 @@ def fingerprint(args) -> str:
     return h.hexdigest()
 
 
-def _days(text: str) -> tuple[int, int]:
-    a, _, b = text.partition("-")
-    return int(a), int(b or a)
-
-
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument(
@@ -448,7 +444,7 @@ def main() -> None:
         default="worlds/scenarios/apartment-28d-hw.toml",
         help="scenario whose stream is recorded and replayed",
     )
-    p.add_argument("--days", type=_days, default=(1, 4), help="day range of the replay")
+    p.add_argument("--days", type=day_range, default=(1, 4), help="day range of the replay")
     p.add_argument("--timed-from", type=int, default=2, help="first timed day (see doc)")
     p.add_argument("--runs", type=int, default=3, help="timed replays (each with reference)")
     p.add_argument(

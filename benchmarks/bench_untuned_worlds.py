@@ -25,6 +25,7 @@ import time
 from pathlib import Path
 
 from dynmap_sim.analysis.report import overall_stats
+from dynmap_sim.cli import day_range
 from dynmap_sim.experiments.results import ResultsDB
 from dynmap_sim.experiments.runner import run_experiment
 from dynmap_sim.experiments.scenario import load_scenario
@@ -40,18 +41,6 @@ WORLDS = {
 BAR_ATE_M = 0.10
 #: ... and no position error above this [m]
 BAR_MAX_M = 0.5
-
-
-def day_range(text: str) -> tuple[int, int]:
-    """``A-B`` or ``A`` (1-based, inclusive)."""
-    a, _, b = text.partition("-")
-    try:
-        days = (int(a), int(b or a))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"days look like 3 or 1-7, not {text!r}") from None
-    if days[0] < 1 or days[1] < days[0]:
-        raise argparse.ArgumentTypeError(f"bad day range {text!r}")
-    return days
 
 
 def world_list(text: str) -> list[str]:

@@ -23,6 +23,7 @@ import numpy as np
 
 from dynmap_sim.agent.localization.dynamic_map_localizer import DynamicMapConfig
 from dynmap_sim.agent.localization.odometry_calibration import odometry_error_rates
+from dynmap_sim.cli import day_range
 from dynmap_sim.experiments.runner import run_experiment
 from dynmap_sim.experiments.scenario import LocalizerConfig, load_scenario
 
@@ -72,7 +73,10 @@ def fr079(data: Path) -> tuple[float, float, int] | None:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument(
-        "--days", default="1-1", help="day range simulated in each scenario (default: 1-1)"
+        "--days",
+        type=day_range,
+        default=(1, 1),
+        help="day range simulated in each scenario, e.g. 1-2 (default: 1)",
     )
     ap.add_argument(
         "--data",
@@ -86,13 +90,6 @@ def main(argv: list[str] | None = None) -> int:
         help=f"comma-separated shipped scenarios (default: {','.join(SCENARIOS)})",
     )
     args = ap.parse_args(argv)
-    try:
-        first, _, last = args.days.partition("-")
-        days = (int(first), int(last or first))
-        if not 1 <= days[0] <= days[1]:
-            raise ValueError
-    except ValueError:
-        ap.error(f"--days: expected a range like 1-2, got {args.days!r}")
     names = [s.strip() for s in args.scenarios.split(",") if s.strip()]
     unknown = [n for n in names if not (ROOT / "worlds" / "scenarios" / f"{n}.toml").is_file()]
     if unknown:
@@ -101,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
     print("odometry error rates, 0.9 quantile over 10-scan windows (k_xy, k_th):")
     print(f"  dynamic-map's configured C_O rates: {c.odom_k_xy:.4f}, {c.odom_k_th:.4f}")
     for name in names:
-        for run, kxy, kth in simulated(name, days):
+        for run, kxy, kth in simulated(name, args.days):
             print(f"  {name:15s} {run:14s} {kxy:.4f}  {kth:.4f}")
         sys.stdout.flush()
     pioneer = fr079(args.data)

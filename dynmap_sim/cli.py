@@ -17,8 +17,9 @@ from typing import Any, TypeVar
 Handler = Callable[[argparse.Namespace], int]
 
 
-def _days(text: str) -> tuple[int, int]:
-    """Parse ``A-B`` or ``A`` (1-based, inclusive) into a day range."""
+def day_range(text: str) -> tuple[int, int]:
+    """Parse ``A-B`` or ``A`` (1-based, inclusive) into a day range (an argparse ``type``; the
+    benchmarks' ``--days`` use it too)."""
     try:
         a, _, b = text.partition("-")
         first, last = int(a), int(b or a)
@@ -745,7 +746,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("run", help="run a multi-day experiment from a scenario file")
     s.add_argument("scenario", help="scenario TOML file")
-    s.add_argument("--days", type=_days, help="day range, e.g. 1-7 (default: the scenario's)")
+    s.add_argument("--days", type=day_range, help="day range, e.g. 1-7 (default: the scenario's)")
     s.add_argument("--seed", type=_seed, help=seed_help + " (default: the scenario's first)")
     s.add_argument("--out", help="results folder (default: results/<scenario name>)")
     s.add_argument("--resume", action="store_true", help="continue from the last checkpoint")
@@ -805,7 +806,7 @@ def build_parser() -> argparse.ArgumentParser:
         "(default: the first)",
     )
     s.add_argument(
-        "--day", type=_days, help="with --mcap: day or day range, e.g. 2 or 1-3 (default: all)"
+        "--day", type=day_range, help="with --mcap: day or day range, e.g. 2 or 1-3 (default: all)"
     )
     s.add_argument("--run", type=_positive, help="with --mcap: run of each day (default: all)")
     s.add_argument(
@@ -966,7 +967,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="LABEL",
         help="keep only the localizer with this label; repeat for several (default: all)",
     )
-    s.add_argument("--days", type=_days, help="day range, e.g. 1-7 (default: each scenario's)")
+    s.add_argument("--days", type=day_range, help="day range, e.g. 1-7 (default: each scenario's)")
     s.add_argument(
         "--out", help="the sweep's folder (needed with SCENARIO; --file: results/<its name>)"
     )

@@ -127,10 +127,10 @@ def _give_maps(
             f"--map-from-log-poses: none of the localizers takes a map ({', '.join(localizers)}"
             "); give one that does (e.g. static-mcl, dynamic-map) or drop the option"
         )
-    # the poses of the map's run, for a localizer that acquires its odometry model from them:
-    # a reference's only (the log's own laser-line poses may be the very odometry)
+    # the reference's poses of the map's run (None: the laser lines' own, which are not handed
+    # to a localizer that acquires its odometry model from them: they may be the odometry)
     run_poses = ref.poses if ref is not None else None
-    kf_poses, kf_ranges = keyframe_scans(log, ref.poses if ref is not None else None)
+    kf_poses, kf_ranges = keyframe_scans(log, run_poses)
     grid = OccupancyGrid.from_scans(kf_poses, kf_ranges, log.laser) if any(grids) else None
     for loc, g, m in zip(locs, grids, scans, strict=True):
         if g:

@@ -33,9 +33,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import ArrayLike
 
-FloatArray = NDArray[np.float64]
+from dynmap_sim import se2
 
 
 @dataclass(frozen=True)
@@ -46,15 +46,6 @@ class OdometryRates:
     k_xy: float
     k_th: float
     n_windows: int
-
-
-def _increments(poses: FloatArray, window: int) -> FloatArray:
-    """``poses[i]⁻¹ ⊕ poses[i + window]`` for every ``i``: ``(N − window, 3)``."""
-    a, b = poses[:-window], poses[window:]
-    dx, dy = b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]
-    c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
-    dth = np.arctan2(np.sin(b[:, 2] - a[:, 2]), np.cos(b[:, 2] - a[:, 2]))
-    return np.column_stack([c * dx + s * dy, -s * dx + c * dy, dth])
 
 
 def odometry_error_rates(
@@ -83,8 +74,8 @@ def odometry_error_rates(
     window = int(window)
     if len(ref) <= window:
         return None
-    d_odo = _increments(odo, window)
-    d_ref = _increments(ref, window)
+    d_odo = se2.between(odo[:-window], odo[window:])  # each window's increment
+    d_ref = se2.between(ref[:-window], ref[window:])
     d = np.hypot(d_ref[:, 0], d_ref[:, 1])
     a = np.abs(d_ref[:, 2])
     ok = np.isfinite(d_ref).all(axis=1) & np.isfinite(d_odo).all(axis=1) & (d + a >= min_motion)
@@ -92,8 +83,7 @@ def odometry_error_rates(
         return None
     d, a, d_odo, d_ref = d[ok], a[ok], d_odo[ok], d_ref[ok]
     e_xy = np.hypot(d_odo[:, 0] - d_ref[:, 0], d_odo[:, 1] - d_ref[:, 1]) / (d + 0.5 * a)
-    dth = d_odo[:, 2] - d_ref[:, 2]
-    e_th = np.abs(np.arctan2(np.sin(dth), np.cos(dth))) / (a + 0.5 * d)
+    e_th = np.abs(se2.wrap_angle(d_odo[:, 2] - d_ref[:, 2])) / (a + 0.5 * d)
     return OdometryRates(
         k_xy=float(np.quantile(e_xy, quantile)),
         k_th=float(np.quantile(e_th, quantile)),
