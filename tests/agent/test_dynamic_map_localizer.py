@@ -296,13 +296,43 @@ def test_kappa_first_fuses_the_odometry_prior_from_the_first_match(learned):
     target = loc._current_point_map()
     c_o = np.diag([0.02**2, 0.02**2, 0.01**2])
     pred = truth[30] + [0.032, 0.016, 0.0]  # Mahalanobis 1.8: inside two sigma
-    alone, _, kappa_alone, _ = loc._match(pts, pred, c_o, target)
+    alone, _, kappa_alone, _, _ = loc._match(pts, pred, c_o, target)
     loc.config = replace(loc.config, kappa_first=1.0)
-    fused, _, kappa_fused, _ = loc._match(pts, pred, c_o, target)
+    fused, _, kappa_fused, _, _ = loc._match(pts, pred, c_o, target)
     assert (kappa_alone, kappa_fused) == (0.0, 1.0)
     assert np.hypot(*(alone[:2] - truth[30][:2])) < 0.01
     pull = fused[:2] - alone[:2]
     assert np.hypot(*pull) > 1e-4 and pull @ (pred[:2] - alone[:2]) > 0
+
+
+def test_a_heading_slip_beyond_c_o_takes_the_scans_heading_never_its_position(learned):
+    """``slip_fit_ratio`` (not B&D; on by default): odometry whose heading slipped far beyond
+    ``C_O`` (a wheel on a door sill) makes eq. 9 force the match to a pose that fits the map
+    visibly worse than the scan alone; the scan's heading is then taken (B&D's scheme, the
+    option at 0, keeps the slipped heading). A prediction off in position only (a match
+    sliding along a corridor) gains nothing: the position stays bound to the odometry."""
+    assert DynamicMapConfig().slip_fit_ratio == 1.25
+    loc = pickle.loads(pickle.dumps(learned[0]["dynamic-map"]))
+    truth = learned[2]
+    loc.begin_run(Prior(initial_pose=truth[0].copy(), day=2, run=1))
+    stream = list(_stream(truth, _world(False), np.random.default_rng(11)))
+    for o, s in stream[:30]:
+        loc.update(o, s)
+    pts = se2.scan_to_points(np.asarray(stream[30][1].ranges_m, float), LASER.angles())
+    target = loc._current_point_map()
+    c_o = np.diag([0.01**2, 0.01**2, 0.005**2])
+    slipped = truth[30] + [0.0, 0.0, 0.08]  # 16 sigma in heading
+    pose, _, _, _, slip = loc._match(pts, slipped, c_o, target)
+    assert slip
+    assert abs(se2.wrap_angle(pose[2] - truth[30][2])) < 0.01
+    assert np.hypot(*(pose[:2] - truth[30][:2])) < 0.02
+    slid = truth[30] + [0.1, 0.0, 0.0]  # 10 sigma in x
+    pose_slid, _, _, _, _ = loc._match(pts, slid, c_o, target)
+    assert np.hypot(*(pose_slid[:2] - slid[:2])) < 2.5 * 0.01
+    loc.config = replace(loc.config, slip_fit_ratio=0.0)  # B&D's scheme
+    pose_bd, _, kappa, _, slip_bd = loc._match(pts, slipped, c_o, target)
+    assert not slip_bd and kappa > 0
+    assert abs(se2.wrap_angle(pose_bd[2] - truth[30][2])) > 0.05
 
 
 def test_remap_degenerate_keeps_the_prediction_only_where_the_scan_is_blind():
