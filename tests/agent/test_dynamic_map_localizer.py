@@ -281,11 +281,9 @@ def test_odometry_covariance_is_acquired_from_a_given_maps_run():
         assert other.odom_rates is None and other._odom_params() == c.odom_params
 
 
-def test_kappa_first_fuses_the_odometry_prior_from_the_first_match(learned):
-    """``kappa_first`` (not B&D, whose §4.3 scheme starts at κ = 0 and is the default): the
-    first match already minimises ``E_S + κ E_O``, so a prediction inside the two-sigma
-    region pulls the result towards it, where B&D's scheme returns the scan's own match."""
-    assert DynamicMapConfig().kappa_first == 0
+def _before_scan_30(learned):
+    """A copy of the learned ``dynamic-map`` after 30 scans of a day-2 run: the localizer,
+    the path, scan 30's points (robot frame) and the current map it is matched against."""
     loc = pickle.loads(pickle.dumps(learned[0]["dynamic-map"]))
     truth = learned[2]
     loc.begin_run(Prior(initial_pose=truth[0].copy(), day=2, run=1))
@@ -294,6 +292,15 @@ def test_kappa_first_fuses_the_odometry_prior_from_the_first_match(learned):
         loc.update(o, s)
     pts = se2.scan_to_points(np.asarray(stream[30][1].ranges_m, float), LASER.angles())
     target = loc._current_point_map()
+    return loc, truth, pts, target
+
+
+def test_kappa_first_fuses_the_odometry_prior_from_the_first_match(learned):
+    """``kappa_first`` (not B&D, whose §4.3 scheme starts at κ = 0 and is the default): the
+    first match already minimises ``E_S + κ E_O``, so a prediction inside the two-sigma
+    region pulls the result towards it, where B&D's scheme returns the scan's own match."""
+    assert DynamicMapConfig().kappa_first == 0
+    loc, truth, pts, target = _before_scan_30(learned)
     c_o = np.diag([0.02**2, 0.02**2, 0.01**2])
     pred = truth[30] + [0.032, 0.016, 0.0]  # Mahalanobis 1.8: inside two sigma
     alone, _, kappa_alone, _, _ = loc._match(pts, pred, c_o, target)
@@ -312,14 +319,7 @@ def test_a_heading_slip_beyond_c_o_takes_the_scans_heading_never_its_position(le
     option at 0, keeps the slipped heading). A prediction off in position only (a match
     sliding along a corridor) gains nothing: the position stays bound to the odometry."""
     assert DynamicMapConfig().slip_fit_ratio == 1.25
-    loc = pickle.loads(pickle.dumps(learned[0]["dynamic-map"]))
-    truth = learned[2]
-    loc.begin_run(Prior(initial_pose=truth[0].copy(), day=2, run=1))
-    stream = list(_stream(truth, _world(False), np.random.default_rng(11)))
-    for o, s in stream[:30]:
-        loc.update(o, s)
-    pts = se2.scan_to_points(np.asarray(stream[30][1].ranges_m, float), LASER.angles())
-    target = loc._current_point_map()
+    loc, truth, pts, target = _before_scan_30(learned)
     c_o = np.diag([0.01**2, 0.01**2, 0.005**2])
     slipped = truth[30] + [0.0, 0.0, 0.08]  # 16 sigma in heading
     pose, _, _, _, slip = loc._match(pts, slipped, c_o, target)
