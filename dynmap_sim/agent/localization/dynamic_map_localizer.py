@@ -631,7 +631,7 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
         prior = {"prior_mean": pred, "prior_info": kappa * info_o} if kappa > 0 else {}
         first = match_scan(pts, target, pred, **kw, **prior)
         res, kappa, accepted = self._eq9_bound(pts, target, pred, info_o, first, kw)
-        slipped = res is not first and self._slipped(first, res, len(pts))
+        slipped = self._slipped(first, res, len(pts))
         if slipped:  # the heading from the scan, the position still bound by the odometry
             pred_h = np.array([pred[0], pred[1], first.pose[2]])
             res, kappa, accepted = self._eq9_bound(pts, target, pred_h, info_o, first, kw)
@@ -660,11 +660,7 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
         def within(res: MatchResult) -> bool:
             e = res.pose - pred
             e[2] = se2.wrap_one(float(e[2]))  # float arithmetic: fewer numpy calls
-            return (
-                res.n_matched >= c.min_matched
-                and np.all(np.isfinite(res.pose))
-                and float(e @ info_o @ e) <= 4.0  # two standard deviations
-            )
+            return self._usable(res) and float(e @ info_o @ e) <= 4.0  # two standard deviations
 
         if within(first):
             return first, c.kappa_first, True
@@ -677,13 +673,15 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
             kappa *= 2.0
         return res, kappa, False
 
+    def _usable(self, res: MatchResult) -> bool:
+        """The match has a finite pose and at least ``min_matched`` correspondences."""
+        return res.n_matched >= self.config.min_matched and bool(np.all(np.isfinite(res.pose)))
+
     def _slipped(self, first: MatchResult, forced: MatchResult, n_points: int) -> bool:
-        """The first match fits ``slip_fit_ratio`` times better than the forced one (see
-        :class:`DynamicMapConfig`)."""
+        """Eq. 9 forced the match away from ``first``, which fits ``slip_fit_ratio`` times
+        better (see :class:`DynamicMapConfig`)."""
         c = self.config
-        if c.slip_fit_ratio <= 0 or first is forced or not np.all(np.isfinite(first.pose)):
-            return False
-        if first.n_matched < c.min_matched:
+        if c.slip_fit_ratio <= 0 or first is forced or not self._usable(first):
             return False
         cost = fit_cost(first, n_points, c.max_correspondence_m)
         return c.slip_fit_ratio * cost < fit_cost(forced, n_points, c.max_correspondence_m)
