@@ -49,6 +49,7 @@ from dynmap_sim.agent.control.pure_pursuit import (
     carrot_on_segment,
     pursuit_turn_rate,
 )
+from dynmap_sim.agent.params import check_fields, coerce_fields
 from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
 
 FloatArray = NDArray[np.float64]
@@ -94,7 +95,8 @@ class CorridorFollowerParams:
     #: speed floor while a free offset is driven [m/s] (RPP's regulated minimum speed, scaled
     #: to this slower robot): the robot creeps past a box rather than stalling beside it
     min_speed_mps: float = 0.05
-    #: RPP curvature regulation: slower on turns tighter than this radius [m] (RPP's 0.9)
+    #: RPP curvature regulation: slower on turns tighter than this radius [m] (RPP's 0.9;
+    #: 0: none, as H&W §6.3, whose controller slows for obstacles only)
     regulated_min_radius_m: float = 0.9
     #: RPP approach regulation: slower within this distance of the path's end [m] ...
     approach_dist_m: float = 0.6
@@ -104,12 +106,39 @@ class CorridorFollowerParams:
     min_steering_speed_mps: float = 0.1
 
     def __post_init__(self) -> None:
+        owner = "corridor-follower"
+        coerce_fields(self, owner)
+        check_fields(
+            self,
+            owner,
+            positive=(
+                "speed_mps",
+                "max_omega_radps",
+                "lookahead_m",
+                "turn_in_place_rad",
+                "goal_tolerance_m",
+                "probe_ahead_m",
+                "probe_step_m",
+                "clearance_enough_m",
+                "full_speed_clearance_m",
+                "approach_dist_m",
+            ),
+            non_negative=(
+                "min_clearance_m",
+                "default_half_width_m",
+                "offset_cost_per_m",
+                "switch_cost_per_m",
+                "speed_probe_m",
+                "min_speed_mps",
+                "regulated_min_radius_m",
+                "approach_min_speed_mps",
+                "min_steering_speed_mps",
+            ),
+        )
         if self.n_offsets < 1 or self.n_offsets % 2 == 0:
-            raise ValueError(f"n_offsets must be odd and >= 1, got {self.n_offsets}")
+            raise ValueError(f"{owner}: n_offsets must be odd and >= 1, got {self.n_offsets}")
         if self.full_speed_clearance_m <= self.min_clearance_m:
-            raise ValueError("full_speed_clearance_m must exceed min_clearance_m")
-        if self.probe_step_m <= 0.0 or self.probe_ahead_m <= 0.0:
-            raise ValueError("probe_step_m and probe_ahead_m must be > 0")
+            raise ValueError(f"{owner}: full_speed_clearance_m must exceed min_clearance_m")
 
 
 def speed_for_clearance(clearance_m: float, p: CorridorFollowerParams) -> float:

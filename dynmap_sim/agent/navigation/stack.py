@@ -55,7 +55,8 @@ lambdas; the cached route graph is dropped.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, replace
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
@@ -76,6 +77,7 @@ from dynmap_sim.agent.navigation.route_memory import (
     RoutePosition,
 )
 from dynmap_sim.agent.navigation.route_numba import cut_probe, numba_available
+from dynmap_sim.agent.params import config_from_params
 from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
 from dynmap_sim.agent.planning.costmap import Costmap, CostmapParams, samples_along
 from dynmap_sim.agent.planning.grid_astar import GridAStar, plan_around
@@ -176,7 +178,9 @@ class StackParams:
     #: floor, corridor closed: a person in the open-plan aisle stopped the detour, the
     #: replan turned the robot back and every run of the closure ended at the time limit).
     keep_detour_on_recovery: bool = True
-    #: Tunables of the parts; the stack sets the robot radius, speed and hard clearance.
+    #: Tunables of the parts; the stack sets the robot radius, speed and hard clearance. A
+    #: scenario gives them as tables (``[driver.params.follower]``): a mapping becomes the
+    #: part's dataclass, an unknown key is an error that lists the known ones.
     route_memory: RouteMemoryParams = field(default_factory=RouteMemoryParams)
     costmap: CostmapParams = field(default_factory=CostmapParams)
     follower: CorridorFollowerParams = field(default_factory=CorridorFollowerParams)
@@ -184,6 +188,18 @@ class StackParams:
     recovery: RecoveryParams = field(default_factory=RecoveryParams)
 
     def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name in _PART_PARAMS and isinstance(value, Mapping):
+                owner = f"StackParams.{f.name}"
+                fixed = sorted(set(value) & set(_SET_BY_STACK.get(f.name, ())))
+                if fixed:
+                    raise ValueError(
+                        f"{owner}: {', '.join(fixed)} set by the stack (the cruise speed, robot "
+                        "radius and safety_margin_m), not by the part's table"
+                    )
+                part = config_from_params(_PART_PARAMS[f.name], owner, value)
+                object.__setattr__(self, f.name, part)
         for name in ("speed_mps", "route_half_width_m", "replan_period_s", "goal_tolerance_m"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0.0):
@@ -197,6 +213,24 @@ class StackParams:
             raise ValueError(
                 f"StackParams.cut_offsets must be odd and >= 1, got {self.cut_offsets}"
             )
+
+
+#: The parts' parameter classes by :class:`StackParams` field.
+_PART_PARAMS: dict[str, type] = {
+    "route_memory": RouteMemoryParams,
+    "costmap": CostmapParams,
+    "follower": CorridorFollowerParams,
+    "monitor": CollisionMonitorParams,
+    "recovery": RecoveryParams,
+}
+
+#: The fields of a part's parameters that the stack sets (from its own speed, the robot's
+#: radius and the hard clearance) and so a scenario's table may not.
+_SET_BY_STACK: dict[str, tuple[str, ...]] = {
+    "follower": ("speed_mps", "min_clearance_m"),
+    "monitor": ("robot_radius_m",),
+    "recovery": ("robot_radius_m",),
+}
 
 
 def _params_except(params: object, *names: str) -> dict[str, Any]:
@@ -263,12 +297,14 @@ class NavigationStack:
         self.follower = CorridorFollower(
             p.speed_mps,
             self.min_clearance_m,
-            **_params_except(p.follower, "speed_mps", "min_clearance_m"),
+            **_params_except(p.follower, *_SET_BY_STACK["follower"]),
         )
         self.monitor = CollisionMonitor(
-            self.laser, r, **_params_except(p.monitor, "robot_radius_m")
+            self.laser, r, **_params_except(p.monitor, *_SET_BY_STACK["monitor"])
         )
-        self.recovery = Recovery(self.laser, r, **_params_except(p.recovery, "robot_radius_m"))
+        self.recovery = Recovery(
+            self.laser, r, **_params_except(p.recovery, *_SET_BY_STACK["recovery"])
+        )
         #: True once the goal is reached (the stack then commands zero)
         self.done = False
         #: True once the recovery gave up (the stack then commands zero)

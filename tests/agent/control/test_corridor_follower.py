@@ -153,6 +153,28 @@ def test_bad_params_are_refused():
         follower(n_offsets=4)
     with pytest.raises(TypeError):
         follower(no_such_param=1.0)
+    with pytest.raises(ValueError, match="corridor-follower: regulated_min_radius_m must be"):
+        follower(regulated_min_radius_m=-0.5)
+    with pytest.raises(TypeError, match="corridor-follower: full_speed_clearance_m must be a"):
+        follower(full_speed_clearance_m="far")
+
+
+def test_curvature_regulation_slows_tight_turns_unless_its_radius_is_zero():
+    """RPP's curvature regulation (``v R / R_min`` on turns tighter than R_min) is the only
+    thing between the two commands of a robot 0.2 m beside a straight path in open space (its
+    carrot 0.35 m ahead: a turn of radius ~0.4 m); at R_min = 0 it is off (H&W §6.3's
+    controller slows for obstacles only)."""
+    grid = grid_of(box(-1.5, -1.5, 4.5, 4.5))
+    pose = np.array([0.0, -0.2, 0.0])
+    speeds = {}
+    for radius in (0.9, 0.0):
+        c = follower(regulated_min_radius_m=radius)
+        c.set_path(np.array([[0.0, 0.0], [3.0, 0.0]]))
+        v, w = c.command(pose, grid)
+        speeds[radius] = v
+        assert w > 0.0  # back towards the path
+    assert speeds[0.0] == pytest.approx(SPEED_MPS)
+    assert speeds[0.9] < 0.6 * SPEED_MPS
 
 
 def test_a_follower_pickled_before_its_float_caches_commands_the_same():

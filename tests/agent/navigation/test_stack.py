@@ -8,10 +8,12 @@ import pickle
 import numpy as np
 import pytest
 
+from dynmap_sim.agent.control.corridor_follower import CorridorFollowerParams
 from dynmap_sim.agent.localizer import make_localizer
 from dynmap_sim.agent.navigation.policy import NavigationPolicy
 from dynmap_sim.agent.navigation.route_memory import RouteMemory, RoutePosition
 from dynmap_sim.agent.navigation.stack import NavigationStack, StackParams
+from dynmap_sim.agent.planning.costmap import CostmapParams
 from dynmap_sim.env import DynMapEnv
 from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Prior, Scan
 
@@ -131,6 +133,23 @@ def test_bad_input_is_a_clear_error():
         stack.begin_run(Prior(np.zeros(3), bounds=(0, 0, 5, 5), route=np.zeros((1, 2))))
     with pytest.raises(ValueError, match="cut_offsets"):
         StackParams(cut_offsets=4)
+    with pytest.raises(TypeError, match=r"StackParams.follower: unknown parameters \['nope'\]"):
+        StackParams(follower={"nope": 1.0})
+    with pytest.raises(ValueError, match="corridor-follower: full_speed_clearance_m"):
+        StackParams(follower={"full_speed_clearance_m": -1.0})
+    with pytest.raises(ValueError, match="StackParams.follower: speed_mps set by the stack"):
+        StackParams(follower={"speed_mps": 0.5})
+
+
+def test_a_scenarios_tables_become_the_parts_parameters():
+    """``[driver.params.follower]`` in a scenario is a mapping: the stack's part gets it as its
+    dataclass, every other field at its default."""
+    p = StackParams(follower={"full_speed_clearance_m": 0.56, "regulated_min_radius_m": 0})
+    assert isinstance(p.follower, CorridorFollowerParams)
+    assert p.follower.full_speed_clearance_m == 0.56
+    assert p.follower.regulated_min_radius_m == 0.0
+    assert p.follower.lookahead_m == CorridorFollowerParams().lookahead_m
+    assert p.costmap == CostmapParams()
 
 
 def test_a_loop_cut_in_two_by_forgetting_is_still_driven():
