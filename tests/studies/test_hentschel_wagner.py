@@ -187,6 +187,10 @@ def test_the_shipped_scenario_validates():
     assert {"adaptive-memory", "static-mcl walls", "static-mcl tuned", "dynamic-map"} <= set(labels)
     assert scn.driver.kind == "autonomous" and scn.driver.localizer == "adaptive-memory"
     assert scn.driver.speed_mps <= 0.2
+    # H&W §6.3's speed law: slower for obstacles only, the clearance band scaled to 0.2 m/s
+    follower = scn.driver.params["follower"]
+    assert follower["regulated_min_radius_m"] == 0.0
+    assert follower["full_speed_clearance_m"] == pytest.approx(0.25 + 0.55 * 0.2 / 0.35, abs=1e-3)
     walls = next(loc for loc in scn.localizers if loc.display == "static-mcl walls")
     assert walls.params["map_source"] == "prior-walls"
     assert walls.params["config"] == "walls-only"  # tuned was lost on 72 % of week 1
