@@ -77,6 +77,23 @@ def test_shares_on_walls_and_on_the_world_per_day_and_level():
     assert gone.days == (1, 2)  # a day without geometry is skipped
 
 
+def test_median_distances_are_exact_also_where_most_points_are_far_from_the_world():
+    """Points 1 m from every surface (a chair's rays, the chair gone) beyond the bounded
+    search's 0.5 m: the median is the brute-force one whether most points are near (6 of 10)
+    or far (8 of 10, the search redone unbounded)."""
+    no_chair = _geometry(chair=False)
+    surf, _ = surface_samples(*no_chair, step_m=0.01)
+    for n_wall, n_chair in ((6, 4), (2, 8)):
+        snap = _snapshot(n_wall, n_chair)
+        ms = map_structure([(1, snap)], lambda day: no_chair, tol_m=0.05)
+        for j, level in enumerate(LEVELS):
+            p = snap.points(0, level)
+            d = np.hypot(*(p[:, None, :] - surf[None]).transpose(2, 0, 1)).min(axis=1)
+            assert ms.median_dist_m[0, j] == pytest.approx(np.median(d), abs=1e-12)
+            assert ms.on_world[0, j] == np.mean(d < 0.05)
+    assert ms.median_dist_m[0, 0] == pytest.approx(1.0, abs=0.01)  # the far ones: 1 m off
+
+
 def test_structure_finding_needs_a_rise_of_one_point():
     snaps = [(d, _snapshot(11 - d, d - 1)) for d in (1, 2, 3, 4, 6)]
     ms = map_structure(snaps, lambda day: _geometry(True))

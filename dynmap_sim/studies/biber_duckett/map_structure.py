@@ -66,6 +66,23 @@ def surface_samples(
     return pts, np.asarray(classes, dtype=np.int8)[k]
 
 
+#: The least search bound [m] of :func:`_nearest_for_median` (it only prunes the search: a
+#: map point is rarely this far from the world's surfaces).
+MEDIAN_SEARCH_M = 0.5
+
+
+def _nearest_for_median(tree: cKDTree, p: FloatArray, bound_m: float) -> FloatArray:
+    """Each point's distance to its nearest neighbour in ``tree`` [m], exact up to
+    ``bound_m`` and inf beyond: the median and every fraction below the bound are exactly
+    those of the full distances (when fewer than half and one points are within the bound,
+    the search is redone unbounded). The bound prunes the tree search: the H&W replica's 112
+    map levels took 1.3 s instead of 3.4 s."""
+    d = tree.query(p, distance_upper_bound=bound_m)[0]
+    if np.count_nonzero(np.isfinite(d)) < len(d) // 2 + 1:
+        d = tree.query(p)[0]
+    return d
+
+
 def map_structure(
     snapshots: Sequence[tuple[int, Any]],
     geometry: Callable[[int], tuple[FloatArray, NDArray[np.integer]] | None],
@@ -92,8 +109,12 @@ def map_structure(
             if len(p) == 0:
                 row.append((0, np.nan, np.nan, np.nan))
                 continue
-            d, _ = world.query(p)
-            dw = wall_tree.query(p)[0] if wall_tree is not None else np.full(len(p), np.inf)
+            d = _nearest_for_median(world, p, max(MEDIAN_SEARCH_M, tol_m))
+            dw = (
+                wall_tree.query(p, distance_upper_bound=tol_m)[0]
+                if wall_tree is not None
+                else np.full(len(p), np.inf)
+            )
             on_walls, on_world = float(np.mean(dw < tol_m)), float(np.mean(d < tol_m))
             row.append((len(p), on_walls, on_world, float(np.median(d))))
         days.append(int(day))
