@@ -530,6 +530,7 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         reference_tolerance_s=args.reference_tolerance or REFERENCE_TOLERANCE_S,
         odometry=args.odometry,
         reversals=args.odometry_reversals,
+        seed=args.seed,
     )
     print(f"results in {out}")
     for line in _headline(out, timing=True):
@@ -918,6 +919,13 @@ def build_parser() -> argparse.ArgumentParser:
         "(default: REFERENCE_TOLERANCE_S, 0.1 s)",
     )
     _odometry_option(s)
+    s.add_argument(
+        "--seed",
+        type=_seed,
+        default=0,
+        help="root of the localizers' random generators, an integer >= 0 (default: 0); "
+        "another seed is another draw of every particle filter on the same log",
+    )
     s.add_argument("--out", required=True, help="results folder")
     s.add_argument(
         "--force", action="store_true", help="replace earlier results in --out (else refused)"

@@ -226,6 +226,7 @@ def replay_log(
     reference_tolerance_s: float = REFERENCE_TOLERANCE_S,
     odometry: str = "auto",
     reversals: str = "repair",
+    seed: int = 0,
 ) -> Path:
     """Replay CARMEN ``log`` through ``localizers`` into a results store in ``out_dir``;
     ``note`` gets what the user should know (which localizers took the log's map, how the
@@ -234,7 +235,11 @@ def replay_log(
     ``reference_offset_s`` ``None`` = estimated, and ``reference_tolerance_s``); ``None``:
     the log has no ground truth and no errors are stored. ``odometry``: which of the log's
     odometry records the localizers get and ``reversals`` what to do with its unsigned
-    reversing (:func:`~dynmap_sim.io.carmen.read_carmen`)."""
+    reversing (:func:`~dynmap_sim.io.carmen.read_carmen`). ``seed``: the root of the
+    localizers' random generators (:func:`~dynmap_sim.experiments.runner.localizer_seeds`),
+    as ``run --seed`` (another seed: another draw of every particle filter)."""
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise InputError(f"seed must be an integer >= 0, got {seed!r}")
     data = read_carmen(log, odometry=odometry, reversals=reversals)
     if len(data) < 2:
         raise InputError(f"{log}: the log has fewer than 2 scans")
@@ -245,7 +250,7 @@ def replay_log(
             note(f"note: {ref.describe()}")
     truth = ref.poses if ref is not None else np.full((len(data), 3), np.nan)
     specs = [parse_localizer_arg(a) for a in localizers]
-    rngs = localizer_seeds(0, len(specs))
+    rngs = localizer_seeds(seed, len(specs))
     try:
         locs = [
             make_localizer(name, laser=data.laser, rng=rngs[k + 1], **params)
@@ -264,6 +269,8 @@ def replay_log(
     ident = hashlib.sha256(Path(log).read_bytes())
     ident.update(json.dumps([localizers, bool(map_from_log_poses)]).encode())
     ident.update(json.dumps([data.odometry_source, data.reversals]).encode())
+    if seed:  # seed 0 keeps the hash of the replays before the option
+        ident.update(json.dumps({"seed": seed}).encode())
     if ref is not None:
         ident.update(Path(ref.path).read_bytes())
         ident.update(json.dumps([ref.offset_s, ref.tolerance_s]).encode())
@@ -276,7 +283,7 @@ def replay_log(
             log_path=str(log),
             log_message=data.message,
             log_start_s=float(data.stamps_s[0]),
-            seed=0,
+            seed=seed,
             days=[1, 2],
             slots=[[1, 1, date, start_s], [2, 1, date, start_s]],
             first_date=date,
@@ -305,7 +312,7 @@ def replay_log(
             ]
             rec = _run_pass(data, locs, priors, day, truth, labels=list(localizers))
             summaries = [ExperimentRunner._run_summary(k, rec) for k in range(len(locs))]
-            db.write_run(rec, summaries, True, None, "replay", 0)
+            db.write_run(rec, summaries, True, None, "replay", seed)
         db.set_meta(complete=True)
     finally:
         db.close()
