@@ -267,6 +267,33 @@ def test_tracks_a_synthetic_run_learns_the_furniture_and_reports_its_diagnostics
     assert np.array_equal(clone.ltm.map().logodds, loc.ltm.map().logodds)
 
 
+def test_eq_1s_clock_runs_from_the_runs_first_scan_whatever_the_stamps_origin():
+    """The experiment's stream is stamped in seconds since midnight (10:00 = 36,000 s), a
+    replay's in its log's clock: either way a 10:00 run lands in slot 4 (run_clock_s) for
+    its whole length, two days fill no second slot, and the estimates are the same as with
+    stamps from 0. (Adding the stamps to run_clock_s put each run at 20:00, slot 8, beside a
+    slot 4 copied at the run's start: a second map for §6.1's selection every day.)"""
+    from dynmap_sim.types import Scan
+
+    truth = polyline_path(np.array([[1.0, 1.0], [4.0, 1.0], [4.0, 3.5]]), 0.05, 0.15)
+    segs = room_segments(cupboard=True)
+    out = {}
+    for origin_s in (0.0, 36000.0):
+        loc = make_localizer("adaptive-memory", laser=LASER, rng=np.random.default_rng(1))
+        stream = drifting_stream(truth, segs, LASER, np.random.default_rng(0))
+        ests = []
+        for day in (1, 2):
+            loc.begin_run(Prior(initial_pose=truth[0].copy(), walls=WALLS, day=day, run=1))
+            for o, sc in stream:
+                ests.append(loc.update(o, Scan(sc.ranges_m, sc.stamp_s + origin_s)))
+                assert loc.ltm.current == 4
+            loc.end_run()
+            loc.end_day()
+        assert loc.ltm.filled() == [4]
+        out[origin_s] = np.array([e.mean for e in ests])
+    assert np.array_equal(out[0.0], out[36000.0])
+
+
 def test_points_on_the_prior_walls_do_not_redraw_them():
     """``ltm_learn_prior_walls``: by default a point the walls prior explains adds free
     space only, so the long-term map learns the furniture but no second, shifted or

@@ -96,8 +96,10 @@ class AdaptiveMemoryConfig:
     slot_init: str = "copy_latest"
     #: Time of day [s] of a run's start (ours: the prior carries the day and run, not the
     #: clock; 36000 = 10:00, the apartment's run), plus ``run_spacing_s`` per later run of a
-    #: day. ``t`` of eq. 1 is ``(day - 1)·86400 + run_clock_s + (run - 1)·run_spacing_s +
-    #: scan stamp``, ``t_s`` the first midnight.
+    #: day. ``t`` of eq. 1 is ``(day - 1)·86400 + run_clock_s + (run - 1)·run_spacing_s +``
+    #: the time since the run's first scan, ``t_s`` the first midnight: the stamps' own
+    #: origin (seconds since midnight in an experiment, a log's clock in a replay) is not
+    #: added again.
     run_clock_s: float = 36000.0
     run_spacing_s: float = 0.0
     # -- long-term grids (§4.3, eqs. 12-15; §7.1) -----------------------------------------
@@ -426,6 +428,8 @@ class AdaptiveMemoryLocalizer(Localizer):
         self.filter: StaticPointFilter | None = None
         self.used_slot = -1
         self._t0 = 0.0
+        #: the stamp of the run's first scan [s] (None before it): eq. 1's clock runs from it
+        self._stamp0: float | None = None
         self._est = np.zeros(3)
         self._cov = np.eye(3)
         self._cov_reported: tuple[FloatArray, FloatArray, float] | None = None
@@ -459,6 +463,7 @@ class AdaptiveMemoryLocalizer(Localizer):
         self._t0 = (
             max(prior.day - 1, 0) * DAY_S + c.run_clock_s + max(prior.run - 1, 0) * c.run_spacing_s
         )
+        self._stamp0 = None
         self.ltm.activate(self._t0)
         self.tracker.reset()
         self.sm.clear()
@@ -488,7 +493,9 @@ class AdaptiveMemoryLocalizer(Localizer):
         if f is None or ltm is None:
             raise RuntimeError(f"{NAME}: update() before begin_run()")
         c = self.config
-        t = self._t0 + float(scan.stamp_s)
+        if self._stamp0 is None:
+            self._stamp0 = float(scan.stamp_s)
+        t = self._t0 + (float(scan.stamp_s) - self._stamp0)
         ltm.activate(t)  # eq. 1
         pose_odom = np.asarray(odom.pose, dtype=np.float64)
         # 1. the predicted pose
