@@ -708,8 +708,9 @@ class AdaptiveMemoryLocalizer(Localizer):
     def day_artifacts(self) -> dict[str, dict[str, np.ndarray]]:
         """``ltm``: the current long-term slot's grid after the day (log-odds ``(H, W)``
         float32, rows along y, ``origin_m``, ``resolution_m``, ``ltm_slot``), as the
-        ``dynamic-map`` hands over its map (named arrays). With one run a day and
-        ``slot_init = copy_latest`` the other slots hold earlier copies of it."""
+        ``dynamic-map`` hands over its map (named arrays). Runs at other times of day fill
+        other slots (with ``slot_init = copy_latest``, copies of the latest map then); one
+        run a day at a fixed time, as H&W's, only ever fills this one."""
         if self.ltm is None or self.ltm.current < 0:
             return {}
         m = self.ltm.map()
