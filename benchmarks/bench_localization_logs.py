@@ -30,21 +30,13 @@ from pathlib import Path
 import numpy as np
 from tqdm.auto import tqdm
 
+from dynmap_sim.cli import seed_list
 from dynmap_sim.errors import InputError
 from dynmap_sim.experiments.replay import replay_log
-from dynmap_sim.experiments.sweep import parse_seeds
 
 LOG, REFERENCE = "fr079.raw.log.gz", "fr079-corrected.log.gz"
 DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "slam-benchmark"
 DEFAULT_LOCALIZERS = ["static-mcl", "static-mcl,config=nav2-default", "dynamic-map"]
-
-
-def _seeds(text: str) -> tuple[int, ...]:
-    """``--seeds 0-4``, ``0,2,5`` or ``7`` (the sweep's syntax)."""
-    try:
-        return parse_seeds(text, "seeds")
-    except InputError as exc:
-        raise argparse.ArgumentTypeError(str(exc).removeprefix("seeds: ")) from None
 
 
 def pass_rows(db: Path, localizers: list[str]) -> list[tuple[str, int, np.ndarray, float]]:
@@ -81,7 +73,7 @@ def main() -> int:
     )
     ap.add_argument(
         "--seeds",
-        type=_seeds,
+        type=seed_list,
         default=(0,),
         help="replay once per seed of the localizers' generators: 0-4, 0,2,5 or 7 (default: 0)",
     )

@@ -583,8 +583,9 @@ def _cmd_slam_eval(args: argparse.Namespace) -> int:
     return 0
 
 
-def _sweep_seeds(text: str) -> tuple[int, ...]:
-    """``--seeds 0-3``, ``0,2,5`` or ``7``."""
+def seed_list(text: str) -> tuple[int, ...]:
+    """Parse ``0-3``, ``0,2,5`` or ``7`` into seeds (an argparse ``type``: ``sweep --seeds``
+    and the benchmarks' ``--seeds``)."""
     from dynmap_sim.errors import InputError
     from dynmap_sim.experiments.sweep import parse_seeds
 
@@ -960,7 +961,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     s.add_argument("scenarios", nargs="*", metavar="SCENARIO", help="scenario TOML files")
     s.add_argument("--file", help="a sweep TOML file (instead of SCENARIO, --seeds, --set, ...)")
-    s.add_argument("--seeds", type=_sweep_seeds, help="seeds: 0-3, 0,2,5 or 7")
+    s.add_argument("--seeds", type=seed_list, help="seeds: 0-3, 0,2,5 or 7")
     s.add_argument(
         "--set",
         action="append",
