@@ -31,6 +31,12 @@ ROBOT_PRESETS: dict[str, dict[str, Any]] = {"default": {}}
 #: The sensor when a scenario names none.
 DEFAULT_SENSOR = "urg-04lx"
 
+#: The lidar backend of a scenario's env unless its ``sensor.overrides`` name one:
+#: ``auto`` casts with numpy (the same ranges on every install) and, with the ``fast`` extra,
+#: adds noise and steps the people with the compiled kernels, which give numpy's numbers bit
+#: for bit (:data:`dynmap_sim.sensors.lidar.LIDAR_BACKENDS`).
+SCENARIO_SENSOR_BACKEND = "auto"
+
 #: Shortest scan period a scenario may ask for [s]: it is the simulation step, and real
 #: scanners turn at 10-75 Hz (a microsecond period would simulate for days).
 MIN_SCAN_PERIOD_S = 0.005
@@ -45,7 +51,8 @@ class SimSpec:
     ``max_v_mps``, ...) plus ``wheels`` (``WheelGeometry``: UMBmark ``e_d``, ``e_b``, ...) and
     ``encoder`` (``EncoderNoise``); ``sensor_preset`` (None: ``urg-04lx``) and
     ``sensor_overrides``: ``make_lidar`` overrides (``LaserSpec`` fields, ``beams``, ``mode``,
-    ``mount_pose``) and ``noise`` (``LidarNoise`` fields).
+    ``mount_pose``, ``backend``: :data:`SCENARIO_SENSOR_BACKEND` when not given) and
+    ``noise`` (``LidarNoise`` fields).
     """
 
     world: Path
@@ -105,7 +112,9 @@ def _finite_number(v: Any) -> bool:
 
 def _sensor_kwargs(spec: SimSpec) -> dict[str, Any]:
     sensor = spec.sensor_preset or DEFAULT_SENSOR
-    opts = dict(spec.sensor_overrides)
+    # numpy's casting (the same ranges on every install) with the compiled noise model and
+    # people's step when numba is installed (numpy's numbers bit for bit, faster)
+    opts = {"backend": SCENARIO_SENSOR_BACKEND, **spec.sensor_overrides}
     noise = opts.pop("noise", None)
     if noise is not None and not isinstance(noise, Mapping):
         raise SimSpecError(

@@ -155,9 +155,10 @@ def make_lidar(
     ``mode`` (``"mm"``: 8.19 m, ``"cm"``: 81.9 m) select the variant. Any
     :class:`~dynmap_sim.types.LaserSpec` field (``n_beams``, ``range_max_m``, ...) may be
     overridden by keyword; ``noise`` is a :class:`LidarNoise` or a dict of fields to change in
-    the preset's noise model. ``backend`` is ``"numpy"`` or ``"numba"`` (extra ``fast``:
-    compiled ray casting, and the noise model of :mod:`~dynmap_sim.sensors.noise_numba`,
-    whose readings are numpy's bit for bit).
+    the preset's noise model. ``backend`` is one of :data:`LIDAR_BACKENDS`: ``"numpy"``,
+    ``"numba"`` (extra ``fast``: compiled ray casting, and the noise model of
+    :mod:`~dynmap_sim.sensors.noise_numba`, whose readings are numpy's bit for bit) or
+    ``"auto"`` (numpy's casting with that noise model when numba is installed).
     """
     variant = {k: overrides.pop(k) for k in ("beams", "mode") if k in overrides}
     if sensor == "urg-04lx":
@@ -188,11 +189,8 @@ def cast_many(
     :func:`~dynmap_sim.sensors.raycast.cast_scans` pass for all when they are numpy
     casters of the same beams (the same numbers as one by one)."""
     first = lidars[0]
-    same = all(
-        lid.backend == "numpy" and lid.spec == first.spec and lid._cast is cast_scan
-        for lid in lidars
-    )
-    if len(lidars) < 2 or first.backend != "numpy" or not same:
+    same = all(lid.spec == first.spec and lid._cast is cast_scan for lid in lidars)
+    if len(lidars) < 2 or not same:
         casts = [lid.cast(p, g) for lid, p, g in zip(lidars, robot_poses, geoms, strict=True)]
         return np.stack([c[0] for c in casts]), np.stack([c[1] for c in casts])
     spec = first.spec
@@ -224,17 +222,38 @@ class LidarReading:
     beam_class: NDArray[np.int8]
 
 
+#: Lidar backends: ``numpy`` (casting and noise), ``numba`` (extra ``fast``: compiled
+#: casting, noise model and people's step; the ranges agree with numpy's to 1e-9 m, not to
+#: the bit), ``auto`` (numpy's casting, so the same ranges on every install, with the
+#: compiled noise model and people's step when numba is installed: those give numpy's
+#: numbers bit for bit, in about a fifth of the noise's time).
+LIDAR_BACKENDS = ("numpy", "numba", "auto")
+
+
+def _compiled_noise(backend: str) -> Any:
+    """The compiled noise of one scan for ``backend`` (numba; auto when installed), else
+    None (numpy's)."""
+    if backend == "numpy":
+        return None
+    from dynmap_sim.sensors.raycast_numba import numba_available
+
+    if backend == "auto" and not numba_available():
+        return None
+    from dynmap_sim.sensors.noise_numba import noise_scan
+
+    return noise_scan
+
+
 class Lidar:
     """A laser scanner mounted on the robot at ``spec.mount_pose`` (``base_link`` frame)."""
 
     def __init__(
         self, spec: LaserSpec, noise: LidarNoise, bias_seed: int = 0, backend: str = "numpy"
     ) -> None:
-        self._noise_scan: Any = None  # compiled noise of one scan (numba backend)
-        if backend == "numpy":
-            self._cast = cast_scan
-        elif backend == "numba":
-            from dynmap_sim.sensors.noise_numba import noise_scan
+        if backend not in LIDAR_BACKENDS:
+            raise ValueError(f"lidar backend must be one of {LIDAR_BACKENDS}, got {backend!r}")
+        self._cast = cast_scan
+        if backend == "numba":
             from dynmap_sim.sensors.raycast_numba import cast_scan_numba, numba_available
 
             if not numba_available():
@@ -242,9 +261,8 @@ class Lidar:
                     'lidar backend "numba" needs numba: pip install "dynmap-sim[fast]"'
                 )
             self._cast = cast_scan_numba
-            self._noise_scan = noise_scan
-        else:
-            raise ValueError(f'lidar backend must be "numpy" or "numba", got {backend!r}')
+        # the compiled noise of one scan (numba; auto when installed), None: numpy's
+        self._noise_scan: Any = _compiled_noise(backend)
         self.backend = backend
         if spec.n_beams < 2:
             raise ValueError(f"a laser scanner needs at least 2 beams, got {spec.n_beams}")
@@ -276,13 +294,17 @@ class Lidar:
         state = self.__dict__.copy()
         state["_cache"] = None
         state["_cache_key"] = None
+        if self.backend == "auto":  # resolved again where it is unpickled
+            state["_noise_scan"] = None
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         """Restore; a lidar pickled before the compiled noise existed uses numpy's (the
-        same numbers)."""
+        same numbers), an ``auto`` one the compiled noise if this install has numba."""
         self.__dict__.update(state)
         self.__dict__.setdefault("_noise_scan", None)
+        if self.backend == "auto":
+            self._noise_scan = _compiled_noise("auto")
 
     def _segments(self, geom: GeometryLike) -> SegmentCache:
         """Broad-phase data of the segments, rebuilt when the geometry changes.

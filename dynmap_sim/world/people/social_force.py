@@ -166,10 +166,11 @@ class SocialForce:
         spawning.renew_goals(crowd, redo, self.populations, self.obstacles, self.rng, avoid)
 
     def backend_ops(self) -> StepOps:
-        """The backend's operations: numpy's (:mod:`.dynamics`) or, with the numba backend,
-        the kernels of :mod:`.dynamics_numba` (the same numbers)."""
+        """The backend's operations: numpy's (:mod:`.dynamics`) or, with the numba backend
+        (``auto`` when numba is installed), the kernels of :mod:`.dynamics_numba` (the same
+        numbers)."""
         if self._ops is None:
-            self._ops = NUMPY_OPS if self.backend == "numpy" else compiled_ops()
+            self._ops = NUMPY_OPS if resolved_backend(self.backend) == "numpy" else compiled_ops()
         return self._ops
 
     @staticmethod
@@ -183,20 +184,31 @@ class SocialForce:
         return _legs.poses(crowd)
 
 
-#: People backends: numpy, or numba (extra ``fast``; the same numbers).
-BACKENDS = ("numpy", "numba")
+#: People backends: numpy, numba (extra ``fast``; the same numbers), or auto (numba when it
+#: is installed, else numpy; resolved when the people step, so a pickled world resumes on
+#: either install).
+BACKENDS = ("numpy", "numba", "auto")
 
 
 def check_backend(backend: str) -> str:
     """``backend`` if it is one of :data:`BACKENDS` and usable; ValueError otherwise."""
     if backend not in BACKENDS:
-        raise ValueError(f'people backend must be "numpy" or "numba", got {backend!r}')
+        raise ValueError(f"people backend must be one of {BACKENDS}, got {backend!r}")
     if backend == "numba":
         from dynmap_sim.jit import numba_available
 
         if not numba_available():
             raise ValueError('people backend "numba" needs numba: pip install "dynmap-sim[fast]"')
     return backend
+
+
+def resolved_backend(backend: str) -> str:
+    """``"numpy"`` or ``"numba"``: what a checked ``backend`` runs on this install."""
+    if backend != "auto":
+        return backend
+    from dynmap_sim.jit import numba_available
+
+    return "numba" if numba_available() else "numpy"
 
 
 class StepOps(NamedTuple):
