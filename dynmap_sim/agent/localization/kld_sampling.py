@@ -88,8 +88,10 @@ def kld_stop(
 
 
 def _clipped_size(stop: int | None, n_draws: int, min_particles: int, max_particles: int) -> int:
+    """The loop's size clamped to ``[min(min_particles, n_draws), max_particles]`` (as
+    ``np.clip`` does it, the upper bound last; in integers, without numpy's call)."""
     n = stop + 1 if stop is not None else n_draws
-    return int(np.clip(n, min(min_particles, n_draws), max_particles))
+    return min(max(int(n), min(min_particles, n_draws)), int(max_particles))
 
 
 def kld_prefix_size(
