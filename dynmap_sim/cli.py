@@ -357,7 +357,7 @@ def _headline(
     else:
         table = [("localizer", "scans")]
     if timing:
-        table[0] += ("update [ms/scan]",)
+        table[0] += ("update CPU [ms/scan]",)
     for s in stats:
         lost = s["lost_fraction"]
         row: tuple[str, ...] = (

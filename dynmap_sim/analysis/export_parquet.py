@@ -188,7 +188,7 @@ n_lost_episodes        =                    i32    times the localizer got lost
 n_recovered            =                    i32    lost episodes it recovered from
 mean_time_to_recover_s =                    f64    mean time to recover after getting lost [s]
 rpe_m                  =                    f64    relative pose error [m]
-update_ms_per_scan     =                    f64    update() time [ms/scan]
+update_ms_per_scan     =                    f64    update() CPU time [ms/scan]
 """
 )
 _DATE = Column("date", "date", pa.date32(), "calendar date of the run", False)

@@ -226,7 +226,7 @@ def _summary_md(
         "## Overall (position error in the map frame, no alignment)",
         "",
         f"| localizer | ATE RMSE [m] | mean [m] | max [m] | mean heading [rad] | {rpe} [m] "
-        "| lost | lost episodes | recovered | mean time to recover [s] | update [ms/scan] |",
+        "| lost | lost episodes | recovered | mean time to recover [s] | update CPU [ms/scan] |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for s in overall:
@@ -265,7 +265,7 @@ def _no_truth_lines(db: ResultsDB, overall: list[dict[str, Any]]) -> list[str]:
         "localizers are not scored (no errors are stored). Give a reference log with the true "
         "poses (`replay --reference`) to score them.",
         "",
-        "| localizer | scans | update [ms/scan] | scans/s | mean scan loglik | mean λ_min |",
+        "| localizer | scans | update CPU [ms/scan] | scans/s | mean scan loglik | mean λ_min |",
         "|---|---|---|---|---|---|",
     ]
     rows = {

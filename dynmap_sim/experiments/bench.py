@@ -145,9 +145,10 @@ class LocalizerOutput:
     """What one localizer produced for one run.
 
     ``estimates`` ``(T, 3)``; ``cov_diag`` ``(T, 3)``; ``confusion`` ``(4, 4)`` point-class
-    counts; ``update_s`` wall time in ``update()`` [s]; ``busy_s`` wall time of the whole run
-    including the hooks and pickling [s]; ``state`` the pickled localizer after ``end_run``
-    (and ``end_day``); ``diagnostics`` what it declared and reported
+    counts; ``update_s`` CPU time of ``update()`` [s] (its thread's, :func:`time.thread_time`:
+    not the time it waited for a core it shares with other processes); ``busy_s`` wall time
+    of the whole run including the hooks and pickling [s]; ``state`` the pickled localizer
+    after ``end_run`` (and ``end_day``); ``diagnostics`` what it declared and reported
     (:class:`DiagnosticsRecorder`); ``point_tally`` its reported point classes against the
     seen-before truth and their shares of the valid readings
     (:class:`~dynmap_sim.metrics.PointClassTally`).
@@ -318,9 +319,9 @@ class LocalizerRun:
         odom = Odometry(pose=np.array(odom_pose, dtype=np.float64), stamp_s=t_s)
         scan = Scan(ranges_m=np.array(ranges_m, dtype=np.float32), stamp_s=t_s)
         with self._blame(step):
-            t_up = time.perf_counter()
+            t_up = time.thread_time()
             e = self.loc.update(odom, scan)
-            self.update_s += time.perf_counter() - t_up
+            self.update_s += time.thread_time() - t_up
         where = f"on day {self.prior.day} run {self.prior.run} at scan {step}"
         mean, cov = self.checked_estimate(self.label, self.loc, e, where)
         self.est[step] = mean

@@ -259,7 +259,7 @@ class RunRecord:
     events: list[tuple[int, float, str, str]]  # (step, t_s, kind, detail)
     segments: NDArray[np.float64] | None = None
     segment_class: NDArray[np.int8] | None = None
-    update_s: NDArray[np.float64] | None = None  # (L,) wall time spent in each update()
+    update_s: NDArray[np.float64] | None = None  # (L,) CPU time of each localizer's update()
     diagnostics: list[LocalizerDiagnostics] = field(default_factory=list)
     #: the run's navigation measures (None: not measured)
     nav: NavRunSummary | None = None

@@ -50,7 +50,7 @@ class RunSummary(GroupSummary):
     Position errors [m] and the lost fraction as in :func:`~.daily.summarize`; lost episodes
     and recoveries as in :func:`~.lost.lost_stats`; ``rpe_m`` the RMSE of the RPE translation
     over :data:`RUN_RPE_DELTA` :data:`RUN_RPE_UNIT`; ``update_ms_per_scan`` the localizer's
-    wall time per ``update()`` (NaN when not measured). NaN where undefined."""
+    CPU time per ``update()`` (its thread's; NaN when not measured). NaN where undefined."""
 
     n_lost_episodes: int
     n_recovered: int

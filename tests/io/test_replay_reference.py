@@ -74,7 +74,7 @@ def test_errors_equal_the_known_offsets_of_the_reference(tmp_path, capsys):
     assert _replay(tmp_path, "--reference", str(ref)) == 0
     cap = capsys.readouterr()
     assert f"{matched.sum()} of {N} scans matched" in cap.err
-    assert "from shared scans" in cap.err and "update [ms/scan]" in cap.out
+    assert "from shared scans" in cap.err and "update CPU [ms/scan]" in cap.out
     con = sqlite3.connect(tmp_path / "out" / "results.db")
     for day in (1, 2):
         err = np.array(
