@@ -345,6 +345,7 @@ def _headline(
         nav = db.nav_runs()
         goals = goals_reached_line(db)
         truth = has_ground_truth(db)
+        update_header = db.update_time_header()
 
     def num(v: float) -> str:
         return "n/a" if v is None or math.isnan(v) else f"{v:.3f}"
@@ -357,7 +358,7 @@ def _headline(
     else:
         table = [("localizer", "scans")]
     if timing:
-        table[0] += ("update CPU [ms/scan]",)
+        table[0] += (update_header,)
     for s in stats:
         lost = s["lost_fraction"]
         row: tuple[str, ...] = (

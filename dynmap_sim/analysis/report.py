@@ -221,12 +221,13 @@ def _summary_md(
     if not has_ground_truth(db):
         lines += _no_truth_lines(db, overall)
         return _finish_summary(db, path, lines, labels, figures, studies)
+    update = db.update_time_header()
     lines += [
         "",
         "## Overall (position error in the map frame, no alignment)",
         "",
         f"| localizer | ATE RMSE [m] | mean [m] | max [m] | mean heading [rad] | {rpe} [m] "
-        "| lost | lost episodes | recovered | mean time to recover [s] | update CPU [ms/scan] |",
+        f"| lost | lost episodes | recovered | mean time to recover [s] | {update} |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for s in overall:
@@ -265,7 +266,8 @@ def _no_truth_lines(db: ResultsDB, overall: list[dict[str, Any]]) -> list[str]:
         "localizers are not scored (no errors are stored). Give a reference log with the true "
         "poses (`replay --reference`) to score them.",
         "",
-        "| localizer | scans | update CPU [ms/scan] | scans/s | mean scan loglik | mean λ_min |",
+        f"| localizer | scans | {db.update_time_header()} | scans/s | mean scan loglik "
+        "| mean λ_min |",
         "|---|---|---|---|---|---|",
     ]
     rows = {

@@ -178,6 +178,10 @@ _SCAN_PEOPLE_TABLE = """CREATE TABLE IF NOT EXISTS scan_people (
 #: The layout this version writes (``results_format`` in ``meta``; none: format 1).
 RESULTS_FORMAT = 3
 
+#: ``update_time`` in ``meta``: what ``update_ms_per_scan`` measures in folders created since
+#: it is written (a localizer thread's CPU time); folders without it hold wall times.
+UPDATE_TIME_CPU = "cpu"
+
 #: Per-scan diagnostics with a column of ``estimates`` in every results format (NULL where a
 #: localizer does not declare or report them), and the column's type.
 SCAN_COLUMNS = {
@@ -433,7 +437,7 @@ class ResultsDB:
                     db.con.execute("PRAGMA synchronous=NORMAL")
                     db.con.executescript(_SCHEMA)
                     db.con.commit()
-                    db.set_meta(results_format=RESULTS_FORMAT)
+                    db.set_meta(results_format=RESULTS_FORMAT, update_time=UPDATE_TIME_CPU)
             except sqlite3.OperationalError as exc:  # e.g. a folder SQLite cannot write in
                 raise InputError(
                     f"{path}: cannot create a results database there ({exc})"
@@ -494,6 +498,13 @@ class ResultsDB:
 
     def meta(self) -> dict[str, Any]:
         return {k: json.loads(v) for k, v in self.con.execute("SELECT key, value FROM meta")}
+
+    def update_time_header(self) -> str:
+        """The column header of ``update_ms_per_scan``: CPU time in folders created since
+        :data:`UPDATE_TIME_CPU` is recorded, wall time in older ones (a folder begun before
+        and resumed since mixes both; it keeps the older label)."""
+        cpu = self.meta().get("update_time") == UPDATE_TIME_CPU
+        return "update CPU [ms/scan]" if cpu else "update wall [ms/scan]"
 
     def set_localizers(self, rows: list[tuple[str, str, dict[str, Any]]]) -> None:
         with self._disk_full_is_clear(str(self.path)), self.con:

@@ -39,3 +39,14 @@ def test_update_time_is_cpu_time():
     out = localize_run("sleeper", loc, stream)
     assert out.busy_s >= n * SLEEP_S  # the wall time of the run holds the sleeps
     assert 0.0 <= out.update_s < 0.5 * n * SLEEP_S  # the update time does not
+
+
+def test_new_results_say_cpu_and_older_ones_wall(tmp_path):
+    """Folders created since update times are CPU times say so in their column header;
+    older ones (no ``update_time`` in ``meta``) held wall times and keep that label."""
+    from dynmap_sim.experiments.results import ResultsDB
+
+    with ResultsDB.create(tmp_path / "new") as db:
+        assert db.update_time_header() == "update CPU [ms/scan]"
+        db.con.execute("DELETE FROM meta WHERE key = 'update_time'")
+        assert db.update_time_header() == "update wall [ms/scan]"
