@@ -25,6 +25,7 @@ import argparse
 import sqlite3
 import sys
 import tempfile
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +34,7 @@ from tqdm.auto import tqdm
 from dynmap_sim.cli import seed_list
 from dynmap_sim.errors import InputError
 from dynmap_sim.experiments.replay import replay_log
+from dynmap_sim.io.carmen import CarmenOdometryWarning
 
 LOG, REFERENCE = "fr079.raw.log.gz", "fr079-corrected.log.gz"
 DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "slam-benchmark"
@@ -91,12 +93,21 @@ def main() -> int:
             args.seeds, desc="FR079 replays", unit="seed", disable=len(args.seeds) < 2
         ):
             try:
-                out = replay_log(
-                    log, localizers, Path(tmp) / f"seed{seed}", map_from_log_poses=True,
-                    note=notes.append, reference=ref, seed=seed,
-                )  # fmt: skip
+                # each replay reads the same log: its odometry warnings go with the notes,
+                # printed once after the replays (the other warnings as they came)
+                with warnings.catch_warnings(record=True) as caught:
+                    warnings.simplefilter("always", CarmenOdometryWarning)
+                    out = replay_log(
+                        log, localizers, Path(tmp) / f"seed{seed}", map_from_log_poses=True,
+                        note=notes.append, reference=ref, seed=seed,
+                    )  # fmt: skip
             except InputError as exc:
                 ap.error(str(exc))
+            for w in caught:
+                if issubclass(w.category, CarmenOdometryWarning):
+                    notes.append(f"warning: {w.message}")
+                else:
+                    warnings.showwarning(w.message, w.category, w.filename, w.lineno)
             per_seed[seed] = pass_rows(out, localizers)
     for n in dict.fromkeys(notes):
         print(n)
