@@ -112,8 +112,6 @@ def _finite_number(v: Any) -> bool:
 
 def _sensor_kwargs(spec: SimSpec) -> dict[str, Any]:
     sensor = spec.sensor_preset or DEFAULT_SENSOR
-    # numpy's casting (the same ranges on every install) with the compiled noise model and
-    # people's step when numba is installed (numpy's numbers bit for bit, faster)
     opts = {"backend": SCENARIO_SENSOR_BACKEND, **spec.sensor_overrides}
     noise = opts.pop("noise", None)
     if noise is not None and not isinstance(noise, Mapping):

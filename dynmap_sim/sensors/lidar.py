@@ -231,13 +231,13 @@ LIDAR_BACKENDS = ("numpy", "numba", "auto")
 
 
 def _compiled_noise(backend: str) -> Any:
-    """The compiled noise of one scan for ``backend`` (numba; auto when installed), else
-    None (numpy's)."""
-    if backend == "numpy":
+    """The compiled noise of one scan for ``backend`` (numba; auto when installed:
+    :func:`dynmap_sim.jit.kernel_backend`), else None (numpy's)."""
+    if backend == "numpy":  # (numba is not even imported)
         return None
-    from dynmap_sim.sensors.raycast_numba import numba_available
+    from dynmap_sim.jit import kernel_backend
 
-    if backend == "auto" and not numba_available():
+    if kernel_backend(backend) is None:
         return None
     from dynmap_sim.sensors.noise_numba import noise_scan
 

@@ -12,14 +12,15 @@ from dynmap_sim.env_factory import SCENARIO_SENSOR_BACKEND, SimSpec, make_env, r
 from dynmap_sim.jit import numba_available
 from dynmap_sim.sensors.lidar import LIDAR_BACKENDS, make_lidar
 from dynmap_sim.sensors.raycast import cast_scan
-from dynmap_sim.world.people.social_force import check_backend, resolved_backend
+from dynmap_sim.world.people.social_force import NUMPY_OPS, SocialForce
 
 
 def test_auto_casts_with_numpy_and_noises_with_the_kernel_when_installed():
     lidar = make_lidar("urg-04lx", backend="auto")
     assert lidar._cast is cast_scan
     assert (lidar._noise_scan is not None) == numba_available()
-    assert resolved_backend(check_backend("auto")) == ("numba" if numba_available() else "numpy")
+    people = SocialForce((), np.zeros((0, 4)), np.random.default_rng(0), backend="auto")
+    assert (people.backend_ops() is NUMPY_OPS) == (not numba_available())
 
 
 def test_unknown_lidar_backend_names_the_choices():

@@ -170,7 +170,7 @@ class SocialForce:
         (``auto`` when numba is installed), the kernels of :mod:`.dynamics_numba` (the same
         numbers)."""
         if self._ops is None:
-            self._ops = NUMPY_OPS if resolved_backend(self.backend) == "numpy" else compiled_ops()
+            self._ops = NUMPY_OPS if _runs_numpy(self.backend) else compiled_ops()
         return self._ops
 
     @staticmethod
@@ -202,13 +202,14 @@ def check_backend(backend: str) -> str:
     return backend
 
 
-def resolved_backend(backend: str) -> str:
-    """``"numpy"`` or ``"numba"``: what a checked ``backend`` runs on this install."""
-    if backend != "auto":
-        return backend
-    from dynmap_sim.jit import numba_available
+def _runs_numpy(backend: str) -> bool:
+    """True where a checked ``backend`` steps with numpy's operations on this install
+    (``auto`` without numba: :func:`dynmap_sim.jit.kernel_backend`)."""
+    if backend == "numpy":  # (numba is not even imported)
+        return True
+    from dynmap_sim.jit import kernel_backend
 
-    return "numba" if numba_available() else "numpy"
+    return kernel_backend(backend) is None
 
 
 class StepOps(NamedTuple):
