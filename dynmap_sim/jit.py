@@ -6,13 +6,61 @@ compiles it with :func:`compiled` when numba is installed.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
+from fractions import Fraction
 from typing import Any
 
 try:  # pragma: no cover - depends on the optional extra
     import numba
 except ImportError:  # pragma: no cover
     numba = None
+
+
+def fma(a: float, b: float, c: float) -> float:
+    """``a * b + c`` rounded once (IEEE 754 fusedMultiplyAdd), as numpy's SIMD loops compute
+    where they fuse; in kernels compiled by numba, the CPU's instruction (``llvm.fma.f64``).
+    Plain Python computes it exactly with fractions (slow: for the kernels' tests)."""
+    if not (math.isfinite(a) and math.isfinite(b) and math.isfinite(c)):
+        return a * b + c
+    return float(Fraction(a) * Fraction(b) + Fraction(c))
+
+
+def jitable(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """``fn`` itself, made callable from compiled kernels too when numba is installed (its
+    ``register_jitable``): helpers shared by a kernel's plain and compiled runs."""
+    return numba.extending.register_jitable(fn) if numba is not None else fn
+
+
+def _register_fma() -> None:  # pragma: no cover - depends on the optional extra
+    """Let compiled kernels call :func:`fma` as the LLVM intrinsic (one instruction on CPUs
+    with FMA, a correctly rounded library call elsewhere)."""
+    from llvmlite import ir
+    from numba.core import cgutils
+    from numba.extending import intrinsic, overload
+
+    @intrinsic
+    def _fma_ir(typingctx: Any, a: Any, b: Any, c: Any) -> Any:
+        sig = numba.float64(numba.float64, numba.float64, numba.float64)
+
+        def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+            fnty = ir.FunctionType(ir.DoubleType(), [ir.DoubleType()] * 3)
+            return builder.call(
+                cgutils.get_or_insert_function(builder.module, fnty, "llvm.fma.f64"), args
+            )
+
+        return sig, codegen
+
+    @overload(fma)
+    def _fma_overload(a, b, c):  # type: ignore[no-untyped-def]  (numba compares the names)
+        def impl(a, b, c):  # type: ignore[no-untyped-def]  (numba: the overload's names)
+            return _fma_ir(float(a), float(b), float(c))
+
+        return impl
+
+
+if numba is not None:  # pragma: no cover - depends on the optional extra
+    _register_fma()
 
 
 def numba_available() -> bool:

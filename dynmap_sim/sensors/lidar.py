@@ -156,9 +156,11 @@ def make_lidar(
     :class:`~dynmap_sim.types.LaserSpec` field (``n_beams``, ``range_max_m``, ...) may be
     overridden by keyword; ``noise`` is a :class:`LidarNoise` or a dict of fields to change in
     the preset's noise model. ``backend`` is one of :data:`LIDAR_BACKENDS`: ``"numpy"``,
-    ``"numba"`` (extra ``fast``: compiled ray casting, and the noise model of
+    ``"numba"`` (extra ``fast``: the compiled ray casting of
+    :mod:`~dynmap_sim.sensors.raycast_numba` and noise model of
     :mod:`~dynmap_sim.sensors.noise_numba`, whose readings are numpy's bit for bit) or
-    ``"auto"`` (numpy's casting with that noise model when numba is installed).
+    ``"auto"`` (those when numba is installed, numpy's casting where the compiled one could
+    not reproduce numpy's complex arithmetic).
     """
     variant = {k: overrides.pop(k) for k in ("beams", "mode") if k in overrides}
     if sensor == "urg-04lx":
@@ -223,11 +225,32 @@ class LidarReading:
 
 
 #: Lidar backends: ``numpy`` (casting and noise), ``numba`` (extra ``fast``: compiled
-#: casting, noise model and people's step; the ranges agree with numpy's to 1e-9 m, not to
-#: the bit), ``auto`` (numpy's casting, so the same ranges on every install, with the
-#: compiled noise model and people's step when numba is installed: those give numpy's
-#: numbers bit for bit, in about a fifth of the noise's time).
+#: casting, noise model and people's step), ``auto`` (the compiled ones when numba is
+#: installed and the compiled casting reproduces numpy's complex arithmetic on this install,
+#: :func:`~dynmap_sim.sensors.raycast_numba.numpy_complex_mode`, else numpy's casting; the
+#: compiled noise and people's step whenever numba is installed). The compiled noise and
+#: people's step give numpy's numbers bit for bit on every install, the casting wherever
+#: that mode is known (``numba`` casts in the fused mode elsewhere: numpy's ranges to
+#: rounding), so ``auto`` has numpy's numbers on every install.
 LIDAR_BACKENDS = ("numpy", "numba", "auto")
+
+
+def _caster(backend: str) -> Any:
+    """The casting function of ``backend``: :func:`~dynmap_sim.sensors.raycast.cast_scan`
+    or its compiled twin (see :data:`LIDAR_BACKENDS`)."""
+    if backend == "numpy":  # (numba is not even imported)
+        return cast_scan
+    from dynmap_sim.jit import kernel_backend
+    from dynmap_sim.sensors import raycast_numba
+
+    if backend == "auto":
+        exact = (
+            kernel_backend("auto") is not None and raycast_numba.numpy_complex_mode() is not None
+        )
+        return raycast_numba.cast_scan_numba if exact else cast_scan
+    if not raycast_numba.numba_available():
+        raise ValueError('lidar backend "numba" needs numba: pip install "dynmap-sim[fast]"')
+    return raycast_numba.cast_scan_numba
 
 
 def _compiled_noise(backend: str) -> Any:
@@ -252,15 +275,7 @@ class Lidar:
     ) -> None:
         if backend not in LIDAR_BACKENDS:
             raise ValueError(f"lidar backend must be one of {LIDAR_BACKENDS}, got {backend!r}")
-        self._cast = cast_scan
-        if backend == "numba":
-            from dynmap_sim.sensors.raycast_numba import cast_scan_numba, numba_available
-
-            if not numba_available():
-                raise ValueError(
-                    'lidar backend "numba" needs numba: pip install "dynmap-sim[fast]"'
-                )
-            self._cast = cast_scan_numba
+        self._cast = _caster(backend)
         # the compiled noise of one scan (numba; auto when installed), None: numpy's
         self._noise_scan: Any = _compiled_noise(backend)
         self.backend = backend
@@ -296,6 +311,7 @@ class Lidar:
         state["_cache_key"] = None
         if self.backend == "auto":  # resolved again where it is unpickled
             state["_noise_scan"] = None
+            state["_cast"] = None
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
@@ -305,6 +321,7 @@ class Lidar:
         self.__dict__.setdefault("_noise_scan", None)
         if self.backend == "auto":
             self._noise_scan = _compiled_noise("auto")
+            self._cast = _caster("auto")
 
     def _segments(self, geom: GeometryLike) -> SegmentCache:
         """Broad-phase data of the segments, rebuilt when the geometry changes.

@@ -1,50 +1,100 @@
-"""Optional numba backend of :func:`dynmap_sim.sensors.raycast.cast_scan` (extra ``fast``).
+"""Optional numba backend of :func:`dynmap_sim.sensors.raycast.cast_scan` (extra ``fast``),
+with numpy's ranges and hit indices bit for bit.
 
-The same algorithm as the numpy caster — bounding-box range cull, angular-interval broad
-phase per shape, exact segment and circle intersections — written as one compiled loop, so
-it returns the same ranges (to rounding, far below 1e-6 m). Install with
+The numpy caster's pair arithmetic is written as one compiled loop, operation for operation
+and operand for operand. The reals' ``+ - * /``, ``sqrt`` and comparisons are correctly
+rounded IEEE operations, the same in any loop; what is not is numpy's complex arithmetic,
+whose SIMD loops depend on the CPU: on x86-64-v3 (AVX2 + FMA) numpy 2 computes a product as
+``(fma(ar, br, -(ai bi)), fma(ar, bi, ai br))`` and ``abs`` as ``L sqrt(fma(q, q, 1))``
+(``L`` the larger part, ``q`` the ratio), on older CPUs plainly (``ar br - ai bi``, libm's
+``hypot``). The kernel has both (:data:`FUSED`, :data:`PLAIN`); :func:`numpy_complex_mode`
+probes numpy once per process and says which one numpy's loops match on this install (None:
+neither, e.g. a numpy whose AVX-512 loops use another formula). The broad phase (the beams
+each shape's bearing interval covers, widened by one beam) uses ``atan2``/``asin``, whose
+last bits differ between numpy and libm, but a one-beam margin only adds pairs that miss;
+the bounding-box range cull likewise keeps every segment within range. Where two shapes are
+hit at the same range the later one in numpy's pair order wins, as in numpy's scatter
+(segments before their copies shifted by a turn, then circles, then theirs).
+
+So, with the mode numpy matches, the ranges and hit indices are numpy's (tests compare the
+bytes); with another mode they agree to rounding (~1e-15 m). Install with
 ``pip install "dynmap-sim[fast]"``; :func:`numba_available` says whether it can be used.
 """
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
 from numpy.typing import NDArray
 
-from dynmap_sim.jit import compiled, require_numba
+from dynmap_sim.jit import compiled, fma, jitable, pick_kernel
 from dynmap_sim.jit import numba_available as numba_available  # re-exported
 from dynmap_sim.sensors.raycast import SegmentCache
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
+#: Complex arithmetic as numpy's x86-64-v3 loops do it (fused multiply-adds).
+FUSED = 1
+#: Complex arithmetic as numpy's baseline loops do it (separate roundings, libm's hypot).
+PLAIN = 0
 
-def _kernel_py(
-    ox: float,
-    oy: float,
-    heading: float,
-    amin: float,
-    inc: float,
-    cos_l: FloatArray,
-    sin_l: FloatArray,
-    r_max: float,
-    data: FloatArray,
-    bbox: FloatArray,
-    circles: FloatArray,
-    ranges: FloatArray,
-    hit: IntArray,
-) -> None:
-    """The casting loop (compiled by numba; see the numpy module for the geometry)."""
-    two_pi = 2.0 * math.pi
+
+@jitable
+def _cmul_re(ar: float, ai: float, br: float, bi: float, mode: int) -> float:
+    """Real part of numpy's ``np.multiply(a, b)`` for complex ``a``, ``b`` in ``mode``."""
+    if mode == FUSED:
+        return fma(ar, br, -(ai * bi))
+    return ar * br - ai * bi
+
+
+@jitable
+def _cmul_im(ar: float, ai: float, br: float, bi: float, mode: int) -> float:
+    """Imaginary part of numpy's ``np.multiply(a, b)`` (the operands' order matters)."""
+    if mode == FUSED:
+        return fma(ar, bi, ai * br)
+    return ar * bi + ai * br
+
+
+@jitable
+def _cabs(x: float, y: float, mode: int) -> float:
+    """numpy's ``np.abs(x + iy)`` in ``mode`` (finite parts)."""
+    if mode != FUSED:
+        return math.hypot(x, y)
+    ax, ay = abs(x), abs(y)
+    big, small = max(ax, ay), min(ax, ay)
+    if big == 0.0:
+        return 0.0
+    q = small / big
+    return big * math.sqrt(fma(q, q, 1.0))
+
+
+@jitable
+def _beam_run(start: float, span: float, amin: float, inv_inc: float, shift: float, n: int):  # type: ignore[no-untyped-def]
+    """First and last beam of the numpy caster's run for a bearing interval (``shift``: 0,
+    or one turn for the copy of an interval that wraps), widened by one beam."""
+    s_b = ((start - amin) % (2.0 * math.pi) - shift) * inv_inc
+    return max(int(s_b) - 1, 0), min(int(s_b + span * inv_inc) + 1, n - 1)
+
+
+def _kernel_py(  # type: ignore[no-untyped-def]
+    ox, oy, rr, ri, amin, inc, cos_l, sin_l, r_max, data, bbox, circles, mode, ranges, hit
+):
+    """The casting loop (see the module doc): the sensor at ``(ox, oy)``, ``rr + i ri`` the
+    rotation map -> sensor; ``ranges`` / ``hit`` receive the result."""
     n = cos_l.shape[0]
-    ch = math.cos(heading)
-    sh = math.sin(heading)
+    inv_inc = 1.0 / inc
+    two_pi = 2.0 * math.pi
     for b in range(n):
         ranges[b] = math.inf
         hit[b] = -1
     n_seg = data.shape[1]
+    # per segment in range: a, d (sensor frame), a x d, and its bearing interval
+    seg = np.empty((n_seg, 7))
+    near = np.empty(n_seg, np.int64)
+    m = 0
     for k in range(n_seg):
         if (
             bbox[0, k] > ox + r_max
@@ -53,71 +103,110 @@ def _kernel_py(
             or bbox[3, k] < oy - r_max
         ):
             continue
-        wx = data[0, k] - ox
-        wy = data[1, k] - oy
-        ax = ch * wx + sh * wy
-        ay = ch * wy - sh * wx
-        dx = ch * data[2, k] + sh * data[3, k]
-        dy = ch * data[3, k] - sh * data[2, k]
-        bx = ax + dx
-        by = ay + dy
-        cr = ax * by - ay * bx
-        span = math.atan2(abs(cr), ax * bx + ay * by)
-        start = math.atan2(ay, ax) if cr >= 0.0 else math.atan2(by, bx)
-        rel = (start - amin) % two_pi
-        for shift in (0.0, two_pi):
-            s0 = (rel - shift) / inc
-            lo = max(int(math.ceil(s0)) - 1, 0)
-            hi = min(int(math.floor(s0 + span / inc)) + 1, n - 1)
+        wr, wi = data[0, k] - ox, data[1, k] - oy
+        ar, ai = _cmul_re(wr, wi, rr, ri, mode), _cmul_im(wr, wi, rr, ri, mode)
+        d0r, d0i = data[2, k], data[3, k]
+        dr, di = _cmul_re(d0r, d0i, rr, ri, mode), _cmul_im(d0r, d0i, rr, ri, mode)
+        br, bi = ar + dr, ai + di
+        a_x_d = _cmul_im(ar, -ai, br, bi, mode)  # conj(a) b: imag a x b, real a . b
+        span = abs(math.atan2(a_x_d, _cmul_re(ar, -ai, br, bi, mode)))
+        start = math.atan2(ai, ar) if a_x_d >= 0.0 else math.atan2(bi, br)
+        seg[m, 0], seg[m, 1], seg[m, 2], seg[m, 3] = ar, ai, dr, di
+        seg[m, 4], seg[m, 5], seg[m, 6] = a_x_d, start, span
+        near[m] = k
+        m += 1
+    for shift in (0.0, two_pi):
+        for q in range(m):
+            ar, ai, dr, di, a_x_d = seg[q, 0], seg[q, 1], seg[q, 2], seg[q, 3], seg[q, 4]
+            lo, hi = _beam_run(seg[q, 5], seg[q, 6], amin, inv_inc, shift, n)
             for b in range(lo, hi + 1):
-                ux = cos_l[b]
-                uy = sin_l[b]
-                den = ux * dy - uy * dx
-                if den == 0.0:
+                ucr, uci = cos_l[b], -sin_l[b]  # conj(u)
+                den = _cmul_im(ucr, uci, dr, di, mode)  # u x d
+                if den == 0.0:  # numpy: t is +-inf or NaN, never a hit
                     continue
                 inv = 1.0 / den
-                t = (ax * dy - ay * dx) * inv
-                s = (ax * uy - ay * ux) * inv
-                if t >= 0.0 and s >= 0.0 and s <= 1.0 and t < ranges[b]:
+                t = a_x_d * inv
+                s_neg = _cmul_im(ar, ai, ucr, uci, mode) * inv
+                if t >= 0.0 and t <= r_max and s_neg <= 0.0 and s_neg >= -1.0 and t <= ranges[b]:
                     ranges[b] = t
-                    hit[b] = k
-    for j in range(circles.shape[0]):
-        wx = circles[j, 0] - ox
-        wy = circles[j, 1] - oy
+                    hit[b] = near[q]
+    # circles within range: centre c (sensor frame), |c|^2 - r^2, inside, bearing interval
+    n_circ = circles.shape[0]
+    circ = np.empty((n_circ, 6))
+    cnear = np.empty(n_circ, np.int64)
+    m = 0
+    for j in range(n_circ):
+        wr, wi = circles[j, 0] - ox, circles[j, 1] - oy
         r = circles[j, 2]
-        d2 = wx * wx + wy * wy
-        if d2 > (r_max + r) * (r_max + r):
+        dist = _cabs(wr, wi, mode)
+        if not dist <= r_max + r:
             continue
-        cx = ch * wx + sh * wy
-        cy = ch * wy - sh * wx
-        c0 = d2 - r * r
-        half = math.pi if c0 <= 0.0 else math.asin(min(r / math.sqrt(d2), 1.0))
-        rel = (math.atan2(cy, cx) - half - amin) % two_pi
-        for shift in (0.0, two_pi):
-            s0 = (rel - shift) / inc
-            lo = max(int(math.ceil(s0)) - 1, 0)
-            hi = min(int(math.floor(s0 + 2.0 * half / inc)) + 1, n - 1)
+        cr, ci = _cmul_re(wr, wi, rr, ri, mode), _cmul_im(wr, wi, rr, ri, mode)
+        c0 = (dist - r) * (dist + r)
+        half = math.pi if c0 <= 0.0 else math.asin(r / max(dist, r))
+        circ[m, 0], circ[m, 1], circ[m, 2] = cr, ci, c0
+        circ[m, 3], circ[m, 4] = math.atan2(ci, cr) - half, 2.0 * half
+        cnear[m] = j
+        m += 1
+    for shift in (0.0, two_pi):
+        for q in range(m):
+            cr, ci, c0 = circ[q, 0], circ[q, 1], circ[q, 2]
+            lo, hi = _beam_run(circ[q, 3], circ[q, 4], amin, inv_inc, shift, n)
             for b in range(lo, hi + 1):
-                bb = cos_l[b] * cx + sin_l[b] * cy
-                disc = bb * bb - c0
-                if disc < 0.0:
-                    continue
-                if c0 <= 0.0:
+                if c0 <= 0.0:  # the sensor inside the circle
                     t = 0.0
-                elif bb < 0.0:
-                    continue
                 else:
-                    t = bb - math.sqrt(disc)
-                if t < ranges[b]:
+                    bdot = _cmul_re(cos_l[b], -sin_l[b], cr, ci, mode)  # u . c
+                    disc = bdot * bdot - c0
+                    if not disc >= 0.0:
+                        continue
+                    t = bdot - math.sqrt(disc)
+                if t >= 0.0 and t <= r_max and t <= ranges[b]:
                     ranges[b] = t
-                    hit[b] = n_seg + j
-    for b in range(n):
-        if ranges[b] > r_max:
-            ranges[b] = math.inf
-            hit[b] = -1
+                    hit[b] = n_seg + cnear[q]
 
 
 _kernel = compiled(_kernel_py)
+
+
+def _probe_py(ar, ai, br, bi, mode, out):  # type: ignore[no-untyped-def]
+    """Product and ``abs`` of each pair in ``mode``, by the kernel's own helpers."""
+    for i in range(ar.shape[0]):
+        out[i, 0] = _cmul_re(ar[i], ai[i], br[i], bi[i], mode)
+        out[i, 1] = _cmul_im(ar[i], ai[i], br[i], bi[i], mode)
+        out[i, 2] = _cabs(ar[i], ai[i], mode)
+
+
+_probe = compiled(_probe_py)
+
+
+@functools.cache
+def numpy_complex_mode(python: bool = False) -> int | None:
+    """:data:`FUSED` or :data:`PLAIN`, whichever reproduces numpy's complex products (of
+    arrays, and of an array by a scalar) and ``abs`` on this install, or None.
+
+    Probed once per process on 3,000 random pairs of three lengths (a fused and a plain
+    product differ in the last bit on about a quarter of such pairs, so a wrong mode cannot
+    pass); ``python``: probe the plain-Python helpers (numba not needed; slow)."""
+    probe = pick_kernel(_probe_py, _probe, python, "ray casting")
+    rng = np.random.default_rng(20261128)
+    for mode in (FUSED, PLAIN):
+        ok = True
+        for n in (1, 7, 2992):
+            a = rng.normal(size=n) * 3.0 + 1j * rng.normal(size=n)
+            b = rng.normal(size=n) + 1j * rng.normal(size=n) * 3.0
+            for bb, ref in (
+                (b, np.multiply(a, b)),
+                (b[:1].repeat(n), np.multiply(a, complex(b[0]))),
+            ):
+                out = np.empty((n, 3))
+                probe(a.real.copy(), a.imag.copy(), bb.real.copy(), bb.imag.copy(), mode, out)
+                ok &= out[:, 0].tobytes() == ref.real.tobytes()
+                ok &= out[:, 1].tobytes() == ref.imag.tobytes()
+                ok &= out[:, 2].tobytes() == np.abs(a).tobytes()
+        if ok:
+            return mode
+    return None
 
 
 def cast_scan_numba(
@@ -130,20 +219,27 @@ def cast_scan_numba(
     segments: SegmentCache,
     circles: FloatArray | None = None,
     u_l: NDArray[np.complex128] | None = None,
+    python: bool = False,
 ) -> tuple[FloatArray, IntArray]:
-    """Same contract as :func:`dynmap_sim.sensors.raycast.cast_scan`, compiled with numba.
+    """Same contract and numbers as :func:`dynmap_sim.sensors.raycast.cast_scan`, compiled
+    with numba (``python``: the same kernel uncompiled, for the tests).
 
-    ``u_l`` (the numpy caster's complex beam directions) is accepted and ignored.
+    The complex arithmetic follows :func:`numpy_complex_mode` (:data:`FUSED` when it is
+    None: the ranges then agree with numpy's to rounding). ``u_l`` (the numpy caster's
+    complex beam directions) is accepted and ignored.
     """
-    require_numba("backend")
+    kernel = pick_kernel(_kernel_py, _kernel, python, "ray casting")
+    mode = numpy_complex_mode(python)
     n = cos_l.shape[0]
     ranges = np.empty(n)
     hit = np.empty(n, dtype=np.int64)
     circ = np.zeros((0, 3)) if circles is None else np.ascontiguousarray(circles, dtype=np.float64)
-    _kernel(
+    heading = float(pose[2])
+    kernel(
         float(pose[0]),
         float(pose[1]),
-        float(pose[2]),
+        math.cos(heading),  # the numpy caster's rotation map -> sensor, cos - i sin
+        -math.sin(heading),
         float(angle_min_rad),
         float(angle_increment_rad),
         cos_l,
@@ -152,6 +248,7 @@ def cast_scan_numba(
         segments.data,
         segments.bbox,
         circ,
+        FUSED if mode is None else mode,
         ranges,
         hit,
     )

@@ -1,6 +1,7 @@
-"""The ``auto`` sensor backend, which scenario experiments use: numpy's casting with the
-compiled noise model and people's step when numba is installed, numpy's numbers bit for bit
-on every install, and pickles that resume on an install with or without numba."""
+"""The ``auto`` sensor backend, which scenario experiments use: the compiled casting, noise
+model and people's step when numba is installed (numpy's casting where the compiled one
+could not reproduce numpy's complex arithmetic), numpy's numbers bit for bit on every
+install, and pickles that resume on an install with or without numba."""
 
 import pickle
 
@@ -12,12 +13,14 @@ from dynmap_sim.env_factory import SCENARIO_SENSOR_BACKEND, SimSpec, make_env, r
 from dynmap_sim.jit import numba_available
 from dynmap_sim.sensors.lidar import LIDAR_BACKENDS, make_lidar
 from dynmap_sim.sensors.raycast import cast_scan
+from dynmap_sim.sensors.raycast_numba import numpy_complex_mode
 from dynmap_sim.world.people.social_force import NUMPY_OPS, SocialForce
 
 
-def test_auto_casts_with_numpy_and_noises_with_the_kernel_when_installed():
+def test_auto_uses_the_kernels_when_installed_and_exact():
     lidar = make_lidar("urg-04lx", backend="auto")
-    assert lidar._cast is cast_scan
+    exact = numba_available() and numpy_complex_mode() is not None
+    assert (lidar._cast is cast_scan) == (not exact)
     assert (lidar._noise_scan is not None) == numba_available()
     people = SocialForce((), np.zeros((0, 4)), np.random.default_rng(0), backend="auto")
     assert (people.backend_ops() is NUMPY_OPS) == (not numba_available())
@@ -30,14 +33,15 @@ def test_unknown_lidar_backend_names_the_choices():
         assert name in str(err.value)
 
 
-def test_an_auto_lidar_pickles_without_its_kernel():
-    """The kernel is resolved where the lidar is unpickled (a checkpoint taken with numba
+def test_an_auto_lidar_pickles_without_its_kernels():
+    """The kernels are resolved where the lidar is unpickled (a checkpoint taken with numba
     resumes without it)."""
     lidar = make_lidar("urg-04lx", backend="auto")
     state = lidar.__getstate__()
-    assert state["_noise_scan"] is None
+    assert state["_noise_scan"] is None and state["_cast"] is None
     back = pickle.loads(pickle.dumps(lidar))
     assert (back._noise_scan is not None) == numba_available()
+    assert back._cast is lidar._cast
 
 
 def test_auto_env_gives_the_numpy_env_numbers_bit_for_bit():
