@@ -144,9 +144,9 @@ class DynMapEnv(gymnasium.Env):
     ``sensor``: ``"urg-04lx"`` or ``"lms200"``; ``sensor_options``: preset overrides passed to
     ``make_lidar`` (e.g. ``{"beams": 181, "mode": "cm", "mount_pose": (0.1, 0, 0)}``, or
     ``{"backend": "numba"}`` for the compiled ray caster, noise model and people's step of
-    the ``fast`` extra, the noise and the people numpy's bit for bit; ``"auto"``: numpy's
-    caster with the compiled noise and people when numba is installed, which scenario
-    experiments use);
+    the ``fast`` extra, all numpy's numbers bit for bit; ``"auto"``: those when numba is
+    installed, numpy's caster where the compiled one cannot reproduce numpy's complex
+    arithmetic, which scenario experiments use);
     ``lidar_noise``: a ``LidarNoise``. ``people``: False removes all people. ``robot``:
     ``RobotParams`` (limits, wheel geometry with UMBmark errors ``E_d``/``E_b``, slip);
     ``encoder``: ``EncoderNoise``. ``dt_s``: step period (default the scan period).

@@ -32,9 +32,9 @@ ROBOT_PRESETS: dict[str, dict[str, Any]] = {"default": {}}
 DEFAULT_SENSOR = "urg-04lx"
 
 #: The lidar backend of a scenario's env unless its ``sensor.overrides`` name one:
-#: ``auto`` casts with numpy (the same ranges on every install) and, with the ``fast`` extra,
-#: adds noise and steps the people with the compiled kernels, which give numpy's numbers bit
-#: for bit (:data:`dynmap_sim.sensors.lidar.LIDAR_BACKENDS`).
+#: ``auto`` casts, adds noise and steps the people with numpy, or with the ``fast`` extra's
+#: compiled kernels, which give numpy's numbers bit for bit, so every install has the same
+#: numbers (:data:`dynmap_sim.sensors.lidar.LIDAR_BACKENDS`).
 SCENARIO_SENSOR_BACKEND = "auto"
 
 #: Shortest scan period a scenario may ask for [s]: it is the simulation step, and real
