@@ -227,7 +227,7 @@ class LidarReading:
 #: Lidar backends: ``numpy`` (casting and noise), ``numba`` (extra ``fast``: compiled
 #: casting, noise model and people's step), ``auto`` (the compiled ones when numba is
 #: installed and the compiled casting reproduces numpy's complex arithmetic on this install,
-#: :func:`~dynmap_sim.sensors.raycast_numba.numpy_complex_mode`, else numpy's casting; the
+#: :func:`~dynmap_sim.numpy_complex.numpy_complex_mode`, else numpy's casting; the
 #: compiled noise and people's step whenever numba is installed). The compiled noise and
 #: people's step give numpy's numbers bit for bit on every install, the casting wherever
 #: that mode is known (``numba`` casts in the fused mode elsewhere: numpy's ranges to
@@ -241,12 +241,11 @@ def _caster(backend: str) -> Any:
     if backend == "numpy":  # (numba is not even imported)
         return cast_scan
     from dynmap_sim.jit import kernel_backend
+    from dynmap_sim.numpy_complex import numpy_complex_mode
     from dynmap_sim.sensors import raycast_numba
 
     if backend == "auto":
-        exact = (
-            kernel_backend("auto") is not None and raycast_numba.numpy_complex_mode() is not None
-        )
+        exact = kernel_backend("auto") is not None and numpy_complex_mode() is not None
         return raycast_numba.cast_scan_numba if exact else cast_scan
     if not raycast_numba.numba_available():
         raise ValueError('lidar backend "numba" needs numba: pip install "dynmap-sim[fast]"')

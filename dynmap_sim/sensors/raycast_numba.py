@@ -2,14 +2,9 @@
 with numpy's ranges and hit indices bit for bit.
 
 The numpy caster's pair arithmetic is written as one compiled loop, operation for operation
-and operand for operand. The reals' ``+ - * /``, ``sqrt`` and comparisons are correctly
-rounded IEEE operations, the same in any loop; what is not is numpy's complex arithmetic,
-whose SIMD loops depend on the CPU: on x86-64-v3 (AVX2 + FMA) numpy 2 computes a product as
-``(fma(ar, br, -(ai bi)), fma(ar, bi, ai br))`` and ``abs`` as ``L sqrt(fma(q, q, 1))``
-(``L`` the larger part, ``q`` the ratio), on older CPUs plainly (``ar br - ai bi``, libm's
-``hypot``). The kernel has both (:data:`FUSED`, :data:`PLAIN`); :func:`numpy_complex_mode`
-probes numpy once per process and says which one numpy's loops match on this install (None:
-neither, e.g. a numpy whose AVX-512 loops use another formula). The broad phase (the beams
+and operand for operand, its complex products and ``abs`` as :mod:`dynmap_sim.numpy_complex`
+reproduces numpy's on this install (fused multiply-adds on x86-64-v3, plain on older CPUs;
+:func:`~dynmap_sim.numpy_complex.numpy_complex_mode` probes which). The broad phase (the beams
 each shape's bearing interval covers, widened by one beam) uses ``atan2``/``asin``, whose
 last bits differ between numpy and libm, but a one-beam margin only adds pairs that miss;
 the bounding-box range cull likewise keeps every segment within range. Where two shapes are
@@ -23,52 +18,18 @@ bytes); with another mode they agree to rounding (~1e-15 m). Install with
 
 from __future__ import annotations
 
-import functools
 import math
 
 import numpy as np
 from numpy.typing import NDArray
 
-from dynmap_sim.jit import compiled, fma, jitable, pick_kernel
+from dynmap_sim.jit import compiled, jitable, pick_kernel
 from dynmap_sim.jit import numba_available as numba_available  # re-exported
+from dynmap_sim.numpy_complex import FUSED, cabs, cmul_im, cmul_re, numpy_complex_mode
 from dynmap_sim.sensors.raycast import SegmentCache
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-
-#: Complex arithmetic as numpy's x86-64-v3 loops do it (fused multiply-adds).
-FUSED = 1
-#: Complex arithmetic as numpy's baseline loops do it (separate roundings, libm's hypot).
-PLAIN = 0
-
-
-@jitable
-def _cmul_re(ar: float, ai: float, br: float, bi: float, mode: int) -> float:
-    """Real part of numpy's ``np.multiply(a, b)`` for complex ``a``, ``b`` in ``mode``."""
-    if mode == FUSED:
-        return fma(ar, br, -(ai * bi))
-    return ar * br - ai * bi
-
-
-@jitable
-def _cmul_im(ar: float, ai: float, br: float, bi: float, mode: int) -> float:
-    """Imaginary part of numpy's ``np.multiply(a, b)`` (the operands' order matters)."""
-    if mode == FUSED:
-        return fma(ar, bi, ai * br)
-    return ar * bi + ai * br
-
-
-@jitable
-def _cabs(x: float, y: float, mode: int) -> float:
-    """numpy's ``np.abs(x + iy)`` in ``mode`` (finite parts)."""
-    if mode != FUSED:
-        return math.hypot(x, y)
-    ax, ay = abs(x), abs(y)
-    big, small = max(ax, ay), min(ax, ay)
-    if big == 0.0:
-        return 0.0
-    q = small / big
-    return big * math.sqrt(fma(q, q, 1.0))
 
 
 @jitable
@@ -104,12 +65,12 @@ def _kernel_py(  # type: ignore[no-untyped-def]
         ):
             continue
         wr, wi = data[0, k] - ox, data[1, k] - oy
-        ar, ai = _cmul_re(wr, wi, rr, ri, mode), _cmul_im(wr, wi, rr, ri, mode)
+        ar, ai = cmul_re(wr, wi, rr, ri, mode), cmul_im(wr, wi, rr, ri, mode)
         d0r, d0i = data[2, k], data[3, k]
-        dr, di = _cmul_re(d0r, d0i, rr, ri, mode), _cmul_im(d0r, d0i, rr, ri, mode)
+        dr, di = cmul_re(d0r, d0i, rr, ri, mode), cmul_im(d0r, d0i, rr, ri, mode)
         br, bi = ar + dr, ai + di
-        a_x_d = _cmul_im(ar, -ai, br, bi, mode)  # conj(a) b: imag a x b, real a . b
-        span = abs(math.atan2(a_x_d, _cmul_re(ar, -ai, br, bi, mode)))
+        a_x_d = cmul_im(ar, -ai, br, bi, mode)  # conj(a) b: imag a x b, real a . b
+        span = abs(math.atan2(a_x_d, cmul_re(ar, -ai, br, bi, mode)))
         start = math.atan2(ai, ar) if a_x_d >= 0.0 else math.atan2(bi, br)
         seg[m, 0], seg[m, 1], seg[m, 2], seg[m, 3] = ar, ai, dr, di
         seg[m, 4], seg[m, 5], seg[m, 6] = a_x_d, start, span
@@ -121,12 +82,12 @@ def _kernel_py(  # type: ignore[no-untyped-def]
             lo, hi = _beam_run(seg[q, 5], seg[q, 6], amin, inv_inc, shift, n)
             for b in range(lo, hi + 1):
                 ucr, uci = cos_l[b], -sin_l[b]  # conj(u)
-                den = _cmul_im(ucr, uci, dr, di, mode)  # u x d
+                den = cmul_im(ucr, uci, dr, di, mode)  # u x d
                 if den == 0.0:  # numpy: t is +-inf or NaN, never a hit
                     continue
                 inv = 1.0 / den
                 t = a_x_d * inv
-                s_neg = _cmul_im(ar, ai, ucr, uci, mode) * inv
+                s_neg = cmul_im(ar, ai, ucr, uci, mode) * inv
                 if t >= 0.0 and t <= r_max and s_neg <= 0.0 and s_neg >= -1.0 and t <= ranges[b]:
                     ranges[b] = t
                     hit[b] = near[q]
@@ -138,10 +99,10 @@ def _kernel_py(  # type: ignore[no-untyped-def]
     for j in range(n_circ):
         wr, wi = circles[j, 0] - ox, circles[j, 1] - oy
         r = circles[j, 2]
-        dist = _cabs(wr, wi, mode)
+        dist = cabs(wr, wi, mode)
         if not dist <= r_max + r:
             continue
-        cr, ci = _cmul_re(wr, wi, rr, ri, mode), _cmul_im(wr, wi, rr, ri, mode)
+        cr, ci = cmul_re(wr, wi, rr, ri, mode), cmul_im(wr, wi, rr, ri, mode)
         c0 = (dist - r) * (dist + r)
         half = math.pi if c0 <= 0.0 else math.asin(r / max(dist, r))
         circ[m, 0], circ[m, 1], circ[m, 2] = cr, ci, c0
@@ -156,7 +117,7 @@ def _kernel_py(  # type: ignore[no-untyped-def]
                 if c0 <= 0.0:  # the sensor inside the circle
                     t = 0.0
                 else:
-                    bdot = _cmul_re(cos_l[b], -sin_l[b], cr, ci, mode)  # u . c
+                    bdot = cmul_re(cos_l[b], -sin_l[b], cr, ci, mode)  # u . c
                     disc = bdot * bdot - c0
                     if not disc >= 0.0:
                         continue
@@ -167,46 +128,6 @@ def _kernel_py(  # type: ignore[no-untyped-def]
 
 
 _kernel = compiled(_kernel_py)
-
-
-def _probe_py(ar, ai, br, bi, mode, out):  # type: ignore[no-untyped-def]
-    """Product and ``abs`` of each pair in ``mode``, by the kernel's own helpers."""
-    for i in range(ar.shape[0]):
-        out[i, 0] = _cmul_re(ar[i], ai[i], br[i], bi[i], mode)
-        out[i, 1] = _cmul_im(ar[i], ai[i], br[i], bi[i], mode)
-        out[i, 2] = _cabs(ar[i], ai[i], mode)
-
-
-_probe = compiled(_probe_py)
-
-
-@functools.cache
-def numpy_complex_mode(python: bool = False) -> int | None:
-    """:data:`FUSED` or :data:`PLAIN`, whichever reproduces numpy's complex products (of
-    arrays, and of an array by a scalar) and ``abs`` on this install, or None.
-
-    Probed once per process on 3,000 random pairs of three lengths (a fused and a plain
-    product differ in the last bit on about a quarter of such pairs, so a wrong mode cannot
-    pass); ``python``: probe the plain-Python helpers (numba not needed; slow)."""
-    probe = pick_kernel(_probe_py, _probe, python, "ray casting")
-    rng = np.random.default_rng(20261128)
-    for mode in (FUSED, PLAIN):
-        ok = True
-        for n in (1, 7, 2992):
-            a = rng.normal(size=n) * 3.0 + 1j * rng.normal(size=n)
-            b = rng.normal(size=n) + 1j * rng.normal(size=n) * 3.0
-            for bb, ref in (
-                (b, np.multiply(a, b)),
-                (b[:1].repeat(n), np.multiply(a, complex(b[0]))),
-            ):
-                out = np.empty((n, 3))
-                probe(a.real.copy(), a.imag.copy(), bb.real.copy(), bb.imag.copy(), mode, out)
-                ok &= out[:, 0].tobytes() == ref.real.tobytes()
-                ok &= out[:, 1].tobytes() == ref.imag.tobytes()
-                ok &= out[:, 2].tobytes() == np.abs(a).tobytes()
-        if ok:
-            return mode
-    return None
 
 
 def cast_scan_numba(

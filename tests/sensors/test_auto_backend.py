@@ -11,9 +11,9 @@ import pytest
 from dynmap_sim.env import DynMapEnv
 from dynmap_sim.env_factory import SCENARIO_SENSOR_BACKEND, SimSpec, make_env, resolve_world
 from dynmap_sim.jit import numba_available
+from dynmap_sim.numpy_complex import numpy_complex_mode
 from dynmap_sim.sensors.lidar import LIDAR_BACKENDS, make_lidar
 from dynmap_sim.sensors.raycast import cast_scan
-from dynmap_sim.sensors.raycast_numba import numpy_complex_mode
 from dynmap_sim.world.people.social_force import NUMPY_OPS, SocialForce
 
 

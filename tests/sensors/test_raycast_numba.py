@@ -5,18 +5,10 @@ plain-Python twin alike), and to rounding in the other."""
 import numpy as np
 import pytest
 
+from dynmap_sim.numpy_complex import FUSED, PLAIN, cabs, cmul_im, cmul_re, numpy_complex_mode
 from dynmap_sim.sensors.lidar import NOISELESS, make_lidar
 from dynmap_sim.sensors.raycast import SegmentCache, beam_directions, cast_scan
-from dynmap_sim.sensors.raycast_numba import (
-    FUSED,
-    PLAIN,
-    _cabs,
-    _cmul_im,
-    _cmul_re,
-    cast_scan_numba,
-    numba_available,
-    numpy_complex_mode,
-)
+from dynmap_sim.sensors.raycast_numba import cast_scan_numba, numba_available
 
 needs_numba = pytest.mark.skipif(not numba_available(), reason="numba (extra 'fast') not installed")
 
@@ -40,9 +32,9 @@ def test_the_probe_finds_numpys_complex_arithmetic():
     assert mode in (FUSED, PLAIN)
     a, b = 0.1 + 0.7j, -1.3 + 2.9j
     prod = np.multiply(np.array([a]), np.array([b]))[0]
-    assert _cmul_re(a.real, a.imag, b.real, b.imag, mode) == prod.real
-    assert _cmul_im(a.real, a.imag, b.real, b.imag, mode) == prod.imag
-    assert _cabs(3.0, 4.0, mode) == 5.0
+    assert cmul_re(a.real, a.imag, b.real, b.imag, mode) == prod.real
+    assert cmul_im(a.real, a.imag, b.real, b.imag, mode) == prod.imag
+    assert cabs(3.0, 4.0, mode) == 5.0
 
 
 def test_the_plain_kernel_matches_numpy_bit_for_bit():

@@ -163,7 +163,8 @@ class SocialForce:
         if redo is None or not redo.any():
             return
         avoid = None if robot_xy is None else spawning.goal_avoid(robot_xy, robot_radius_m)
-        spawning.renew_goals(crowd, redo, self.populations, self.obstacles, self.rng, avoid)
+        queries = ops.queries(self.obstacles)
+        spawning.renew_goals(crowd, redo, self.populations, queries, self.rng, avoid)
 
     def backend_ops(self) -> StepOps:
         """The backend's operations: numpy's (:mod:`.dynamics`) or, with the numba backend
@@ -226,9 +227,17 @@ class StepOps(NamedTuple):
     #: the compiled heading and swing of the legs (None: numpy's;
     #: :func:`.legs.leg_centres_into`)
     legs: Callable[..., None] | None
+    #: the obstacles' queries goal choice asks (free space, line of sight): the obstacles
+    #: themselves, or their compiled twin (:func:`.obstacles_numba.queries`)
+    queries: Callable[[Obstacles], Any]
 
 
-NUMPY_OPS = StepOps(Obstacles.rows, social_force, speed_factor, goals_due, None, None)
+def _own_queries(obstacles: Obstacles) -> Obstacles:
+    """numpy's queries: the obstacles' own methods."""
+    return obstacles
+
+
+NUMPY_OPS = StepOps(Obstacles.rows, social_force, speed_factor, goals_due, None, None, _own_queries)
 
 
 def compiled_ops(python: bool = False) -> StepOps:
@@ -236,6 +245,7 @@ def compiled_ops(python: bool = False) -> StepOps:
     compiled kernels (imported on first use; ``python=True``: the plain-Python kernels, for
     tests)."""
     from dynmap_sim.world.people import dynamics_numba as dn
+    from dynmap_sim.world.people import obstacles_numba
 
     kern = dn.Kernels(python=python)
     return StepOps(
@@ -245,4 +255,5 @@ def compiled_ops(python: bool = False) -> StepOps:
         partial(dn.goals_due, kern),
         kern.pair_push,
         kern.legs,
+        partial(obstacles_numba.queries, python=python),
     )
