@@ -229,7 +229,7 @@ class StepOps(NamedTuple):
     legs: Callable[..., None] | None
     #: the obstacles' queries goal choice asks (free space, line of sight): the obstacles
     #: themselves, or their compiled twin (:func:`.obstacles_numba.queries`)
-    queries: Callable[[Obstacles], Any]
+    queries: Callable[[Obstacles], spawning.GoalQueries]
 
 
 def _own_queries(obstacles: Obstacles) -> Obstacles:

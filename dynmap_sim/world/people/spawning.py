@@ -8,12 +8,12 @@ from __future__ import annotations
 
 import math
 from functools import lru_cache
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from dynmap_sim.world.people.crowd import Crowd, profile_fraction
-from dynmap_sim.world.people.obstacles import Obstacles
 from dynmap_sim.world.people.params import GOAL_TOL_M, PAUSE_S, ROBOT_GAP_M
 from dynmap_sim.world.polygons import FloatArray
 from dynmap_sim.world.spec import PeopleSpec
@@ -22,6 +22,19 @@ from dynmap_sim.world.spec import PeopleSpec
 GOAL_TRIES = 20
 #: Tries of :func:`pick_goal` evaluated in one pass.
 SPECULATE = 4
+
+
+class GoalQueries(Protocol):
+    """What spawning and goal choice ask of the static geometry: :class:`.Obstacles`, or its
+    compiled twin (:class:`.obstacles_numba.CompiledQueries`, the same answers)."""
+
+    segments: FloatArray
+
+    def free_mask(self, points: FloatArray, r: float) -> NDArray[np.bool_]: ...
+
+    def visible(self, a: FloatArray, b: FloatArray) -> bool: ...
+
+    def visible_many(self, a: FloatArray, bs: FloatArray) -> NDArray[np.bool_]: ...
 
 
 @lru_cache(maxsize=64)
@@ -38,7 +51,7 @@ def _boxes(areas: tuple[tuple[float, float, float, float], ...]) -> tuple[FloatA
 
 
 def random_point(
-    obstacles: Obstacles, rng: np.random.Generator, pop: PeopleSpec, r: float
+    obstacles: GoalQueries, rng: np.random.Generator, pop: PeopleSpec, r: float
 ) -> FloatArray | None:
     """A uniformly drawn free point of the population's areas (up to 8 batches of 8)."""
     lo, span = _boxes(pop.areas)
@@ -55,7 +68,7 @@ def random_point(
 
 
 def pick_goal(
-    obstacles: Obstacles,
+    obstacles: GoalQueries,
     rng: np.random.Generator,
     pop: PeopleSpec,
     frm: FloatArray,
@@ -103,7 +116,7 @@ def pick_goal(
 
 
 def _try_goal(
-    obstacles: Obstacles, rng: np.random.Generator, pop: PeopleSpec, r: float
+    obstacles: GoalQueries, rng: np.random.Generator, pop: PeopleSpec, r: float
 ) -> FloatArray | None:
     """One try of :func:`pick_goal`: an attraction point, or a free point of the areas."""
     if pop.goals:
@@ -112,7 +125,7 @@ def _try_goal(
 
 
 def _draw_tries(
-    obstacles: Obstacles,
+    obstacles: GoalQueries,
     rng: np.random.Generator,
     pop: PeopleSpec,
     r: float,
@@ -151,7 +164,7 @@ def _draw_tries(
 
 
 def _accept_one(
-    obstacles: Obstacles,
+    obstacles: GoalQueries,
     g: FloatArray,
     frm: FloatArray,
     r: float,
@@ -165,7 +178,7 @@ def _accept_one(
 
 
 def _accept(
-    obstacles: Obstacles,
+    obstacles: GoalQueries,
     goals: FloatArray,
     frm: FloatArray,
     r: float,
@@ -187,7 +200,7 @@ def _accept(
 
 def spawn(
     populations: tuple[PeopleSpec, ...],
-    obstacles: Obstacles,
+    obstacles: GoalQueries,
     rng: np.random.Generator,
     time_s: float,
     day_active: list[bool],
@@ -231,7 +244,7 @@ def spawn(
 
 
 def _free_spot(
-    obstacles: Obstacles,
+    obstacles: GoalQueries,
     rng: np.random.Generator,
     pop: PeopleSpec,
     wp: int,
@@ -270,7 +283,7 @@ def renew_goals(
     crowd: Crowd,
     redo: NDArray[np.bool_],
     populations: tuple[PeopleSpec, ...],
-    obstacles: Obstacles,
+    obstacles: GoalQueries,
     rng: np.random.Generator,
     avoid: tuple[FloatArray, float] | None,
 ) -> None:
