@@ -20,7 +20,9 @@ Up to :attr:`LocalizerPool.depth` runs are in flight at once: a worker takes the
 they arrive (a reader thread) and works on them in order as soon as it is done with the ones
 before, so the simulation and the localizers never wait for each other within a run, and the
 workers neither idle while the first run is simulated nor have whole runs left when the last
-one is.
+one is. Nor does the pool wait for its workers to start (their imports take seconds of CPU:
+the H&W replica's three took 4.4 s): the first run is simulated meanwhile, and a worker that
+cannot take its localizers is reported at the first result.
 Worker processes use the ``spawn`` start method, ignore SIGINT (the main process stops them),
 exit when the main process goes away, and report a failing localizer by its label; a dead
 worker is noticed through its process sentinel, so the main process never hangs on it.
@@ -620,6 +622,7 @@ class _Worker:
     conn: Connection
     locs: list[int]
     niced: bool = False  # given LIGHT_WORKER_NICE (never undone: only root may)
+    owed: int = 0  # replies to messages sent without waiting (the first adopt), not yet read
 
 
 class LocalizerPool:
@@ -663,11 +666,13 @@ class LocalizerPool:
                 proc.start()
                 theirs.close()
                 self.workers.append(_Worker(proc, ours, []))
-            # first assignment: round robin (no costs measured yet)
+            # first assignment: round robin (no costs measured yet); not waited for: the
+            # workers start (imports, about 3 s of CPU each) while the first run is simulated,
+            # and their replies are read before the next ones (:meth:`_recv`)
             for k in range(len(self.labels)):
                 self.workers[k % n_workers].locs.append(k)
             for w in self.workers:
-                self._call(w, ("adopt", {k: (self.labels[k], self.states[k]) for k in w.locs}))
+                self._send(w, ("adopt", {k: (self.labels[k], self.states[k]) for k in w.locs}))
         except BaseException:
             self.close()
             raise
@@ -684,7 +689,16 @@ class LocalizerPool:
         return f"worker process {w.proc.name} (pid {w.proc.pid}; {names})"
 
     def _recv(self, w: _Worker) -> Any:
-        """The worker's reply; raises when it reports an error or dies (never hangs)."""
+        """The worker's reply to the last message that asks one, after those owed to
+        messages sent without waiting (:meth:`_send`); raises when it reports an error or
+        dies (never hangs)."""
+        while w.owed:
+            w.owed -= 1
+            self._recv_one(w)
+        return self._recv_one(w)
+
+    def _recv_one(self, w: _Worker) -> Any:
+        """The worker's next reply (see :meth:`_recv`)."""
         while True:
             ready = wait([w.conn, w.proc.sentinel])
             if w.conn in ready:
@@ -710,11 +724,18 @@ class LocalizerPool:
             raise InputError(message)
         raise LocalizerError(f"{message}\n--- traceback in {self._who(w)} ---\n{tb}")
 
-    def _call(self, w: _Worker, msg: tuple[Any, ...]) -> Any:
+    def _send(self, w: _Worker, msg: tuple[Any, ...]) -> None:
+        """Send a message that gets a reply without waiting for it (read by :meth:`_recv`
+        before the next reply)."""
         try:
             w.conn.send(msg)
         except (BrokenPipeError, OSError):
             pass  # it died: _recv says so
+        w.owed += 1
+
+    def _call(self, w: _Worker, msg: tuple[Any, ...]) -> Any:
+        self._send(w, msg)
+        w.owed -= 1
         return self._recv(w)
 
     # ------------------------------------------------------------------ balancing

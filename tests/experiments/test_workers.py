@@ -137,6 +137,27 @@ def test_an_unpicklable_localizer_is_named_before_any_worker_starts(tmp_path):
     assert not mp.active_children()
 
 
+def test_the_pool_does_not_wait_for_its_workers_and_reports_a_failed_start(tmp_path):
+    """The workers start (imports, the localizers' states) while the first run is simulated;
+    a worker that cannot take its localizers is reported, by name, at the first result."""
+    from dynmap_sim.experiments.bench import LocalizerPool
+
+    scn = scenario(tmp_path, days=[1, 1])
+    r = ExperimentRunner(scn, tmp_path / "o", scn.days, 0, resume=False, env=FakeEnv())
+    sim = r._simulate(0)[0]
+    states = [pickle.dumps(loc) for loc in r.localizers()]
+    states[1] = b"not a pickled localizer"
+    pool = LocalizerPool(scn.labels, states, 2)
+    try:
+        assert all(w.owed == 1 for w in pool.workers)  # their replies not waited for
+        pool.submit(sim.stream)
+        with pytest.raises(LocalizerError, match=rf"worker process .*{scn.labels[1]!r}"):
+            pool.result()
+    finally:
+        pool.close()
+    assert not mp.active_children()
+
+
 def test_rebalancing_moves_localizers_and_keeps_the_numbers(tmp_path):
     from dynmap_sim.experiments.bench import LocalizerPool
 
