@@ -724,18 +724,23 @@ class LocalizerPool:
             raise InputError(message)
         raise LocalizerError(f"{message}\n--- traceback in {self._who(w)} ---\n{tb}")
 
-    def _send(self, w: _Worker, msg: tuple[Any, ...]) -> None:
-        """Send a message that gets a reply without waiting for it (read by :meth:`_recv`
-        before the next reply)."""
+    @staticmethod
+    def _post(w: _Worker, msg: tuple[Any, ...]) -> None:
+        """Send ``msg`` to the worker, ignoring a broken pipe: a dead worker is reported
+        where its reply is read (:meth:`_recv`), and :meth:`close` joins it either way."""
         try:
             w.conn.send(msg)
         except (BrokenPipeError, OSError):
-            pass  # it died: _recv says so
+            pass
+
+    def _send(self, w: _Worker, msg: tuple[Any, ...]) -> None:
+        """Send a message that gets a reply without waiting for it (read by :meth:`_recv`
+        before the next reply)."""
+        self._post(w, msg)
         w.owed += 1
 
     def _call(self, w: _Worker, msg: tuple[Any, ...]) -> Any:
-        self._send(w, msg)
-        w.owed -= 1
+        self._post(w, msg)
         return self._recv(w)
 
     # ------------------------------------------------------------------ balancing
@@ -780,10 +785,7 @@ class LocalizerPool:
     def _send_all(self, msg: tuple[Any, ...]) -> None:
         for w in self.workers:
             if w.locs:
-                try:
-                    w.conn.send(msg)
-                except (BrokenPipeError, OSError):
-                    pass  # it died: result() says so
+                self._post(w, msg)
 
     def begin(self, header: RunHeader, capacity: int = 1024) -> None:
         """Start a run in the workers (returns at once; a worker busy with an earlier run
@@ -861,10 +863,7 @@ class LocalizerPool:
     def close(self) -> None:
         """Stop the workers (politely, then by force); safe to call more than once."""
         for w in self.workers:
-            try:
-                w.conn.send(("stop",))
-            except (BrokenPipeError, OSError):
-                pass
+            self._post(w, ("stop",))
         deadline = time.monotonic() + 2.0
         for w in self.workers:
             w.proc.join(timeout=max(0.0, deadline - time.monotonic()))
