@@ -1,7 +1,8 @@
 """Side by side with a peer simulator (issue 13 item 3): steps/s as ratios measured in one run.
 
 Cases, each timed in alternating rounds (ours, the reference, ours, ...; the median of the
-per-round ratios is reported, so a busy machine slows both sides of a round alike):
+per-round ratios is reported, so a busy machine slows both sides of a round alike, with
+the range of the rounds' ratios beside it):
 
 1. **Identical world vs ir-sim 2.12.0** (extra ``bench``: ``pip install -e ".[bench]"``):
    a 12 m x 10 m room with 20 rectangles (0.5 m x 0.5 m, on a 5 x 4 grid), a diff-drive robot
@@ -43,7 +44,7 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import gymnasium as gym
 import numpy as np
@@ -161,9 +162,27 @@ def actions(n: int) -> np.ndarray:
     return np.stack([0.4 + 0.3 * np.sin(0.13 * t), 0.8 * np.sin(0.31 * t)], axis=1)
 
 
-def alternate(ours: Callable[[], float], ref: Callable[[], float], rounds: int):
-    """Median of per-round ratios ``ref_time / our_time`` and the median rates; each callable
-    returns items/s of one round."""
+class Ratio(NamedTuple):
+    """Median rates of both sides (items/s) and the per-round ratios ``ours / ref``."""
+
+    ours: float
+    ref: float
+    ratios: list[float]
+
+    @property
+    def median(self) -> float:
+        return statistics.median(self.ratios)
+
+    def __str__(self) -> str:
+        """The median ratio and the range of the rounds', e.g. ``25.3x (22.1-27.0)``: on a
+        shared machine one round's ratio moves by a fifth, so the range says how far a bar
+        is from being met reliably."""
+        return f"{self.median:.2f}x ({min(self.ratios):.2f}-{max(self.ratios):.2f})"
+
+
+def alternate(ours: Callable[[], float], ref: Callable[[], float], rounds: int) -> Ratio:
+    """Alternating rounds of both sides (ours first on even rounds, the reference first on
+    odd ones); each callable returns items/s of one round."""
     a, b = [], []
     for r in range(rounds):
         if r % 2 == 0:
@@ -173,7 +192,7 @@ def alternate(ours: Callable[[], float], ref: Callable[[], float], rounds: int):
             b.append(ref())
             a.append(ours())
     ratios = [x / y for x, y in zip(a, b, strict=True)]
-    return statistics.median(a), statistics.median(b), statistics.median(ratios)
+    return Ratio(statistics.median(a), statistics.median(b), ratios)
 
 
 def timed(fn: Callable[[], None], n: int) -> float:
@@ -273,7 +292,10 @@ def peers_table(steps: int, rounds: int, backends: list[str]) -> None:
         )
         return
     print(f"identical world vs ir-sim {irsim.__version__} ({steps} steps a round, {rounds} rounds)")
-    print("| case | backend | ir-sim steps/s | dynmap_sim steps/s | ratio (median of rounds) |")
+    print(
+        "| case | backend | ir-sim steps/s | dynmap_sim steps/s "
+        "| ratio: median of rounds (their range) |"
+    )
     print("|---|---|---|---|---|")
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
@@ -287,8 +309,8 @@ def peers_table(steps: int, rounds: int, backends: list[str]) -> None:
                  irsim_scan_rate(tmp, steps)),
             ]  # fmt: skip
             for name, ours, ref in cases:
-                a, b, ratio = alternate(ours, ref, rounds)
-                print(f"| {name} | {backend} | {b:,.0f} | {a:,.0f} | {ratio:.1f}x |")
+                res = alternate(ours, ref, rounds)
+                print(f"| {name} | {backend} | {res.ref:,.0f} | {res.ours:,.0f} | {res} |")
     print(
         "targets (issue 13): >= 30x ir-sim with 10 people on numpy, >= 50x with numba\n",
         flush=True,
@@ -324,9 +346,12 @@ def lab_crowd(steps: int, rounds: int, backend: str) -> None:
 
         return timed(loop, n_naive)
 
-    a, b, ratio = alternate(ours, ref, rounds)
+    res = alternate(ours, ref, rounds)
     print(f"lab lunch crowd (day {day} run {run}, {n_people} people), backend {backend}:")
-    print(f"  env {a:,.0f} steps/s, naive pymunk loop {b:,.0f} scans/s: {ratio:.2f}x (target 10x)")
+    print(
+        f"  env {res.ours:,.0f} steps/s, naive pymunk loop {res.ref:,.0f} scans/s: {res} "
+        "(target 10x)"
+    )
 
 
 def vector(steps: int, rounds: int, n: int = 8) -> None:
@@ -360,14 +385,14 @@ def vector(steps: int, rounds: int, n: int = 8) -> None:
 
         return timed(loop, steps * n)
 
-    a, b, ratio = alternate(run_vec(vec), run_seq, rounds)
+    res = alternate(run_vec(vec), run_seq, rounds)
     print(
         f"vector env, {n} lab envs (with people; the numpy backend, which the vector env "
         "batches), env-steps/s:"
     )
-    print(f"  make_vec {a:,.0f}, {n} sequential envs {b:,.0f}: {ratio:.2f}x (target 3x)")
-    a, b, ratio = alternate(run_vec(vec), run_vec(sync), rounds)
-    print(f"  make_vec {a:,.0f}, SyncVectorEnv {b:,.0f}: {ratio:.2f}x")
+    print(f"  make_vec {res.ours:,.0f}, {n} sequential envs {res.ref:,.0f}: {res} (target 3x)")
+    res = alternate(run_vec(vec), run_vec(sync), rounds)
+    print(f"  make_vec {res.ours:,.0f}, SyncVectorEnv {res.ref:,.0f}: {res}")
 
 
 def _feed(h: Any, x: object) -> None:
