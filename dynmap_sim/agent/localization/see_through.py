@@ -85,11 +85,19 @@ def see_through_logp(
     """``(P, B)`` log score of each reading by how far it ends beyond its wall
     (``delta = range - depth``): ``log(z_hit exp(-(delta - margin)^2 / 2 sigma^2) + z_rand /
     range_max)``; ``0`` where it does not see through (``depth`` inf), so that a minimum with
-    the likelihood field's value leaves those readings alone."""
+    the likelihood field's value leaves those readings alone.
+
+    Only the see-through readings are scored (a few percent of a cloud's readings on a
+    tracked run): numpy's ``exp`` and ``log`` give an element the same bits wherever it
+    stands in an array, so the scores are those of scoring every reading."""
     r = np.asarray(ranges_m, dtype=np.float64)
-    beyond = np.maximum(r[None, :] - depths_m - margin_m, 0.0)  # inf depth -> 0
+    d = np.asarray(depths_m, dtype=np.float64)
+    out = np.zeros(d.shape)
+    k = np.flatnonzero(np.isfinite(d))  # flat (particle, reading) indices
+    beyond = np.maximum(r.take(k % d.shape[-1]) - d.take(k) - margin_m, 0.0)
     p = z_hit * np.exp(beyond * beyond * (-0.5 / sigma_hit_m**2)) + z_rand / range_max_m
-    return np.where(np.isfinite(depths_m), np.log(p), 0.0)
+    out.put(k, np.log(p))
+    return out
 
 
 def _wall_depths_numpy(
