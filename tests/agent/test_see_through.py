@@ -145,3 +145,21 @@ def test_the_score_is_the_field_at_the_margin_and_the_floor_beyond() -> None:
     assert lp[0, 0] > lp[0, 1] > lp[0, 2]
     assert lp[0, 2] == pytest.approx(np.log(0.1 / 5.6), abs=1e-9)
     assert lp[0, 3] == 0.0
+
+
+def test_scoring_only_the_see_through_readings_gives_every_reading_s_bits() -> None:
+    """The score of the see-through readings alone equals, bit for bit, the score computed
+    for every reading and then masked (numpy's exp and log do not depend on where an element
+    stands in the array)."""
+    rng = np.random.default_rng(3)
+    for n_p, n_b in ((1, 1), (7, 13), (500, 55), (64, 361)):
+        ranges = rng.uniform(0.1, 8.0, n_b)
+        depth = ranges - rng.uniform(-1.0, 3.0, (n_p, n_b))
+        depth[rng.random((n_p, n_b)) < 0.8] = np.inf
+        args = (0.3, 0.9, 0.1, 0.12, 8.0)
+        beyond = np.maximum(ranges[None, :] - depth - 0.3, 0.0)
+        p = 0.9 * np.exp(beyond * beyond * (-0.5 / 0.12**2)) + 0.1 / 8.0
+        every = np.where(np.isfinite(depth), np.log(p), 0.0)
+        got = see_through_logp(depth, ranges, *args)
+        assert got.shape == (n_p, n_b)
+        assert np.array_equal(got.view(np.int64), every.view(np.int64))
