@@ -171,6 +171,7 @@ class Ratio(NamedTuple):
 
     @property
     def median(self) -> float:
+        """The median of the per-round ratios (what the targets are read against)."""
         return statistics.median(self.ratios)
 
     def __str__(self) -> str:
