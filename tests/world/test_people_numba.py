@@ -26,7 +26,9 @@ def _robot_path(n: int, start: np.ndarray) -> list[np.ndarray]:
     return [np.array([a, b, 0.0]) for a, b in zip(x, y, strict=True)]
 
 
-def _compare(world_name: str, day: int, run: int, steps: int, python: bool, robot: bool):
+def _compare(
+    world_name: str, day: int, run: int, steps: int, python: bool, robot: bool, fused: bool = True
+):
     spec = load_world(resolve_world_path(world_name))
     ref = World(spec, seed=0)
     fast = World(spec, seed=0)
@@ -35,6 +37,8 @@ def _compare(world_name: str, day: int, run: int, steps: int, python: bool, robo
     fast.people_backend = "numba"  # the kernels (the check for numba is bypassed)
     fast._forces.backend = "numba"
     fast._forces._ops = sf_module.compiled_ops(python=python)
+    if not fused:  # the parts between numpy's calls, not the one force kernel
+        fast._forces._ops.social_force.args[0].force_mode = None
     assert fast.crowd.n > 0
     start = ref.crowd.pos[0]  # among the people: their goals, comfort discs, evasion
     for i, pose in enumerate(_robot_path(steps, start)):
@@ -56,6 +60,44 @@ def test_python_kernels_step_people_as_numpy(robot):
 )
 def test_compiled_kernels_step_people_as_numpy(world, day, run, robot):
     _compare(world, day, run, 600, python=False, robot=robot)
+
+
+@pytest.mark.skipif(not numba_available(), reason="numba (extra 'fast') not installed")
+@pytest.mark.parametrize("robot", [True, False])
+def test_compiled_parts_without_the_one_force_kernel_step_people_as_numpy(robot):
+    """The kernels between numpy's calls, where the force cannot be one kernel (numpy's
+    complex arithmetic or exp not reproduced, or rows too long)."""
+    _compare("lab", 1, 2, 200, python=False, robot=robot, fused=False)
+
+
+@pytest.mark.parametrize("python", [True, False])
+def test_row_sums_are_numpy_s_pairwise_sums(python):
+    """``_row_sum`` gives ``np.sum`` of a row's real and imaginary parts bit for bit, for
+    every length up to FORCE_MAX_COLS (once split beyond 64)."""
+    if not python and not numba_available():
+        pytest.skip("numba (extra 'fast') not installed")
+    from dynmap_sim.world.people import dynamics_numba as dn
+
+    def sums(x, out):  # type: ignore[no-untyped-def]
+        for i in range(x.shape[0]):
+            out[i] = dn._row_sum(x[i], x.shape[1])
+
+    if python:
+        kernel = sums
+    else:
+        import numba
+
+        kernel = numba.njit(sums)
+    rng = np.random.default_rng(7)
+    for m in range(1, dn.FORCE_MAX_COLS + 1):
+        z = rng.standard_normal((4, m)) * np.exp(rng.uniform(-8, 8, (4, m))) + 1j * (
+            rng.standard_normal((4, m)) * np.exp(rng.uniform(-8, 8, (4, m)))
+        )
+        want = z.sum(axis=1)
+        for part, ref in ((z.real.copy(), want.real), (z.imag.copy(), want.imag)):
+            out = np.empty(4)
+            kernel(part, out)
+            assert out.tobytes() == ref.tobytes(), m
 
 
 @pytest.mark.skipif(not numba_available(), reason="numba (extra 'fast') not installed")
