@@ -53,6 +53,29 @@ from dynmap_sim.world.people.params import (
 from dynmap_sim.world.polygons import FloatArray
 
 
+@jitable
+def _nan_min(a, b):  # type: ignore[no-untyped-def]
+    """One step of numpy's ``min``: ``b`` where it is smaller than ``a`` or NaN (a NaN, once
+    taken, stays)."""
+    return b if (b < a or b != b) else a
+
+
+@jitable
+def _at_least_1e9(d):  # type: ignore[no-untyped-def]
+    """numpy's ``np.maximum(d, 1e-9)`` (NaN stays)."""
+    return 1e-9 if d < 1e-9 else d
+
+
+@jitable
+def _clip01(v):  # type: ignore[no-untyped-def]
+    """numpy's ``np.minimum(np.maximum(v, 0), 1)`` (the first operand when equal, NaN kept)."""
+    if not (v >= 0.0 or v != v):
+        v = 0.0
+    if not (v <= 1.0 or v != v):
+        v = 1.0
+    return v
+
+
 def _gaps_py(  # type: ignore[no-untyped-def]
     d,
     n,
@@ -79,23 +102,15 @@ def _gaps_py(  # type: ignore[no-untyped-def]
         for j in range(m):
             arg[i, j] = log_a[i, j] - d[i, j] * inv_b[i, j]
         for j in range(n):
-            g = d[i, j] - rsum_masked[i, j]
-            if g < pair_gap or g != g:  # numpy's min propagates NaN
-                pair_gap = g
+            pair_gap = _nan_min(pair_gap, d[i, j] - rsum_masked[i, j])
         w = d[i, n + 1]
         for j in range(n + 2, m):
-            v = d[i, j]
-            if v < w or v != v:
-                w = v
+            w = _nan_min(w, d[i, j])
         wall_gap[i] = w - radius[i]
         if robot:
             dr = d[i, n]
-            g = dr - robot_need[i]
-            if g < robot_gap or g != g:
-                robot_gap = g
-            if dr < 1e-9:  # np.maximum(d, 1e-9) (NaN stays)
-                dr = 1e-9
-            earg[i] = evade_log_a[i] - dr * inv_b_evade
+            robot_gap = _nan_min(robot_gap, dr - robot_need[i])
+            earg[i] = evade_log_a[i] - _at_least_1e9(dr) * inv_b_evade
     return pair_gap, robot_gap
 
 
@@ -106,7 +121,7 @@ def _weights_py(w, d, n, reach):  # type: ignore[no-untyped-def]
     for i in range(p):
         for j in range(m):
             dj = d[i, j]
-            w[i, j] = w[i, j] / (1e-9 if dj < 1e-9 else dj)
+            w[i, j] = w[i, j] / _at_least_1e9(dj)
             if j > n and dj > reach:
                 w[i, j] = 0.0
 
@@ -125,7 +140,7 @@ def _speed_factor_py(sp, vmax, out):  # type: ignore[no-untyped-def]
     """``out = min(1, vmax / max(sp, 1e-9))`` (H&M eq. 8), NaN-propagating as numpy."""
     for i in range(sp.shape[0]):
         s = sp[i]
-        f = vmax[i] / (1e-9 if s < 1e-9 else s)
+        f = vmax[i] / _at_least_1e9(s)
         out[i] = 1.0 if f > 1.0 else f
 
 
@@ -142,7 +157,7 @@ def _pair_push_py(d, rsum_masked, out):  # type: ignore[no-untyped-def]
                 o = 0.0
             if o != 0.0:
                 anyone = True
-            out[i, j] = o / (1e-9 if dj < 1e-9 else dj)
+            out[i, j] = o / _at_least_1e9(dj)
     return anyone
 
 
@@ -200,12 +215,7 @@ def _clamp_py(prod, inv, t):  # type: ignore[no-untyped-def]
     p, m = inv.shape
     for i in range(p):
         for j in range(m):
-            v = prod[i, j].real * inv[i, j]
-            if not (v >= 0.0 or v != v):
-                v = 0.0
-            if not (v <= 1.0 or v != v):
-                v = 1.0
-            t[i, j] = v
+            t[i, j] = _clip01(prod[i, j].real * inv[i, j])
 
 
 def _goals_py(  # type: ignore[no-untyped-def]
@@ -307,14 +317,12 @@ def _force_py(  # type: ignore[no-untyped-def]
     :mod:`dynmap_sim.numpy_complex`), libm's ``exp`` (which numpy's gives here:
     :func:`exp_matches_numpy`) and its pairwise row sums (:func:`_row_sum`). Writes the
     forces and the gaps to the walls; returns the smallest gaps between two bodies and to
-    the robot's disc. ``sre``, ``sim``: scratch rows of the summed terms."""
-    p = z.shape[0]
-    n = p
-    k_cols = rows.shape[1]
-    m = n + 1 + k_cols
+    the robot's disc (inf without a robot). ``sre``, ``sim``: scratch rows of the summed terms."""
+    n = z.shape[0]
+    m = n + 1 + rows.shape[1]
     pair_gap = math.inf
     robot_gap = math.inf
-    for i in range(p):
+    for i in range(n):
         zr = z[i].real
         zi = z[i].imag
         # driving force: e = (goal - z) / max(|goal - z|, 1e-9), v0/tau e - v (1/tau)
@@ -350,31 +358,22 @@ def _force_py(  # type: ignore[no-untyped-def]
                 ai = zi - rows[i, c, 0].imag
                 cdr = rows[i, c, 1].real
                 cdi = rows[i, c, 1].imag
-                t = cmul_re(ar, ai, cdr, cdi, mode) * rows[i, c, 2].real
-                if not (t >= 0.0 or t != t):
-                    t = 0.0
-                if not (t <= 1.0 or t != t):
-                    t = 1.0
+                t = _clip01(cmul_re(ar, ai, cdr, cdi, mode) * rows[i, c, 2].real)
                 dr_ = ar - cmul_re(t, 0.0, cdr, -cdi, mode)
                 di_ = ai - cmul_im(t, 0.0, cdr, -cdi, mode)
             d = cabs(dr_, di_, mode)
             arg = log_a[i, j] - d * inv_b[i, j]
             if j < n:
-                g = d - rsum_masked[i, j]
-                if g < pair_gap or g != g:  # numpy's min propagates NaN
-                    pair_gap = g
+                pair_gap = _nan_min(pair_gap, d - rsum_masked[i, j])
             elif j == n:
                 if robot:
-                    g = d - robot_need[i]
-                    if g < robot_gap or g != g:
-                        robot_gap = g
-                    dr = 1e-9 if d < 1e-9 else d
-                    earg = evade_log_a[i] - dr * inv_b_evade
+                    robot_gap = _nan_min(robot_gap, d - robot_need[i])
+                    earg = evade_log_a[i] - _at_least_1e9(d) * inv_b_evade
             elif j == n + 1:
                 wall = d
-            elif d < wall or d != d:
-                wall = d
-            w = math.exp(arg) / (1e-9 if d < 1e-9 else d)
+            else:
+                wall = _nan_min(wall, d)
+            w = math.exp(arg) / _at_least_1e9(d)
             if j > n and d > reach:
                 w = 0.0
             sre[j] = cmul_re(w, 0.0, dr_, di_, mode)
@@ -507,7 +506,7 @@ def social_force(
             k.evade_log_a, _INV_B_EVADE, REACH_M, KEEP_RIGHT_M, kern.force_mode, force,
             wall_gap, np.empty(m), np.empty(m),
         )  # fmt: skip
-        return force, pair_gap, wall_gap, robot_gap if rz is not None else np.inf
+        return force, pair_gap, wall_gap, robot_gap  # inf without a robot
     e, force = driving_force(z, v, goal, k)
     diff = source_vectors(kern, z, rows, rz)
     d = np.abs(diff)
