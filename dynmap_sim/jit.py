@@ -11,10 +11,7 @@ from collections.abc import Callable
 from fractions import Fraction
 from typing import Any
 
-try:  # pragma: no cover - depends on the optional extra
-    import numba
-except ImportError:  # pragma: no cover
-    numba = None
+import numba
 
 
 def fma(a: float, b: float, c: float) -> float:
