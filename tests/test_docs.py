@@ -1,13 +1,25 @@
-"""Citations of the architecture page cannot rot: every ``docs/architecture.md §N`` cited in
-the package (and in the tests, benchmarks, examples, README and pyproject.toml) names a
-numbered section heading of ``docs/architecture.md``, and nothing cites design notes from
-outside the repository, which users never see."""
+"""The docs cannot rot.
 
+Citations of the architecture page: every ``docs/architecture.md §N`` cited in the package
+(and in the tests, benchmarks, examples, README and pyproject.toml) names a numbered section
+heading of ``docs/architecture.md``, and nothing cites design notes from outside the
+repository, which users never see. The site (``mkdocs.yml``): every page is in the nav, and
+the generated parts (``docs/hooks/generate.py``: the world and scenario field references,
+the CLI reference) show every field, command and option of the code. ``.ci/run`` builds the
+site with ``mkdocs build --strict``; the pages' commands and examples are tested in
+``tests/test_readme_commands.py``.
+"""
+
+import argparse
+import importlib.util
 import re
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "architecture.md"
+HOOK = ROOT / "docs" / "hooks" / "generate.py"
 #: ``docs/architecture.md §6``, or a range ``§2-3`` (hyphen or en dash).
 CITATION = re.compile(r"docs/architecture\.md §(\d+)(?:\s*[-\u2013]\s*(\d+))?")
 #: A section heading of the page: ``## 6. Experiments, results, metrics``.
@@ -80,3 +92,125 @@ def test_nothing_cites_design_notes_outside_the_repository():
         if OUTSIDE in line
     ]
     assert not hits, f"cite docs/architecture.md instead of {OUTSIDE}: {hits}"
+
+
+# ---------------------------------------------------------------------------------------------
+# the site
+# ---------------------------------------------------------------------------------------------
+
+
+def _hook():
+    spec = importlib.util.spec_from_file_location("docs_generate", HOOK)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _nav_pages(nav) -> list[str]:
+    out = []
+    for item in nav:
+        value = next(iter(item.values())) if isinstance(item, dict) else item
+        out += _nav_pages(value) if isinstance(value, list) else [value]
+    return out
+
+
+def _nav() -> list:
+    yaml = pytest.importorskip("yaml")
+    return yaml.safe_load((ROOT / "mkdocs.yml").read_text())["nav"]
+
+
+def test_every_page_is_in_the_nav():
+    docs = ROOT / "docs"
+    nav = _hook().expand_nav(_nav(), docs)
+    listed = set(_nav_pages(nav))
+    pages = {p.relative_to(docs).as_posix() for p in docs.rglob("*.md")}
+    assert pages <= listed, f"pages missing from mkdocs.yml's nav: {sorted(pages - listed)}"
+    assert listed <= pages, f"nav entries without a page: {sorted(listed - pages)}"
+
+
+def test_a_folder_in_the_nav_lists_its_pages(tmp_path):
+    (tmp_path / "tuning").mkdir()
+    (tmp_path / "tuning" / "b.md").write_text("# Bee notes\n")
+    (tmp_path / "tuning" / "a.md").write_text("text without a heading\n")
+    (tmp_path / "tuning" / "index.md").write_text("# Tuning\n")
+    nav = [{"Home": "index.md"}, {"Tuning": "tuning/"}, {"Empty": "none/"}]
+    assert _hook().expand_nav(nav, tmp_path) == [
+        {"Home": "index.md"},
+        {
+            "Tuning": [
+                {"Tuning": "tuning/index.md"},
+                {"A": "tuning/a.md"},
+                {"Bee notes": "tuning/b.md"},
+            ]
+        },
+    ]
+
+
+def _models(schema: dict) -> dict[str, dict]:
+    return {"": schema, **schema.get("$defs", {})}
+
+
+@pytest.mark.parametrize("kind", ["world", "scenario"])
+def test_the_field_reference_shows_every_field_of_the_schema(kind):
+    from dynmap_sim.experiments.scenario import scenario_json_schema
+    from dynmap_sim.world import world_json_schema
+
+    schema = world_json_schema() if kind == "world" else scenario_json_schema()
+    page = (ROOT / "docs" / f"{kind}s.md").read_text(encoding="utf-8")
+    assert f"<!-- generate: {kind}-schema -->" in page
+    text = _hook().expand(f"<!-- generate: {kind}-schema -->")
+    for name, model in _models(schema).items():
+        if name:
+            assert f"### {name}\n" in text, f"model {name} missing"
+        for field in model.get("properties", {}):
+            assert f"| `{field}` |" in text, f"{name or kind}.{field} missing"
+
+
+def test_the_type_of_a_field_reads_as_words():
+    type_text = _hook().type_text
+    assert type_text({"type": "array", "prefixItems": [{"type": "number"}] * 2}) == (
+        "[number, number]"
+    )
+    assert type_text({"anyOf": [{"$ref": "#/$defs/WallSpec"}, {"type": "null"}]}) == (
+        "[WallSpec](#wallspec) or null"
+    )
+    assert type_text({"enum": ["box", "circle"]}) == '"box" | "circle"'
+    assert type_text({"type": "array", "items": {"type": "string", "format": "date"}}) == (
+        "list of date"
+    )
+
+
+def _subparsers(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            return dict(action.choices)
+    return {}
+
+
+def test_the_cli_reference_shows_every_command_and_option():
+    from dynmap_sim.cli import build_parser
+
+    page = (ROOT / "docs" / "cli.md").read_text(encoding="utf-8")
+    assert "<!-- generate: cli -->" in page
+    text = _hook().expand("<!-- generate: cli -->")
+    commands = _subparsers(build_parser())
+    assert commands
+    for name, sub in commands.items():
+        assert f"## `{name}` {{#{name}}}" in text, f"command {name} missing"
+        section = text.split(f"## `{name}` ", 1)[1].split("\n## ", 1)[0]
+        for action in sub._actions:
+            for flag in action.option_strings:
+                if flag not in ("-h", "--help"):
+                    assert f"`{flag}`" in section, f"{name} {flag} missing"
+
+
+def test_an_unknown_generated_part_is_an_error():
+    with pytest.raises(KeyError, match="unknown generated part"):
+        _hook().expand("<!-- generate: nothing-of-that-name -->")
+
+
+def test_sphinx_roles_leave_the_api_pages():
+    html = "see :class:<code>Registry</code> and :meth:<code>add</code>, not :note:"
+    assert _hook().on_page_content(html, None, None, None) == (
+        "see <code>Registry</code> and <code>add</code>, not :note:"
+    )

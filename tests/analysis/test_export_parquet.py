@@ -274,15 +274,15 @@ def test_polars_loads_the_tables(exported: Path) -> None:
     assert np.allclose(joined["max_error_m"].to_numpy(), joined["max_m"].to_numpy())
 
 
-def test_readme_snippet_runs(exported: Path, capsys) -> None:
+def test_docs_parquet_snippet_runs(exported: Path, capsys) -> None:
     pytest.importorskip("pandas")
     pytest.importorskip("polars")
-    readme = (ROOT / "README.md").read_text()
-    section = readme.split("## Load the results in pandas / polars", 1)[1].split("\n## ", 1)[0]
+    page = (ROOT / "docs" / "results.md").read_text()
+    section = page.split("## Parquet for pandas and polars", 1)[1].split("\n## ", 1)[0]
     code = section.split("```python\n", 1)[1].split("```", 1)[0]
     code = code.replace('"tables/ci-mcl"', repr(str(exported)))
     scope: dict = {}
-    exec(compile(code, "README.md", "exec"), scope)  # noqa: S102 - our own README
+    exec(compile(code, "docs/results.md", "exec"), scope)  # noqa: S102 - our own docs
     assert scope["worst"].height == 3 and len(scope["runs"]) > 0
     assert "mcl-tuned" in capsys.readouterr().out
 
