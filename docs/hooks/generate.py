@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import json
 import re
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -53,24 +54,31 @@ def type_text(prop: dict[str, Any]) -> str:
         return json.dumps(prop["const"])
     for key in ("anyOf", "oneOf"):
         if key in prop:
-            parts = [type_text(p) for p in prop[key]]
-            return " or ".join(dict.fromkeys(parts))
+            parts = list(dict.fromkeys(type_text(p) for p in prop[key]))
+            if "number" in parts and "integer" in parts:  # an integer is a number
+                parts.remove("integer")
+            return " or ".join(parts)
     kind = prop.get("type")
     if kind == "array":
         if "prefixItems" in prop:
             return "[" + ", ".join(type_text(p) for p in prop["prefixItems"]) + "]"
         items = prop.get("items")
-        return f"list of {type_text(items)}" if items else "list"
+        return f"list of {_grouped(type_text(items))}" if items else "list"
     if kind == "object":
         extra = prop.get("additionalProperties")
         if isinstance(extra, dict) and extra:
-            return f"table of {type_text(extra)}"
+            return f"table of {_grouped(type_text(extra))}"
         return "table"
     if kind == "string" and prop.get("format") == "date":
         return "date"
     if isinstance(kind, list):
         return " or ".join(kind)
     return kind or "any"
+
+
+def _grouped(text: str) -> str:
+    """``text`` in parentheses when it is a choice (``list of (number or string)``)."""
+    return f"({text})" if " or " in text or " | " in text else text
 
 
 def _limits(prop: dict[str, Any]) -> str:
@@ -314,6 +322,9 @@ def expand_nav(nav: list[Any], docs_dir: Path) -> list[Any]:
 
 
 def on_config(config: Any) -> Any:
+    root = str(Path(config.config_file_path).resolve().parent)
+    if root not in sys.path:  # the generated parts describe this tree's code, as the API does
+        sys.path.insert(0, root)
     if config.nav:
         config.nav = expand_nav(config.nav, Path(config.docs_dir))
     return config
