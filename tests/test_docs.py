@@ -5,7 +5,8 @@ Citations of the architecture page: every ``docs/architecture.md §N`` cited in 
 heading of ``docs/architecture.md``, and nothing cites design notes from outside the
 repository, which users never see. The site (``mkdocs.yml``): every page is in the nav, and
 the generated parts (``docs/hooks/generate.py``: the world and scenario field references,
-the CLI reference) show every field, command and option of the code. ``.ci/run`` builds the
+the CLI reference, the built-in roles) show every field, command, option and role of the
+code. ``.ci/run`` builds the
 site with ``mkdocs build --strict``; the pages' commands and examples are tested in
 ``tests/test_readme_commands.py``.
 """
@@ -214,3 +215,16 @@ def test_sphinx_roles_leave_the_api_pages():
     assert _hook().on_page_content(html, None, None, None) == (
         "see <code>Registry</code> and <code>add</code>, not :note:"
     )
+
+
+def test_the_roles_table_lists_every_registered_name():
+    from dynmap_sim.agent.control.controller import CONTROLLERS
+    from dynmap_sim.agent.localizer import LOCALIZERS
+    from dynmap_sim.agent.planning.planner import PLANNERS
+    from dynmap_sim.experiments.drivers.driver import DRIVERS
+
+    assert "<!-- generate: roles -->" in (ROOT / "docs" / "plugins.md").read_text()
+    text = _hook().expand("<!-- generate: roles -->")
+    for registry in (LOCALIZERS, DRIVERS, PLANNERS, CONTROLLERS):
+        for name in registry.names():
+            assert f"| `{name}` | {registry.role} |" in text

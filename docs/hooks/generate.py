@@ -7,7 +7,9 @@ read as plain Markdown):
 - ``<!-- generate: world-schema -->``: the world file's fields, from ``world_json_schema()``;
 - ``<!-- generate: scenario-schema -->``: the scenario file's fields, from
   ``scenario_json_schema()``;
-- ``<!-- generate: cli -->``: every ``dynmap-sim`` command and option, from ``build_parser()``.
+- ``<!-- generate: cli -->``: every ``dynmap-sim`` command and option, from ``build_parser()``;
+- ``<!-- generate: roles -->``: the built-in localizers, drivers, planners and controllers,
+  from their registries, each with the first paragraph of its class's docstring.
 
 The docstrings' Sphinx roles (``:class:`X```), which mkdocstrings leaves as text, are dropped
 from the API pages' HTML: the name stays as code.
@@ -273,7 +275,46 @@ def _cli() -> str:
     return cli_reference(build_parser())
 
 
-PARTS = {"world-schema": _world_schema, "scenario-schema": _scenario_schema, "cli": _cli}
+def _summary(cls: type) -> str:
+    """The first paragraph of a class's docstring, as one line of Markdown."""
+    text = (cls.__doc__ or "").strip().split("\n\n", 1)[0]
+    text = re.sub(r":[a-z]+:`~?([^`]+)`", r"``\1``", text)
+    text = re.sub(r"``[\w.]*?\.?(\w+)``", lambda m: f"``{m.group(1)}``", text)
+    return _cell(_docstring(text).replace(" (module doc)", ""))
+
+
+def roles_table(registries: dict[str, Any]) -> str:
+    """One row per registered name of each role: name, role, what, module."""
+    rows = ["| name | role | what | module |", "|---|---|---|---|"]
+    for role, registry in registries.items():
+        for name in registry.names():
+            cls = registry.get(name)
+            rows.append(f"| `{name}` | {role} | {_summary(cls)} | `{cls.__module__}` |")
+    return "\n".join(rows)
+
+
+def _roles() -> str:
+    from dynmap_sim.agent.control.controller import CONTROLLERS
+    from dynmap_sim.agent.localizer import LOCALIZERS
+    from dynmap_sim.agent.planning.planner import PLANNERS
+    from dynmap_sim.experiments.drivers.driver import DRIVERS
+
+    return roles_table(
+        {
+            "localizer": LOCALIZERS,
+            "driver": DRIVERS,
+            "planner": PLANNERS,
+            "controller": CONTROLLERS,
+        }
+    )
+
+
+PARTS = {
+    "world-schema": _world_schema,
+    "scenario-schema": _scenario_schema,
+    "cli": _cli,
+    "roles": _roles,
+}
 
 
 def expand(markdown: str) -> str:
