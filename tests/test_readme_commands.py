@@ -157,7 +157,12 @@ def test_commands_are_split_as_a_shell_would():
 
 
 def _all_commands() -> list[tuple[str, list[str]]]:
-    return [(b.id, words) for b in _of("bash") for words in commands(b.code)]
+    """Every command of the bash blocks, and of the ``run:`` steps of the CI (yaml) blocks."""
+    shells = [(b, b.code) for b in _of("bash")] + [
+        (b, "\n".join(re.findall(r"^\s*-?\s*run:\s*(.+)$", b.code, flags=re.M)))
+        for b in _of("yaml")
+    ]
+    return [(b.id, words) for b, code in shells for words in commands(code)]
 
 
 def _extras(command: str) -> set[str]:
