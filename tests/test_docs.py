@@ -228,3 +228,13 @@ def test_the_roles_table_lists_every_registered_name():
     for registry in (LOCALIZERS, DRIVERS, PLANNERS, CONTROLLERS):
         for name in registry.names():
             assert f"| `{name}` | {registry.role} |" in text
+
+
+def test_the_readme_links_to_files_that_exist():
+    """The README is not part of the site, so ``mkdocs build --strict`` does not check it."""
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    targets = re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", text)
+    local = [t for t in targets if "://" not in t]
+    assert local, "no relative links in the README: is the pattern right?"
+    missing = [t for t in local if not (ROOT / t).exists()]
+    assert not missing, f"README links to missing files: {missing}"
