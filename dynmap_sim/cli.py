@@ -413,14 +413,12 @@ def _cmd_export(args: argparse.Namespace) -> int:
     ros_only = [f"--{k}" for k in ("localizer", "day", "run") if getattr(args, k) is not None]
     if args.mcap is None and ros_only:
         raise InputError(f"{', '.join(ros_only)}: only with --mcap")
-    if args.force and args.mcap is None and args.parquet is None:
-        raise InputError("--force: only with --mcap or --parquet")
     if args.tum is not None:
         from dynmap_sim.analysis.export import export_tum
 
-        out = _output_dir(args.tum)
-        existed = {p.name for p in out.iterdir()}
-        for path in export_tum(Path(args.dir), out):
+        out = Path(args.tum)
+        existed = {p.name for p in out.iterdir()} if out.is_dir() else set()
+        for path in export_tum(Path(args.dir), out, force=args.force):
             print(_wrote(path, path.name in existed))
     if args.mcap is not None:
         from dynmap_sim.analysis.export_mcap import export_mcap
@@ -815,8 +813,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument(
         "--force",
         action="store_true",
-        help="replace an existing bag OUT (--mcap) or Parquet files in OUT (--parquet); "
-        "else refused",
+        help="replace existing TUM files (--tum), an existing bag OUT (--mcap) or Parquet "
+        "files in OUT (--parquet); else refused",
     )
     s.set_defaults(func=_cmd_export)
 
