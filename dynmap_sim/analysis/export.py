@@ -83,7 +83,10 @@ def _run_tables(db: ResultsDB, meta: dict[str, Any]) -> list[TumTable]:
     for k, label in enumerate(db.labels()):
         d = db.per_scan(k)
         offset = np.array(
-            [(dates[(a, b)] - first).days * 86400.0 for a, b in zip(d["day"], d["run"], strict=True)]
+            [
+                (dates[(a, b)] - first).days * 86400.0
+                for a, b in zip(d["day"], d["run"], strict=True)
+            ]
         )
         stamps = offset + d["t_s"]
         if k == 0:

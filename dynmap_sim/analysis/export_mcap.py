@@ -509,7 +509,9 @@ def export_mcap(
     try:  # its folder is made as --parquet's and --tum's are
         dst.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
-        raise InputError(f"--mcap {out}: cannot create folder {dst.parent}: {exc.strerror}") from None
+        raise InputError(
+            f"--mcap {out}: cannot create folder {dst.parent}: {exc.strerror}"
+        ) from None
     msgs = _Msgs()
     with ResultsDB.open(results_dir) as db:
         meta = db.meta()

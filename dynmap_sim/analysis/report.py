@@ -39,8 +39,8 @@ from dynmap_sim.metrics import (
     overall_summary,
     rpe_label,
 )
-from dynmap_sim.studies.study import StudyReport, all_studies
 from dynmap_sim.plot_style import legend_columns, localizer_color
+from dynmap_sim.studies.study import StudyReport, all_studies
 from dynmap_sim.types import BeamClass
 
 #: Columns of ``per_day.csv``, in order.
@@ -517,7 +517,11 @@ def _fig_trajectories(db: ResultsDB, path: Path) -> Path:
                     d["truth"][:, 0], d["truth"][:, 1], color="0.3", lw=3, label="truth", alpha=0.35
                 )
             ax.plot(
-                d["estimate"][:, 0], d["estimate"][:, 1], lw=1, color=localizer_color(k), label=label
+                d["estimate"][:, 0],
+                d["estimate"][:, 1],
+                lw=1,
+                color=localizer_color(k),
+                label=label,
             )
         ax.set_aspect("equal")
         ax.set_title(f"{role} run: day {day}, run {run}", fontsize="small")

@@ -116,7 +116,9 @@ def test_error_per_day_and_trajectories_keep_their_legends_off_the_data(
     (fig,) = kept_figures()
     assert len(fig.axes) == 3  # first, worst, last run
     assert [ax.get_title() for ax in fig.axes] == [
-        "first run: day 1, run 1", "worst run: day 2, run 1", "last run: day 3, run 1"
+        "first run: day 1, run 1",
+        "worst run: day 2, run 1",
+        "last run: day 3, run 1",
     ]  # fmt: skip  (the odometry reference, worst on the last day, does not count)
     assert_legend_beside_the_data(fig)
     assert [t.get_text() for t in fig.legends[0].get_texts()] == [
