@@ -487,6 +487,47 @@ ODOMETRY_CHOICES = ("auto", "odom-lines", "laser-lines")
 REVERSAL_CHOICES = ("repair", "keep")
 
 
+#: ``list`` sections: :data:`dynmap_sim.catalog.SECTIONS` (not imported here, so the CLI starts
+#: without the registries; a test keeps the two equal).
+LIST_SECTIONS = ("worlds", "scenarios", "localizers", "drivers", "planners", "controllers")
+
+
+def _section(text: str) -> str:
+    """A ``list`` section (argparse's ``choices`` refuses an empty ``nargs="*"``)."""
+    if text not in LIST_SECTIONS:
+        raise argparse.ArgumentTypeError(
+            f"no section {text!r}; sections: {', '.join(LIST_SECTIONS)}"
+        )
+    return text
+
+
+def _cmd_list(args: argparse.Namespace) -> int:
+    from dynmap_sim.catalog import SECTIONS, catalog, catalog_text
+
+    print(catalog_text(catalog(tuple(args.sections) or SECTIONS)), end="")
+    return 0
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from dynmap_sim.analysis.compare import (
+        compare_results,
+        comparison_table,
+        write_comparison_csv,
+    )
+
+    csv_out = _output_file(args.csv) if args.csv is not None else None
+    if csv_out is not None and csv_out.exists() and not args.force:
+        from dynmap_sim.errors import InputError
+
+        raise InputError(f"--csv {csv_out}: already exists; pass --force to replace it")
+    cmp = compare_results(args.dir_a, args.dir_b)
+    print(comparison_table(cmp), end="")
+    if csv_out is not None:
+        existed = csv_out.exists()
+        print(_wrote(write_comparison_csv(cmp, csv_out), existed))
+    return 0
+
+
 def _odometry_option(s: argparse.ArgumentParser) -> None:
     """``--odometry`` for the subcommands that read a CARMEN log."""
     s.add_argument(
@@ -708,6 +749,36 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = p.add_subparsers(dest="command", required=True)
     seed_help = "world and noise seed, an integer >= 0"
+
+    s = sub.add_parser(
+        "list",
+        help="the shipped worlds, scenarios, localizers, drivers, planners and controllers",
+        description="List what ships, one line each: the worlds and scenarios under worlds/ "
+        "and the names a scenario file can give each role.",
+    )
+    s.add_argument(
+        "sections",
+        nargs="*",
+        type=_section,
+        metavar="SECTION",
+        help="only these: worlds, scenarios, localizers, drivers, planners, controllers "
+        "(default: all)",
+    )
+    s.set_defaults(func=_cmd_list)
+
+    s = sub.add_parser(
+        "compare",
+        help="compare two results folders of one scenario (before and after a change)",
+        description="Paired per-run differences B - A of the error and navigation measures of "
+        "two results folders of the same scenario, per localizer and day, with a 95 %% "
+        "Student t interval over the runs and a verdict on which measures moved beyond noise. "
+        "Folders of different scenarios or worlds are refused.",
+    )
+    s.add_argument("dir_a", metavar="DIR_A", help="the results folder before the change (A)")
+    s.add_argument("dir_b", metavar="DIR_B", help="the results folder after the change (B)")
+    s.add_argument("--csv", metavar="FILE", help="also write the per-day differences to FILE (CSV)")
+    s.add_argument("--force", action="store_true", help="replace an existing --csv FILE")
+    s.set_defaults(func=_cmd_compare)
 
     s = sub.add_parser("validate", help="validate world or scenario files")
     s.add_argument("files", nargs="+", metavar="FILE", help="world or scenario TOML files")
