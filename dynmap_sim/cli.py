@@ -21,7 +21,9 @@ def day_range(text: str) -> tuple[int, int]:
     """Parse ``A-B`` or ``A`` (1-based, inclusive) into a day range (an argparse ``type``; the
     benchmarks' ``--days`` use it too)."""
     try:
-        a, _, b = text.partition("-")
+        a, dash, b = text.partition("-")
+        if dash and not b.strip():  # "1-" is not "1": say what was meant
+            raise ValueError(text)
         first, last = int(a), int(b or a)
     except ValueError:
         raise argparse.ArgumentTypeError(f"days must look like 3 or 1-7, not {text!r}") from None
@@ -276,11 +278,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
         for field, msg in sim_spec_errors(scenario.sim_spec(), args.days):
             if field == "days":
                 raise InputError(f"--days: {msg}")
+    from dynmap_sim.experiments.runner import default_out_dir
+
+    out_dir = Path(args.out) if args.out is not None else default_out_dir(scenario)
+    if args.report and not args.resume:
+        _refuse_foreign_report_files(out_dir)
     if args.resume:
         from dynmap_sim.experiments.results import DB_NAME, orphaned_checkpoint
-        from dynmap_sim.experiments.runner import default_out_dir
 
-        out_dir = Path(args.out) if args.out is not None else default_out_dir(scenario)
         if not (out_dir / DB_NAME).exists() and orphaned_checkpoint(out_dir) is None:
             print(
                 f"note: nothing to resume in {out_dir}: starting from the first run",
@@ -301,6 +306,27 @@ def _cmd_run(args: argparse.Namespace) -> int:
     for line in _headline(out, overall=overall):
         print(line)
     return 0
+
+
+#: Kinds of file a report writes into a results folder (summary.md, per_day.csv, figures,
+#: findings.json, ...).
+REPORT_SUFFIXES = (".md", ".csv", ".png", ".json")
+
+
+def _refuse_foreign_report_files(out: Path) -> None:
+    """Before a new run with ``--report`` into ``out``: refuse a folder that already holds
+    files of the kinds a report writes (the user's own ``summary.md``, say), which the report
+    would replace at the end of the run."""
+    from dynmap_sim.errors import InputError
+
+    if not out.is_dir():
+        return
+    held = sorted(p.name for p in out.iterdir() if p.is_file() and p.suffix in REPORT_SUFFIXES)
+    if held:
+        raise InputError(
+            f"--out {out}: holds {', '.join(held[:3])}{' …' if len(held) > 3 else ''}, which "
+            "the report would replace: choose an empty folder (or run without --report)"
+        )
 
 
 def _write_report(out: Path) -> list[dict[str, Any]]:
