@@ -1,6 +1,5 @@
 """The Gymnasium env: checker, determinism, vector envs, episodes, action handling."""
 
-import sys
 import time
 import warnings
 
