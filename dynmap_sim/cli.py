@@ -554,6 +554,43 @@ def _cmd_compare(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_benchmark(args: argparse.Namespace) -> int:
+    from dynmap_sim.analysis.leaderboard import leaderboard, leaderboard_md, write_leaderboard
+    from dynmap_sim.env_factory import generated_world_toml, generator_kinds
+    from dynmap_sim.errors import InputError
+    from dynmap_sim.experiments.benchmark import load_suite, run_benchmark
+
+    try:
+        kinds = generator_kinds()
+    except ImportError:  # pragma: no cover - a tree without the generator
+        kinds = ()
+    suite = load_suite(args.suite, kinds=kinds)
+    out = Path(args.out) if args.out is not None else Path("results") / f"benchmark-{suite.name}"
+
+    def note(text: str) -> None:
+        print(f"note: {text}", file=sys.stderr)
+
+    outcome = run_benchmark(
+        suite,
+        out,
+        generated_world_toml,
+        workers=args.workers,
+        cluster=args.cluster,
+        progress=not args.quiet,
+        note=note,
+    )
+    for path in write_leaderboard(out):
+        print(f"wrote {path}")
+    board = leaderboard(out)
+    print(leaderboard_md(board).split("\n## ")[0].rstrip())
+    if not outcome.complete:
+        raise InputError(
+            f"{len(outcome.failed)} of {outcome.n_cells} worlds failed (see "
+            f"{out / 'leaderboard.md'}); the same command retries them"
+        )
+    return 0
+
+
 def _odometry_option(s: argparse.ArgumentParser) -> None:
     """``--odometry`` for the subcommands that read a CARMEN log."""
     s.add_argument(
@@ -805,6 +842,33 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--csv", metavar="FILE", help="also write the per-day differences to FILE (CSV)")
     s.add_argument("--force", action="store_true", help="replace an existing --csv FILE")
     s.set_defaults(func=_cmd_compare)
+
+    s = sub.add_parser(
+        "benchmark",
+        help="run a suite of worlds (generated and given) and write its leaderboard",
+        description="Run a benchmark suite: every world of the suite (generator kinds x seeds, "
+        "world files) with the suite's scenario, as the cells of a sweep (resumed after a kill: "
+        "the same command skips finished worlds), then leaderboard.md, leaderboard.csv and "
+        "leaderboard.png in the output folder: each localizer's ATE over the worlds with "
+        "bootstrap intervals, paired differences against the baseline and the worst worlds "
+        "with the command that re-runs each alone.",
+    )
+    s.add_argument("suite", help="suite TOML file (e.g. benchmarks/suites/generalization.toml)")
+    s.add_argument("--out", help="benchmark folder (default: results/benchmark-<suite name>)")
+    s.add_argument(
+        "--workers",
+        type=_positive,
+        help="worlds run at once in local processes (default: the cores); ignored with --cluster",
+    )
+    s.add_argument(
+        "--cluster",
+        type=_cluster_address,
+        metavar="ADDRESS",
+        help="run the worlds on a Dask cluster (tcp://HOST:PORT; extra 'cluster'); its workers "
+        "need dynmap_sim and the benchmark folder at the same path",
+    )
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    s.set_defaults(func=_cmd_benchmark)
 
     s = sub.add_parser("validate", help="validate world or scenario files")
     s.add_argument("files", nargs="+", metavar="FILE", help="world or scenario TOML files")
