@@ -21,7 +21,9 @@ def day_range(text: str) -> tuple[int, int]:
     """Parse ``A-B`` or ``A`` (1-based, inclusive) into a day range (an argparse ``type``; the
     benchmarks' ``--days`` use it too)."""
     try:
-        a, _, b = text.partition("-")
+        a, dash, b = text.partition("-")
+        if dash and not b.strip():  # "1-" is not "1": say what was meant
+            raise ValueError(text)
         first, last = int(a), int(b or a)
     except ValueError:
         raise argparse.ArgumentTypeError(f"days must look like 3 or 1-7, not {text!r}") from None
@@ -276,11 +278,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
         for field, msg in sim_spec_errors(scenario.sim_spec(), args.days):
             if field == "days":
                 raise InputError(f"--days: {msg}")
+    from dynmap_sim.experiments.runner import default_out_dir
+
+    out_dir = Path(args.out) if args.out is not None else default_out_dir(scenario)
+    if args.report and not args.resume:
+        _refuse_foreign_report_files(out_dir)
     if args.resume:
         from dynmap_sim.experiments.results import DB_NAME, orphaned_checkpoint
-        from dynmap_sim.experiments.runner import default_out_dir
 
-        out_dir = Path(args.out) if args.out is not None else default_out_dir(scenario)
         if not (out_dir / DB_NAME).exists() and orphaned_checkpoint(out_dir) is None:
             print(
                 f"note: nothing to resume in {out_dir}: starting from the first run",
@@ -301,6 +306,27 @@ def _cmd_run(args: argparse.Namespace) -> int:
     for line in _headline(out, overall=overall):
         print(line)
     return 0
+
+
+#: Kinds of file a report writes into a results folder (summary.md, per_day.csv, figures,
+#: findings.json, ...).
+REPORT_SUFFIXES = (".md", ".csv", ".png", ".json")
+
+
+def _refuse_foreign_report_files(out: Path) -> None:
+    """Before a new run with ``--report`` into ``out``: refuse a folder that already holds
+    files of the kinds a report writes (the user's own ``summary.md``, say), which the report
+    would replace at the end of the run."""
+    from dynmap_sim.errors import InputError
+
+    if not out.is_dir():
+        return
+    held = sorted(p.name for p in out.iterdir() if p.is_file() and p.suffix in REPORT_SUFFIXES)
+    if held:
+        raise InputError(
+            f"--out {out}: holds {', '.join(held[:3])}{' …' if len(held) > 3 else ''}, which "
+            "the report would replace: choose an empty folder (or run without --report)"
+        )
 
 
 def _write_report(out: Path) -> list[dict[str, Any]]:
@@ -413,14 +439,12 @@ def _cmd_export(args: argparse.Namespace) -> int:
     ros_only = [f"--{k}" for k in ("localizer", "day", "run") if getattr(args, k) is not None]
     if args.mcap is None and ros_only:
         raise InputError(f"{', '.join(ros_only)}: only with --mcap")
-    if args.force and args.mcap is None and args.parquet is None:
-        raise InputError("--force: only with --mcap or --parquet")
     if args.tum is not None:
         from dynmap_sim.analysis.export import export_tum
 
-        out = _output_dir(args.tum)
-        existed = {p.name for p in out.iterdir()}
-        for path in export_tum(Path(args.dir), out):
+        out = Path(args.tum)
+        existed = {p.name for p in out.iterdir()} if out.is_dir() else set()
+        for path in export_tum(Path(args.dir), out, force=args.force):
             print(_wrote(path, path.name in existed))
     if args.mcap is not None:
         from dynmap_sim.analysis.export_mcap import export_mcap
@@ -487,6 +511,84 @@ def _cmd_check(args: argparse.Namespace) -> int:
 ODOMETRY_CHOICES = ("auto", "odom-lines", "laser-lines")
 #: ``--odometry-reversals`` choices: :data:`dynmap_sim.io.carmen.REVERSAL_MODES` (the same).
 REVERSAL_CHOICES = ("repair", "keep")
+
+
+#: ``list`` sections: :data:`dynmap_sim.catalog.SECTIONS` (not imported here, so the CLI starts
+#: without the registries; a test keeps the two equal).
+LIST_SECTIONS = ("worlds", "scenarios", "localizers", "drivers", "planners", "controllers")
+
+
+def _section(text: str) -> str:
+    """A ``list`` section (argparse's ``choices`` refuses an empty ``nargs="*"``)."""
+    if text not in LIST_SECTIONS:
+        raise argparse.ArgumentTypeError(
+            f"no section {text!r}; sections: {', '.join(LIST_SECTIONS)}"
+        )
+    return text
+
+
+def _cmd_list(args: argparse.Namespace) -> int:
+    from dynmap_sim.catalog import SECTIONS, catalog, catalog_text
+
+    print(catalog_text(catalog(tuple(args.sections) or SECTIONS)), end="")
+    return 0
+
+
+def _cmd_compare(args: argparse.Namespace) -> int:
+    from dynmap_sim.analysis.compare import (
+        compare_results,
+        comparison_table,
+        write_comparison_csv,
+    )
+
+    csv_out = _output_file(args.csv) if args.csv is not None else None
+    if csv_out is not None and csv_out.exists() and not args.force:
+        from dynmap_sim.errors import InputError
+
+        raise InputError(f"--csv {csv_out}: already exists; pass --force to replace it")
+    cmp = compare_results(args.dir_a, args.dir_b)
+    print(comparison_table(cmp), end="")
+    if csv_out is not None:
+        existed = csv_out.exists()
+        print(_wrote(write_comparison_csv(cmp, csv_out), existed))
+    return 0
+
+
+def _cmd_benchmark(args: argparse.Namespace) -> int:
+    from dynmap_sim.analysis.leaderboard import leaderboard, leaderboard_md, write_leaderboard
+    from dynmap_sim.env_factory import generated_world_toml, generator_kinds
+    from dynmap_sim.errors import InputError
+    from dynmap_sim.experiments.benchmark import load_suite, run_benchmark
+
+    try:
+        kinds = generator_kinds()
+    except ImportError:  # pragma: no cover - a tree without the generator
+        kinds = ()
+    suite = load_suite(args.suite, kinds=kinds)
+    out = Path(args.out) if args.out is not None else Path("results") / f"benchmark-{suite.name}"
+
+    def note(text: str) -> None:
+        print(f"note: {text}", file=sys.stderr)
+
+    outcome = run_benchmark(
+        suite,
+        out,
+        generated_world_toml,
+        workers=args.workers,
+        cluster=args.cluster,
+        progress=not args.quiet,
+        note=note,
+    )
+    for path in write_leaderboard(out):
+        print(f"wrote {path}")
+    board = leaderboard(out)
+    print(leaderboard_md(board).split("\n## ")[0].rstrip())
+    if not outcome.complete:
+        raise InputError(
+            f"{len(outcome.failed)} of {outcome.n_cells} worlds failed (see "
+            f"{out / 'leaderboard.md'}); the same command retries them"
+        )
+    return 0
 
 
 def _odometry_option(s: argparse.ArgumentParser) -> None:
@@ -711,6 +813,63 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
     seed_help = "world and noise seed, an integer >= 0"
 
+    s = sub.add_parser(
+        "list",
+        help="the shipped worlds, scenarios, localizers, drivers, planners and controllers",
+        description="List what ships, one line each: the worlds and scenarios under worlds/ "
+        "and the names a scenario file can give each role.",
+    )
+    s.add_argument(
+        "sections",
+        nargs="*",
+        type=_section,
+        metavar="SECTION",
+        help="only these: worlds, scenarios, localizers, drivers, planners, controllers "
+        "(default: all)",
+    )
+    s.set_defaults(func=_cmd_list)
+
+    s = sub.add_parser(
+        "compare",
+        help="compare two results folders of one scenario (before and after a change)",
+        description="Paired per-run differences B - A of the error and navigation measures of "
+        "two results folders of the same scenario, per localizer and day, with a 95 %% "
+        "Student t interval over the runs and a verdict on which measures moved beyond noise. "
+        "Folders of different scenarios or worlds are refused.",
+    )
+    s.add_argument("dir_a", metavar="DIR_A", help="the results folder before the change (A)")
+    s.add_argument("dir_b", metavar="DIR_B", help="the results folder after the change (B)")
+    s.add_argument("--csv", metavar="FILE", help="also write the per-day differences to FILE (CSV)")
+    s.add_argument("--force", action="store_true", help="replace an existing --csv FILE")
+    s.set_defaults(func=_cmd_compare)
+
+    s = sub.add_parser(
+        "benchmark",
+        help="run a suite of worlds (generated and given) and write its leaderboard",
+        description="Run a benchmark suite: every world of the suite (generator kinds x seeds, "
+        "world files) with the suite's scenario, as the cells of a sweep (resumed after a kill: "
+        "the same command skips finished worlds), then leaderboard.md, leaderboard.csv and "
+        "leaderboard.png in the output folder: each localizer's ATE over the worlds with "
+        "bootstrap intervals, paired differences against the baseline and the worst worlds "
+        "with the command that re-runs each alone.",
+    )
+    s.add_argument("suite", help="suite TOML file (e.g. benchmarks/suites/generalization.toml)")
+    s.add_argument("--out", help="benchmark folder (default: results/benchmark-<suite name>)")
+    s.add_argument(
+        "--workers",
+        type=_positive,
+        help="worlds run at once in local processes (default: the cores); ignored with --cluster",
+    )
+    s.add_argument(
+        "--cluster",
+        type=_cluster_address,
+        metavar="ADDRESS",
+        help="run the worlds on a Dask cluster (tcp://HOST:PORT; extra 'cluster'); its workers "
+        "need dynmap_sim and the benchmark folder at the same path",
+    )
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    s.set_defaults(func=_cmd_benchmark)
+
     s = sub.add_parser("validate", help="validate world or scenario files")
     s.add_argument("files", nargs="+", metavar="FILE", help="world or scenario TOML files")
     s.set_defaults(func=_cmd_validate)
@@ -815,8 +974,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument(
         "--force",
         action="store_true",
-        help="replace an existing bag OUT (--mcap) or Parquet files in OUT (--parquet); "
-        "else refused",
+        help="replace existing TUM files (--tum), an existing bag OUT (--mcap) or Parquet "
+        "files in OUT (--parquet); else refused",
     )
     s.set_defaults(func=_cmd_export)
 

@@ -216,3 +216,19 @@ def sim_spec_errors(spec: SimSpec, days: tuple[int, int] | None = None) -> list[
                 ("days", f"the world's calendar has {n_days} days; days {list(days)} ask more")
             )
     return errors
+
+
+def generated_world_toml(kind: str, seed: int, params: Mapping[str, Any]) -> str:
+    """The world file text the generator makes of ``kind``, ``seed`` and ``params``
+    (:mod:`dynmap_sim.world.generator`): how the benchmark makes its worlds without the
+    engine importing the world package."""
+    from dynmap_sim.world.generator import generate
+
+    return generate(kind, seed, dict(params)).toml()
+
+
+def generator_kinds() -> tuple[str, ...]:
+    """The world generator's kinds (``apartment``, ``office``, ...)."""
+    from dynmap_sim.world.generator import KINDS
+
+    return tuple(KINDS)

@@ -4,8 +4,8 @@ The entry points are the functions :func:`make_env` and :func:`make_world_env`, 
 class, for two reasons:
 
 * the render mode reaches :class:`~dynmap_sim.env.DynMapEnv` as given (``"human"``: its own
-  window, pygame from the ``video`` extra; an unknown mode: its error names the modes it
-  has), instead of Gymnasium choosing wrappers from the class's metadata.
+  matplotlib window; an unknown mode: its error names the modes it has), instead of
+  Gymnasium choosing wrappers from the class's metadata.
 * ``dynmap_sim/World-v0`` needs ``world=PATH``; without it the env would silently be the lab.
 
 Gymnasium's passive env checker is off (``disable_env_checker=True``): in Gymnasium 1.4 it

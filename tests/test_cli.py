@@ -89,7 +89,11 @@ def test_run_report_export_and_resume(capsys, tmp_path):
     code, stdout, _ = run_cli(capsys, "export", out, "--tum", tmp_path / "tum")
     assert code == 0 and (tmp_path / "tum" / "truth.tum").is_file()
     assert (tmp_path / "tum" / "odometry.tum").is_file()
-    code, stdout, _ = run_cli(capsys, "export", out, "--tum", tmp_path / "tum")
+    before = (tmp_path / "tum" / "truth.tum").read_bytes()
+    code, _, err = run_cli(capsys, "export", out, "--tum", tmp_path / "tum")  # never silently
+    assert code == 1 and "truth.tum" in err and "--force" in err
+    assert (tmp_path / "tum" / "truth.tum").read_bytes() == before
+    code, stdout, _ = run_cli(capsys, "export", out, "--tum", tmp_path / "tum", "--force")
     assert (
         code == 0
         and f"wrote {tmp_path / 'tum' / 'truth.tum'} (replaced the earlier file)" in stdout

@@ -1,6 +1,6 @@
 """The Gymnasium env: checker, determinism, vector envs, episodes, action handling."""
 
-import sys
+import time
 import warnings
 
 import gymnasium
@@ -351,12 +351,10 @@ def test_rgb_array_list_through_make_collects_frames():
     env.close()
 
 
-def test_human_render_mode_shows_every_frame_in_a_window(monkeypatch):
-    """``render_mode="human"`` (extra ``video``): a pygame window shows the rgb_array frame
-    at every reset and step (SDL's dummy video driver here, no screen); ``render()`` returns
-    None; ``close()`` closes the window."""
-    pytest.importorskip("pygame")
-    monkeypatch.setenv("SDL_VIDEODRIVER", "dummy")
+def test_human_render_mode_shows_every_frame_in_a_window():
+    """``render_mode="human"``: a matplotlib window (off screen here: the Agg backend) shows
+    the rgb_array frame at every reset and step; ``render()`` returns None; ``close()``
+    closes the window. It needs nothing beyond the default install."""
     env = gymnasium.make("dynmap_sim/Apartment-v0", render_mode="human")
     twin = DynMapEnv(world="apartment", render_mode="rgb_array")
     env.reset(seed=0)
@@ -375,11 +373,18 @@ def test_human_render_mode_shows_every_frame_in_a_window(monkeypatch):
     twin.close()
 
 
-def test_human_render_mode_without_pygame_says_which_extra(monkeypatch):
-    monkeypatch.setitem(sys.modules, "pygame", None)  # import pygame fails
-    env = DynMapEnv(world="apartment", render_mode="human")
-    with pytest.raises(ImportError, match=r"dynmap-sim\[video\]"):
-        env.reset(seed=0)
+def test_the_window_plays_at_the_scan_rate():
+    from dynmap_sim.human_window import HumanWindow
+
+    window = HumanWindow("t", fps=20)
+    frame = np.zeros((40, 60, 3), np.uint8)
+    t0 = time.monotonic()
+    for _ in range(5):
+        window.show(frame)
+    assert time.monotonic() - t0 >= 4 / 20  # four waits of 1/20 s between five frames
+    window.close()
+    window.show(frame)  # after close: nothing
+    assert window.closed
 
 
 @pytest.mark.parametrize(

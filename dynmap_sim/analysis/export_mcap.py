@@ -500,13 +500,18 @@ def export_mcap(
     """Write the chosen runs of ``results_dir`` as a ROS 2 bag folder ``out`` (see the
     module doc). ``localizer``: the label whose estimate gives ``map`` -> ``odom``
     (default: the first); ``days`` ``(first, last)`` and ``run``: which runs (default:
-    all). An existing ``out`` is refused unless ``force``. The bag is written next to
+    all). An existing ``out`` is refused unless ``force``; missing folders above it are
+    created. The bag is written next to
     ``out`` and moved there when complete, so a failure leaves no half bag."""
     rosbag2 = _import_rosbags()
     dst = Path(out)
-    if not dst.parent.is_dir():
-        raise InputError(f"--mcap {out}: folder {dst.parent} does not exist; create it first")
     _refuse_or_clear(dst, force)
+    try:  # its folder is made as --parquet's and --tum's are
+        dst.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(
+            f"--mcap {out}: cannot create folder {dst.parent}: {exc.strerror}"
+        ) from None
     msgs = _Msgs()
     with ResultsDB.open(results_dir) as db:
         meta = db.meta()

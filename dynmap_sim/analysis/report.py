@@ -39,6 +39,7 @@ from dynmap_sim.metrics import (
     overall_summary,
     rpe_label,
 )
+from dynmap_sim.plot_style import legend_columns, localizer_color
 from dynmap_sim.studies.study import StudyReport, all_studies
 from dynmap_sim.types import BeamClass
 
@@ -405,8 +406,9 @@ def _fig_error_per_day(db: ResultsDB, path: Path) -> Path:
         mean = np.array([x["mean_error_m"] for x in r])
         mx = np.array([x["max_error_m"] for x in r])
         off = (k - (n - 1) / 2) * 0.8 / max(n, 1)
-        ax.bar(days + off, mean, width=0.8 / max(n, 1), label=f"{label} (mean)")
-        ax.plot(days + off, mx, "_", ms=10, color=ax.patches[-1].get_facecolor())
+        color = localizer_color(k)
+        ax.bar(days + off, mean, width=0.8 / max(n, 1), color=color, label=f"{label} (mean)")
+        ax.plot(days + off, mx, "_", ms=10, color=color)
     ax.set_xlabel("day")
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_ylabel("position error [m]")
@@ -425,7 +427,7 @@ def _legend_below(fig: Any, axes: list[Any]) -> None:
     for ax in axes:
         for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
             entries.setdefault(label, handle)
-    ncol = max(1, min(len(entries), 4))
+    ncol = legend_columns(list(entries), fig.get_figwidth())
     rows = -(-len(entries) // ncol)
     height = fig.get_figheight()
     fig.set_figheight(height + 0.25 * rows)  # room for the legend, the axes keep their size
@@ -442,14 +444,24 @@ def _legend_below(fig: Any, axes: list[Any]) -> None:
         )
 
 
-def _pick_runs(db: ResultsDB) -> list[tuple[int, int]]:
-    """The first run, the last run and the run with the largest error."""
+def _pick_runs(db: ResultsDB) -> list[tuple[str, int, int]]:
+    """The first run, the run with the largest error of a localizer and the last run, each
+    with its role (``first``, ``worst``, ``last``; one run may hold several). The odometry
+    reference is left out of "worst": its drift grows over the experiment, so it would name
+    the last run and hide the localizers' worst one."""
     runs = [(int(d), int(r)) for d, r in db.query("SELECT day, run FROM runs ORDER BY day, run")]
     if not runs:
         return []
-    worst = db.query("SELECT day, run FROM run_summaries ORDER BY max_error_m DESC LIMIT 1")
-    pick = [runs[0]] + ([tuple(map(int, worst[0]))] if worst else []) + [runs[-1]]
-    return list(dict.fromkeys(pick))  # type: ignore[arg-type]
+    names = {int(k): name for k, name in db.query("SELECT idx, name FROM localizers")}
+    rows = db.query("SELECT loc, day, run, max_error_m FROM run_summaries")
+    scored = [(float(e), int(d), int(r)) for k, d, r, e in rows if names.get(int(k)) != "odometry"]
+    scored = [s for s in scored if math.isfinite(s[0])]
+    picks: dict[tuple[int, int], list[str]] = {runs[0]: ["first"]}
+    if scored:
+        _, d, r = max(scored, key=lambda s: (s[0], -s[1], -s[2]))
+        picks.setdefault((d, r), []).append("worst")
+    picks.setdefault(runs[-1], []).append("last")
+    return [(" and ".join(roles), d, r) for (d, r), roles in sorted(picks.items())]
 
 
 def _fig_error_over_time(db: ResultsDB, path: Path) -> Path:
@@ -457,12 +469,13 @@ def _fig_error_over_time(db: ResultsDB, path: Path) -> Path:
 
     picks = _pick_runs(db)
     fig, axes = plt.subplots(len(picks), 1, figsize=(8, 2.4 * len(picks)), squeeze=False)
-    for ax, (day, run) in zip(axes[:, 0], picks, strict=True):
+    for ax, (role, day, run) in zip(axes[:, 0], picks, strict=True):
         for k, label in enumerate(db.labels()):
             d = db.per_scan(k, day, run)
-            ax.plot(d["t_s"] - d["t_s"][0] if len(d["t_s"]) else [], d["err_m"], label=label)
+            t = d["t_s"] - d["t_s"][0] if len(d["t_s"]) else []
+            ax.plot(t, d["err_m"], color=localizer_color(k), label=label)
         ax.axhline(LOST_THRESHOLD_M, color="gray", ls=":", lw=1)
-        ax.set_title(f"day {day}, run {run}", fontsize="small")
+        ax.set_title(f"{role} run: day {day}, run {run}", fontsize="small")
         ax.set_ylabel("error [m]")
     axes[-1, 0].set_xlabel("time in run [s]")
     axes[0, 0].legend(fontsize="small")
@@ -477,7 +490,7 @@ def _fig_trajectories(db: ResultsDB, path: Path) -> Path:
 
     picks = _pick_runs(db)
     fig, axes = plt.subplots(1, len(picks), figsize=(5 * len(picks), 5), squeeze=False)
-    for ax, (day, run) in zip(axes[0], picks, strict=True):
+    for ax, (role, day, run) in zip(axes[0], picks, strict=True):
         g = db.geometry(day, run)
         if g is not None:
             seg, cls = g
@@ -503,9 +516,15 @@ def _fig_trajectories(db: ResultsDB, path: Path) -> Path:
                 ax.plot(
                     d["truth"][:, 0], d["truth"][:, 1], color="0.3", lw=3, label="truth", alpha=0.35
                 )
-            ax.plot(d["estimate"][:, 0], d["estimate"][:, 1], lw=1, label=label)
+            ax.plot(
+                d["estimate"][:, 0],
+                d["estimate"][:, 1],
+                lw=1,
+                color=localizer_color(k),
+                label=label,
+            )
         ax.set_aspect("equal")
-        ax.set_title(f"day {day}, run {run}", fontsize="small")
+        ax.set_title(f"{role} run: day {day}, run {run}", fontsize="small")
         ax.set_xlabel("x [m]")
         ax.set_ylabel("y [m]")
     _legend_below(fig, list(axes[0]))
@@ -522,14 +541,14 @@ def _fig_likelihood(db: ResultsDB, path: Path) -> Path | None:
     for k, label in enumerate(labels):
         d = db.per_scan(k)
         if np.isfinite(d["scan_loglik"]).any() or np.isfinite(d["lambda_min"]).any():
-            series.append((label, d))
+            series.append((k, label, d))
     if not series:
         return None
     fig, (a1, a2) = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
-    for label, d in series:
+    for k, label, d in series:
         x = np.arange(len(d["t_s"]))
-        a1.plot(x, d["scan_loglik"], lw=0.6, label=label)
-        a2.plot(x, d["lambda_min"], lw=0.6, label=label)
+        a1.plot(x, d["scan_loglik"], lw=0.6, color=localizer_color(k), label=label)
+        a2.plot(x, d["lambda_min"], lw=0.6, color=localizer_color(k), label=label)
     a1.set_ylabel("scan log-likelihood")
     a2.set_ylabel("λ_min")
     a2.set_yscale("symlog")

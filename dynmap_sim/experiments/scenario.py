@@ -38,6 +38,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import re
 import sys
 import tomllib
 from collections.abc import Callable, Sequence
@@ -291,10 +292,20 @@ def _parse_days(v: Any) -> Any:
     return v
 
 
+#: A scenario name names its results folder: this many characters at most, so that every
+#: file under ``results/<name>/`` stays well within the usual 255-byte file-name limit.
+MAX_NAME_CHARS = 100
+
+
 class Scenario(_Strict):
     """A validated scenario. ``world_path`` is resolved against the scenario file's folder."""
 
-    name: str = Field(min_length=1)
+    name: str = Field(
+        min_length=1,
+        description="the scenario's name, also its default results folder results/<name>: "
+        "letters, digits and . _ + - (no path separators), at most 100 characters so that "
+        "every file name under it stays within the file system's limits",
+    )
     description: str = ""
     world: str = Field(description="shipped world name ('lab', 'apartment') or a path")
     days: tuple[int, int] = Field(description="inclusive 1-based day range")
@@ -310,6 +321,20 @@ class Scenario(_Strict):
 
     _source: Path | None = PrivateAttr(default=None)
     _world_path: Path | None = PrivateAttr(default=None)
+
+    @field_validator("name")
+    @classmethod
+    def _name_is_a_folder_name(cls, v: str) -> str:
+        if len(v) > MAX_NAME_CHARS:
+            raise ValueError(
+                f"at most {MAX_NAME_CHARS} characters (it names the results folder), not {len(v)}"
+            )
+        if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._+-]*", v):
+            raise ValueError(
+                f"{v!r}: letters, digits and . _ + - only, starting with a letter or digit (it "
+                "names the results folder results/<name>)"
+            )
+        return v
 
     @field_validator("days", mode="before")
     @classmethod

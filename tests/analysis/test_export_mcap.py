@@ -100,12 +100,13 @@ def test_counts_per_topic_match_the_store(results: Path, bag: Path) -> None:
         "/truth/pose": n_scans,
         "/tf_static": n_runs,
         "/world/obstacles": n_runs,
+        "/plan": n_runs,  # the tour driver's planned path of each run
     } | {topic: n_scans for topic in pose_topics(labels)}
     assert set(pose_topics(labels)) == {"/odometry/pose", "/mcl_tuned/pose", "/mcl_nav2/pose"}
     with Reader(bag) as reader:
         got = {topic: info.msgcount for topic, info in reader.topics.items()}
         assert reader.duration > 0
-    assert got == expected  # no /scan (ranges not kept), no /plan (tour driver)
+    assert got == expected  # no /scan (ranges not kept)
     with (bag / f"{bag.name}.mcap").open("rb") as f:
         counted = Counter(ch.topic for _, ch, _ in make_reader(f).iter_messages())
     assert dict(counted) == expected
@@ -247,6 +248,14 @@ def test_cli_refuses_to_overwrite_and_names_the_extra(
     assert main(["export", str(results), "--mcap", str(tmp_path / "other")]) == 1
     assert 'pip install "dynmap-sim[ros]"' in capsys.readouterr().err
     assert not (tmp_path / "other").exists()
+
+
+def test_missing_folders_above_the_bag_are_made_as_for_parquet(
+    results: Path, tmp_path: Path
+) -> None:
+    out = tmp_path / "bags" / "deeper" / "x"
+    assert main(["export", str(results), "--mcap", str(out), "--day", "1"]) == 0
+    assert (out / "x.mcap").is_file() and (out / "metadata.yaml").is_file()
 
 
 def test_people_are_exported_as_cylinders_at_every_scan(

@@ -36,10 +36,12 @@ class FakeDB:
         return self._meta
 
     def query(self, sql, params=()):
+        if "SELECT idx, name FROM localizers" in sql:
+            return [(k, name) for k, (_, name, _) in enumerate(self.locs)]
         if "FROM localizers" in sql:
             return [(lb, name, json.dumps(p)) for lb, name, p in self.locs]
-        if "FROM run_summaries" in sql:
-            return [(2, 1)]
+        if "FROM run_summaries" in sql:  # (loc, day, run, max error): odometry worst last
+            return [(0, d, 1, 1.0 * d) for d in (1, 2, 3)] + [(1, 2, 1, 0.4), (1, 3, 1, 0.1)]
         return [(d, 1) for d in (1, 2, 3)]
 
     def geometry(self, day, run):
@@ -113,15 +115,45 @@ def test_error_per_day_and_trajectories_keep_their_legends_off_the_data(
     report._fig_trajectories(db, tmp_path / "t.png")
     (fig,) = kept_figures()
     assert len(fig.axes) == 3  # first, worst, last run
+    assert [ax.get_title() for ax in fig.axes] == [
+        "first run: day 1, run 1",
+        "worst run: day 2, run 1",
+        "last run: day 3, run 1",
+    ]  # fmt: skip  (the odometry reference, worst on the last day, does not count)
     assert_legend_beside_the_data(fig)
     assert [t.get_text() for t in fig.legends[0].get_texts()] == [
         "route", "truth", "odometry", "mcl-tuned", "mcl-walls", "dynamic-map"
     ]  # fmt: skip
 
 
+def test_a_localizer_has_one_colour_in_every_figure(tmp_path, monkeypatch, kept_figures):
+    rows = [
+        {"day": d, "localizer": lb, "mean_error_m": 0.1, "max_error_m": 0.3}
+        for d in (1, 2) for lb, _, _ in LOCS
+    ]  # fmt: skip
+    monkeypatch.setattr(report, "per_day_rows", lambda db: rows)
+    db = FakeDB(LOCS, {"route": [[1, 2], [5, 2]]})
+    report._fig_error_per_day(db, tmp_path / "e.png")
+    report._fig_trajectories(db, tmp_path / "t.png")
+    report._fig_error_over_time(db, tmp_path / "o.png")
+    colours: dict[str, set] = {}
+    for fig in kept_figures():
+        for ax in fig.axes:
+            for line in ax.get_lines():
+                if line.get_label() in db.labels():
+                    colours.setdefault(line.get_label(), set()).add(line.get_color())
+            for bar in ax.patches:
+                label = bar.get_label().removesuffix(" (mean)")
+                if label in db.labels():
+                    colours.setdefault(label, set()).add(matplotlib.colors.to_hex(bar.get_fc()))
+    for k, label in enumerate(db.labels()):
+        want = matplotlib.colors.to_hex(f"C{k}")
+        assert {matplotlib.colors.to_hex(c) for c in colours[label]} == {want}, label
+
+
 def test_every_per_day_figure_has_whole_days(tmp_path, kept_figures):
     days, means = np.array([1, 2]), np.array([0.5, 0.7])
-    figures._plot_per_day([("dyn", days, means)], "y", "t", tmp_path / "a.png")
+    figures._plot_per_day([("dyn", "C0", days, means)], "y", "t", tmp_path / "a.png")
     figures.plot_timescale_trend("dyn", days, np.full((2, 5), 0.2), tmp_path / "b.png")
     ms = MapStructure(
         days=(1, 2),

@@ -161,6 +161,7 @@ class TourDriver(Driver):
         )
         self._grid: ClearanceGrid | None = None
         self._plan: WaypointPlan | None = None
+        self._last_path: FloatArray = np.zeros((0, 2))
         self._waiting = False
         self._step = 0
         self._backoff = 0
@@ -195,10 +196,20 @@ class TourDriver(Driver):
         self.controller.set_path(plan.vertices)
 
     def end_run(self) -> None:
-        """Drop the run's grid and plan (they are rebuilt next run; keeps checkpoints small)."""
+        """Drop the run's grid and plan (they are rebuilt next run; keeps checkpoints small),
+        keeping the last planned polyline for :meth:`run_artifacts`."""
+        self._last_path = self.path()
         self._grid = None
         self._plan = None
         self.controller.set_path(None)
+
+    def run_artifacts(self) -> dict[str, bytes]:
+        """The run's last planned path (``(K, 2)`` float64 bytes), as the autonomous driver
+        hands it: the report draws it and ``export --mcap`` writes it as ``/plan``."""
+        path = self._last_path
+        if not len(path):
+            return {}
+        return {"planned_path.f8": np.ascontiguousarray(path, dtype="<f8").tobytes()}
 
     def teleported(self, pose: FloatArray, t_s: float) -> None:
         """The true robot was moved (kidnapping): replan from there to the rest of the route."""

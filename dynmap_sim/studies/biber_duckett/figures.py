@@ -21,6 +21,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from dynmap_sim.plot_style import localizer_color
+
 #: Biber & Duckett's timescales λ1–λ5 (Table 1): the bins of the per-scan fallback of
 #: :func:`selection_counts_per_day` (results without the per-run ``timescale_counts``).
 N_TIMESCALES = 5
@@ -57,8 +59,8 @@ def _plot_per_day(series, ylabel: str, title: str, path: Path, log: bool = False
     from matplotlib.ticker import MaxNLocator
 
     fig, ax = plt.subplots(figsize=(7, 3.6))
-    for label, days, means in series:
-        ax.plot(days, means, marker="o", ms=3, label=label)
+    for label, color, days, means in series:
+        ax.plot(days, means, marker="o", ms=3, color=color, label=label)
     ax.set_xlabel("day")
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_ylabel(ylabel)
@@ -124,6 +126,7 @@ def write_dynamic_figures(out_dir: str | Path) -> list[Path]:
     # Figs. 12-13 count every selection; results without those counts fall back to the
     # first selection of each scan.
     sel_of = dict(zip(labels, selections, strict=True))
+    color_of = {label: localizer_color(k) for k, label in enumerate(labels)}
     # Figs. 10-11 compare sample-based maps under their own perceptual model (eq. 6-8):
     # only localizers that select timescales; static MCL's likelihood field is another scale.
     data = [
@@ -137,8 +140,8 @@ def write_dynamic_figures(out_dir: str | Path) -> list[Path]:
          True),
     )  # fmt: skip
     for key, ylabel, title, name, log in per_day:
-        series = [(lb, *daily_means(d["day"], d[key])) for lb, d in data]
-        series = [s for s in series if len(s[1])]
+        series = [(lb, color_of[lb], *daily_means(d["day"], d[key])) for lb, d in data]
+        series = [s for s in series if len(s[2])]
         if series:
             written.append(_plot_per_day(series, ylabel, title, out / name, log=log))
     for label, d in data:

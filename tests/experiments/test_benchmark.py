@@ -1,0 +1,136 @@
+"""`dynmap-sim benchmark`: a suite of worlds run as a sweep, judged by a leaderboard."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from dynmap_sim.analysis.leaderboard import (
+    BAR_ATE_M,
+    CSV_COLUMNS,
+    leaderboard,
+    leaderboard_md,
+    write_leaderboard,
+)
+from dynmap_sim.errors import InputError
+from dynmap_sim.experiments.benchmark import (
+    BENCHMARK_INDEX,
+    SuiteFileError,
+    load_suite,
+    prepare_benchmark,
+    run_benchmark,
+)
+
+ROOT = Path(__file__).resolve().parents[2]
+
+SUITE = """
+name = "tiny"
+days = "1-2"
+baseline = "mcl"
+
+[worlds]
+files = ["{apartment}", "{office}"]
+
+[scenario]
+driver = {{ kind = "tour", max_run_s = 5.0 }}
+prior = {{ map = "walls", initial_pose = "known" }}
+
+[[scenario.localizers]]
+name = "odometry"
+
+[[scenario.localizers]]
+name = "static-mcl"
+label = "mcl"
+params = {{ config = "tuned" }}
+"""
+
+
+def _no_generator(kind: str, seed: int, params: dict) -> str:
+    raise AssertionError("file worlds need no generator")
+
+
+def _suite(tmp: Path, text: str = SUITE) -> Path:
+    p = tmp / "suite.toml"
+    p.write_text(
+        text.format(apartment=ROOT / "worlds/apartment.toml", office=ROOT / "worlds/office.toml")
+    )
+    return p
+
+
+@pytest.fixture(scope="module")
+def bench(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    tmp = tmp_path_factory.mktemp("bench")
+    out = tmp / "out"
+    outcome = run_benchmark(load_suite(_suite(tmp)), out, _no_generator, workers=1, progress=False)
+    assert outcome.complete and len(outcome.done) == 2
+    return out
+
+
+def test_every_world_gets_its_world_file_scenario_and_cell(bench: Path) -> None:
+    record = json.loads((bench / BENCHMARK_INDEX).read_text())
+    assert [w["name"] for w in record["worlds"]] == ["apartment", "office"]
+    for name in ("apartment", "office"):
+        assert (bench / "worlds" / f"{name}.toml").read_bytes() == (
+            ROOT / "worlds" / f"{name}.toml"
+        ).read_bytes()
+        text = (bench / "scenarios" / f"{name}.toml").read_text()
+        assert f'world = "../worlds/{name}.toml"' in text and "days = [1, 2]" in text
+
+
+def test_the_leaderboard_ranks_the_localizers_over_the_worlds(bench: Path) -> None:
+    board = leaderboard(bench)
+    assert board.baseline == "mcl" and board.references == ("odometry",)
+    assert {r.world for r in board.rows} == {"apartment", "office"}
+    (score,) = board.scores  # odometry is a reference, not ranked
+    assert score.localizer == "mcl" and score.n_worlds == 2
+    ate = sorted(r.ate_m for r in board.rows if r.localizer == "mcl")
+    assert score.ate_median.value == pytest.approx(sum(ate) / 2)
+    assert score.vs_baseline is None  # the baseline against itself
+    assert [w for w, _ in board.worst()] == sorted(
+        ("apartment", "office"), key=lambda w: -next(
+            r.ate_m for r in board.rows if r.world == w and r.localizer == "mcl"
+        )
+    )  # fmt: skip
+    md = leaderboard_md(board)
+    assert f"ATE ≤ {BAR_ATE_M} m" in md and "dynmap-sim run " in md and "apartment.toml" in md
+
+
+def test_files_are_written_and_a_second_run_resumes_without_running(bench: Path) -> None:
+    paths = write_leaderboard(bench)
+    assert [p.name for p in paths] == ["leaderboard.md", "leaderboard.csv", "leaderboard.png"]
+    rows = (bench / "leaderboard.csv").read_text().splitlines()
+    assert rows[0].split(",") == list(CSV_COLUMNS) and len(rows) == 1 + 2 * 2
+    suite = load_suite(bench.parent / "suite.toml")
+    again = run_benchmark(suite, bench, _no_generator, workers=1, progress=False)
+    assert again.complete and len(again.skipped) == 2 and not again.done
+
+
+def test_a_folder_of_another_suite_is_refused(bench: Path, tmp_path: Path) -> None:
+    other = _suite(tmp_path, SUITE.replace('days = "1-2"', 'days = "1-1"'))
+    with pytest.raises(InputError, match="holds another benchmark"):
+        prepare_benchmark(load_suite(other), bench, _no_generator)
+
+
+@pytest.mark.parametrize(
+    ("edit", "field"),
+    [
+        (
+            lambda s: s.replace('files = ["{apartment}", ', 'files = ["nope.toml", '),
+            "worlds.files.0",
+        ),
+        (lambda s: s.replace('name = "static-mcl"', 'name = "no-such"'), "scenario.localizers"),
+        (lambda s: s.replace('days = "1-2"', 'days = "2-1"'), "days"),
+        (lambda s: s.replace("[worlds]", '[worlds]\nkinds = ["castle"]\nseeds = "x"'), "worlds"),
+        (lambda s: s.replace("[scenario]", '[scenario]\nworld = "lab"'), "scenario"),
+    ],
+)
+def test_a_bad_suite_is_one_clear_error_and_writes_nothing(
+    tmp_path: Path, edit, field: str
+) -> None:
+    out = tmp_path / "out"
+    with pytest.raises(SuiteFileError, match=field.replace(".", r"\.")):
+        suite = load_suite(_suite(tmp_path, edit(SUITE)), kinds=("office",))
+        prepare_benchmark(suite, out, _no_generator)
+    assert not out.exists() or not any(p.name != ".staging" for p in out.iterdir())
