@@ -295,6 +295,7 @@ def plot_leaderboard(board: Leaderboard, path: Path, n_named: int = 3) -> Path:
     """Per-world ATE, one column per localizer (deterministic jitter), the bar as a line,
     and the ``n_named`` worst worlds of each column named."""
     import matplotlib
+    import matplotlib.ticker
 
     matplotlib.use("Agg", force=True)
     import matplotlib.pyplot as plt
@@ -313,7 +314,10 @@ def plot_leaderboard(board: Leaderboard, path: Path, n_named: int = 3) -> Path:
             )
     ax.axhline(BAR_ATE_M, color="0.5", ls="--", lw=0.8, label=f"bar {BAR_ATE_M} m")
     ax.set_xticks(range(len(labels)), labels, rotation=15, fontsize="small")
+    ax.set_xlim(-0.6, len(labels) - 0.4)
     ax.set_yscale("log")
+    ax.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+    ax.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     ax.set_ylabel("ATE RMSE per world [m]")
     ax.set_title(f"{board.name}: {len({r.world for r in board.rows})} worlds", fontsize="medium")
     ax.legend(fontsize="small", loc="upper left")
