@@ -316,6 +316,7 @@ def plot_leaderboard(board: Leaderboard, path: Path, n_named: int = 3) -> Path:
     ax.set_xticks(range(len(labels)), labels, rotation=15, fontsize="small")
     ax.set_xlim(-0.6, len(labels) - 0.4)
     ax.set_yscale("log")
+    ax.yaxis.set_major_locator(matplotlib.ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
     ax.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
     ax.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     ax.set_ylabel("ATE RMSE per world [m]")
