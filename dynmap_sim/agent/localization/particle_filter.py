@@ -56,12 +56,9 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import OCCUPIED, OccupancyGrid
-from dynmap_sim.agent.localization import mcl_numba
 from dynmap_sim.agent.localization.distance_filter import expected_ranges, short_readings
 from dynmap_sim.agent.localization.kld_sampling import (
     ONE_BIN_RULES,
@@ -80,13 +77,13 @@ from dynmap_sim.agent.localization.likelihood_field import (
     valid_beams,
 )
 from dynmap_sim.agent.localization.motion_model import sample_odometry_motion
+from dynmap_sim.agent.localization.particle_filter_kernels import bin_clusters
 from dynmap_sim.agent.localization.resampling import LowVarianceDraws, low_variance_resample
 from dynmap_sim.agent.localization.see_through import see_through_logp, wall_depths
 from dynmap_sim.agent.localization.verified_recovery import VerifiedRecovery
 from dynmap_sim.agent.localizer import Localizer, MapUser, register_localizer
 from dynmap_sim.agent.maps.map_source import MapSource, PriorWallsMap, make_map_source
 from dynmap_sim.agent.params import check_fields, coerce_fields
-from dynmap_sim.jit import kernel_backend
 from dynmap_sim.types import Diagnostic, LaserSpec, Odometry, PoseEstimate, Prior, Scan
 
 FloatArray = NDArray[np.float64]
@@ -621,37 +618,6 @@ def weighted_pose_stats(
     r_len = min(max(np.hypot(c, s), 1e-12), 1.0)
     cov[2, 2] = max(-2.0 * np.log(r_len), 0.0)
     return mean, 0.5 * (cov + cov.T)
-
-
-def bin_clusters(
-    ukeys: NDArray[np.int64], ny: int, n_th: int, backend: str = "auto"
-) -> NDArray[np.intp]:
-    """Cluster label of each occupied bin (``pf_cluster_stats``): ``ukeys`` sorted unique bin
-    keys ``(bx * ny + by) * n_th + bt`` (``bx, by >= 0``), a cluster the bins connected
-    through their 26 neighbours (theta wraps around), numbered in the order of their first
-    bin. ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): :mod:`.mcl_numba`'s union-find
-    or the numpy adjacency and scipy's ``connected_components`` (the same labels)."""
-    kernel = kernel_backend(backend)
-    if kernel:
-        return mcl_numba.bin_clusters(ukeys, ny, n_th, python=kernel == "python")
-    ubx, rem = np.divmod(ukeys, ny * n_th)
-    uby, ubt = np.divmod(rem, n_th)
-    rows, cols = [], []
-    for dx in (-1, 0, 1):
-        for dy in (-1, 0, 1):
-            for dt in (-1, 0, 1):
-                if dx == dy == dt == 0:
-                    continue
-                nk = ((ubx + dx) * ny + (uby + dy)) * n_th + (ubt + dt) % n_th
-                pos = np.searchsorted(ukeys, nk)
-                pos = np.minimum(pos, len(ukeys) - 1)
-                hit = (ukeys[pos] == nk) & (ubx + dx >= 0) & (uby + dy >= 0)
-                rows.append(np.nonzero(hit)[0])
-                cols.append(pos[hit])
-    r = np.concatenate(rows)
-    cidx = np.concatenate(cols)
-    adj = coo_matrix((np.ones(len(r)), (r, cidx)), shape=(len(ukeys), len(ukeys)))
-    return connected_components(adj, directed=False)[1]
 
 
 class AMCLFilter:
