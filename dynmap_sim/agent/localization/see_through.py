@@ -122,9 +122,8 @@ def see_through_logp(
     range_max)``; ``0`` where it does not see through (``depth`` inf), so that a minimum with
     the likelihood field's value leaves those readings alone.
 
-    Only the see-through readings are scored (a few percent of a cloud's readings on a
-    tracked run): numpy's ``exp`` and ``log`` give an element the same bits wherever it
-    stands in an array, so the scores are those of scoring every reading."""
+    Only the see-through readings are scored: they are a few percent of a cloud's readings
+    on a tracked run."""
     r = np.asarray(ranges_m, dtype=np.float64)
     d = np.asarray(depths_m, dtype=np.float64)
     out = np.zeros(d.shape)

@@ -183,8 +183,10 @@ class SampleSets:
         n_rule = np.zeros(n_runs, dtype=np.int64) if fill else self._n_new(n_runs, rng)
         n_new = np.empty(n_runs, dtype=np.int64)
         n_add = np.empty(n_runs, dtype=np.int64)
-        n_rep = _plan_update(r_s, first, self.count, self.initialized, self.n_samples,
-                             self.fills_first_step, fill, initialize, n_rule, n_new, n_add)  # fmt: skip
+        n_rep = _plan_update(
+            r_s, first, self.count, self.initialized, self.n_samples, self.fills_first_step,
+            fill, initialize, n_rule, n_new, n_add,
+        )  # fmt: skip
         keys = rng.random((n_rep, self.n_samples)) if n_rep else np.empty((0, self.n_samples))
         _write_update(r_s, v_s, first, n_new, n_add, keys, self.samples_mm, self.count)
         self._changed()
@@ -366,7 +368,7 @@ def _sort_by_ray(ray, keys, val, n_rays, r_s, v_s, first):  # type: ignore[no-un
     in random order within a ray) into ``r_s``, ``v_s``, and the starts of their runs of
     equal rays into ``first``; returns the number of runs, -1 when a ray is not in
     ``[0, n_rays)``. A counting sort by ray, then each ray's keys sorted (insertion sort up
-    to 16, numpy's ``argsort`` beyond)."""
+    to 16, ``np.argsort`` beyond)."""
     m = ray.shape[0]
     for i in range(m):
         if ray[i] < 0 or ray[i] >= n_rays:
