@@ -35,6 +35,7 @@ import pstats
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -177,7 +178,7 @@ def bench_localizer(rng: np.random.Generator) -> None:
     )
     fast = pickle.loads(pickle.dumps(loc))
     fast.end_run()
-    fast.min_update_dist_m, fast.min_update_angle_rad = 0.1, 0.1
+    fast.config = replace(fast.config, min_update_dist_m=0.1, min_update_angle_rad=0.1)
     fast.begin_run(Prior(initial_pose=truth[0].copy(), day=2, run=2))
     c0 = time.process_time()
     ests = [fast.update(o, s) for o, s in stream]

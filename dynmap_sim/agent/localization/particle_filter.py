@@ -405,6 +405,7 @@ WALLS_ONLY = replace(
     recovery_occluded="all-beams",
 )
 
+#: The configs ``static-mcl``'s ``config`` parameter names (docs/tuning/localization.md).
 CONFIGS: dict[str, MCLConfig] = {
     "nav2-default": NAV2_DEFAULT,
     "tuned": TUNED,
