@@ -7,10 +7,9 @@ Prints
    L-shaped room after one learned day (first-run SLAM + two runs), and the time of the
    offline (end-of-run / end-of-day) updates;
 3. memory per local map (Table 1: 329,400 samples, 658,800 bytes);
-4. the hot-path kernels with their two backends on the same inputs in the same run: ICP
-   (``match_scan``), ``PointMap`` construction (normals), the per-scan log-likelihoods of a
-   local map and the robust estimates of a lambda1 sub-map -- numba (extra ``fast``) against
-   numpy, with the ratio.
+4. the time per call of the hot paths: ICP (``match_scan``), ``PointMap`` construction
+   (normals), the per-scan log-likelihoods of a local map and the robust estimates of a
+   lambda1 and a lambda5 sub-map.
 
 By default (without ``--synthetic``) it instead records a scenario's sensor stream once
 (``--scenario``, ``--days``; the simulation with the steering localizer only, cached in
@@ -23,8 +22,7 @@ on the prior walls, as the H&W replica runs it) and their ratio, the CPU of the 
 run/day learning, and with ``--profile`` the CPU per stage [ms/scan] from cProfile.
 ``--fingerprint`` prints a SHA-256 of everything ``dynamic-map`` returns on the replay
 (estimates, covariances, extras) and of its map's samples after it: a change meant to be
-faster must leave it unchanged (with numba and with numba blocked). ``--synthetic`` runs the
-sections above.
+faster must leave it unchanged. ``--synthetic`` runs the sections above.
 """
 
 from __future__ import annotations
@@ -37,6 +35,7 @@ import pstats
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -44,7 +43,6 @@ import numpy as np
 from dynmap_sim import se2
 from dynmap_sim.agent.localizer import make_localizer
 from dynmap_sim.agent.mapping.scan_matcher import PointMap, match_scan
-from dynmap_sim.agent.mapping.scan_matcher_numba import numba_available
 from dynmap_sim.agent.mapping.scan_points import scan_points_base, voxel_downsample
 from dynmap_sim.agent.maps.dynamic_map import DynamicMap
 from dynmap_sim.agent.maps.local_map import LocalMap
@@ -85,7 +83,7 @@ def loop_update(s: SampleSets, ray: np.ndarray, val: np.ndarray, rng: np.random.
 
 
 def bench_sample_sets(rng: np.random.Generator, repeats: int) -> None:
-    print("1. sample-set update (§3.1), vectorized vs per-ray Python loop")
+    print("1. sample-set update (§3.1), compiled vs per-ray Python loop")
     for name, n_rays, n_samples, u, per_ray in (
         ("lambda1 (360 x 5, u=0.2), 2 meas/ray", 360, 5, 0.2, 2),
         ("lambda5 (1440 x 100, u=0.05), 40 meas/ray", 1440, 100, 0.05, 40),
@@ -108,7 +106,7 @@ def bench_sample_sets(rng: np.random.Generator, repeats: int) -> None:
         t_loop = (time.perf_counter() - t0) / reps_loop
         mps = ray.size / t_vec
         print(
-            f"   {name}: vectorized {t_vec * 1e3:.3f} ms/update ({mps / 1e6:.2f} M meas/s), "
+            f"   {name}: compiled {t_vec * 1e3:.3f} ms/update ({mps / 1e6:.2f} M meas/s), "
             f"loop {t_loop * 1e3:.2f} ms/update -> speed-up x{t_loop / t_vec:.1f}"
         )
 
@@ -180,7 +178,7 @@ def bench_localizer(rng: np.random.Generator) -> None:
     )
     fast = pickle.loads(pickle.dumps(loc))
     fast.end_run()
-    fast.min_update_dist_m, fast.min_update_angle_rad = 0.1, 0.1
+    fast.config = replace(fast.config, min_update_dist_m=0.1, min_update_angle_rad=0.1)
     fast.begin_run(Prior(initial_pose=truth[0].copy(), day=2, run=2))
     c0 = time.process_time()
     ests = [fast.update(o, s) for o, s in stream]
@@ -212,11 +210,8 @@ def _per_call_s(fn, repeats: int) -> float:
     return (time.perf_counter() - t0) / repeats
 
 
-def bench_backends(rng: np.random.Generator, repeats: int) -> None:
-    print("4. hot-path kernels, numba backend vs numpy backend (same inputs, same run)")
-    if not numba_available():
-        print('   numba not installed (pip install "dynmap-sim[fast]"): numpy only')
-        return
+def bench_kernels(rng: np.random.Generator, repeats: int) -> None:
+    print("4. hot paths, time per call")
     segs = _world()
     truth = _route()[::40]
     scans = [raycast(p, URG.angles(), segs, URG.range_max_m) for p in truth]
@@ -228,27 +223,16 @@ def bench_backends(rng: np.random.Generator, repeats: int) -> None:
     pts = base[12][:: max(1, len(base[12]) // 400)]
     init = truth[12] + [0.05, -0.03, 0.02]
     prior = np.diag([400.0, 400.0, 2500.0])
-    rows = []
-    for backend in ("numpy", "numba"):
-        target = PointMap(local, backend=backend)
-        t_icp = _per_call_s(
-            lambda b=backend, t=target: match_scan(
-                pts, t, init, prior_mean=init, prior_info=prior, max_correspondence_m=0.3,
-                backend=b, huber_m=0.02,
-            ),
-            repeats,
-        )  # fmt: skip
-        t_map = _per_call_s(lambda b=backend: PointMap(local, backend=b), max(1, repeats // 4))
-        rows.append((t_icp, t_map))
-    print(
-        f"   match_scan ({len(pts)} points, {len(local)}-point local map, with prior): "
-        f"numpy {rows[0][0] * 1e3:.3f} ms, numba {rows[1][0] * 1e3:.3f} ms "
-        f"-> x{rows[0][0] / rows[1][0]:.1f}"
-    )
-    print(
-        f"   PointMap({len(local)} points): numpy {rows[0][1] * 1e3:.3f} ms, "
-        f"numba {rows[1][1] * 1e3:.3f} ms -> x{rows[0][1] / rows[1][1]:.1f}"
-    )
+    target = PointMap(local)
+    t_icp = _per_call_s(
+        lambda: match_scan(pts, target, init, prior_mean=init, prior_info=prior,
+                           max_correspondence_m=0.3, huber_m=0.02),
+        repeats,
+    )  # fmt: skip
+    t_map = _per_call_s(lambda: PointMap(local), max(1, repeats // 4))
+    print(f"   match_scan ({len(pts)} points, {len(local)}-point local map, with prior): "
+          f"{t_icp * 1e3:.3f} ms")  # fmt: skip
+    print(f"   PointMap({len(local)} points): {t_map * 1e3:.3f} ms")
     dmap = DynamicMap(max_range_m=URG.range_max_m)
     centre = truth[12]
     i = dmap.add_local_map(centre[:2], se2.transform_points(centre, base[12]), rng)
@@ -260,23 +244,14 @@ def bench_backends(rng: np.random.Generator, repeats: int) -> None:
     lm = dmap.local_maps[i]
     scan = se2.transform_points(truth[13], base[13])[::3]
     kw = {"sigma_min_m": 0.01, "min_outlier_ratio": 0.0}
-    t_np = _per_call_s(
-        lambda: lm.scan_log_likelihoods(range(5), scan, backend="numpy", **kw), repeats
-    )
-    t_nb = _per_call_s(
-        lambda: lm.scan_log_likelihoods(range(5), scan, backend="numba", **kw), repeats
-    )
-    print(
-        f"   LocalMap.scan_log_likelihoods ({len(scan)} readings x 5 timescales): "
-        f"numpy {t_np * 1e6:.0f} us, numba {t_nb * 1e6:.0f} us -> x{t_np / t_nb:.1f}"
-    )
-    sub = lm.sub[0]
-    t_np = _per_call_s(lambda: robust_estimates(sub.samples_mm, sub.count, "numpy"), repeats)
-    t_nb = _per_call_s(lambda: robust_estimates(sub.samples_mm, sub.count, "numba"), repeats)
-    print(
-        f"   robust_estimates of a 360 x 5 sub-map: numpy {t_np * 1e6:.0f} us, "
-        f"numba {t_nb * 1e6:.0f} us -> x{t_np / t_nb:.1f}"
-    )
+    t_ll = _per_call_s(lambda: lm.scan_log_likelihoods(range(5), scan, **kw), repeats)
+    print(f"   LocalMap.scan_log_likelihoods ({len(scan)} readings x 5 timescales): "
+          f"{t_ll * 1e6:.0f} us")  # fmt: skip
+    for level in (0, 4):
+        sub = lm.sub[level]
+        t_est = _per_call_s(lambda s=sub: robust_estimates(s.samples_mm, s.count), repeats)
+        print(f"   robust_estimates of a {sub.n_rays} x {sub.n_samples} sub-map: "
+              f"{t_est * 1e6:.0f} us")  # fmt: skip
 
 
 # ---------------------------------------------------------------------- replay of a scenario
@@ -470,7 +445,7 @@ def main() -> None:
     bench_sample_sets(rng, args.repeats)
     bench_localizer(rng)
     bench_memory()
-    bench_backends(rng, max(10, args.repeats // 2))
+    bench_kernels(rng, max(10, args.repeats // 2))
 
 
 if __name__ == "__main__":

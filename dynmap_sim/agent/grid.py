@@ -4,8 +4,8 @@ The grid follows ROS ``nav_msgs/OccupancyGrid`` conventions: cell ``[iy, ix]`` c
 ``origin + ([ix, iy] .. [ix+1, iy+1]) * resolution_m``; values are ``-1`` unknown, ``0``
 free, ``100`` occupied. The likelihood field of Thrun et al., *Probabilistic Robotics*
 §6.4 (the table AMCL precomputes) is the Euclidean distance from each cell centre to the
-nearest occupied cell centre, from ``scipy.ndimage.distance_transform_edt``, clipped at
-``max_dist_m``.
+nearest occupied cell centre (the exact transform of Felzenszwalb & Huttenlocher 2012,
+:func:`_squared_distances`), clipped at ``max_dist_m``.
 
 Grids are built either by rasterizing known wall segments (a scenario's prior) or by
 tracing laser beams from known poses (free cells along each beam, an occupied cell at each
@@ -19,8 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
 from dynmap_sim import se2
-from dynmap_sim.agent import grid_numba
-from dynmap_sim.jit import kernel_backend
+from dynmap_sim.jit import compiled
 from dynmap_sim.types import LaserSpec
 
 FloatArray = NDArray[np.float64]
@@ -29,14 +28,71 @@ UNKNOWN = -1
 FREE = 0
 OCCUPIED = 100
 
+#: Stands for "no occupied cell in this column" (far beyond any grid's squared distances).
+_FAR = 1e20
+
+
+@compiled
+def _squared_distances(occ, col, f, v, z, out):  # type: ignore[no-untyped-def]
+    """``out[y, x]``: squared distance [cells²] from cell ``(y, x)`` to the nearest True cell
+    of ``occ`` (at least one), by Felzenszwalb & Huttenlocher's (2012) exact transform: along
+    the columns, then the lower envelope of parabolas along each row. ``col`` ``(H, W)``,
+    ``f, v`` ``(W,)``, ``z`` ``(W + 1,)``: scratch."""
+    h, w = occ.shape
+    for y in range(h):  # 1. along the columns (row by row): the nearest occupied cell above
+        for x in range(w):
+            if occ[y, x]:
+                col[y, x] = 0.0
+            elif y > 0 and col[y - 1, x] < _FAR:
+                col[y, x] = col[y - 1, x] + 1.0
+            else:
+                col[y, x] = _FAR
+    for y in range(h - 2, -1, -1):  # ... or below
+        for x in range(w):
+            if col[y + 1, x] + 1.0 < col[y, x]:
+                col[y, x] = col[y + 1, x] + 1.0
+    for y in range(h):  # 2. along each row: min over q of (x - q)² + col[y, q]²
+        for q in range(w):
+            f[q] = col[y, q] * col[y, q] if col[y, q] < _FAR else _FAR
+        k = 0
+        v[0] = 0
+        z[0] = -np.inf
+        z[1] = np.inf
+        for q in range(1, w):
+            while True:  # where parabola q overtakes the envelope's last one
+                p = v[k]
+                s = ((f[q] + q * q) - (f[p] + p * p)) / (2.0 * q - 2.0 * p)
+                if s > z[k]:
+                    break
+                k -= 1
+            k += 1
+            v[k] = q
+            z[k] = s
+            z[k + 1] = np.inf
+        k = 0
+        for q in range(w):
+            while z[k + 1] < q:
+                k += 1
+            p = v[k]
+            out[y, q] = (q - p) * (q - p) + f[p]
+
+
+def squared_distances(occupied: NDArray[np.bool_]) -> NDArray[np.float64]:
+    """``(H, W)`` squared distances [cells²] from each cell to the nearest of ``occupied``
+    (at least one True): exact integers in float64."""
+    h, w = occupied.shape
+    out = np.empty((h, w), dtype=np.float64)
+    _squared_distances(np.ascontiguousarray(occupied), np.empty((h, w)), np.empty(w),
+                       np.empty(w, np.intp), np.empty(w + 1), out)  # fmt: skip
+    return out
+
 
 class OccupancyGrid:
     """A 2-D occupancy grid with a cached likelihood field.
 
     ``occupancy`` is ``(H, W)`` int8 (``-1``/``0``/``100``); ``origin_xy_m`` the map-frame
     corner of cell ``[0, 0]``; ``dist_m`` ``(H, W)`` float32 the distance [m] from each
-    cell centre to the nearest occupied cell centre, clipped at ``max_dist_m`` (``backend``:
-    how it is computed, :meth:`_distance_field`).
+    cell centre to the nearest occupied cell centre, clipped at ``max_dist_m``.
     """
 
     def __init__(
@@ -45,7 +101,6 @@ class OccupancyGrid:
         origin_xy_m: ArrayLike,
         resolution_m: float = 0.05,
         max_dist_m: float = 2.0,
-        backend: str = "auto",
     ) -> None:
         occ = np.asarray(occupancy, dtype=np.int8)
         if occ.ndim != 2 or occ.size == 0:
@@ -56,7 +111,7 @@ class OccupancyGrid:
         self.origin_xy_m = np.asarray(origin_xy_m, dtype=np.float64).reshape(2)
         self.resolution_m = float(resolution_m)
         self.max_dist_m = float(max_dist_m)
-        self.dist_m = self._distance_field(self.max_dist_m, backend)
+        self.dist_m = self._distance_field(self.max_dist_m)
 
     # -- geometry ------------------------------------------------------------------------
     @property
@@ -89,18 +144,13 @@ class OccupancyGrid:
             axis=-1,
         )
 
-    def _distance_field(self, max_dist_m: float, backend: str = "auto") -> NDArray[np.float32]:
-        """``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): the distances from
-        :mod:`.grid_numba`'s kernel or from scipy, the same numbers."""
-        kernel = kernel_backend(backend)
+    def _distance_field(self, max_dist_m: float) -> NDArray[np.float32]:
+        """Distance [m] from each cell centre to the nearest occupied one, clipped at
+        ``max_dist_m`` (everywhere ``max_dist_m`` without an occupied cell)."""
         occ = self.occupancy == OCCUPIED
         if not occ.any():
             return np.full(self.shape, max_dist_m, dtype=np.float32)
-        if kernel:
-            edt = np.sqrt(grid_numba.squared_distances(occ, python=kernel == "python"))
-        else:
-            edt = ndimage.distance_transform_edt(~occ)
-        d = edt * self.resolution_m
+        d = np.sqrt(squared_distances(occ)) * self.resolution_m
         return np.minimum(d, max_dist_m).astype(np.float32)
 
     def distance_at(self, x_m: ArrayLike, y_m: ArrayLike) -> NDArray[np.float32]:

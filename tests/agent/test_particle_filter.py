@@ -22,7 +22,8 @@ from dynmap_sim.agent.localization.kld_sampling import (
 from dynmap_sim.agent.localization.likelihood_field import (
     LikelihoodFieldParams,
     LikelihoodTable,
-    likelihood_field_prob_logweights,
+    beam_likelihoods,
+    likelihood_field_prob_beams,
     select_beams,
 )
 from dynmap_sim.agent.localization.motion_model import decompose_odometry, sample_odometry_motion
@@ -222,12 +223,18 @@ def test_select_beams_like_amcl():
 
 def test_beam_skipping_ignores_unmapped_obstacle_and_falls_back():
     params = LikelihoodFieldParams(z_hit=0.9, z_rand=0.1, sigma_hit=0.1, do_beamskip=True)
+    table = LikelihoodTable(OccupancyGrid(np.full((2, 2), OCCUPIED), [0, 0], 0.1), params)
+
+    def logp(d: np.ndarray) -> np.ndarray:
+        return np.log(beam_likelihoods(d, params)).astype(np.float32)
+
     d = np.zeros((100, 10))
     d[:, 3] = 1.0  # every particle sees beam 3 far from the map: a person
-    lw, use = likelihood_field_prob_logweights(d, params)
+    lw, use = likelihood_field_prob_beams(logp(d), table, params)
     assert not use[3] and use.sum() == 9
+    np.testing.assert_allclose(lw, 9 * np.log(0.9 + 0.1 / 100.0), rtol=1e-6)
     d2 = np.ones((100, 10))  # all beams disagree: diverged, so use them all
-    _, use2 = likelihood_field_prob_logweights(d2, params)
+    _, use2 = likelihood_field_prob_beams(logp(d2), table, params)
     assert use2.all()
 
 

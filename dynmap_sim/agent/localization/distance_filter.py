@@ -20,8 +20,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from dynmap_sim.agent.grid import OCCUPIED, OccupancyGrid
-from dynmap_sim.agent.localization import mcl_numba
-from dynmap_sim.jit import kernel_backend
+from dynmap_sim.jit import compiled
 
 FloatArray = NDArray[np.float64]
 
@@ -45,6 +44,22 @@ def expected_ranges(
     return np.where(first >= 0, t[first], np.inf)
 
 
+@compiled
+def _first_occupied(occupied, x0, y0, ca, sa, t, ox, oy, res, out):  # type: ignore[no-untyped-def]
+    """``out[i]``: the first ``k`` whose sample ``(x0 + ca_i t_k, y0 + sa_i t_k)`` falls in an
+    occupied cell (``occupied[iy, ix]``, cells ``floor((x - ox) / res)``), -1 for none; each
+    beam stops at its first hit."""
+    h, w = occupied.shape
+    for i in range(ca.shape[0]):
+        out[i] = -1
+        for k in range(t.shape[0]):
+            fx = np.floor((x0 + ca[i] * t[k] - ox) / res)
+            fy = np.floor((y0 + sa[i] * t[k] - oy) / res)
+            if 0 <= fx < w and 0 <= fy < h and occupied[int(fy), int(fx)]:
+                out[i] = k
+                break
+
+
 def cast_rays(
     occupied: NDArray[np.bool_],
     origin_xy_m: FloatArray,
@@ -52,32 +67,19 @@ def cast_rays(
     laser_pose: ArrayLike,
     angles_rad: ArrayLike,
     range_max_m: float,
-    backend: str = "auto",
 ) -> tuple[FloatArray, NDArray[np.intp]]:
     """The samples ``t`` [m] along each beam (every half cell up to ``range_max_m``) and, per
     beam, the index of the first in an ``occupied`` cell of the grid (cells ``(H, W)`` from
-    ``origin_xy_m``), -1 for none; off-grid samples never hit. ``backend``
-    (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): :mod:`.mcl_numba`'s kernel, which stops each
-    beam at its first hit (the same indices), or numpy."""
-    kernel = kernel_backend(backend)
+    ``origin_xy_m``), -1 for none; off-grid samples never hit."""
     p = np.asarray(laser_pose, dtype=np.float64).reshape(3)
     a = p[2] + np.asarray(angles_rad, dtype=np.float64)
     step = 0.5 * resolution_m
     t = np.arange(1, int(np.ceil(range_max_m / step)) + 1) * step
-    if kernel:
-        first = mcl_numba.first_occupied(occupied, origin_xy_m, resolution_m, p[:2],
-                                         (np.cos(a), np.sin(a)), t,
-                                         python=kernel == "python")  # fmt: skip
-        return t, first
-    xs = p[0] + np.cos(a)[:, None] * t[None, :]
-    ys = p[1] + np.sin(a)[:, None] * t[None, :]
-    ix = np.floor((xs - origin_xy_m[0]) / resolution_m).astype(np.intp)
-    iy = np.floor((ys - origin_xy_m[1]) / resolution_m).astype(np.intp)
-    h, w = occupied.shape
-    inside = (ix >= 0) & (ix < w) & (iy >= 0) & (iy < h)
-    occ = np.zeros(xs.shape, dtype=bool)
-    occ[inside] = occupied[iy[inside], ix[inside]]
-    return t, np.where(occ.any(axis=1), np.argmax(occ, axis=1), -1)
+    first = np.empty(len(a), dtype=np.intp)
+    _first_occupied(occupied, float(p[0]), float(p[1]), np.cos(a), np.sin(a), t,
+                    float(origin_xy_m[0]), float(origin_xy_m[1]), float(resolution_m),
+                    first)  # fmt: skip
+    return t, first
 
 
 def short_readings(

@@ -4,7 +4,8 @@ variants ``static-map`` / ``static-map+stm`` (§5.3).
 Per scan ``z_t`` (with odometry):
 
 1. **Prediction**: ``x̂⁻ = x̂_{t−1} ⊕ Δodom`` with an odometry covariance ``C_O`` that grows
-   with the motion (the paper's was "acquired experimentally"; ours is a parameter).
+   with the motion (the paper's was "acquired experimentally": ours are the simulated robots'
+   rates, or acquired from a given map's run, :mod:`.odometry_calibration`).
 2. **Scan matching against the current map** built after the previous step, with the adaptive
    odometry prior of eq. 9: minimise ``E_S + κ·E_O`` with κ = 0 first (``kappa_first``, an
    option that is not B&D's, starts higher); while the result is not within two standard
@@ -42,8 +43,7 @@ adding u·n randomly chosen samples"), so λ5 (u = 0.05, 100 samples, one step a
 about 20 days to fill. That growth is one of §5.4's reasons why λ5 is used more and more
 ("the median filter becomes more precise as the number of samples in the long-term memory
 map increases"). ``True`` lets a ray's first time step take up to ``n`` measurements, the way
-the toy example of §3.5 is initialized; on the lab replica λ5 is then full after day 1 and
-its usage does not rise.
+the toy example of §3.5 is initialized (λ5 is then full after the first day).
 
 ``min_update_dist_m`` / ``min_update_angle_rad`` (default 0: every scan, as in the paper)
 skip scans taken before the robot moved that far since the last processed scan: those get
@@ -166,7 +166,8 @@ def remap_degenerate(
 @dataclass(frozen=True)
 class DynamicMapConfig:
     """Parameters of the dynamic-map localizer and its static variants (lengths in m,
-    angles in rad). A scenario's ``params`` table gives them by name."""
+    angles in rad). A scenario's ``params`` table gives them by name. The measurements behind
+    the non-paper values: ``docs/tuning/localization.md``."""
 
     #: Static variants (§5.3): the map freezes after the end of this day ("a snapshot of the
     #: dynamic map after the first day").
@@ -196,40 +197,27 @@ class DynamicMapConfig:
     #: Floor of the perceptual model's sigma [m] (eq. 7) (1 cm, the URG-04LX's noise at 1 m;
     #: a ray learned from a few equal samples is not infinitely sharp).
     sigma_min_m: float = 0.01
-    #: ``C_O`` (§4.3: "a covariance matrix that was acquired experimentally"; ours is a
-    #: parameter): standard deviation in x and y ``odom_sigma_xy0_m + odom_k_xy (d + a/2)``
-    #: [m] for a step of ``d`` [m] and turn ``a`` [rad] between two scans (1 mm: a robot
-    #: that stands still does not move; was 1 cm, which is 29 % of a 3.5 cm step at 10 Hz) ...
+    #: ``C_O`` (§4.3: "a covariance matrix that was acquired experimentally"): standard
+    #: deviation in x and y ``odom_sigma_xy0_m + odom_k_xy (d + a/2)`` [m] for a step of ``d``
+    #: [m] and turn ``a`` [rad] between two scans; 1 mm: a robot that stands still does not
+    #: move ...
     odom_sigma_xy0_m: float = 0.001
-    #: ... with the rate acquired experimentally for the simulated robots (§4.3): their
-    #: odometry's error rates against the truth (:func:`.odometry_error_rates`, the 0.9
-    #: quantile over 10-scan windows; ``python benchmarks/odometry_rates.py``: 0.71-0.88 %
-    #: in translation and 3.4-5.7 % in heading on day 1 of every shipped tour scenario),
-    #: rounded. Eq. 9 takes the scan match whenever it lies within two standard deviations
-    #: of the odometry prediction, so ``C_O`` bounds how far a match may slide a scan along a
-    #: blank corridor, where the matches against λ1 (the robot's own recent scans) are
-    #: biased by about 1 % and the long-term maps learn what they pass. History (replays of
-    #: the untuned worlds' tours, RMSE): 1 cm + 10 % slid 1.5 m along the corridor world's
-    #: corridor (0.81 m); 2 % and 10 % (a wheel odometry's order, 2026-11-28) gave the
-    #: corridor 0.060 / 0.050 / 0.152 m on filter generators 1 / 2 / 3, these rates 0.050 /
-    #: 0.047 / 0.045 m; the office 0.029 / 0.029 m on generators 1 / 3 either way, the hall
-    #: 0.043 / 0.042 -> 0.044 / 0.047 m, the lab's five weeks 0.035 -> 0.034 m (README,
-    #: "Odometry covariance acquired experimentally").
+    #: ... with the rate [m per m (+ rad/2)] acquired experimentally for the simulated robots
+    #: (§4.3): their odometry's error rate against the truth (:func:`.odometry_error_rates`),
+    #: rounded. Eq. 9 takes the match whenever it lies within two standard deviations of the
+    #: prediction, so ``C_O`` bounds how far a match may slide a scan along a blank corridor.
     odom_k_xy: float = 0.008
     #: ... and in theta ``odom_sigma_th0_rad + odom_k_th (a + d/2)`` [rad] ...
     odom_sigma_th0_rad: float = 0.01
-    #: ... (the simulated robots' rate, as in x and y; was 10 %).
+    #: ... (the simulated robots' rate [rad per rad (+ m/2)], as in x and y).
     odom_k_th: float = 0.055
     #: ``C_O`` "acquired experimentally" (§4.3; :mod:`.odometry_calibration`) for a given
     #: map: when the map comes with the poses and odometry of every scan of its run
-    #: (:meth:`DynamicMapLocalizer.set_map_from_scans`, e.g. replay's
-    #: ``--map-from-log-poses``), ``odom_k_xy`` and ``odom_k_th`` are replaced by the
-    #: odometry's error rates against those poses (the ``σ0`` terms stay): a real robot's
-    #: odometry is its own (the FR079 log's Pioneer: 16 % and 18 %, where the simulated
-    #: robots have 0.8 % and 5 %). Not from the first-run SLAM's trajectory: its per-scan
-    #: jitter is larger than the simulated odometry's error (corridor world, windows of 10
-    #: scans: 4.3 % against 0.77 % from the truth), and ``C_O`` that wide let the corridor's
-    #: estimate slide (0.36 m mean on day 2). False: the rates above, always.
+    #: (:meth:`DynamicMapLocalizer.set_map_from_scans`, e.g. replay's ``--map-from-log-poses``),
+    #: ``odom_k_xy`` and ``odom_k_th`` are replaced by the odometry's error rates against those
+    #: poses (the ``σ0`` terms stay): a real robot's odometry is its own. Not from the
+    #: first-run SLAM's trajectory, whose per-scan jitter exceeds the simulated odometry's
+    #: error. False: the rates above, always.
     odom_calibration: bool = True
     #: ... over windows of this many scans (1 s at 10 Hz) ...
     odom_calibration_window: int = 10
@@ -237,44 +225,25 @@ class DynamicMapConfig:
     odom_calibration_quantile: float = 0.9
     #: First non-zero κ of eq. 9 (§4.3 step 4 doubles it from here).
     kappa0: float = 0.25
-    #: κ of the first match. B&D §4.3: 0 (the scan alone; "in most cases the result from
-    #: scan matching is so much more exact than odometry that incorporation of the prior
-    #: E_O would only worsen the result"), the default. > 0 is not B&D: the odometry prior
-    #: from the first match on, scan and odometry fused by their information, doubled from
-    #: there while the result leaves the two-sigma region. Why offered: along the corridor
-    #: world's blank corridor the scan alone is biased along it by ~1 % (which the long-term
-    #: maps then learn); with 1.0, replays of the tours (mean / max / RMSE, B&D's scheme ->
-    #: 1.0): corridor 0.136 / 0.32 / 0.152 -> 0.042 / 0.22 / 0.049 m, office 0.022 / 0.21 /
-    #: 0.029 -> 0.017 / 0.21 / 0.025 m, hall 0.037 / 0.22 / 0.042 -> 0.038 / 0.22 / 0.044 m,
-    #: the lab's five weeks 0.030 / 0.16 / 0.035 -> 0.029 / 0.16 / 0.033 m (README, "Worlds
-    #: nobody tuned for").
+    #: κ of the first match. B&D §4.3: 0, the default (the scan alone; "in most cases the
+    #: result from scan matching is so much more exact than odometry that incorporation of
+    #: the prior E_O would only worsen the result"). > 0 is not B&D: the odometry prior from
+    #: the first match on, doubled from there while the result leaves the two-sigma region,
+    #: against the scan's bias along a blank corridor.
     kappa_first: float = 0.0
     #: Degenerate directions (not B&D; 0 = off, the paper): where the scan term of the
     #: accepted match constrains the position along a direction only to a standard deviation
     #: over this [m] (the heading marginalized out, :func:`worst_position_sigma`; e.g. along a
     #: corridor whose walls are blank), the match's move along that direction is dropped and
-    #: the odometry prediction kept there (Zhang, Kaess & Singh 2016, "On degeneracy of
-    #: optimization-based state estimation problems": solution remapping); in the other
-    #: directions the scan alone decides, as in B&D. Why offered: see ``kappa_first``.
+    #: the odometry prediction kept there (Zhang, Kaess & Singh 2016's solution remapping).
     degenerate_sigma_m: float = 0.0
-    #: Odometry whose heading slipped (not B&D; 0 = off, the paper's scheme): when the
-    #: first match lies outside the two-sigma region of ``C_O`` and fits the current map
-    #: this many times better (:func:`fit_cost`) than the last match eq. 9's doubling κ
-    #: forced toward the prediction, the prediction takes the first match's heading and
-    #: steps 3-4 of §4.3 run again from it: the heading from the scan, the position still
-    #: bound by the odometry. Why: B&D force the match back because the scan "could converge
-    #: to a wrong solution" with a well-conditioned covariance; a pose forced toward a
-    #: heading that slipped beyond ``C_O`` (one wheel on a door sill) fits visibly worse,
-    #: while the scan's heading is what scan matching gets right even where its position is
-    #: weak (along a corridor). Measured on FR079 (raw odometry, map from the corrected
-    #: poses, 5 filter generators x 2 passes): at a door sill the odometry turns 0.02 rad a
-    #: scan where the robot turns 0.09 rad, eq. 9 followed it and the estimate was lost for
-    #: the log's last 280 scans in every pass (mean 0.17-0.21 m, max 5.2-5.8 m); with 1.25
-    #: every pass holds (mean 0.036-0.044 m, max 0.18-0.46 m), and so with 1.1, 1.5 and 2.0
-    #: (generators 1 and 5). Taking the whole first match instead (heading and position)
-    #: held FR079 too but let the corridor world's estimate slide (ATE 0.05 -> 0.61 m): its
-    #: first matches that fit better disagree with the odometry by 0.06 m in position and
-    #: 0.002 rad in heading (medians), FR079's by 0.07 rad in heading.
+    #: Odometry whose heading slipped (not B&D; 0 = off, the paper's scheme): when the first
+    #: match lies outside the two-sigma region of ``C_O`` and fits the current map this many
+    #: times better (:func:`fit_cost`) than the last match eq. 9's doubling κ forced toward
+    #: the prediction, the prediction takes the first match's heading and steps 3-4 of §4.3
+    #: run again from it. A pose forced toward a heading that slipped (one wheel on a door
+    #: sill) fits visibly worse, while the heading is what scan matching gets right even where
+    #: its position is weak; 1.25 held the real log it was measured on.
     slip_fit_ratio: float = 1.25
     #: At most this many doublings of κ; if none brings the result within two standard
     #: deviations of the odometry prediction, the prediction is used (0.25 * 2^12 = 1024).
@@ -300,16 +269,14 @@ class DynamicMapConfig:
     min_update_angle_rad: float = 0.0
     #: λ3-λ5 learn this many random scans of each of the day's runs (0: all).
     ltm_day_scans_per_run: int = 1500
-    #: Keep a snapshot of λ2-λ5 after each day's learning (for figures like B&D Fig. 9;
-    #: ~0.5 MB a day in the lab).
+    #: Keep a snapshot of λ2-λ5 after each day's learning (for figures like B&D Fig. 9; the
+    #: uint16 medians of 3,960 rays: about 8 kB per local map and day).
     day_snapshots: bool = True
     #: Long-term anchor (not in B&D; 0 = off, the paper): each scan is also matched against
     #: a current map of λ2–λ5 alone, and when that match pins the position (worst-direction
     #: sigma of its scan term at most ``ltm_anchor_max_sigma_m``) and lies more than this [m]
-    #: from the match with λ1, its pose is taken. λ1 learns the robot's own scans at its own
-    #: estimates, so along a corridor whose walls are blank nothing else holds the estimate
-    #: and it slides (measured on the corridor world: 1.5 m in one run), and the slid poses
-    #: then train λ2–λ5; the anchor bounds the slide by this tolerance.
+    #: from the match with λ1, its pose is taken: λ1 learns the robot's own scans at its own
+    #: estimates, so along a blank corridor nothing else holds the estimate from sliding.
     ltm_anchor_tol_m: float = 0.0
     #: ... (the long-term match must be this good [m] to override; see above).
     ltm_anchor_max_sigma_m: float = 0.05

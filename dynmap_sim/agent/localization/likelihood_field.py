@@ -17,7 +17,8 @@ Two ways to combine beams, as in nav2's AMCL:
   case all beams count.
 
 Beams are subsampled like AMCL: ``max_beams`` evenly spaced; readings that are not finite or
-at/over ``range_max`` are ignored. Everything is vectorized over particles x beams.
+at/over ``range_max`` are ignored. The end points are projected and looked up in one compiled
+loop over particles x beams (:func:`endpoint_values`).
 """
 
 from __future__ import annotations
@@ -28,8 +29,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from dynmap_sim.agent.grid import OccupancyGrid
-from dynmap_sim.agent.localization import mcl_numba
-from dynmap_sim.jit import kernel_backend
+from dynmap_sim.jit import compiled
 
 FloatArray = NDArray[np.float64]
 
@@ -66,50 +66,41 @@ def _endpoint_terms(
 ) -> tuple[NDArray[np.float32], ...]:
     """The per-particle and per-beam float32 terms of the end points [cells]: laser origins
     ``lx, ly`` relative to the grid origin, ``cos, sin`` of the headings, beam offsets
-    ``bx, by`` in the laser frame (:func:`endpoint_cells`)."""
+    ``bx, by`` in the laser frame (:func:`_endpoint_values`)."""
     mx, my, myaw = (float(v) for v in mount_pose)
     th = particles[:, 2]
     c64, s64 = np.cos(th), np.sin(th)
     inv_res = 1.0 / grid.resolution_m
-    if len(particles) == 1:  # one pose (a diagnostic): the same float64 operations in floats
+    ox, oy = float(grid.origin_xy_m[0]), float(grid.origin_xy_m[1])
+    if len(particles) == 1:  # one pose (a diagnostic, every scan): the same operations in floats
         x, y = float(particles[0, 0]), float(particles[0, 1])
         c1, s1 = float(c64[0]), float(s64[0])
-        ox, oy = float(grid.origin_xy_m[0]), float(grid.origin_xy_m[1])
         lx = np.array([(x + c1 * mx - s1 * my - ox) * inv_res], dtype=np.float32)
         ly = np.array([(y + s1 * mx + c1 * my - oy) * inv_res], dtype=np.float32)
     else:
-        lx = ((particles[:, 0] + c64 * mx - s64 * my - grid.origin_xy_m[0]) * inv_res).astype(
-            np.float32
-        )
-        ly = ((particles[:, 1] + s64 * mx + c64 * my - grid.origin_xy_m[1]) * inv_res).astype(
-            np.float32
-        )
+        lx = ((particles[:, 0] + c64 * mx - s64 * my - ox) * inv_res).astype(np.float32)
+        ly = ((particles[:, 1] + s64 * mx + c64 * my - oy) * inv_res).astype(np.float32)
     bx = (ranges_m * np.cos(angles_rad + myaw) * inv_res).astype(np.float32)
     by = (ranges_m * np.sin(angles_rad + myaw) * inv_res).astype(np.float32)
     return lx, ly, c64.astype(np.float32), s64.astype(np.float32), bx, by
 
 
-def endpoint_cells(
-    particles: FloatArray,
-    ranges_m: FloatArray,
-    angles_rad: FloatArray,
-    mount_pose: ArrayLike,
-    grid: OccupancyGrid,
-) -> NDArray[np.intp]:
-    """Flat cell index ``(P, B)`` of each beam's end point; ``H * W`` (one past the last
-    cell) where the end point falls outside the grid. Computed in float32 for speed."""
-    lx, ly, c, s, bx, by = _endpoint_terms(particles, ranges_m, angles_rad, mount_pose, grid)
-    hx = c[:, None] * bx[None, :] - s[:, None] * by[None, :]
-    hx += lx[:, None]
-    hy = s[:, None] * bx[None, :] + c[:, None] * by[None, :]
-    hy += ly[:, None]
-    h, w = grid.shape
-    ix = np.floor(hx, out=hx).astype(np.intp)
-    iy = np.floor(hy, out=hy).astype(np.intp)
-    inside = (ix >= 0) & (ix < w) & (iy >= 0) & (iy < h)
-    flat = iy * w + ix
-    flat[~inside] = h * w
-    return flat
+@compiled
+def _endpoint_values(lx, ly, c, s, bx, by, values, h, w, out):  # type: ignore[no-untyped-def]
+    """``out[i, j]``: ``values[iy * w + ix]`` at the cell of particle ``i``'s beam ``j``, whose
+    end point is ``(c_i bx_j - s_i by_j + lx_i, s_i bx_j + c_i by_j + ly_i)`` [cells] (all
+    float32), or ``values[h * w]`` outside the grid (*Probabilistic Robotics* Table 6.3,
+    line 5)."""
+    outside = values[h * w]
+    for i in range(lx.shape[0]):
+        ci, si, lxi, lyi = c[i], s[i], lx[i], ly[i]
+        for j in range(bx.shape[0]):
+            fx = np.floor(ci * bx[j] - si * by[j] + lxi)
+            fy = np.floor(si * bx[j] + ci * by[j] + lyi)
+            if 0 <= fx < w and 0 <= fy < h:
+                out[i, j] = values[int(fy) * w + int(fx)]
+            else:
+                out[i, j] = outside
 
 
 def endpoint_values(
@@ -119,24 +110,22 @@ def endpoint_values(
     angles_rad: FloatArray,
     mount_pose: ArrayLike,
     grid: OccupancyGrid,
-    backend: str = "auto",
 ) -> NDArray[np.generic]:
     """``values`` ``(H * W + 1,)`` (a :class:`LikelihoodTable`'s, the last entry for outside
-    the grid) at each beam's end point ``(P, B)``: ``values[endpoint_cells(...)]``.
-    ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): :mod:`.mcl_numba`'s kernel, which
-    gathers as it projects (the same values), or numpy."""
-    kernel = kernel_backend(backend)
-    if kernel:
-        terms = _endpoint_terms(particles, ranges_m, angles_rad, mount_pose, grid)
-        return mcl_numba.endpoint_values(values, terms, grid.shape, python=kernel == "python")
-    return np.take(values, endpoint_cells(particles, ranges_m, angles_rad, mount_pose, grid))
+    the grid) at each beam's end point ``(P, B)``, in ``values``' dtype; the end points are
+    computed in float32 for speed."""
+    terms = _endpoint_terms(particles, ranges_m, angles_rad, mount_pose, grid)
+    h, w = grid.shape
+    out = np.empty((len(particles), len(ranges_m)), dtype=values.dtype)
+    _endpoint_values(*terms, values, int(h), int(w), out)
+    return out
 
 
 class LikelihoodTable:
     """Per-cell beam likelihood tables for one grid and one parameter set (AMCL precomputes
     the distance map; we also precompute ``p`` and ``log p`` so the hot loop is a gather).
     The last entry is the value outside the grid (distance ``max_dist_m``): ``dist`` [m]
-    float32, indexed by :func:`endpoint_cells`."""
+    float32, read by :func:`endpoint_values`."""
 
     def __init__(
         self,
@@ -185,15 +174,9 @@ def valid_beams(ranges_m: ArrayLike, range_max_m: float) -> NDArray[np.bool_]:
     return np.isfinite(r) & (r < range_max_m) & (r > 0)
 
 
-def likelihood_field_weights(d: ArrayLike, params: LikelihoodFieldParams) -> FloatArray:
-    """AMCL ``likelihood_field``: ``w = 1 + sum_k p_k^3`` per particle ``(P,)``."""
-    p = beam_likelihoods(d, params)
-    return 1.0 + np.sum(p * p * p, axis=1)
-
-
 def likelihood_field_weights_beams(p: NDArray[np.float32]) -> FloatArray:
-    """:func:`likelihood_field_weights` from the per-beam ``p`` ``(P, B)`` of the end-point
-    cells (``np.take(table.p, cells)``, precomputed table)."""
+    """AMCL ``likelihood_field``: ``w = 1 + sum_k p_k^3`` per particle ``(P,)`` from the
+    per-beam ``p`` ``(P, B)`` of the end points (:func:`endpoint_values` of ``table.p``)."""
     return 1.0 + np.sum((p * p * p).astype(np.float64), axis=1)
 
 
@@ -203,8 +186,9 @@ def likelihood_field_prob_beams(
     params: LikelihoodFieldParams,
     scored: NDArray[np.float32] | None = None,
 ) -> tuple[FloatArray, NDArray[np.bool_]]:
-    """:func:`likelihood_field_prob_logweights` from the per-beam ``log p`` ``(P, B)`` of the
-    end-point cells (``np.take(table.logp, cells)``, precomputed table). ``scored``: the
+    """AMCL ``likelihood_field_prob``: ``log w = sum_k log p_k`` per particle ``(P,)`` over
+    the beams kept, and the mask ``(B,)`` of those beams, from the per-beam ``log p``
+    ``(P, B)`` of the end points (:func:`endpoint_values` of ``table.logp``). ``scored``: the
     ``(P, B)`` values to sum instead (e.g. see-through readings rescored,
     :mod:`.see_through`); beam skipping still decides on ``logp``.
 
@@ -220,23 +204,3 @@ def likelihood_field_prob_beams(
     values = logp if scored is None else scored
     kept = values if use.all() else values[:, use]
     return kept.sum(axis=1, dtype=np.float64), use
-
-
-def likelihood_field_prob_logweights(
-    d: ArrayLike, params: LikelihoodFieldParams
-) -> tuple[FloatArray, NDArray[np.bool_]]:
-    """AMCL ``likelihood_field_prob``: ``log w = sum_k log p_k`` over the beams kept.
-
-    Returns the per-particle log weights ``(P,)`` and the mask ``(B,)`` of beams used.
-    """
-    d = np.asarray(d)
-    logp = np.log(beam_likelihoods(d, params))
-    n_beams = d.shape[1]
-    use = np.ones(n_beams, dtype=bool)
-    if params.do_beamskip and n_beams > 0:
-        frac_close = np.mean(d < params.beam_skip_distance, axis=0)
-        use = frac_close > params.beam_skip_threshold
-        n_skipped = int(np.sum(~use))
-        if n_skipped >= n_beams * params.beam_skip_error_threshold:
-            use[:] = True
-    return logp[:, use].sum(axis=1), use

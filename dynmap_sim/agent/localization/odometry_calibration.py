@@ -14,18 +14,13 @@ unit of motion, as ``C_O`` grows:
 ``quantile`` of each over the windows is the rate ``k`` of ``σ = σ0 + k (d + a/2)``.
 
 Choices the paper leaves open (parameters of the callers): a window of 10 scans (1 s at the
-URG's 10 Hz, 2 s on the FR079 log's 5 Hz), long enough that the trajectory's own per-scan
-noise (a corrected log's few centimetres) does not dominate the comparison, short enough
-that the odometry's systematic drift does not; the 0.9 quantile, so that eq. 9's two-sigma
-region holds a correct match in most windows while a wheel's slip on a few does not widen
-it; windows with less motion than ``min_motion`` [m + rad] are left out (their ratios divide
-by nearly nothing). Measured (2026-11-28, ``python benchmarks/odometry_rates.py``): the
-simulated robots against the truth 0.71-0.88 % in translation and 3.4-5.7 % in heading; the
-Pioneer of the FR079 log against its corrected poses 16.0 % and 18.2 %. The hand-set
-``C_O`` before (2 % and 10 %) was too wide for the first in the corridor world and too
-narrow for the second, whose correct matches eq. 9 then pulled back towards the slipping
-odometry. A loop-closed first-run SLAM's trajectory is not precise enough for the simulated
-robots (see ``DynamicMapConfig.odom_calibration``).
+URG's 10 Hz), long enough that the trajectory's own per-scan noise (a corrected log's few
+centimetres) does not dominate the comparison, short enough that the odometry's systematic
+drift does not; the 0.9 quantile, so that eq. 9's two-sigma region holds a correct match in
+most windows while a wheel's slip on a few does not widen it; windows with less motion than
+``min_motion`` [m + rad] are left out (their ratios divide by nearly nothing). The rates it
+gives for the simulated robots and for a real log: ``docs/tuning/localization.md``
+(``python benchmarks/odometry_rates.py``).
 """
 
 from __future__ import annotations

@@ -14,26 +14,23 @@ Table 8.4 "KLD_Sampling_MCL"; Fox 2003) exactly as nav2_amcl composes it:
   ``max(0, 1 - w_fast / w_slow)``, after which nav2's ``pf.c`` resets both averages
   (``recovery_reset``; the ``tuned`` config keeps them, as Table 8.3 does, so that a filter
   that converged to a wrong place after an injection keeps injecting);
-* ``tuned`` only: the recovery rule is made robust to a changing world. On the apartment's
-  week 2 (furniture moved daily) Table 8.3 as nav2 implements it fired on every drop of the
-  raw 60-beam likelihood product and the estimate jumped up to 5 m away for seconds. Now
-  (a) w_slow/w_fast average the per-beam (geometric-mean) likelihood over all valid beams,
-  (b) injection starts only when ``w_fast`` stays below ``recovery_ratio_threshold`` of
-  ``w_ref = max(w_slow, exp(recovery_floor_loglik))`` for ``recovery_min_updates``
-  consecutive updates (a moved chair lowers the likelihood a little, a kidnapping a lot;
-  the floor lets a filter that converged wrongly right after global initialization
-  recover), (c) at most ``recovery_max_fraction`` of the draws are random poses, so a
-  large unmapped obstacle cannot wipe out the correct cluster, and (d) readings much
+* ``tuned`` only: the recovery rule is made robust to a changing world (Table 8.3 as nav2
+  implements it fires on every drop of the raw 60-beam likelihood product, e.g. when
+  furniture moved): (a) w_slow/w_fast average the per-beam (geometric-mean) likelihood over
+  all valid beams, (b) injection starts only when ``w_fast`` stays below
+  ``recovery_ratio_threshold`` of ``w_ref = max(w_slow, exp(recovery_floor_loglik))`` for
+  ``recovery_min_updates`` consecutive updates (a moved chair lowers the likelihood a little,
+  a kidnapping a lot), (c) at most ``recovery_max_fraction`` of the draws are random poses,
+  so a large unmapped obstacle cannot wipe out the correct cluster, and (d) readings much
   shorter than the map predicts at the mean particle (people, moved furniture in front of
   mapped walls) are left out of the averages (``recovery_distance_filter_m``, Fox et al.
   1999's distance filter, :mod:`.distance_filter`), unless that would leave out more than
   half of them. See :class:`MCLConfig`;
 * ``tuned`` only: **local resetting first** (Lenser & Veloso 2000's sensor resetting, drawn
   around the estimate): when this update's per-beam likelihood falls below half of
-  ``w_ref``, up to 30 % of the draws are poses near the estimate, for at most 10 updates
-  and only before the global gate above counts. It repairs the odometry glitches of real
-  logs (a missed 10-16 degree turn on FR079) that otherwise drift the cloud off, open the
-  global gate and let a random pose 26-35 m away win for seconds
+  ``w_ref``, up to 30 % of the draws are poses near the estimate, for at most 10 updates and
+  only before the global gate above counts, to repair an odometry glitch (a missed turn on a
+  real log) before it drifts the cloud off and opens the global gate
   (``recovery_local_ratio``);
 * KLD-sampling picks the number of particles (0.5 m x 0.5 m x 10 degree bins,
   :mod:`.kld_sampling`), low-variance resampling draws them (:mod:`.resampling`);
@@ -56,12 +53,9 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import OCCUPIED, OccupancyGrid
-from dynmap_sim.agent.localization import mcl_numba
 from dynmap_sim.agent.localization.distance_filter import expected_ranges, short_readings
 from dynmap_sim.agent.localization.kld_sampling import (
     ONE_BIN_RULES,
@@ -80,13 +74,13 @@ from dynmap_sim.agent.localization.likelihood_field import (
     valid_beams,
 )
 from dynmap_sim.agent.localization.motion_model import sample_odometry_motion
+from dynmap_sim.agent.localization.particle_filter_kernels import bin_clusters
 from dynmap_sim.agent.localization.resampling import LowVarianceDraws, low_variance_resample
 from dynmap_sim.agent.localization.see_through import see_through_logp, wall_depths
 from dynmap_sim.agent.localization.verified_recovery import VerifiedRecovery
 from dynmap_sim.agent.localizer import Localizer, MapUser, register_localizer
 from dynmap_sim.agent.maps.map_source import MapSource, PriorWallsMap, make_map_source
 from dynmap_sim.agent.params import check_fields, coerce_fields
-from dynmap_sim.jit import kernel_backend
 from dynmap_sim.types import Diagnostic, LaserSpec, Odometry, PoseEstimate, Prior, Scan
 
 FloatArray = NDArray[np.float64]
@@ -106,219 +100,161 @@ MAX_PARTICLES = 1_000_000
 
 @dataclass(frozen=True)
 class MCLConfig:
-    """AMCL parameters (nav2 names and units)."""
+    """AMCL's parameters with nav2's names, units and defaults (``nav2_params.yaml``,
+    ``amcl_node.cpp``), and the rules the ``tuned`` configs add (``recovery_*`` beyond nav2's
+    two alphas, ``see_through_*``, ``distance_filter_weights``), each off by default so that
+    the defaults are nav2's AMCL. The measurements behind the tuned values:
+    ``docs/tuning/localization.md``."""
 
+    #: Odometry model (:mod:`.motion_model`): rotation noise from rotation (squared
+    #: [rad/rad]); nav2's 0.2.
     alpha1: float = 0.2
+    #: ... rotation noise from translation (squared [rad/m]); nav2's 0.2.
     alpha2: float = 0.2
+    #: ... translation noise from translation (squared [m/m]); nav2's 0.2.
     alpha3: float = 0.2
+    #: ... translation noise from rotation (squared [m/rad]); nav2's 0.2.
     alpha4: float = 0.2
-    laser_model_type: str = "likelihood_field"  # or "likelihood_field_prob"
+    #: ``likelihood_field`` (AMCL's ``1 + sum p^3``) or ``likelihood_field_prob`` (the product
+    #: of the beams, with beam skipping); nav2's default is the first.
+    laser_model_type: str = "likelihood_field"
+    #: Beams per update, evenly spaced over the scan (:func:`.select_beams`); nav2's 60.
     max_beams: int = 60
+    #: Distance [m] at which the likelihood field is clipped (the map's ``max_dist_m``); nav2's.
     laser_likelihood_max_dist: float = 2.0
+    #: Readings at or beyond this [m] are ignored (<= 0: the sensor's range); nav2's 100.
     laser_max_range: float = 100.0
+    #: Readings below this [m] are ignored (<= 0: the sensor's minimum); nav2's -1.
     laser_min_range: float = -1.0
+    #: Weight of the Gaussian ("hit") part of the beam model; nav2's 0.5.
     z_hit: float = 0.5
+    #: Weight of the uniform ("random") part, a density of ``z_rand / range_max``; nav2's 0.5.
     z_rand: float = 0.5
+    #: Standard deviation [m] of the hit part; nav2's 0.2.
     sigma_hit: float = 0.2
+    #: Beam skipping (``likelihood_field_prob``): ignore the beams that few particles see near
+    #: an obstacle (an unmapped object); off in nav2.
     do_beamskip: bool = False
+    #: A particle sees a beam near an obstacle within this distance [m]; nav2's 0.5.
     beam_skip_distance: float = 0.5
+    #: A beam is skipped when at most this share of the particles sees it near one; nav2's 0.3.
     beam_skip_threshold: float = 0.3
+    #: ... unless this share of the beams would be skipped (the filter has likely diverged:
+    #: all beams count); nav2's 0.9.
     beam_skip_error_threshold: float = 0.9
+    #: Fewest particles KLD-sampling keeps; nav2's 500.
     min_particles: int = 500
+    #: Most particles KLD-sampling keeps (at most :data:`MAX_PARTICLES`); nav2's 2000.
     max_particles: int = 2000
+    #: KLD-sampling's bound on the K-L divergence (:mod:`.kld_sampling`); nav2's 0.05.
     pf_err: float = 0.05
+    #: KLD-sampling's normal quantile ``z``; nav2's 0.99, which nav2 passes as the quantile
+    #: itself (not a probability: :mod:`.kld_sampling`).
     pf_z: float = 0.99
+    #: Side [m] of the KLD histogram's (and the clusters') bins; AMCL's 0.5 m.
     kld_cell_m: float = 0.5
+    #: Heading width [rad] of those bins; AMCL's 10 degrees.
     kld_angle_rad: float = float(np.deg2rad(10.0))
-    #: Particles when every draw falls into one KLD bin: ``max`` (nav2's
-    #: ``pf_resample_limit``) or ``min`` (Fox 2003 Table 1, *Probabilistic Robotics* Table
-    #: 8.4: the bound counts from two bins on); :mod:`.kld_sampling`. With ``max`` a cloud
-    #: narrower than a bin gets ``max_particles`` or ``min_particles`` depending on whether
-    #: it straddles a bin border: adaptive-memory's filter on the static points (``tuned``,
-    #: 8000 at most) had 41 of 282 updates at 8000, the rest at 501-927, and those 41 took
-    #: 70 % of its sensor-update time (benchmarks/bench_adaptive_memory.py). ``min`` there,
-    #: seeds 0/1/2: 419/419/392 -> 543/542/563 scans/s of CPU, mean error 0.039/0.035/0.037
-    #: -> 0.040/0.033/0.035 m, max 0.063/0.059/0.072 -> 0.082/0.056/0.063 m; apartment-28d-hw
-    #: days 1-3 with adaptive-memory (steering) on ``min``: its mean error a day
-    #: 0.038/0.040/0.039 -> 0.038/0.041/0.040 m, never lost (the route changes with it).
+    #: Particles when every draw falls into one KLD bin: ``max`` (nav2's ``pf_resample_limit``)
+    #: or ``min`` (Fox 2003, *Probabilistic Robotics* Table 8.4: the bound counts from two
+    #: bins on); :mod:`.kld_sampling`.
     kld_one_bin: str = "max"
+    #: Smoothing of the slow average ``w_slow`` of the mean weight (Table 8.3 line 10); 0 with
+    #: ``recovery_alpha_fast`` 0 is no recovery, nav2's default.
     recovery_alpha_slow: float = 0.0
+    #: Smoothing of the fast average ``w_fast`` (Table 8.3 line 11); nav2's 0.
     recovery_alpha_fast: float = 0.0
-    #: ``pf.c`` resets w_slow and w_fast to 0 after injecting random poses; Table 8.3 does not.
+    #: Reset ``w_slow`` and ``w_fast`` to 0 after injecting random poses, as nav2's ``pf.c``
+    #: does (Table 8.3 does not).
     recovery_reset: bool = True
-    #: ``pf.c`` divides the sum of ``w_prev * p`` (already normalized) by the particle count
-    #: again, so its ``w_avg`` scales with 1/N and jumps when KLD changes N; Table 8.3's
-    #: average of the measurement likelihood does not (``False``).
+    #: Divide the (already normalized) weighted likelihood by the particle count again, as
+    #: ``pf.c`` does, so that ``w_avg`` scales with 1/N; False: Table 8.3's average.
     recovery_w_avg_per_sample: bool = True
-    #: Feed w_slow/w_fast the weighted mean likelihood **per beam** (geometric mean over all
-    #: valid beams, ``(sum_i w_i prod_k p_ik)**(1/n_beams)``, beam skipping not applied).
-    #: nav2 (``False``) averages the raw product of 60 beams, whose scale swings by orders of
-    #: magnitude from scan to scan and whenever beam skipping drops a few beams, so
-    #: ``w_fast/w_slow`` is often tiny while tracking well and a few moved pieces of furniture
-    #: trigger injection. Skipped beams still count here: skipping is meant to ignore unmapped
-    #: obstacles in the *weights*, but it also hides the disagreement of a lost filter.
+    #: Average the per-beam (geometric mean over all valid beams, beam skipping not applied)
+    #: likelihood instead of nav2's raw product of the beams, whose scale swings by orders of
+    #: magnitude from scan to scan; off in nav2.
     recovery_w_avg_per_beam: bool = False
-    #: Inject only while ``w_fast / w_ref`` is below this ratio (nav2: 1.0, i.e. whenever it
-    #: is below 1); the probability stays ``1 - w_fast / w_ref`` (Table 8.3 line 13).
+    #: Inject only while ``w_fast / w_ref`` is below this ratio; the probability stays
+    #: ``1 - w_fast / w_ref`` (Table 8.3 line 13); nav2's 1 (whenever it is below 1).
     recovery_ratio_threshold: float = 1.0
-    #: ``w_ref = max(w_slow, exp(recovery_floor_loglik))`` (per-beam mode only): a filter that
-    #: converged to the wrong place right after global initialization seeds w_slow at the
-    #: wrong place's low level and would never inject; a correctly localized filter's
-    #: per-beam likelihood is at least this high (nav2: -inf, no floor).
+    #: ``w_ref = max(w_slow, exp(recovery_floor_loglik))`` [log per beam] (per-beam mode): lets
+    #: a filter that converged wrongly right after global initialization, whose ``w_slow``
+    #: starts at the wrong place's low level, inject; nav2: -inf, no floor.
     recovery_floor_loglik: float = float("-inf")
-    #: ... and only after that many consecutive filter updates below it (nav2: 1).
+    #: ... and only after this many consecutive filter updates below it; nav2's 1.
     recovery_min_updates: int = 1
-    #: Cap on the injection probability (nav2: 1.0). Table 8.3 replaces up to all particles
-    #: at once; when a large unmapped obstacle (the apartment's day-9 board) drags the
-    #: likelihood down, that wipes out the (correct) cluster. A cap keeps most of it while
-    #: a few thousand random poses per update still find a kidnapped robot.
+    #: Cap on the injection probability, so that a large unmapped obstacle cannot replace the
+    #: correct cluster at once; nav2's 1 (no cap).
     recovery_max_fraction: float = 1.0
-    #: Leave readings that are more than this much shorter than the map predicts at the mean
-    #: particle out of the recovery average (:mod:`.distance_filter`, Fox et al. 1999); 0 off
-    #: (nav2). People and moved furniture then no longer look like a kidnapping, so the
-    #: threshold can be higher and a real kidnapping is found sooner (apartment: median
-    #: 6.3 s, max 8.4 s, against 8.0 s / 12.5 s without the filter at threshold 0.3).
+    #: Readings more than this [m] shorter than the map predicts at the mean particle are left
+    #: out of the recovery average (Fox et al. 1999's distance filter, :mod:`.distance_filter`),
+    #: so that people and moved furniture do not look like a kidnapping; 0 off (nav2).
     recovery_distance_filter_m: float = 0.0
-    #: The distance filter applies only when it leaves at least this share of the valid
-    #: beams (``recovery_distance_filter_m`` > 0).
+    #: The distance filter applies only when it leaves at least this share of the valid beams.
     recovery_min_beam_share: float = 0.5
-    #: ... and a scan that leaves fewer: ``all-beams`` averages all valid beams (a scan mostly
-    #: shorter than the map predicts, e.g. after a kidnapping into a smaller room, says "wrong pose"
-    #: as loudly as "crowd"); ``hold`` leaves the recovery averages as they are for this update
-    #: while the gate is not counting (``n_low_updates == 0``: such a scan says nothing about the
-    #: pose, Fox et al. 1999's short readings are explained by unmapped objects and the beams that
-    #: could tell a wrong pose are too few) and averages all beams once it counts (the fit had
-    #: fallen before: in the apartment's kidnapping trials a robot carried into a smaller room is
-    #: first seen through the old place's walls, then the cloud reaches open space where every
-    #: reading is short; holding there kept it lost for 35 s, counting found it in 8 s). Why
-    #: ``hold`` exists: in the hall world (tuned for nowhere) the evening crowd and the unmapped
-    #: exhibition panels make 65-75 % of the readings short at the *true* pose for 15-20 s,
-    #: ``all-beams`` then feeds -2 to -3.5 per beam into ``w_fast``, the gate opens and random poses
-    #: win 6-11 m away, while at that pose almost no reading is longer than the map allows (0-8 %:
-    #: nothing contradicts it).
+    #: A scan the distance filter leaves fewer beams of: ``all-beams`` averages all valid
+    #: beams; ``hold`` leaves the averages as they are while the gate is not counting
+    #: (``n_low_updates == 0``: such a scan says nothing about the pose) and averages all beams
+    #: once it counts.
     recovery_occluded: str = "all-beams"
-    #: Negative information for the global recovery's random poses (0 off, as nav2): a random
-    #: pose at which more than this share of the scan's valid readings end more than
-    #: ``recovery_through_margin_m`` *beyond* the first occupied cell of the map along the
-    #: beam is not injected (the draw keeps its resampled particle). Fox et al. 1999 (§4.2;
-    #: :mod:`.distance_filter`): a reading shorter than the map predicts may be an unmapped
-    #: object, one longer can only be a wrong pose or a removed object. The likelihood field
-    #: scores end points only, so a pose whose beams pass through walls can still fit: in the
-    #: lab's stale hallway (day 20 run 2, numba install) random poses won 6-20 m away at which
-    #: 73-85 % of the readings passed through mapped walls, against 18-25 % at the true pose.
+    #: A global random pose at which more than this share of the last scan's readings end
+    #: ``recovery_through_margin_m`` beyond the map's first occupied cell along the beam (only
+    #: a wrong pose or a removed object explains them, Fox et al. 1999 §4.2) is not injected;
+    #: 0 off (nav2).
     recovery_through_max_share: float = 0.0
-    #: How far [m] beyond the map's first occupied cell a reading must end to count as passing
-    #: through a wall (:attr:`recovery_through_max_share`; the distance filter's 0.3 m: a few
-    #: cells of map error and the grid's half-cell ray steps stay below it).
+    #: How far [m] beyond the map's first occupied cell a reading must end to pass through a
+    #: wall: the distance filter's 0.3 m, above a few cells of map error and the half-cell
+    #: ray steps.
     recovery_through_margin_m: float = 0.3
-    #: **Local resetting first** (per-beam mode only; 0 off, as nav2). Sensor resetting
-    #: localization (Lenser & Veloso 2000, "Sensor resetting localization for poorly
-    #: modelled mobile robots", ICRA) replaces a share ``1 - P_avg / threshold`` of the
-    #: samples at once when the *current* average likelihood falls below a threshold; here
-    #: the share is ``1 - w_last / (recovery_local_ratio * w_ref)``, ``w_last`` this update's
-    #: per-beam average (unsmoothed, unlike ``w_fast``), and the new poses are drawn around
-    #: the current estimate (``recovery_local_sigma_xy`` / ``_theta``) instead of uniformly.
-    #: Why: on real logs (FR079, raw wheel odometry) the odometry now and then misses a
-    #: 10-16 degree turn or adds 8 cm in one step. The tracked cloud, far narrower than such
-    #: an error, then drifts 1 m off within a few scans, its fit drops, Table 8.3's global
-    #: poses are injected and one of them 26-35 m away wins for seconds. Redrawing near the
-    #: estimate repairs the glitch before the global gate opens (Gutmann & Fox 2002 found
-    #: resetting best for small errors, w_slow/w_fast for kidnapping: both are kept, local
-    #: first). Local draws stop once the global gate counts (``n_low_updates > 0``) and
-    #: after ``recovery_local_max_updates`` resets without the fit getting back to ``w_ref``:
-    #: after a kidnapping local poses only fit the wrong place a little better, which would
-    #: keep ``w_fast`` above the global threshold and delay the global recovery.
+    #: Local resetting (Lenser & Veloso 2000's sensor resetting, drawn around the estimate;
+    #: per-beam mode): a share ``1 - w_last / (ratio * w_ref)`` of the draws are poses near the
+    #: estimate (``w_last``: this update's per-beam average), to repair an odometry glitch
+    #: before the global gate opens; stopped while the gate counts. 0 off (nav2).
     recovery_local_ratio: float = 0.0
-    #: Cap on the share of local draws per update (:attr:`recovery_local_ratio`).
+    #: Cap on the share of local draws per update.
     recovery_local_max_fraction: float = 0.0
     #: Standard deviation [m] of the local draws around the estimate in x and y.
     recovery_local_sigma_xy: float = 0.5
     #: Standard deviation [rad] of the local draws around the estimate's heading.
     recovery_local_sigma_theta: float = 0.3
-    #: Local resets allowed before the fit is back to ``w_ref`` (then global recovery only).
+    #: Local resets allowed before the fit is back at ``w_ref`` (then global recovery only):
+    #: after a kidnapping, local poses only fit the wrong place a little better.
     recovery_local_max_updates: int = 10
     #: Where the global recovery's random poses go: ``inject`` (Table 8.3 line 13, nav2's
-    #: ``pf.c``): into the one particle set, whose heaviest cluster is the estimate; or
-    #: ``verify``: into a second particle set, the *challenger*, a global localization filter
-    #: of its own (uniform start, Table 8.3 inside it) that runs beside the tracked set while
-    #: the gate is open and replaces it only when it is verified: its scan fits at least
-    #: ``recovery_accept_ratio`` of the tracked set's reference ``w_ref`` per beam and better
-    #: than the tracked set's, for ``recovery_accept_updates`` consecutive updates. Why: with
-    #: ``inject`` the random poses compete with the tracked cloud in one weighting, so when
-    #: the tracked cloud fits badly for a reason that is not a kidnapping (the lab's hallway
-    #: after lunch: a stale map, furniture moved, people; -2.6 to -3.0 per beam) a random pose
-    #: that fits poorly (-1.4 to -2.7) but less badly wins 16-31 m away. A kidnapped robot's
-    #: true pose fits as well as tracking does, a stale map's stranger does not. This is
-    #: hypothesis verification as in multi-hypothesis localization (Jensfelt & Kristensen
-    #: 2001, "Active global localization for a mobile robot using multiple hypothesis
-    #: tracking", IEEE T-RA 17(5)): a new hypothesis must be confirmed before it is believed.
-    #: Not ``tuned``'s default: measured against ``inject`` on the same recorded streams
-    #: (static-mcl tuned alone, seed 0; max error / mean / lost > 0.5 m), ``verify`` lowers
-    #: the lost share everywhere but removes no jump where a look-alike place fits as well
-    #: as the true one: lab 5 weeks on the numpy install 12.4 m (day 20 run 2) / 0.090 m /
-    #: 0.84 %; office 9.5 -> 3.3 m, 1.26 -> 0.85 %; corridor 20.2 -> 20.2 m (identical
-    #: rooms), 3.2 -> 2.4 %; hall 19.0 -> 19.0 m (mirrored study rooms), 2.7 -> 2.3 %;
-    #: apartment kidnappings 20/20 within 30 s either way (median 6.7 -> 7.2 s); FR079
-    #: unchanged (mean 0.054 m, max 0.76 m).
+    #: ``pf.c``) into the one particle set; ``verify`` into a challenger set, a global
+    #: localization filter of its own that replaces the tracked set only once its fit is
+    #: verified (:mod:`.verified_recovery`; Jensfelt & Kristensen 2001's hypothesis
+    #: verification). Needs ``recovery_w_avg_per_beam``.
     recovery_global: str = "inject"
-    #: ``verify``: the challenger's per-beam fit must reach this share of ``w_ref``
-    #: (needs ``recovery_w_avg_per_beam``). Measured on the apartment's kidnappings
-    #: (benchmarks/mcl_global_kidnap.py): tracking fits -0.1 to -0.2 per beam (log), a
-    #: look-alike place 4-6 m away -0.8 to -1.0; 0.5 (bar log w_ref - 0.69) adopted the
-    #: look-alike once (recovered after 46 s), 0.7 (log w_ref - 0.36) does not.
+    #: ``verify``: the challenger's per-beam fit must reach this share of ``w_ref`` ...
     recovery_accept_ratio: float = 0.7
     #: ``verify``: ... for this many consecutive filter updates.
     recovery_accept_updates: int = 3
-    #: Negative information in the sensor update (0 off, as nav2; ``likelihood_field_prob``
-    #: only): a particle's reading that ends ``delta`` more than this [m] beyond the first
-    #: occupied cell of the map along its beam scores at most the beam model's ``z_hit
-    #: exp(-(delta - margin)^2 / 2 sigma_hit^2) + z_rand / range_max`` (*Probabilistic
-    #: Robotics* Table 6.1), whatever its end point hits (:mod:`.see_through`; Fox et al. 1999
-    #: §4.2: a reading longer than the map allows can only be a wrong pose or a removed
-    #: object). The score is continuous at the margin, so a particle just past it is not
-    #: cut off from one just short of it (a hard score, every see-through reading at
-    #: ``z_rand / range_max``, was measured first: README, "Worlds nobody tuned for").
-    #: Beam skipping still decides on the end points, and the recovery averages stay the
-    #: likelihood field's (so a removed object does not look like a kidnapping). Why: the
-    #: likelihood field lets a cloud slide along a corridor or through a doorway while beams
-    #: that cross mapped walls end near other walls (the lab's day 15 after lunch: the
-    #: estimate slid 0.8 m in 8 s with 30-38 % of its readings passing through walls, against
-    #: 12-18 % at the true pose, then a random pose won 19 m away).
+    #: Negative information in the sensor update (``likelihood_field_prob``): a particle's
+    #: reading that ends ``delta`` more than this [m] beyond the map's first occupied cell along
+    #: its beam scores at most the beam model's ``z_hit exp(-(delta - margin)^2 / 2
+    #: sigma_hit^2) + z_rand / range_max`` (:mod:`.see_through`), against a cloud sliding
+    #: through walls; 0 off (nav2).
     see_through_margin_m: float = 0.0
-    #: ... except for a reading that sees through at more than this share of the particles
-    #: (unweighted, as AMCL's beam skipping counts): one the whole cloud sees through says
-    #: "removed object", not "wrong pose" (a chair moved away from in front of a wall); only
-    #: readings some particles see through and others do not tell particles apart. Without
-    #: it (1.0) the office's day 7-8 (furniture moved) kept the estimate 0.5-0.8 m back from
-    #: the removed pieces, lost on 6-8 % of the scans, against 0 % without the term. The
-    #: price of 0.5: ``ci-apartment-mcl``'s day-2 error doubles (8.5 -> 18.2 mm, the cloud
-    #: half again to twice as confident): a reading that a fifth to a half of a tight cloud
-    #: sees through grazes a door frame or a furniture edge, and scoring it cuts the cloud.
-    #: 0.2 keeps 9.7 mm there and FR079's max at 0.84 m (0.5: 0.93 m), but the corridor is
-    #: lost on 1.5 % of its scans (0.5: 0.8 %, generator 0, ATE 0.119 against 0.101 m); in
-    #: the lab, stopped after day 13, its worst drift was 1.31 m (0.5: 1.56 m, day 12 run 1).
-    #: Not a clear ranking; the office and the hall were measured with 0.5 only.
+    #: ... except for a reading more than this share of the particles sees through (a removed
+    #: object, not a wrong pose): only readings that some particles see through and others do
+    #: not tell particles apart.
     see_through_max_share: float = 0.5
-    #: Fox et al. 1999's distance filter in the sensor update itself (False: as nav2, the
-    #: weights use every valid beam; ``likelihood_field_prob`` only): readings more than
-    #: ``recovery_distance_filter_m`` shorter than the map predicts at the weighted mean
-    #: particle (a person, a parked bed, a moved chair in front of a mapped wall) are left
-    #: out of this update's weights, as Fox et al. (§4.2) leave them out of the sensor model,
-    #: if at least ``recovery_min_beam_share`` of the readings remain (else all count), and
-    #: only while the recovery gate is not counting (``n_low_updates == 0``: "short" is
-    #: measured against the mean particle, which is wrong after a kidnapping; with the filter
-    #: in the weights throughout, one of the apartment's 20 kidnappings took 38 s). Beam
-    #: skipping handles readings that fit *no* particle; a short reading can fit a wrong
-    #: particle well. Why: in the corridor world's ward (beds and trolleys parked in the
-    #: corridor, day 5) the estimate fell up to 1.4 m behind the robot along the corridor,
-    #: 10-23 % of the readings short at the estimate and at the truth alike, no reading seen
-    #: through, both poses fitting about equally (-0.4 to -0.9 per beam); then a random pose
-    #: won 20 m away (README, "Worlds nobody tuned for").
+    #: Fox et al. 1999's distance filter in the weights too (``likelihood_field_prob``): readings
+    #: more than ``recovery_distance_filter_m`` shorter than the map predicts at the mean particle
+    #: (a person, a parked bed) are left out of the weights while the gate is not counting (a
+    #: short reading can fit a wrong particle well); False: every valid beam (nav2).
     distance_filter_weights: bool = False
+    #: Resample every this many filter updates; nav2's 1.
     resample_interval: int = 1
+    #: The filter updates after the odometry moved this far [m] in x or y; nav2's 0.25.
     update_min_d: float = 0.25
+    #: ... or turned this much [rad]; nav2's 0.2.
     update_min_a: float = 0.2
+    #: Standard deviation [m] of the initial particles around a given pose in x and y
+    #: (without the prior's covariance); nav2's 0.5.
     init_sigma_xy: float = 0.5
+    #: ... and in heading [rad]; nav2's pi/12.
     init_sigma_theta: float = float(np.pi / 12.0)
 
     def __post_init__(self) -> None:
@@ -394,40 +330,12 @@ class MCLConfig:
 #: nav2's defaults (``nav2_params.yaml`` / ``amcl_node.cpp``): recovery off, no beam skipping.
 NAV2_DEFAULT = MCLConfig()
 
-#: Tuned to the simulated sensors and maps: URG-04LX noise (1 cm / 1 %) on a 5 cm grid built by
-#: first-run SLAM (a few cm of map error) -> sigma_hit 0.12 m with the proper product model; wheel
-#: odometry that drifts ~1-2 % -> alphas 0.05 (in the corrected model a standard deviation of
-#: sqrt(0.05) = 22 % of every step, far looser than that drift; all four at 0.01 were measured on
-#: the untuned worlds and FR079 and are not the default: README, "Worlds nobody tuned for",
-#: benchmarks/mcl_untuned_variants.py), but ``alpha3`` (translation noise coefficient) 0.02: a
-#: standard deviation of 14 % of each step (14 mm a 0.1 m update, still ~20x the simulated encoders'
-#: 2 mm sqrt(d / 1 m) a wheel) but tight enough that the cloud does not follow a scan that fits
-#: poses 0.3-1 m apart along a corridor equally well (the corridor world's parked bed: 0.94 m off
-#: along it with 0.05, 0.37 m with 0.02; the lab's hallway drift 1.56 -> 0.85 m; README, "Worlds
-#: nobody tuned for"). Its price is on real wheels: FR079's mean 0.055 -> 0.058 m (Pioneer odometry
-#: slips; heading alphas 0.1 as well gave 0.056 m, and all four at 0.1 0.051 m with a 1.19 m
-#: maximum); people and unmapped objects -> beam skipping; kidnapping and global localization ->
-#: Table 8.3 recovery, 8000 particles at most and the real 99 % normal quantile as pf_z; updates
-#: every 0.1 m / 0.1 rad; local resetting before the global recovery (``recovery_local_*``: real
-#: odometry glitches, FR079). The global recovery injects (Table 8.3); ``recovery_global =
-#: "verify"`` (an override) was measured against it and is not the default (see
-#: :attr:`MCLConfig.recovery_global`). A scan the distance filter leaves fewer than half the beams
-#: of holds the recovery averages while the gate is not counting (``recovery_occluded = "hold"``),
-#: and a random pose at which more than half of the readings pass through mapped walls is not
-#: injected (``recovery_through_max_share``); both measured on the worlds nobody tuned for and the
-#: lab's five weeks (README, "Worlds nobody tuned for"). While tracking, a particle's reading that
-#: ends more than 0.3 m beyond a mapped obstacle scores by the beam model's distance past it unless
-#: most of the cloud sees it through (``see_through_margin_m``, ``see_through_max_share``: the
-#: likelihood field's cloud slid through the lab's hallway and a random pose won during the slide);
-#: readings much shorter than the map predicts at the mean particle are left out of the weights as
-#: well as of the recovery averages (``distance_filter_weights``: Fox et al. 1999's distance filter
-#: where they use it, in the sensor model; the corridor's parked beds dragged the cloud 1.4 m back);
-#: and a cloud inside one KLD bin keeps ``min_particles`` (``kld_one_bin = "min"``, the textbook's
-#: bound, where nav2 takes ``max_particles``: 13 % of the office tour's updates had 8000 particles
-#: for it, which the see-through walks made 3.5x the filter's time). Measured on the same recorded
-#: streams as the rules above, three filter generators (README, "Worlds nobody tuned for");
-#: :data:`TUNED_END_POINTS` is ``tuned`` without these three, with ``alpha3`` 0.05. Measured with
-#: benchmarks/mcl_apartment_week1.py and benchmarks/mcl_global_kidnap.py.
+#: Tuned to the simulated sensors (URG-04LX) and first-run SLAM maps, wheel odometry, and worlds
+#: that change (people, moved furniture, kidnapping): nav2's filter with the product model and
+#: beam skipping, tighter odometry noise, 8000 particles at most, Table 8.3's recovery made
+#: robust (per-beam averages, a gated and capped injection, the distance filter, local
+#: resetting first), and negative information (see-through readings, the distance filter in
+#: the weights). What each value rests on: docs/tuning/localization.md.
 TUNED = MCLConfig(
     alpha1=0.05,
     alpha2=0.05,
@@ -470,11 +378,10 @@ TUNED = MCLConfig(
     kld_one_bin="min",
 )
 
-#: ``tuned`` as it was before the see-through term: the likelihood field on every valid
-#: reading's end point, nav2's one-bin rule and ``alpha3`` 0.05. ``adaptive-memory``'s
-#: filter on the static points (H&W §6.1) and :data:`WALLS_ONLY` were measured with it (the
-#: see-through term, the distance filter in the weights and the tighter translation noise
-#: were not measured there).
+#: ``tuned`` without the rules that look past the end points (no see-through term, the
+#: distance filter out of the weights, nav2's one-bin rule) and ``alpha3`` 0.05: the
+#: likelihood field on every valid reading's end point. ``adaptive-memory``'s filter on the
+#: static points (H&W §6.1) and :data:`WALLS_ONLY` were tuned with it.
 TUNED_END_POINTS = replace(
     TUNED,
     see_through_margin_m=0.0,
@@ -483,35 +390,12 @@ TUNED_END_POINTS = replace(
     alpha3=0.05,
 )
 
-#: ``tuned`` for a map that lacks the furniture: the walls-only prior (H&W Fig. 4, their
-#: static MCL of §7.3). Measured on ``apartment-28d-hw`` days 1-3 (seed 0, 60 beams at the
-#: true pose): 52 % of the valid beams hit furniture the walls map lacks, 83 % of those end
-#: >= 0.5 m from any wall, 10 % 0.3-0.5 m; 99 % of the wall beams end within 0.1 m. There
-#: ``tuned`` was lost on 63-81 % of the scans, 4-7 s into every run. Three changes, each
-#: measured alone on those days (replayed offline, two filter seeds):
-#:
-#: * ``recovery_floor_loglik`` -inf (nav2: no floor). The floor assumes a correctly localized
-#:   filter explains most beams (per-beam log-likelihood >= -0.5); on the walls map the true
-#:   pose scores -1.86, so the gate counted every update as "lost" and injected up to 35 %
-#:   random poses per update (1.9 million in 3 days): lost within 4-7 s. Without the floor
-#:   the recovery compares with ``w_slow`` as Table 8.3 does: no longer lost in the first
-#:   minutes, but still on 25-28 % (furniture dominates the right side, 38 of 49 beams).
-#:   The floor served global localization; the walls scenarios start from a known pose.
-#: * ``z_hit`` / ``z_rand`` 0.5 / 0.5 (nav2's defaults): about half of the beams are "random"
-#:   to this map (the 52 % above), and the mixture should say so; with tuned's 0.9 / 0.1 a
-#:   beam 0.3 m off a wall costs log 37 = 3.6 against log 5 = 1.6 here. Alone (with the
-#:   floor off): 0.17-0.19 m mean, never lost.
-#: * ``beam_skip_distance`` 0.3 m: AMCL's default ratio to ``sigma_hit`` (0.5 m / 0.2 m =
-#:   2.5) at tuned's ``sigma_hit`` 0.12 m. AMCL's 0.5 m keeps the furniture standing in front
-#:   of walls (the 10 % at 0.3-0.5 m), which drags the pose off by its depth; 0.3 m keeps
-#:   all but 0.2 % of the wall beams. Alone (floor off): 0.14-0.16 m, never lost.
-#:
-#: Together: 0.105-0.133 m mean a day, never lost, no random pose injected (days 1-3, two
-#: filter seeds). The rest is ``tuned`` (sensor noise, odometry alphas, particles), but for
-#: ``recovery_occluded``: ``all-beams`` as before ``tuned`` took ``hold``. On this map half of
-#: the readings are short at the true pose on every scan (the furniture it lacks), so
-#: ``hold`` would leave the recovery signal out on most scans; it was measured on maps that
-#: hold the furniture only.
+#: :data:`TUNED_END_POINTS` for a map that lacks the furniture (the walls-only prior, H&W Fig. 4,
+#: their static MCL of §7.3), where about half of the beams end on furniture: no floor under
+#: ``w_ref`` (the true pose fits too poorly for it), nav2's 0.5 / 0.5 mixture (half of the
+#: beams are "random" to this map), beam skipping from 0.3 m (AMCL's ratio to ``sigma_hit``,
+#: which drops the furniture in front of walls) and ``all-beams`` for occluded scans (half of
+#: the readings are short at the true pose on every scan).
 WALLS_ONLY = replace(
     TUNED_END_POINTS,
     z_hit=0.5,
@@ -521,6 +405,7 @@ WALLS_ONLY = replace(
     recovery_occluded="all-beams",
 )
 
+#: The configs ``static-mcl``'s ``config`` parameter names (docs/tuning/localization.md).
 CONFIGS: dict[str, MCLConfig] = {
     "nav2-default": NAV2_DEFAULT,
     "tuned": TUNED,
@@ -621,37 +506,6 @@ def weighted_pose_stats(
     r_len = min(max(np.hypot(c, s), 1e-12), 1.0)
     cov[2, 2] = max(-2.0 * np.log(r_len), 0.0)
     return mean, 0.5 * (cov + cov.T)
-
-
-def bin_clusters(
-    ukeys: NDArray[np.int64], ny: int, n_th: int, backend: str = "auto"
-) -> NDArray[np.intp]:
-    """Cluster label of each occupied bin (``pf_cluster_stats``): ``ukeys`` sorted unique bin
-    keys ``(bx * ny + by) * n_th + bt`` (``bx, by >= 0``), a cluster the bins connected
-    through their 26 neighbours (theta wraps around), numbered in the order of their first
-    bin. ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): :mod:`.mcl_numba`'s union-find
-    or the numpy adjacency and scipy's ``connected_components`` (the same labels)."""
-    kernel = kernel_backend(backend)
-    if kernel:
-        return mcl_numba.bin_clusters(ukeys, ny, n_th, python=kernel == "python")
-    ubx, rem = np.divmod(ukeys, ny * n_th)
-    uby, ubt = np.divmod(rem, n_th)
-    rows, cols = [], []
-    for dx in (-1, 0, 1):
-        for dy in (-1, 0, 1):
-            for dt in (-1, 0, 1):
-                if dx == dy == dt == 0:
-                    continue
-                nk = ((ubx + dx) * ny + (uby + dy)) * n_th + (ubt + dt) % n_th
-                pos = np.searchsorted(ukeys, nk)
-                pos = np.minimum(pos, len(ukeys) - 1)
-                hit = (ukeys[pos] == nk) & (ubx + dx >= 0) & (uby + dy >= 0)
-                rows.append(np.nonzero(hit)[0])
-                cols.append(pos[hit])
-    r = np.concatenate(rows)
-    cidx = np.concatenate(cols)
-    adj = coo_matrix((np.ones(len(r)), (r, cidx)), shape=(len(ukeys), len(ukeys)))
-    return connected_components(adj, directed=False)[1]
 
 
 class AMCLFilter:

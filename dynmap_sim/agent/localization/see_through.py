@@ -31,14 +31,56 @@ ray that left a rectangle never re-enters it).
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from dynmap_sim.agent.grid import OccupancyGrid
-from dynmap_sim.agent.localization import mcl_numba
-from dynmap_sim.jit import kernel_backend
+from dynmap_sim.jit import compiled
 
 FloatArray = NDArray[np.float64]
+
+
+class _Beams(NamedTuple):
+    """The walks' inputs: per particle the laser ``lx, ly`` [m] and heading ``c, s``; per beam
+    its direction ``cb, sb`` on the robot and the walk's ``length`` [m]."""
+
+    lx: FloatArray
+    ly: FloatArray
+    c: FloatArray
+    s: FloatArray
+    cb: FloatArray
+    sb: FloatArray
+    length: FloatArray
+
+
+@compiled
+def _wall_depths(dist, ox, oy, res, beams, out):  # type: ignore[no-untyped-def]
+    """``out[i, j]``: the first sample ``t < length_j`` [m] at which the walk from particle
+    ``i``'s laser along beam ``j`` (:class:`_Beams`) is in an occupied cell, ``inf`` for none;
+    samples from ``res / 2`` on, each step ``max(dist - 1.5 res, res / 2)`` with ``dist``
+    [m] the distance field at the sample's cell (0 in an occupied cell); a sample off the
+    grid ends the walk."""
+    lx, ly, c, s, cb, sb, length = beams
+    h, w = dist.shape
+    inv_res = 1.0 / res
+    for i in range(c.shape[0]):
+        for j in range(cb.shape[0]):
+            out[i, j] = np.inf
+            ca = c[i] * cb[j] - s[i] * sb[j]
+            sa = s[i] * cb[j] + c[i] * sb[j]
+            t = 0.5 * res
+            while t < length[j]:
+                fx = np.floor((lx[i] + ca * t - ox) * inv_res)
+                fy = np.floor((ly[i] + sa * t - oy) * inv_res)
+                if not (0 <= fx < w and 0 <= fy < h):
+                    break
+                d = float(dist[int(fy), int(fx)])
+                if d == 0.0:  # an occupied cell: its distance to the nearest is 0
+                    out[i, j] = t
+                    break
+                t = t + max(d - 1.5 * res, 0.5 * res)
 
 
 def wall_depths(
@@ -48,29 +90,22 @@ def wall_depths(
     angles_rad: ArrayLike,
     mount_pose: ArrayLike,
     margin_m: float,
-    backend: str = "auto",
 ) -> FloatArray:
     """``(P, B)`` [m]: along particle ``i``'s beam ``j`` (``angles_rad`` [rad] in the laser
     frame, the laser at ``mount_pose`` on the robot), the distance of the first occupied
     cell of ``grid`` met before ``ranges_m[j] - margin_m``; ``inf`` for none (the reading
-    does not see through). ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`):
-    :mod:`.mcl_numba`'s kernel (beam by beam) or numpy (all beams in lockstep); the same
-    walk, the same samples."""
+    does not see through)."""
     p = np.asarray(particles, dtype=np.float64).reshape(-1, 3)
     r = np.asarray(ranges_m, dtype=np.float64)
     a = np.asarray(angles_rad, dtype=np.float64)
     mx, my, myaw = (float(v) for v in mount_pose)
     c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
-    lx = p[:, 0] + c * mx - s * my
-    ly = p[:, 1] + s * mx + c * my
-    cb, sb = np.cos(a + myaw), np.sin(a + myaw)
-    length = r - margin_m
-    kernel = kernel_backend(backend)
-    frame = (float(grid.origin_xy_m[0]), float(grid.origin_xy_m[1]), float(grid.resolution_m))
-    terms = (lx, ly, c, s, cb, sb, length)
-    if kernel:
-        return mcl_numba.wall_depths(grid.dist_m, frame, terms, python=kernel == "python")
-    return _wall_depths_numpy(grid.dist_m, *frame, *terms)
+    beams = _Beams(p[:, 0] + c * mx - s * my, p[:, 1] + s * mx + c * my, c, s,
+                   np.cos(a + myaw), np.sin(a + myaw), r - margin_m)  # fmt: skip
+    out = np.empty((len(p), len(a)), dtype=np.float64)
+    ox, oy = (float(v) for v in grid.origin_xy_m)
+    _wall_depths(grid.dist_m, ox, oy, float(grid.resolution_m), beams, out)
+    return out
 
 
 def see_through_logp(
@@ -87,9 +122,8 @@ def see_through_logp(
     range_max)``; ``0`` where it does not see through (``depth`` inf), so that a minimum with
     the likelihood field's value leaves those readings alone.
 
-    Only the see-through readings are scored (a few percent of a cloud's readings on a
-    tracked run): numpy's ``exp`` and ``log`` give an element the same bits wherever it
-    stands in an array, so the scores are those of scoring every reading."""
+    Only the see-through readings are scored: they are a few percent of a cloud's readings
+    on a tracked run."""
     r = np.asarray(ranges_m, dtype=np.float64)
     d = np.asarray(depths_m, dtype=np.float64)
     out = np.zeros(d.shape)
@@ -98,44 +132,3 @@ def see_through_logp(
     p = z_hit * np.exp(beyond * beyond * (-0.5 / sigma_hit_m**2)) + z_rand / range_max_m
     out.put(k, np.log(p))
     return out
-
-
-def _wall_depths_numpy(
-    dist_m: NDArray[np.float32],
-    ox: float,
-    oy: float,
-    res: float,
-    lx: FloatArray,
-    ly: FloatArray,
-    c: FloatArray,
-    s: FloatArray,
-    cb: FloatArray,
-    sb: FloatArray,
-    length: FloatArray,
-) -> FloatArray:
-    """The walk of :func:`.mcl_numba._wall_depths_py` for all beams at once: each round moves
-    every unfinished beam one step (the same arithmetic, so the same samples)."""
-    n_p, n_b = len(c), len(cb)
-    h, w = dist_m.shape
-    inv_res = 1.0 / res
-    out = np.full(n_p * n_b, np.inf)
-    x0 = np.repeat(lx, n_b)
-    y0 = np.repeat(ly, n_b)
-    cx = (c[:, None] * cb[None, :] - s[:, None] * sb[None, :]).ravel()
-    sy = (s[:, None] * cb[None, :] + c[:, None] * sb[None, :]).ravel()
-    lim = np.tile(length, n_p)
-    t = np.full(n_p * n_b, 0.5 * res)
-    live = np.flatnonzero(t < lim)
-    while len(live):
-        tl = t[live]
-        fx = np.floor((x0[live] + cx[live] * tl - ox) * inv_res)
-        fy = np.floor((y0[live] + sy[live] * tl - oy) * inv_res)
-        inside = (fx >= 0) & (fx < w) & (fy >= 0) & (fy < h)
-        live, fx, fy, tl = live[inside], fx[inside], fy[inside], tl[inside]
-        d = dist_m[fy.astype(np.intp), fx.astype(np.intp)].astype(np.float64)
-        hit = d == 0.0
-        out[live[hit]] = tl[hit]
-        live, d, tl = live[~hit], d[~hit], tl[~hit]
-        t[live] = tl + np.maximum(d - 1.5 * res, 0.5 * res)
-        live = live[t[live] < lim[live]]
-    return out.reshape(n_p, n_b)

@@ -20,17 +20,18 @@ most long-term timescale of all nearby maps instead.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
 
-from dynmap_sim.agent.maps.current_map_numba import select_timescales
 from dynmap_sim.agent.maps.dynamic_map import DynamicMap
-from dynmap_sim.jit import kernel_backend
+from dynmap_sim.jit import compiled
 
 FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
 
 
 @dataclass(frozen=True)
@@ -69,28 +70,64 @@ class CurrentMap:
         return self.selections[0][1] if self.selections else -1
 
 
-def _select_numpy(
-    logp: FloatArray, log_floor: float, prm: SynthesisParams
-) -> tuple[NDArray[np.bool_], list[tuple[int, int]]]:
-    """Steps 2-5 on ``logp[m, l, i]`` (floored in place): the readings each model explains
-    and the selections (row of ``logp``, column) in order."""
-    np.maximum(logp, log_floor, out=logp)
-    good = logp >= np.log(prm.explained_density)
-    n = logp.shape[2]
-    remaining = np.ones(n, dtype=bool)
+@compiled
+def _select(logp, log_floor, log_explained, min_readings, good, rows, cols):  # type: ignore[no-untyped-def]
+    """Steps 2-5: floor ``logp`` ``(M, L, N)`` (reading ``i`` under nearby map ``m`` at level
+    ``l``) at ``log_floor`` in place, set ``good = logp >= log_explained`` (the readings each
+    model explains), then select (map ``rows[k]``, level ``cols[k]``) with the best sum over
+    the readings still unexplained (the first such on a tie), while at least
+    ``min_readings`` are unexplained and maps are left; returns how many."""
+    n_maps, n_levels, n = logp.shape
+    for m in range(n_maps):
+        for b in range(n_levels):
+            for i in range(n):
+                v = logp[m, b, i]
+                if v < log_floor:
+                    v = log_floor
+                    logp[m, b, i] = v
+                good[m, b, i] = v >= log_explained
+    remaining = np.ones(n, dtype=np.bool_)
+    available = np.ones(n_maps, dtype=np.bool_)
     n_remaining = n
-    available = np.ones(len(logp), dtype=bool)
-    chosen: list[tuple[int, int]] = []  # (row in nearby, column in levels)
-    while n_remaining >= prm.min_readings and len(chosen) < len(logp):
-        # (maps, levels); all readings: logp itself, the same contiguous rows as the copy
-        score = (logp if n_remaining == n else logp[:, :, remaining]).sum(axis=2)
-        score[~available] = -np.inf
-        a, b = divmod(int(np.argmax(score)), logp.shape[1])
-        chosen.append((a, b))
+    n_chosen = 0
+    while n_remaining >= min_readings and n_chosen < n_maps:
+        best = -math.inf
+        best_k = -1
+        for m in range(n_maps):
+            if not available[m]:
+                continue
+            for b in range(n_levels):
+                s = 0.0
+                for i in range(n):
+                    if remaining[i]:
+                        s += logp[m, b, i]
+                if best_k < 0 or s > best:
+                    best = s
+                    best_k = m * n_levels + b
+        a = best_k // n_levels
+        rows[n_chosen] = a
+        cols[n_chosen] = best_k - a * n_levels
+        n_chosen += 1
         available[a] = False
-        remaining &= ~good[a, b]
-        n_remaining = int(np.count_nonzero(remaining))
-    return good, chosen
+        n_remaining = 0
+        for i in range(n):
+            if good[a, best_k - a * n_levels, i]:
+                remaining[i] = False
+            if remaining[i]:
+                n_remaining += 1
+    return n_chosen
+
+
+def select_timescales(
+    logp: FloatArray, log_floor: float, log_explained: float, min_readings: int
+) -> tuple[NDArray[np.bool_], list[tuple[int, int]]]:
+    """``good`` ``(M, L, N)`` and the selections ``[(row of logp, column), ...]`` of
+    :func:`_select` (``logp`` C-contiguous, floored in place)."""
+    good = np.empty(logp.shape, dtype=np.bool_)
+    rows = np.empty(len(logp), dtype=np.int64)
+    cols = np.empty(len(logp), dtype=np.int64)
+    k = _select(logp, float(log_floor), float(log_explained), int(min_readings), good, rows, cols)
+    return good, list(zip(rows[:k].tolist(), cols[:k].tolist(), strict=True))
 
 
 def synthesize_current_map(
@@ -99,14 +136,10 @@ def synthesize_current_map(
     points_map: FloatArray,
     levels: Sequence[int],
     params: SynthesisParams | None = None,
-    backend: str = "auto",
 ) -> CurrentMap:
     """Run the §4.3 selection for the scan ``points_map`` (map frame) taken at ``pose``.
 
     ``levels`` are the timescales allowed (indices into the map's timescales, short to long).
-    ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): ``"numba"`` (``"auto"`` when
-    installed) or ``"python"`` selects in one loop (:mod:`.current_map_numba`), the same
-    selections as the numpy code.
     """
     prm = SynthesisParams() if params is None else params
     levels = sorted(levels)  # ascending: the last one is the most long-term
@@ -130,13 +163,8 @@ def synthesize_current_map(
             out=logp[a],
             columns=columns,
         )
-    kernel = kernel_backend(backend)
-    if kernel is not None:  # steps 2-5 in one compiled loop, the same selections
-        good, chosen = select_timescales(
-            logp, log_floor, np.log(prm.explained_density), prm.min_readings, kernel == "python"
-        )
-    else:
-        good, chosen = _select_numpy(logp, log_floor, prm)
+    good, chosen = select_timescales(logp, log_floor, np.log(prm.explained_density),
+                                     prm.min_readings)  # fmt: skip
     if chosen:
         rows = np.array([a for a, _ in chosen])
         cols = np.array([b for _, b in chosen])

@@ -16,26 +16,18 @@ lets each ray's first time step fill it instead (the initialization of the toy, 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from dynmap_sim.agent.maps.local_map_numba import (
-    numba_available,
-    polar_rays,
-    scan_log_likelihoods,
-)
-from dynmap_sim.agent.maps.sample_set import (
-    SampleSets,
-    mixture_log_likelihood,
-    table_log_likelihood,
-    to_mm,
-)
-from dynmap_sim.jit import kernel_backend
+from dynmap_sim.agent.maps.sample_set import SampleSets, mixture_log_likelihood
+from dynmap_sim.jit import compiled
 
 FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.int64]
 
 
 @dataclass(frozen=True)
@@ -115,99 +107,24 @@ class LocalMap:
         *,
         fill: bool = False,
         initialize: bool = True,
-        polar: tuple[FloatArray, FloatArray] | None = None,
-        backend: str = "auto",
     ) -> None:
         """One §3.1 update of each sub-map of ``levels`` in turn with the points (all of one
         time step); points farther than ``max_range_m`` from the centre are ignored. The
-        points' millimetre ranges and ray indices are computed once (per number of rays):
-        without ``polar``, by ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`) ``"numba"``
-        (``"auto"`` when installed) in one compiled pass (:func:`.local_map_numba.polar_rays`,
-        the same values)."""
-        kernel = kernel_backend(backend) if polar is None else None
-        if kernel is not None:
-            levels = list(levels)
-            n_rays = list(dict.fromkeys(self.timescales[level].n_rays for level in levels))
-            pts = np.asarray(points_map, dtype=np.float64).reshape(-1, 2)
-            mm, rays = polar_rays(pts, self.centre, self.max_range_m,
-                                  np.array(n_rays, dtype=np.int64), kernel == "python")  # fmt: skip
-            for level in levels:
-                row = rays[n_rays.index(self.timescales[level].n_rays)]
-                self.sub[level].update(row, mm, rng, fill=fill, initialize=initialize)
-            return
-        ang, dist = self.polar(points_map) if polar is None else polar
-        ok = dist <= self.max_range_m
-        ang_ok = ang[ok]
-        mm = to_mm(dist[ok])
-        rays: dict[int, NDArray[np.int64]] = {}
+        points' millimetre ranges and ray indices are computed once, for every number of
+        rays among the levels, in one compiled pass (:func:`_polar_rays`)."""
+        levels = list(levels)
+        n_rays = list(dict.fromkeys(self.timescales[level].n_rays for level in levels))
+        pts = np.asarray(points_map, dtype=np.float64).reshape(-1, 2)
+        mm = np.empty(len(pts), dtype=np.uint16)
+        rays = np.empty((len(n_rays), len(pts)), dtype=np.int64)
+        k = _polar_rays(np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]),
+                        float(self.centre[0]), float(self.centre[1]), self.max_range_m,
+                        np.array(n_rays, dtype=np.int64), mm, rays)  # fmt: skip
         for level in levels:
-            n_rays = self.timescales[level].n_rays
-            if n_rays not in rays:
-                rays[n_rays] = self.ray_index(ang_ok, n_rays)
-            self.sub[level].update(rays[n_rays], mm, rng, fill=fill, initialize=initialize)
+            row = rays[n_rays.index(self.timescales[level].n_rays), :k]
+            self.sub[level].update(row, mm[:k], rng, fill=fill, initialize=initialize)
 
     # ------------------------------------------------------------------ perceptual model
-    def log_likelihood(
-        self,
-        level: int,
-        polar: tuple[FloatArray, FloatArray],
-        *,
-        sigma_min_m: float = 0.0,
-        min_outlier_ratio: float = 0.0,
-    ) -> FloatArray:
-        """Per-reading ``log p(d)`` (eq. 6–8) of readings given in this map's polar frame."""
-        ang, dist = polar
-        ray = self.ray_index(ang, self.timescales[level].n_rays)
-        if sigma_min_m > 0.0:  # fast path (σ = 0 needs the exact point-mass handling)
-            tab = self.sub[level].model_table(self.max_range_m, sigma_min_m, min_outlier_ratio)
-            return table_log_likelihood(tab, ray, dist, self.max_range_m)
-        return mixture_log_likelihood(
-            self.sub[level].estimates(),
-            ray,
-            dist,
-            self.max_range_m,
-            sigma_min_m=sigma_min_m,
-            min_outlier_ratio=min_outlier_ratio,
-        )
-
-    def log_likelihoods(
-        self,
-        levels: Sequence[int],
-        polar: tuple[FloatArray, FloatArray],
-        *,
-        sigma_min_m: float = 0.0,
-        min_outlier_ratio: float = 0.0,
-    ) -> FloatArray:
-        """:meth:`log_likelihood` of several levels at once, ``(len(levels), N)``.
-
-        The same values, computed in one pass over the levels' stacked model tables (one
-        gather, one ``exp``/``log``) instead of one pass per level; the stack is cached until
-        one of its tables changes.
-        """
-        ang, dist = polar
-        n = len(dist)
-        levels = list(levels)
-        if sigma_min_m <= 0.0 or not levels:
-            out = np.empty((len(levels), n))
-            for b, level in enumerate(levels):
-                out[b] = self.log_likelihood(
-                    level,
-                    polar,
-                    sigma_min_m=sigma_min_m,
-                    min_outlier_ratio=min_outlier_ratio,
-                )
-            return out
-        table, offsets, _ = self._model_stack(levels, sigma_min_m, min_outlier_ratio)
-        rays = np.empty(len(levels) * n, dtype=np.int64)
-        by_n_rays: dict[int, NDArray[np.int64]] = {}
-        for b, level in enumerate(levels):
-            n_rays = self.timescales[level].n_rays
-            if n_rays not in by_n_rays:
-                by_n_rays[n_rays] = self.ray_index(ang, n_rays)
-            np.add(by_n_rays[n_rays], offsets[b], out=rays[b * n : (b + 1) * n])
-        ll = table_log_likelihood(table, rays, np.tile(dist, len(levels)), self.max_range_m)
-        return ll.reshape(len(levels), n)
-
     def _model_stack(
         self, levels: list[int], sigma_min_m: float, min_outlier_ratio: float
     ) -> tuple[FloatArray, NDArray[np.int64], NDArray[np.int64]]:
@@ -246,39 +163,39 @@ class LocalMap:
         *,
         sigma_min_m: float = 0.0,
         min_outlier_ratio: float = 0.0,
-        backend: str = "auto",
         out: FloatArray | None = None,
         columns: tuple[FloatArray, FloatArray] | None = None,
     ) -> FloatArray:
-        """:meth:`log_likelihoods` of map-frame points ``(N, 2)``, ``(len(levels), N)``
-        (written into ``out`` when given).
+        """Per-reading ``log p(d)`` (eq. 6–8) of map-frame points ``(N, 2)`` under the
+        sub-maps ``levels``, ``(len(levels), N)`` (written into ``out``, C-contiguous, when
+        given): each point projected to the centre (bearing, distance, §4.1) goes to the
+        closest ray of each sub-map.
 
-        ``backend`` ``"numba"`` (extra ``fast``; ``"auto"``: when installed, for the floored
-        model ``sigma_min_m > 0``) projects and scores in one compiled loop
-        (:mod:`.local_map_numba`, the same values to rounding); ``"numpy"``:
-        :meth:`polar` and :meth:`log_likelihoods`. ``columns`` (optional): the points' x
-        and y as contiguous arrays, which the compiled loop reads (a scan scored under
-        several local maps is split once).
+        With a floor ``sigma_min_m > 0`` the points are projected and scored in one compiled
+        loop over the levels' stacked model tables (:func:`_scan_loglik`); without one (the
+        paper's model exactly, whose rays of equal samples are point masses) by
+        :func:`.sample_set.mixture_log_likelihood`. ``columns`` (optional): the points' x and
+        y as contiguous arrays (a scan scored under several local maps is split once).
         """
-        if backend not in ("auto", "numpy", "numba"):
-            raise ValueError(f'backend must be "auto", "numpy" or "numba", got {backend!r}')
         levels = list(levels)
         pts = np.asarray(points_map, dtype=np.float64).reshape(-1, 2)
-        compiled = backend == "numba" or (backend == "auto" and numba_available())
-        if compiled and sigma_min_m > 0.0 and levels:
-            table, offsets, n_rays = self._model_stack(levels, sigma_min_m, min_outlier_ratio)
-            return scan_log_likelihoods(
-                pts, self.centre, table, offsets, n_rays, self.max_range_m, out, columns
-            )
-        ll = self.log_likelihoods(
-            levels,
-            self.polar(pts),
-            sigma_min_m=sigma_min_m,
-            min_outlier_ratio=min_outlier_ratio,
-        )
+        if columns is None:
+            columns = (np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]))
         if out is None:
-            return ll
-        out[...] = ll
+            out = np.empty((len(levels), len(columns[0])))
+        if not levels:
+            return out
+        if sigma_min_m > 0.0:
+            table, offsets, n_rays = self._model_stack(levels, sigma_min_m, min_outlier_ratio)
+            _scan_loglik(columns[0], columns[1], float(self.centre[0]), float(self.centre[1]),
+                         table, offsets, n_rays, self.max_range_m, out)  # fmt: skip
+            return out
+        ang, dist = self.polar(pts)
+        for b, level in enumerate(levels):
+            ray = self.ray_index(ang, self.timescales[level].n_rays)
+            out[b] = mixture_log_likelihood(self.sub[level].estimates(), ray, dist,
+                                            self.max_range_m,
+                                            min_outlier_ratio=min_outlier_ratio)  # fmt: skip
         return out
 
     def __getstate__(self) -> dict:
@@ -336,3 +253,49 @@ class LocalMap:
         out = LocalMap(self.centre, self.timescales, self.max_range_m, self.first_step_fills)
         out.sub = [s.copy() for s in self.sub]
         return out
+
+
+# ---------------------------------------------------------------------- compiled kernels
+@compiled
+def _scan_loglik(px, py, cx, cy, table, offsets, n_rays, max_range_m, out):  # type: ignore[no-untyped-def]
+    """``out[b, i] = log p`` (eq. 6–8) of point ``(px_i, py_i)`` seen from the centre
+    ``(cx, cy)`` under the level whose model-table rows (:meth:`.SampleSets.model_table`)
+    start at ``offsets[b]`` (``n_rays[b]`` rays)."""
+    two_pi = 2.0 * math.pi
+    for i in range(px.shape[0]):
+        dx = px[i] - cx
+        dy = py[i] - cy
+        ang = math.atan2(dy, dx) % two_pi
+        dist = math.hypot(dx, dy)
+        inside = dist >= 0.0 and dist <= max_range_m
+        for b in range(offsets.shape[0]):
+            nr = n_rays[b]
+            ray = np.int64(np.rint(ang * (nr / two_pi))) % nr
+            row = offsets[b] + ray
+            z = dist - table[row, 0]
+            p = math.exp(table[row, 2] - z * z * table[row, 1])
+            if inside:
+                p += table[row, 3]
+            out[b, i] = math.log(p) if p > 0.0 else -math.inf
+
+
+@compiled
+def _polar_rays(px, py, cx, cy, max_range_m, n_rays, mm, rays):  # type: ignore[no-untyped-def]
+    """The points within ``max_range_m`` of ``(cx, cy)``, in order: their ranges rounded to
+    millimetres (clipped to ``[0, 65535]``) in ``mm`` and their closest rays in ``rays[b]``
+    for sub-maps of ``n_rays[b]`` rays (ray ``j`` at ``j·2π/n_rays[b]``); returns how many."""
+    two_pi = 2.0 * math.pi
+    k = 0
+    for i in range(px.shape[0]):
+        dx = px[i] - cx
+        dy = py[i] - cy
+        dist = math.hypot(dx, dy)
+        if not dist <= max_range_m:
+            continue
+        ang = math.atan2(dy, dx) % two_pi
+        mm[k] = np.uint16(min(max(np.rint(dist * 1000.0), 0.0), 65535.0))
+        for b in range(n_rays.shape[0]):
+            nr = n_rays[b]
+            rays[b, k] = np.int64(np.rint(ang * (nr / two_pi))) % nr
+        k += 1
+    return k

@@ -1,4 +1,4 @@
-"""Dynamic sample sets, vectorized over many rays (Biber & Duckett 2009, §3.1–3.3, §4.2).
+"""Dynamic sample sets of many rays at once (Biber & Duckett 2009, §3.1–3.3, §4.2).
 
 One :class:`SampleSets` object holds ``n_rays`` independent sample sets of capacity
 ``n_samples`` each, as a ``uint16`` array of range samples in millimetres (2 bytes per sample,
@@ -17,6 +17,9 @@ One :class:`SampleSets` object holds ``n_rays`` independent sample sets of capac
   (share of samples farther than 3σ from the median).
 * :meth:`SampleSets.log_likelihood` — the perceptual model eq. 6–8: a mixture of
   ``N(ρ, σ²)`` and ``U(0, maxRange)`` weighted by the outlier ratio.
+
+The per-ray bookkeeping of an update and the robust estimates run in compiled kernels (at
+the end of this module); the random draws are made in numpy and handed to them.
 """
 
 from __future__ import annotations
@@ -26,23 +29,13 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from dynmap_sim.agent.maps.sample_set_numba import (
-    numba_available,
-    robust_rows,
-    table_kernel,
-    update_kernels,
-)
+from dynmap_sim.jit import compiled, jitable
 
 #: Largest storable range [mm] (uint16); also the sort key of empty slots.
 MAX_RANGE_MM = 65535
 
 #: 1/sqrt(2π)
 _INV_SQRT_2PI = 0.3989422804014327
-
-#: Up to this many measurements a ray on average, the numba update sorts them with its
-#: bucket sort (faster for the few of an online step), beyond with numpy's ``argsort``
-#: (faster for the hundreds of an offline step); the same order either way.
-_BUCKET_SORT_PER_RAY = 16
 
 
 @dataclass(frozen=True)
@@ -153,7 +146,6 @@ class SampleSets:
         *,
         fill: bool = False,
         initialize: bool = True,
-        backend: str = "auto",
     ) -> None:
         """Apply one time step of the §3.1 rule with the measurements ``(ray_idx, values_mm)``.
 
@@ -167,10 +159,9 @@ class SampleSets:
         fills free slots without removing anything; with ``initialize=False`` it does not
         count as the first time step (used to seed a new local map with one scan, §4.4).
 
-        ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): with ``"numba"`` (``"auto"``
-        when installed) the bookkeeping runs in compiled kernels
-        (:func:`.sample_set_numba.update_kernels`) between the same random draws and sorts:
-        the same samples.
+        The random draws are made here (a random order of each ray's measurements, the
+        ``u·n`` rounding, the keys of the slots to replace), the bookkeeping in the compiled
+        kernels below (:func:`_sort_by_ray`, :func:`_plan_update`, :func:`_write_update`).
         """
         ray = np.asarray(ray_idx, dtype=np.int64).ravel()
         val = np.asarray(values_mm).ravel()
@@ -181,105 +172,23 @@ class SampleSets:
         if val.dtype != np.uint16:
             val = np.clip(val, 0, MAX_RANGE_MM).astype(np.uint16)
         m = ray.size
-        kernels = update_kernels(backend)
-        if kernels is not None:  # (the sort kernel checks the rays)
-            # Random order within each ray: "randomly chosen samples from M".
-            keys = ray + rng.random(m)  # by ray, random within a ray
-            self._update_kernels(kernels, ray, keys, val, rng, fill, initialize)
-            return
-        if ray.min() < 0 or ray.max() >= self.n_rays:
-            raise ValueError("ray index out of range")
-        keys = ray + rng.random(m)
-        order = np.argsort(keys)
-        r_s = ray[order]
-        v_s = val[order]
-        # Runs of equal rays in the sorted order (what np.unique would return, without a sort).
-        starts = np.empty(m, dtype=bool)
-        starts[0] = True
-        np.not_equal(r_s[1:], r_s[:-1], out=starts[1:])
-        first = np.flatnonzero(starts)
-        uniq = r_s[first]
-        m_per = np.diff(first, append=m)
-        g = np.repeat(np.arange(uniq.size), m_per)
-        rank = np.arange(m) - first[g]
-
-        cnt = self.count[uniq].astype(np.int64)
-        free = self.n_samples - cnt
-        first = ~self.initialized[uniq] & self.fills_first_step
-        if fill:
-            n_new = np.minimum(m_per, free)
-        else:
-            n_new = np.where(
-                first, np.minimum(m_per, free), np.minimum(self._n_new(uniq.size, rng), m_per)
-            )
-        if initialize or not fill:
-            self.initialized[uniq] = True
-        n_add = np.minimum(n_new, free)
-        n_rep = n_new - n_add
-
-        slot = cnt[g] + rank  # filling: next free slot
-        rep_rows = np.flatnonzero(n_rep > 0)
-        if rep_rows.size:
-            # Random permutation of each such ray's *old* slots [0, cnt): remove the first n_rep.
-            keys = rng.random((rep_rows.size, self.n_samples))
-            keys[np.arange(self.n_samples)[None, :] >= cnt[rep_rows, None]] = 2.0
-            perm = np.argsort(keys, axis=1)
-            row_of_group = np.full(uniq.size, -1, dtype=np.int64)
-            row_of_group[rep_rows] = np.arange(rep_rows.size)
-            is_rep = (rank >= n_add[g]) & (rank < n_new[g])
-            pr = row_of_group[g[is_rep]]
-            slot[is_rep] = perm[pr, rank[is_rep] - n_add[g[is_rep]]]
-        keep = rank < n_new[g]
-        self.samples_mm[uniq[g[keep]], slot[keep]] = v_s[keep]
-        self.count[uniq] = (cnt + n_add).astype(np.uint16)
-        self._changed()
-
-    def _update_kernels(
-        self,
-        kernels: tuple,
-        ray: NDArray[np.int64],
-        keys: NDArray[np.float64],
-        val: NDArray[np.uint16],
-        rng: np.random.Generator,
-        fill: bool,
-        initialize: bool,
-    ) -> None:
-        """:meth:`update` after its sort keys, with :func:`.sample_set_numba.update_kernels`:
-        the measurements in the order of the numpy code's ``argsort`` of ``keys`` (a compiled
-        bucket sort; ``argsort`` itself if two keys are equal), the same random draws in the
-        same order (``u·n`` rounding, then the keys of the slots to replace), the keys put
-        in the order of the numpy code's ``argsort`` by the kernel. (A ray out of range raises
-        here, after the draw of ``keys``; the numpy code raises before it.)"""
-        sort_by_ray, ray_runs, plan_update, write_update = kernels
-        m = ray.size
+        keys = ray + rng.random(m)  # by ray, random within a ray: "randomly chosen from M"
         r_s = np.empty(m, dtype=np.int64)
         v_s = np.empty(m, dtype=np.uint16)
         first = np.empty(m, dtype=np.int64)
-        if m <= _BUCKET_SORT_PER_RAY * self.n_rays:  # a few a ray (online): the kernel
-            n_runs = sort_by_ray(ray, keys, val, self.n_rays, r_s, v_s, first)
-        elif ray.min() < 0 or ray.max() >= self.n_rays:  # many (offline): numpy's argsort
-            n_runs = -2
-        else:
-            n_runs = -1
-        if n_runs == -2:
+        n_runs = _sort_by_ray(ray, keys, val, self.n_rays, r_s, v_s, first)
+        if n_runs < 0:
             raise ValueError("ray index out of range")
-        if n_runs < 0:  # equal keys, or many a ray: numpy's order
-            order = np.argsort(keys)
-            r_s = ray[order]
-            v_s = val[order]
-            n_runs = ray_runs(r_s, first)
         first = first[:n_runs]
-        n_groups = first.size
-        n_rule = np.zeros(n_groups, dtype=np.int64) if fill else self._n_new(n_groups, rng)
-        n_new = np.empty(n_groups, dtype=np.int64)
-        n_add = np.empty(n_groups, dtype=np.int64)
-        rep_cnt = np.empty(n_groups, dtype=np.int64)
-        n_rep = plan_update(
-            r_s, first, self.count, self.initialized, self.n_samples,
-            self.fills_first_step, fill, initialize, n_rule, n_new, n_add, rep_cnt,
+        n_rule = np.zeros(n_runs, dtype=np.int64) if fill else self._n_new(n_runs, rng)
+        n_new = np.empty(n_runs, dtype=np.int64)
+        n_add = np.empty(n_runs, dtype=np.int64)
+        n_rep = _plan_update(
+            r_s, first, self.count, self.initialized, self.n_samples, self.fills_first_step,
+            fill, initialize, n_rule, n_new, n_add,
         )  # fmt: skip
         keys = rng.random((n_rep, self.n_samples)) if n_rep else np.empty((0, self.n_samples))
-        write_update(r_s, v_s, first, n_new, n_add, keys, self.samples_mm, self.count)
+        _write_update(r_s, v_s, first, n_new, n_add, keys, self.samples_mm, self.count)
         self._changed()
 
     def update_m(
@@ -301,43 +210,24 @@ class SampleSets:
         return self._est
 
     def model_table(
-        self,
-        max_range_m: float,
-        sigma_min_m: float = 0.0,
-        min_outlier_ratio: float = 0.0,
-        backend: str = "auto",
+        self, max_range_m: float, sigma_min_m: float = 0.0, min_outlier_ratio: float = 0.0
     ) -> NDArray[np.float64]:
         """Per-ray constants of eq. 6–8, ``(n_rays, 4)``: ``ρ``, ``1/(2σ²)``,
-        ``log((1 − p_o)/(σ√(2π)))`` and ``p_o/maxRange`` (cached until the next update).
-
-        Used by :func:`table_log_likelihood`, the fast path of the localizer. ``σ`` is
-        floored at ``max(sigma_min_m, 1 µm)``. ``backend`` ``"numba"`` (``"auto"`` when
-        installed): the arithmetic but the logs in a compiled loop
-        (:func:`.sample_set_numba.table_kernel`), the same values.
+        ``log((1 − p_o)/(σ√(2π)))`` and ``p_o/maxRange`` (cached until the next update), the
+        table the compiled scoring of :meth:`.LocalMap.scan_log_likelihoods` reads. ``σ``
+        is floored at ``max(sigma_min_m, 1 µm)``, ``p_o`` at ``min_outlier_ratio``; a ray
+        without samples gives the uniform density.
         """
         key = (float(max_range_m), float(sigma_min_m), float(min_outlier_ratio))
         if self._table is not None and self._table[0] == key:
             return self._table[1]
         est = self.estimates()
-        kernel = table_kernel(backend)
-        if kernel is not None:
-            tab = np.empty((self.n_rays, 4))
-            omp, sig = np.empty(self.n_rays), np.empty(self.n_rays)
-            kernel(est.rho_m, est.sigma_m, est.outlier_ratio, est.count, max(sigma_min_m, 1e-6),
-                   float(min_outlier_ratio), float(max_range_m), tab, omp, sig)  # fmt: skip
-            with np.errstate(divide="ignore"):
-                tab[:, 2] = np.log(omp) - np.log(sig) + np.log(_INV_SQRT_2PI)
-            self._table = (key, tab)
-            return tab
-        has = est.count > 0
-        sig = np.where(has, np.maximum(np.nan_to_num(est.sigma_m), max(sigma_min_m, 1e-6)), 1.0)
-        po = np.where(has, np.maximum(est.outlier_ratio, min_outlier_ratio), 1.0)
         tab = np.empty((self.n_rays, 4))
-        tab[:, 0] = np.where(has, est.rho_m, 0.0)
-        tab[:, 1] = 0.5 / (sig * sig)
+        omp, sig = np.empty(self.n_rays), np.empty(self.n_rays)
+        _table_rows(est.rho_m, est.sigma_m, est.outlier_ratio, est.count, max(sigma_min_m, 1e-6),
+                    float(min_outlier_ratio), float(max_range_m), tab, omp, sig)  # fmt: skip
         with np.errstate(divide="ignore"):
-            tab[:, 2] = np.log(1.0 - po) - np.log(sig) + np.log(_INV_SQRT_2PI)
-        tab[:, 3] = po / max_range_m
+            tab[:, 2] = np.log(omp) - np.log(sig) + np.log(_INV_SQRT_2PI)
         self._table = (key, tab)
         return tab
 
@@ -368,40 +258,13 @@ class SampleSets:
         )
 
 
-def robust_estimates(
-    samples_mm: NDArray[np.uint16], count: NDArray[np.integer], backend: str = "auto"
-) -> RayEstimates:
-    """Eq. 4–5 and the 3σ outlier ratio for every row of ``samples_mm`` (first ``count`` valid).
-
-    ``backend`` ``"numba"`` (extra ``fast``; ``"auto"``: when installed and the rows are
-    short) computes the identical values in a compiled loop (:mod:`.sample_set_numba`),
-    ``"numpy"`` vectorized.
-    """
-    n_rays, n = samples_mm.shape
+def robust_estimates(samples_mm: NDArray[np.uint16], count: NDArray[np.integer]) -> RayEstimates:
+    """Eq. 4–5 and the 3σ outlier ratio for every row of ``samples_mm`` (first ``count``
+    valid), one row at a time in a compiled loop (:func:`_robust_rows`)."""
     cnt = count.astype(np.int64)
-    if backend not in ("auto", "numpy", "numba"):
-        raise ValueError(f'backend must be "auto", "numpy" or "numba", got {backend!r}')
-    if backend == "numba" or (backend == "auto" and n <= 16 and numba_available()):
-        rho_m, sigma_m, outlier = robust_rows(samples_mm, cnt)
-        return RayEstimates(rho_m=rho_m, sigma_m=sigma_m, outlier_ratio=outlier, count=cnt)
-    valid = np.arange(n)[None, :] < cnt[:, None]
-    s = np.where(valid, samples_mm.astype(np.int32), MAX_RANGE_MM + 1)
-    s.sort(axis=1)
-    rows = np.arange(n_rays)
-    has = cnt > 0
-    mid = np.maximum(cnt - 1, 0) // 2  # lower middle: always a measured value
-    rho_mm = s[rows, mid]
-    absdev = np.abs(samples_mm.astype(np.int32) - rho_mm[:, None])
-    dev = np.where(valid, absdev, np.iinfo(np.int32).max)
-    dev.sort(axis=1)
-    lo = dev[rows, mid].astype(np.float64)
-    hi = dev[rows, np.minimum(cnt // 2, n - 1)].astype(np.float64)
-    mad_mm = np.where(cnt % 2 == 1, lo, 0.5 * (lo + hi))  # MAD is a scale: the usual median
-    sigma_mm = 1.48 * mad_mm
-    n_out = np.sum(valid & (absdev > 3.0 * sigma_mm[:, None]), axis=1)
-    outlier = np.where(has, n_out / np.maximum(cnt, 1), 0.0)
-    rho_m = np.where(has, rho_mm / 1000.0, np.nan)
-    sigma_m = np.where(has, sigma_mm / 1000.0, np.nan)
+    n_rays = samples_mm.shape[0]
+    rho_m, sigma_m, outlier = np.empty(n_rays), np.empty(n_rays), np.empty(n_rays)
+    _robust_rows(np.ascontiguousarray(samples_mm), cnt, rho_m, sigma_m, outlier)
     return RayEstimates(rho_m=rho_m, sigma_m=sigma_m, outlier_ratio=outlier, count=cnt)
 
 
@@ -431,16 +294,211 @@ def mixture_log_likelihood(
         return np.log(p)
 
 
-def table_log_likelihood(
-    table: NDArray[np.float64],
-    ray_idx: NDArray[np.int64],
-    range_m: NDArray[np.float64],
-    max_range_m: float,
-) -> NDArray[np.float64]:
-    """Eq. 6–8 from a :meth:`SampleSets.model_table` (one gather, few temporaries)."""
-    t = table[ray_idx]
-    z = range_m - t[:, 0]
-    p = np.exp(t[:, 2] - z * z * t[:, 1])
-    p += np.where((range_m >= 0.0) & (range_m <= max_range_m), t[:, 3], 0.0)
-    with np.errstate(divide="ignore"):
-        return np.log(p)
+# ---------------------------------------------------------------------- compiled kernels
+@jitable
+def _kth_smallest(a: NDArray[np.int64], n: int, k: int) -> int:
+    """The ``k``-th smallest of ``a[:n]`` (from 0), by Hoare's selection in place: afterwards
+    no element after ``a[k]`` is smaller. (Numba's full sort of a long ray is several times
+    slower than numpy's; the selection is not.)"""
+    lo, hi = 0, n - 1
+    while lo < hi:
+        x, y, z = a[lo], a[(lo + hi) // 2], a[hi]
+        pivot = max(min(x, y), min(max(x, y), z))  # the median of the three
+        i, j = lo, hi
+        while i <= j:
+            while a[i] < pivot:
+                i += 1
+            while a[j] > pivot:
+                j -= 1
+            if i <= j:
+                a[i], a[j] = a[j], a[i]
+                i += 1
+                j -= 1
+        if k <= j:
+            hi = j
+        elif k >= i:
+            lo = i
+        else:
+            break
+    return a[k]
+
+
+@compiled
+def _robust_rows(samples_mm, count, rho_m, sigma_m, outlier):  # type: ignore[no-untyped-def]
+    """Fill ``rho_m`` [m] (the lower middle sample: a measured value), ``sigma_m`` [m]
+    (``1.48·MAD``, the usual median of the absolute deviations) and ``outlier`` (the share
+    of samples beyond ``3σ``) for every row of ``samples_mm`` [mm] (first ``count``
+    valid); NaN, NaN, 0 for an empty row."""
+    n = samples_mm.shape[1]
+    buf = np.empty(n, dtype=np.int64)
+    for r in range(samples_mm.shape[0]):
+        c = count[r]
+        if c <= 0:
+            rho_m[r] = np.nan
+            sigma_m[r] = np.nan
+            outlier[r] = 0.0
+            continue
+        for k in range(c):
+            buf[k] = samples_mm[r, k]
+        mid = (c - 1) // 2
+        rho = _kth_smallest(buf, c, mid)
+        for k in range(c):
+            buf[k] = abs(np.int64(samples_mm[r, k]) - rho)
+        lo = float(_kth_smallest(buf, c, mid))
+        if c % 2 == 1:
+            mad = lo
+        else:  # the next order statistic: the smallest after the selected one
+            hi = buf[mid + 1]
+            for k in range(mid + 2, c):
+                hi = min(hi, buf[k])
+            mad = 0.5 * (lo + float(hi))
+        sig = 1.48 * mad
+        n_out = 0
+        for k in range(c):
+            if abs(np.int64(samples_mm[r, k]) - rho) > 3.0 * sig:
+                n_out += 1
+        rho_m[r] = rho / 1000.0
+        sigma_m[r] = sig / 1000.0
+        outlier[r] = n_out / c
+
+
+@compiled
+def _sort_by_ray(ray, keys, val, n_rays, r_s, v_s, first):  # type: ignore[no-untyped-def]
+    """The measurements ``(ray, val)`` ordered by their ``keys`` (``ray + U[0, 1)``: by ray,
+    in random order within a ray) into ``r_s``, ``v_s``, and the starts of their runs of
+    equal rays into ``first``; returns the number of runs, -1 when a ray is not in
+    ``[0, n_rays)``. A counting sort by ray, then each ray's keys sorted (insertion sort up
+    to 16, ``np.argsort`` beyond)."""
+    m = ray.shape[0]
+    for i in range(m):
+        if ray[i] < 0 or ray[i] >= n_rays:
+            return -1
+    start = np.zeros(n_rays + 1, dtype=np.int64)
+    for i in range(m):
+        start[ray[i] + 1] += 1
+    for r in range(n_rays):
+        start[r + 1] += start[r]
+    nxt = start[:-1].copy()
+    ks = np.empty(m)
+    for i in range(m):  # into the ray's bucket, in arrival order
+        q = nxt[ray[i]]
+        nxt[ray[i]] = q + 1
+        ks[q] = keys[i]
+        v_s[q] = val[i]
+    for r in range(n_rays):  # each bucket by key
+        lo, hi = start[r], start[r + 1]
+        if hi - lo > 16:
+            o = np.argsort(ks[lo:hi]) + lo
+            ks[lo:hi] = ks[o]
+            v_s[lo:hi] = v_s[o]
+            continue
+        for p in range(lo + 1, hi):
+            k = ks[p]
+            v = v_s[p]
+            q = p
+            while q > lo and ks[q - 1] > k:
+                ks[q] = ks[q - 1]
+                v_s[q] = v_s[q - 1]
+                q -= 1
+            ks[q] = k
+            v_s[q] = v
+    n = 0
+    for r in range(n_rays):
+        if start[r + 1] > start[r]:
+            first[n] = start[r]
+            n += 1
+        for q in range(start[r], start[r + 1]):
+            r_s[q] = r
+    return n
+
+
+@compiled
+def _plan_update(  # type: ignore[no-untyped-def]
+    r_s, first, count, initialized, n_samples, fills_first_step, fill, initialize, n_rule,
+    n_new, n_add,
+):  # fmt: skip
+    """Per run ``g`` of :func:`_sort_by_ray` (ray ``r_s[first[g]]``): ``n_new`` measurements
+    taken (all that fit while filling or on a first step, else ``n_rule``, the rounded
+    ``u·n``), ``n_add`` of them into free slots, the rest replacing old samples; marks the
+    rays ``initialized`` (unless a ``fill`` that does not ``initialize``). Returns how many
+    runs replace (the rows of random keys :func:`_write_update` needs)."""
+    m = r_s.shape[0]
+    n_groups = first.shape[0]
+    n_rep_rows = 0
+    for g in range(n_groups):
+        ray = r_s[first[g]]
+        end = first[g + 1] if g + 1 < n_groups else m
+        m_per = end - first[g]
+        cnt = np.int64(count[ray])
+        free = n_samples - cnt
+        if fill or (fills_first_step and not initialized[ray]):
+            k = min(m_per, free)
+        else:
+            k = min(n_rule[g], m_per)
+        if initialize or not fill:
+            initialized[ray] = True
+        a = min(k, free)
+        n_new[g] = k
+        n_add[g] = a
+        if k - a > 0:
+            n_rep_rows += 1
+    return n_rep_rows
+
+
+@compiled
+def _write_update(r_s, v_s, first, n_new, n_add, keys, samples_mm, count):  # type: ignore[no-untyped-def]
+    """Each run's first ``n_add`` measurements into the next free slots, the next
+    ``rep = n_new - n_add`` into the old slots ``[0, count)`` of the ``rep`` smallest random
+    ``keys[row]`` (``row``: the run's order among those that replace; a uniformly random
+    choice of the slots), and the new counts."""
+    n_groups = first.shape[0]
+    slots = np.empty(samples_mm.shape[1], dtype=np.int64)
+    row = 0
+    for g in range(n_groups):
+        start = first[g]
+        ray = r_s[start]
+        cnt = np.int64(count[ray])
+        a = n_add[g]
+        for j in range(a):
+            samples_mm[ray, cnt + j] = v_s[start + j]
+        rep = n_new[g] - a
+        if rep > 0:
+            n_kept = 0  # slots[:n_kept]: the smallest keys so far, increasing
+            for q in range(cnt):
+                kq = keys[row, q]
+                if n_kept == rep and kq >= keys[row, slots[n_kept - 1]]:
+                    continue
+                p = n_kept if n_kept < rep else rep - 1
+                while p > 0 and keys[row, slots[p - 1]] > kq:
+                    slots[p] = slots[p - 1]
+                    p -= 1
+                slots[p] = q
+                if n_kept < rep:
+                    n_kept += 1
+            for j in range(rep):
+                samples_mm[ray, slots[j]] = v_s[start + a + j]
+            row += 1
+        count[ray] = np.uint16(cnt + a)
+
+
+@compiled
+def _table_rows(  # type: ignore[no-untyped-def]
+    rho_m, sigma_m, outlier, count, sigma_floor_m, min_outlier_ratio, max_range_m, table,
+    one_minus_po, sigma,
+):  # fmt: skip
+    """Columns 0, 1 and 3 of :meth:`SampleSets.model_table` (``ρ``, ``1/(2σ²)``,
+    ``p_o/maxRange``), and the floored ``σ`` and ``1 - p_o`` whose logs make column 2 (a ray
+    without samples: ``σ = 1``, ``p_o = 1``, the uniform density)."""
+    for r in range(rho_m.shape[0]):
+        if count[r] > 0:
+            sg = sigma_m[r] if sigma_m[r] >= sigma_floor_m else sigma_floor_m
+            po = outlier[r] if outlier[r] >= min_outlier_ratio else min_outlier_ratio
+            table[r, 0] = rho_m[r]
+        else:
+            sg = 1.0
+            po = 1.0
+            table[r, 0] = 0.0
+        sigma[r] = sg
+        one_minus_po[r] = 1.0 - po
+        table[r, 1] = 0.5 / (sg * sg)
+        table[r, 3] = po / max_range_m

@@ -5,11 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from dynmap_sim.agent.maps import local_map_numba
 from dynmap_sim.agent.maps.current_map import synthesize_current_map
 from dynmap_sim.agent.maps.dynamic_map import DynamicMap
 from dynmap_sim.agent.maps.local_map import TABLE1, LocalMap
-from tests.agent.maps.test_sample_set import UPDATE_KERNELS  # python, numba
+from dynmap_sim.agent.maps.sample_set import mixture_log_likelihood
 
 
 def test_table1_memory():
@@ -113,39 +112,31 @@ def test_safe_mode_when_nothing_fits(room, scan_fn, box_fn):
 
 
 @pytest.mark.parametrize("sigma_min_m", [0.0, 0.01])
-def test_all_levels_at_once_equal_one_level_at_a_time(room, scan_fn, sigma_min_m):
+def test_scan_log_likelihoods_are_the_mixture_model(room, scan_fn, sigma_min_m):
+    """The per-reading log-likelihoods of several levels at once (compiled with a floor,
+    the stacked tables following every update) are eq. 6–8 level by level
+    (:func:`mixture_log_likelihood` on the readings' polar coordinates); a reading beyond
+    the maximum range has none."""
     rng = np.random.default_rng(5)
     dmap = DynamicMap(max_range_m=8.0)
     pose = np.array([2.0, 2.0, 0.0])
     i = dmap.add_local_map(pose[:2], scan_fn(pose, room, rng), rng)
     lm = dmap.local_maps[i]
     dmap.learn_offline([1, 2, 3, 4], pose[None], [scan_fn(pose, room, rng)], rng)
-    for step in range(3):  # the stacked tables must follow every update
-        scan = scan_fn(pose + [0.1 * step, 0.0, 0.0], room, rng)
-        polar = lm.polar(np.concatenate([scan, [[30.0, 30.0]]]))  # one reading out of range
-        levels = [0, 1, 2, 3, 4] if step != 1 else [1, 3, 4]
-        both = lm.log_likelihoods(levels, polar, sigma_min_m=sigma_min_m, min_outlier_ratio=0.01)
-        for b, level in enumerate(levels):
-            one = lm.log_likelihood(level, polar, sigma_min_m=sigma_min_m, min_outlier_ratio=0.01)
-            assert np.array_equal(both[b], one)
-        dmap.learn_online(pose, scan, rng, levels=[0])
-
-
-@pytest.mark.skipif(not local_map_numba.numba_available(), reason="numba not installed")
-def test_compiled_scan_log_likelihoods_agree_with_numpy(room, scan_fn):
-    rng = np.random.default_rng(8)
-    dmap = DynamicMap(max_range_m=8.0)
-    pose = np.array([2.0, 2.0, 0.0])
-    i = dmap.add_local_map(pose[:2], scan_fn(pose, room, rng), rng)
-    lm = dmap.local_maps[i]
-    dmap.learn_offline([1, 2, 3, 4], pose[None], [scan_fn(pose, room, rng)], rng)
     for step in range(3):
-        pts = np.concatenate([scan_fn(pose + [0.2 * step, 0.1, 0.0], room, rng), [[30.0, 2.0]]])
-        kw = {"sigma_min_m": 0.01, "min_outlier_ratio": 0.01}
-        a = lm.scan_log_likelihoods([0, 1, 2, 3, 4], pts, backend="numba", **kw)
-        b = lm.scan_log_likelihoods([0, 1, 2, 3, 4], pts, backend="numpy", **kw)
-        assert np.allclose(a, b, rtol=1e-12, atol=1e-12)
-        dmap.learn_online(pose, pts, rng, levels=[0])
+        scan = scan_fn(pose + [0.1 * step, 0.0, 0.0], room, rng)
+        pts = np.concatenate([scan, [[30.0, 30.0]]])  # one reading out of range
+        levels = [0, 1, 2, 3, 4] if step != 1 else [1, 3, 4]
+        kw = {"sigma_min_m": sigma_min_m, "min_outlier_ratio": 0.01}
+        got = lm.scan_log_likelihoods(levels, pts, **kw)
+        ang, dist = lm.polar(pts)
+        for b, level in enumerate(levels):
+            ray = lm.ray_index(ang, TABLE1[level].n_rays)
+            want = mixture_log_likelihood(lm.sub[level].estimates(), ray, dist, 8.0, **kw)
+            fin = np.isfinite(want)
+            assert np.array_equal(fin, np.isfinite(got[b])) and not fin[-1]
+            np.testing.assert_allclose(got[b][fin], want[fin], rtol=1e-9, atol=1e-9)
+        dmap.learn_online(pose, scan, rng, levels=[0])
 
 
 def test_snapshot_points_are_the_sub_map_medians(room, scan_fn):
@@ -164,27 +155,27 @@ def test_snapshot_points_are_the_sub_map_medians(room, scan_fn):
             assert np.abs(got - want).max() < 1e-3
 
 
-@pytest.mark.parametrize("backend", UPDATE_KERNELS)
 @pytest.mark.parametrize("seed", range(6))
-def test_compiled_projection_learns_the_numpy_samples(backend, seed):
-    """learn_levels with the compiled projection (local_map_numba.polar_rays) leaves every
-    sub-map's samples and the generator as the numpy projection does: points beyond the
-    maximum range, on ray boundaries and at 2π, ranges past 65.535 m, levels sharing rays."""
+def test_learning_puts_each_point_on_its_closest_ray(seed):
+    """A filling step puts each point within the maximum range on the closest ray of every
+    level (ray ``j`` at ``j·2π/R``) with its distance in millimetres (clipped at 65.535 m);
+    points beyond the maximum range are left out."""
     rng = np.random.default_rng(seed)
-    a = LocalMap(rng.normal(0, 1, 2), max_range_m=float(rng.choice([4.0, 80.0])))
-    b = LocalMap(a.centre, max_range_m=a.max_range_m)
-    ra, rb = np.random.default_rng(seed), np.random.default_rng(seed)
-    for step in range(8):
-        n = int(rng.integers(0, 900))
-        ang = rng.uniform(0, 2 * np.pi, n)
-        ang[: n // 4] = np.round(ang[: n // 4] * 720 / np.pi) * np.pi / 720  # on the rays
-        r = rng.uniform(0.0, 6.0, n) * (1.0 + 12.0 * (rng.random(n) < 0.05))
-        pts = a.centre + r[:, None] * np.column_stack([np.cos(ang), np.sin(ang)])
-        levels = [[0], [1], [2, 3, 4], [0, 1, 2, 3, 4]][step % 4]
-        fill = step == 0
-        a.learn_levels(levels, pts, ra, fill=fill, backend="numpy")
-        b.learn_levels(levels, pts, rb, fill=fill, backend=backend)
-        for sa, sb in zip(a.sub, b.sub, strict=True):
-            assert np.array_equal(sa.samples_mm, sb.samples_mm)
-            assert np.array_equal(sa.count, sb.count)
-    assert ra.random() == rb.random()
+    lm = LocalMap(rng.normal(0, 1, 2), max_range_m=float(rng.choice([4.0, 80.0])))
+    n = int(rng.integers(1, 300))
+    ang = rng.uniform(0, 2 * np.pi, n)
+    r = rng.uniform(0.0, 6.0, n) * (1.0 + 12.0 * (rng.random(n) < 0.05))
+    pts = lm.centre + r[:, None] * np.column_stack([np.cos(ang), np.sin(ang)])
+    lm.learn_levels(range(5), pts, rng, fill=True)
+    near = np.hypot(*(pts - lm.centre).T) <= lm.max_range_m
+    for level, ts in enumerate(TABLE1):
+        want: list[list[int]] = [[] for _ in range(ts.n_rays)]
+        for a, d in zip(ang[near], r[near], strict=True):
+            want[int(np.rint(a * ts.n_rays / (2 * np.pi))) % ts.n_rays].append(
+                min(int(np.rint(d * 1000.0)), 65535)
+            )
+        sub = lm.sub[level]
+        for j in range(ts.n_rays):
+            got = sorted(sub.samples_mm[j, : sub.count[j]].tolist())
+            assert len(got) == min(len(want[j]), ts.n_samples)
+            assert all(v in want[j] for v in got)
