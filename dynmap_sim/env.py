@@ -142,11 +142,7 @@ class DynMapEnv(gymnasium.Env):
 
     ``world``: ``"lab"``, ``"apartment"``, a path to a world TOML file, or a ``WorldSpec``.
     ``sensor``: ``"urg-04lx"`` or ``"lms200"``; ``sensor_options``: preset overrides passed to
-    ``make_lidar`` (e.g. ``{"beams": 181, "mode": "cm", "mount_pose": (0.1, 0, 0)}``, or
-    ``{"backend": "numba"}`` for the compiled ray caster, noise model and people's step of
-    the ``fast`` extra, all numpy's numbers bit for bit; ``"auto"``: those when numba is
-    installed, numpy's caster where the compiled one cannot reproduce numpy's complex
-    arithmetic, which scenario experiments use);
+    ``make_lidar`` (e.g. ``{"beams": 181, "mode": "cm", "mount_pose": (0.1, 0, 0)}``);
     ``lidar_noise``: a ``LidarNoise``. ``people``: False removes all people. ``robot``:
     ``RobotParams`` (limits, wheel geometry with UMBmark errors ``E_d``/``E_b``, slip);
     ``encoder``: ``EncoderNoise``. ``dt_s``: step period (default the scan period).
@@ -250,8 +246,7 @@ class DynMapEnv(gymnasium.Env):
         self._act_bounds = (tuple(self._act_lo.tolist()), tuple(self._act_hi.tolist()))
 
         self.world_seed = 0
-        # the fast extra's lidar also steps people with its kernels (numpy's numbers)
-        self.world = World(spec, seed=0, people_backend=self.lidar.backend)
+        self.world = World(spec, seed=0)
         self.robot = DiffDriveRobot(self.world.space, p, tuple(spec.robot.start))
         self.odometry = WheelOdometry(p.wheels, self.encoder)
         self._slot = -1  # index of the current run in the calendar (-1: none yet)
@@ -271,9 +266,7 @@ class DynMapEnv(gymnasium.Env):
             seed = int(self.np_random.integers(2**31))
         if seed is not None and int(seed) != self.world_seed:
             self.world_seed = int(seed)
-            self.world = World(
-                self.spec_world, seed=self.world_seed, people_backend=self.lidar.backend
-            )
+            self.world = World(self.spec_world, seed=self.world_seed)
             self.robot.attach(self.world.space)
         cal = self.world.calendar
         if asked_slot is not None:

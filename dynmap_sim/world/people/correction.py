@@ -3,8 +3,6 @@ each other, then walls (walls win), so no person is ever shown inside a wall."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 from numpy.typing import NDArray
 
@@ -23,7 +21,6 @@ def correct(
     old: NDArray[np.complex128],
     gaps: tuple[float, FloatArray, float],
     moved_max_m: float,
-    pair_push: Callable[..., bool] | None = None,
 ) -> FloatArray:
     """Push bodies out of the robot's comfort disc, each other, then walls (walls win);
     return how far each body moved in the step, ``|z - old|`` [m].
@@ -32,14 +29,13 @@ def correct(
     Distances are 1-Lipschitz in position, so a body that moved less than its gap before
     the move (``gaps``: between bodies, per body to a segment, to the robot's disc [m];
     ``moved_max_m`` bounds the move) cannot overlap: those checks are skipped.
-    ``pair_push``: the compiled weights of the pair separation (the numba backend's).
     """
     pair_gap, wall_gap, robot_gap = gaps
     if rz is not None and robot_gap <= moved_max_m:
         _clear_robot(z, rz, k)
     disp = np.abs(z - old)
     if crowd.n > 1 and 2.0 * disp.max() >= pair_gap:
-        _separate_pairs(z, k, pair_push)
+        _separate_pairs(z, k)
         disp = np.abs(z - old)
     if not bool((disp >= wall_gap).any()):
         return disp
@@ -57,27 +53,13 @@ def _clear_robot(z: NDArray[np.complex128], rz: complex, k: StepConstants) -> No
         z += push / dr * rd
 
 
-def _separate_pairs(
-    z: NDArray[np.complex128], k: StepConstants, pair_push: Callable[..., bool] | None = None
-) -> None:
-    """Move each overlapping pair of bodies apart, half the overlap each.
-
-    Without an overlapping pair nothing moves (the push would add only zeros).
-    ``pair_push(d, rsum_masked, out)``: ``out = max(rsum - d, 0) / max(d, 1e-9)``, True if
-    any pair overlaps (a compiled kernel; else numpy does it).
-    """
+def _separate_pairs(z: NDArray[np.complex128], k: StepConstants) -> None:
+    """Move each overlapping pair of bodies apart, half the overlap each."""
     diff = z[:, None] - z[None, :]
     d = np.abs(diff)
-    if pair_push is None:
-        over = np.maximum(k.rsum_masked - d, 0.0)
-        if not over.any():
-            return
-        push = over / np.maximum(d, 1e-9)
-    else:
-        push = np.empty_like(d)
-        if not pair_push(d, k.rsum_masked, push):
-            return
-    z += 0.5 * (push * diff).sum(axis=1)
+    over = np.maximum(k.rsum_masked - d, 0.0)
+    if over.any():
+        z += 0.5 * (over / np.maximum(d, 1e-9) * diff).sum(axis=1)
 
 
 def _push_out_of_walls(
