@@ -344,19 +344,32 @@ def _mixed_pixels(r, out, left, n_edges, pick, p_mixed, w):  # type: ignore[no-u
 
 
 @compiled
+def _rare_beams(r, u, p_any, r_max):  # type: ignore[no-untyped-def]
+    """The number of beams that hit with ``u < p_any`` (a rare event each)."""
+    m = 0
+    for i in range(r.shape[0]):
+        if r[i] <= r_max and u[i] < p_any:
+            m += 1
+    return m
+
+
+@compiled
 def _finish(r, out, u, short, p, r_min, r_max, res):  # type: ignore[no-untyped-def]
     """Rare events of the beams that hit (``u < p[0]``: dropout ``+inf``; ``< p[1]``: a
-    short return ``r_min + short (r - r_min)``; ``< p[2]``: NaN), then REP-117 (``-inf``
-    below ``r_min``, ``+inf`` beyond ``r_max``) into the float32 readings ``res``."""
+    short return ``r_min + short (r - r_min)``, one ``short`` draw per rare beam in order;
+    ``< p[2]``: NaN), then REP-117 (``-inf`` below ``r_min``, ``+inf`` beyond ``r_max``)
+    into the float32 readings ``res``."""
+    j = 0
     for i in range(out.shape[0]):
         v = out[i]
         if u.shape[0] and r[i] <= r_max and u[i] < p[2]:
             if u[i] < p[0]:
                 v = math.inf
             elif u[i] < p[1]:
-                v = r_min + short[i] * (r[i] - r_min)
+                v = r_min + short[j] * (r[i] - r_min)
             else:
                 v = math.nan
+            j += 1
         if v < r_min:
             v = -math.inf
         elif v > r_max:
@@ -387,8 +400,13 @@ def _noise_scan(
         pick = rng.random(2 * n_edges)
         w = rng.random(int((pick < nz.p_mixed).sum()))
         _mixed_pixels(r, out, left, n_edges, pick, float(nz.p_mixed), w)
-    p = np.cumsum([nz.p_dropout, nz.p_short, nz.p_invalid])
-    u, short = (rng.random(n), rng.random(n)) if p[2] > 0.0 else (_EMPTY, _EMPTY)
+    p1 = nz.p_dropout
+    p2 = p1 + nz.p_short
+    p = np.array([p1, p2, p2 + nz.p_invalid])
+    u = short = _EMPTY
+    if p[2] > 0.0:
+        u = rng.random(n)
+        short = rng.random(_rare_beams(r, u, p[2], r_max))
     res = np.empty(n, dtype=np.float32)
     _finish(r, out, u, short, p, float(spec.range_min_m), r_max, res)
     return res

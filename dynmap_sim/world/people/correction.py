@@ -3,16 +3,17 @@ each other, then walls (walls win), so no person is ever shown inside a wall."""
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 
-from dynmap_sim.world.people.crowd import Crowd
+from dynmap_sim.jit import compiled
 from dynmap_sim.world.people.dynamics import StepConstants
 from dynmap_sim.world.polygons import FloatArray
 
 
 def correct(
-    crowd: Crowd,
     z: NDArray[np.complex128],
     v: NDArray[np.complex128],
     rows: NDArray[np.complex128],
@@ -25,70 +26,75 @@ def correct(
     """Push bodies out of the robot's comfort disc, each other, then walls (walls win);
     return how far each body moved in the step, ``|z - old|`` [m].
 
-    ``z``, ``v`` are complex views of positions and velocities (updated in place).
-    Distances are 1-Lipschitz in position, so a body that moved less than its gap before
-    the move (``gaps``: between bodies, per body to a segment, to the robot's disc [m];
-    ``moved_max_m`` bounds the move) cannot overlap: those checks are skipped.
+    ``z``, ``v`` are complex views of positions and velocities (updated in place), ``rows``
+    the candidate segments. Distances are 1-Lipschitz in position, so a body that moved less
+    than its gap before the move (``gaps``: between bodies, per body to a segment, to the
+    robot's disc [m]; ``moved_max_m`` bounds the move) cannot overlap: those checks are
+    skipped.
     """
     pair_gap, wall_gap, robot_gap = gaps
-    if rz is not None and robot_gap <= moved_max_m:
-        _clear_robot(z, rz, k)
-    disp = np.abs(z - old)
-    if crowd.n > 1 and 2.0 * disp.max() >= pair_gap:
-        _separate_pairs(z, k)
-        disp = np.abs(z - old)
-    if not bool((disp >= wall_gap).any()):
-        return disp
-    _push_out_of_walls(crowd, z, v, rows)
-    return np.abs(z - old)
+    disp = np.empty(len(z))
+    robot = rz is not None
+    limits = np.array([pair_gap, robot_gap if robot else math.inf, moved_max_m])
+    _correct(z, v, rows, complex(rz) if robot else 0j, k.force, old, wall_gap, limits, disp)
+    return disp
 
 
-def _clear_robot(z: NDArray[np.complex128], rz: complex, k: StepConstants) -> None:
-    """Move bodies radially out to ``robot_need`` from the robot at ``rz``."""
-    rd = z - rz
-    dr = np.maximum(np.abs(rd), 1e-9)
-    push = k.robot_need - dr
-    if push.max() > 0.0:
-        np.maximum(push, 0.0, out=push)
-        z += push / dr * rd
-
-
-def _separate_pairs(z: NDArray[np.complex128], k: StepConstants) -> None:
-    """Move each overlapping pair of bodies apart, half the overlap each."""
-    diff = z[:, None] - z[None, :]
-    d = np.abs(diff)
-    over = np.maximum(k.rsum_masked - d, 0.0)
-    if over.any():
-        z += 0.5 * (over / np.maximum(d, 1e-9) * diff).sum(axis=1)
-
-
-def _push_out_of_walls(
-    crowd: Crowd,
-    z: NDArray[np.complex128],
-    v: NDArray[np.complex128],
-    rows: NDArray[np.complex128],
-) -> None:
-    """Two passes: push each body out of its deepest candidate segment and remove the
-    velocity component into it."""
-    p0 = rows[..., 0]
-    cd = rows[..., 1]
-    inv = rows[..., 2].real
-    idx = np.arange(crowd.n)
-    for _ in range(2):
-        a = z[:, None] - p0
-        t = (a * cd).real * inv
-        np.minimum(np.maximum(t, 0.0, out=t), 1.0, out=t)
-        q = a - t * cd.conjugate()
-        dist = np.abs(q)
-        over = crowd.radius[:, None] - dist
-        j = np.argmax(over, axis=1)
-        depth = over[idx, j]
-        if not (depth > 0.0).any():
+@compiled
+def _correct(z, v, rows, rz, k, old, wall_gap, limits, disp):  # type: ignore[no-untyped-def]
+    """The correction in place (see :func:`correct`); ``limits = (pair_gap, robot_gap,
+    moved_max)``, ``disp`` receives ``|z - old|``."""
+    n = z.shape[0]
+    pair_gap, robot_gap, moved_max = limits[0], limits[1], limits[2]
+    if robot_gap <= moved_max:  # radially out to robot_need from the robot
+        for i in range(n):
+            rd = z[i] - rz
+            dr = max(abs(rd), 1e-9)
+            if k.robot_need[i] > dr:
+                z[i] += (k.robot_need[i] - dr) / dr * rd
+    dmax = 0.0
+    for i in range(n):
+        disp[i] = abs(z[i] - old[i])
+        dmax = max(dmax, disp[i])
+    if n > 1 and 2.0 * dmax >= pair_gap:  # each overlapping pair apart, half the overlap each
+        push = np.zeros(n, dtype=np.complex128)
+        for i in range(n):
+            for j in range(n):
+                if j != i:
+                    dv = z[i] - z[j]
+                    d = abs(dv)
+                    if k.rsum[i, j] > d:
+                        push[i] += 0.5 * (k.rsum[i, j] - d) / max(d, 1e-9) * dv
+        for i in range(n):
+            z[i] += push[i]
+            disp[i] = abs(z[i] - old[i])
+    into_wall = False
+    for i in range(n):
+        into_wall = into_wall or disp[i] >= wall_gap[i]
+    if not into_wall:
+        return
+    for _ in range(2):  # out of the deepest candidate segment, velocity into it removed
+        anyone = False
+        for i in range(n):
+            depth = -math.inf
+            q = 0j
+            dist = 0.0
+            for c in range(rows.shape[1]):
+                a = z[i] - rows[i, c, 0]
+                cd = rows[i, c, 1]
+                t = min(max((a * cd).real * rows[i, c, 2].real, 0.0), 1.0)
+                qc = a - t * cd.conjugate()
+                dc = abs(qc)
+                if k.radius[i] - dc > depth:
+                    depth, q, dist = k.radius[i] - dc, qc, dc
+            if depth > 0.0:
+                anyone = True
+                nv = q / max(dist, 1e-9)
+                z[i] += depth * nv
+                vn = (v[i] * nv.conjugate()).real
+                if vn < 0.0:
+                    v[i] -= vn * nv
+        if not anyone:
             break
-        np.maximum(depth, 0.0, out=depth)
-        nv = q[idx, j] / np.maximum(dist[idx, j], 1e-9)
-        z += depth * nv
-        # remove the velocity component into the obstacle
-        vn = (v * nv.conjugate()).real
-        hit = (depth > 0) & (vn < 0)
-        v -= np.where(hit, vn, 0.0) * nv
+    for i in range(n):
+        disp[i] = abs(z[i] - old[i])

@@ -75,10 +75,8 @@ class StepConstants:
     """Speed cap ``1.3 v0`` [m/s] (H&M eq. 8)."""
     vmax_max: float
     """The largest speed of anyone [m/s] (bounds a step's move)."""
-    rsum_masked: FloatArray
-    """``r_i + r_j`` with ``-inf`` on the diagonal (a body never overlaps itself)."""
-    robot_need: FloatArray
     robot_goal_reach: FloatArray
+    """How near the robot may come to a goal before it is given up [m]."""
     force: ForceConsts
 
     @classmethod
@@ -104,8 +102,6 @@ class StepConstants:
             robot_radius_m=robot_radius_m,
             vmax=1.3 * v0,
             vmax_max=float((1.3 * v0).max()) if n else 0.0,
-            rsum_masked=np.where(np.eye(n, dtype=bool), -np.inf, rsum),
-            robot_need=reach,
             robot_goal_reach=reach + 0.1,
             force=force,
         )

@@ -138,7 +138,7 @@ class SocialForce:
         # walls are checked only when someone was that close to them
         moved_max_m = max_move_m(dt_s, k.vmax_max)
         gaps = (pair_gap, wall_gap, robot_gap)
-        disp = correct(crowd, z, v, rows, rz, k, old, gaps, moved_max_m)
+        disp = correct(z, v, rows, rz, k, old, gaps, moved_max_m)
         crowd.phase += disp * (2 * np.pi / STRIDE_M)
         redo = goals_due(crowd, goal, z, dt_s, rz, k)
         if redo is None:
