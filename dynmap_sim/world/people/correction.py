@@ -9,7 +9,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynmap_sim.jit import compiled
-from dynmap_sim.world.people.dynamics import StepConstants
+from dynmap_sim.world.people.dynamics import RADIUS, ROBOT_NEED, StepConstants
 from dynmap_sim.world.polygons import FloatArray
 
 
@@ -36,12 +36,12 @@ def correct(
     disp = np.empty(len(z))
     robot = rz is not None
     limits = np.array([pair_gap, robot_gap if robot else math.inf, moved_max_m])
-    _correct(z, v, rows, complex(rz) if robot else 0j, k.force, old, wall_gap, limits, disp)
+    _correct(z, v, rows, complex(rz) if robot else 0j, k.per, k.pair, old, wall_gap, limits, disp)
     return disp
 
 
 @compiled
-def _correct(z, v, rows, rz, k, old, wall_gap, limits, disp):  # type: ignore[no-untyped-def]
+def _correct(z, v, rows, rz, per, pair, old, wall_gap, limits, disp):  # type: ignore[no-untyped-def]
     """The correction in place (see :func:`correct`); ``limits = (pair_gap, robot_gap,
     moved_max)``, ``disp`` receives ``|z - old|``."""
     n = z.shape[0]
@@ -50,8 +50,8 @@ def _correct(z, v, rows, rz, k, old, wall_gap, limits, disp):  # type: ignore[no
         for i in range(n):
             rd = z[i] - rz
             dr = max(abs(rd), 1e-9)
-            if k.robot_need[i] > dr:
-                z[i] += (k.robot_need[i] - dr) / dr * rd
+            if per[i, ROBOT_NEED] > dr:
+                z[i] += (per[i, ROBOT_NEED] - dr) / dr * rd
     dmax = 0.0
     for i in range(n):
         disp[i] = abs(z[i] - old[i])
@@ -63,8 +63,8 @@ def _correct(z, v, rows, rz, k, old, wall_gap, limits, disp):  # type: ignore[no
                 if j != i:
                     dv = z[i] - z[j]
                     d = abs(dv)
-                    if k.rsum[i, j] > d:
-                        push[i] += 0.5 * (k.rsum[i, j] - d) / max(d, 1e-9) * dv
+                    if pair[0, i, j] > d:
+                        push[i] += 0.5 * (pair[0, i, j] - d) / max(d, 1e-9) * dv
         for i in range(n):
             z[i] += push[i]
             disp[i] = abs(z[i] - old[i])
@@ -85,8 +85,8 @@ def _correct(z, v, rows, rz, k, old, wall_gap, limits, disp):  # type: ignore[no
                 t = min(max((a * cd).real * rows[i, c, 2].real, 0.0), 1.0)
                 qc = a - t * cd.conjugate()
                 dc = abs(qc)
-                if k.radius[i] - dc > depth:
-                    depth, q, dist = k.radius[i] - dc, qc, dc
+                if per[i, RADIUS] - dc > depth:
+                    depth, q, dist = per[i, RADIUS] - dc, qc, dc
             if depth > 0.0:
                 anyone = True
                 nv = q / max(dist, 1e-9)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -45,22 +45,11 @@ _INV_B_WALL = 1.0 / B_WALL
 _INV_B_EVADE = 1.0 / B_EVADE
 
 
-class ForceConsts(NamedTuple):
-    """Per-person constants the force kernel reads (``*_log_a``: a force's ``ln A`` plus the
-    bodies' radii over its range ``B``)."""
-
-    v0_tau: FloatArray
-    """Desired speed over the relaxation time [m/s^2]."""
-    rsum: FloatArray
-    """``(P, P)``: ``r_i + r_j`` [m]."""
-    pair_log_a: FloatArray
-    """``(P, P)``: ``ln A + (r_i + r_j) / B`` of person-person repulsion."""
-    wall_log_a: FloatArray
-    robot_log_a: FloatArray
-    evade_log_a: FloatArray
-    robot_need: FloatArray
-    """Body radius + robot radius + ``ROBOT_GAP_M`` [m]: how far the robot is kept."""
-    radius: FloatArray
+#: Columns of :attr:`StepConstants.per` (per-person constants of the kernels):
+#: desired speed over the relaxation time [m/s^2], the ``ln A + r / B`` of the walls', the
+#: robot's and the evasion's forces, the distance the robot is kept at (body radius + robot
+#: radius + ``ROBOT_GAP_M``) [m] and the body radius [m].
+V0_TAU, WALL_LOG_A, ROBOT_LOG_A, EVADE_LOG_A, ROBOT_NEED, RADIUS = range(6)
 
 
 @dataclass(frozen=True)
@@ -77,7 +66,11 @@ class StepConstants:
     """The largest speed of anyone [m/s] (bounds a step's move)."""
     robot_goal_reach: FloatArray
     """How near the robot may come to a goal before it is given up [m]."""
-    force: ForceConsts
+    per: FloatArray
+    """``(P, 6)``: per-person constants, columns :data:`V0_TAU` ... :data:`RADIUS`."""
+    pair: FloatArray
+    """``(2, P, P)``: ``r_i + r_j`` [m] and ``ln A + (r_i + r_j) / B`` of the repulsion
+    between two people."""
 
     @classmethod
     def build(cls, radius: FloatArray, v0: FloatArray, robot_radius_m: float) -> StepConstants:
@@ -85,16 +78,13 @@ class StepConstants:
         n = len(radius)
         rsum = radius[:, None] + radius[None, :]
         reach = radius + robot_radius_m + ROBOT_GAP_M
-        force = ForceConsts(
-            v0_tau=v0 / TAU_S,
-            rsum=rsum,
-            pair_log_a=np.log(A_PEOPLE) + rsum / B_PEOPLE,
-            wall_log_a=np.log(A_WALL) + radius / B_WALL,
-            robot_log_a=np.log(A_ROBOT) + reach / B_ROBOT,
-            evade_log_a=np.log(A_EVADE) + reach / B_EVADE,
-            robot_need=reach,
-            radius=np.ascontiguousarray(radius, dtype=np.float64),
-        )
+        per = np.empty((n, 6))
+        per[:, V0_TAU] = v0 / TAU_S
+        per[:, WALL_LOG_A] = np.log(A_WALL) + radius / B_WALL
+        per[:, ROBOT_LOG_A] = np.log(A_ROBOT) + reach / B_ROBOT
+        per[:, EVADE_LOG_A] = np.log(A_EVADE) + reach / B_EVADE
+        per[:, ROBOT_NEED] = reach
+        per[:, RADIUS] = radius
         return cls(
             n=n,
             radius=radius,
@@ -103,12 +93,13 @@ class StepConstants:
             vmax=1.3 * v0,
             vmax_max=float((1.3 * v0).max()) if n else 0.0,
             robot_goal_reach=reach + 0.1,
-            force=force,
+            per=per,
+            pair=np.stack([rsum, np.log(A_PEOPLE) + rsum / B_PEOPLE]),
         )
 
 
 @compiled
-def _force(z, v, goal, rows, rz, robot, k, force, wall_gap):  # type: ignore[no-untyped-def]
+def _force(z, v, goal, rows, rz, robot, per, pair, force, wall_gap):  # type: ignore[no-untyped-def]
     """The force on each person into ``force``: driving term (H&M eq. 2), repulsion by the
     other people (eq. 3-4), by the robot and by the closest point of each candidate segment
     within ``REACH_M`` (eq. 5), and the evasion of a robot ahead. Writes each person's gap to
@@ -121,23 +112,23 @@ def _force(z, v, goal, rows, rz, robot, k, force, wall_gap):  # type: ignore[no-
         zi = z[i]
         to_goal = goal[i] - zi
         e = to_goal / max(abs(to_goal), 1e-9)
-        f = k.v0_tau[i] * e - v[i] * _INV_TAU
+        f = per[i, V0_TAU] * e - v[i] * _INV_TAU
         for j in range(n):
             if j != i:
                 dv = zi - z[j]
                 d = abs(dv)
-                pair_gap = min(pair_gap, d - k.rsum[i, j])
-                f += math.exp(k.pair_log_a[i, j] - d * _INV_B_PEOPLE) / max(d, 1e-9) * dv
+                pair_gap = min(pair_gap, d - pair[0, i, j])
+                f += math.exp(pair[1, i, j] - d * _INV_B_PEOPLE) / max(d, 1e-9) * dv
         if robot:
             dv = zi - rz
             d = abs(dv)
-            robot_gap = min(robot_gap, d - k.robot_need[i])
-            f += math.exp(k.robot_log_a[i] - d * _INV_B_ROBOT) / max(d, 1e-9) * dv
+            robot_gap = min(robot_gap, d - per[i, ROBOT_NEED])
+            f += math.exp(per[i, ROBOT_LOG_A] - d * _INV_B_ROBOT) / max(d, 1e-9) * dv
             # evasion: conj(e) (z - robot) has real part < 0 when the robot is ahead, and
             # imaginary part > 0 when it is on the right: step right unless clearly so
             er = e.conjugate() * dv
             if er.real < 0.0:
-                mag = math.exp(k.evade_log_a[i] - max(d, 1e-9) * _INV_B_EVADE)
+                mag = math.exp(per[i, EVADE_LOG_A] - max(d, 1e-9) * _INV_B_EVADE)
                 f += (1j * mag if er.imag > KEEP_RIGHT_M else -1j * mag) * e
         wall = math.inf
         for c in range(rows.shape[1]):
@@ -148,8 +139,8 @@ def _force(z, v, goal, rows, rz, robot, k, force, wall_gap):  # type: ignore[no-
             d = abs(dv)
             wall = min(wall, d)
             if d <= REACH_M:
-                f += math.exp(k.wall_log_a[i] - d * _INV_B_WALL) / max(d, 1e-9) * dv
-        wall_gap[i] = wall - k.radius[i]
+                f += math.exp(per[i, WALL_LOG_A] - d * _INV_B_WALL) / max(d, 1e-9) * dv
+        wall_gap[i] = wall - per[i, RADIUS]
         force[i] = f
     return pair_gap, robot_gap
 
@@ -172,7 +163,7 @@ def social_force(
     wall_gap = np.empty(n)
     robot = rz is not None
     pair_gap, robot_gap = _force(
-        z, v, goal, rows, complex(rz) if robot else 0j, robot, k.force, force, wall_gap
+        z, v, goal, rows, complex(rz) if robot else 0j, robot, k.per, k.pair, force, wall_gap
     )
     return force, pair_gap, wall_gap, robot_gap
 
@@ -240,10 +231,6 @@ def goals_due(
 ) -> NDArray[np.bool_] | None:
     """Update ``crowd``'s progress toward the goals (``best_goal_m``, ``stuck_s`` in place);
     who needs a new goal, or None when nobody does."""
-    for name in ("best_goal_m", "stuck_s"):
-        a = getattr(crowd, name)
-        if not (a.flags.writeable and a.flags.c_contiguous and a.dtype == np.float64):
-            setattr(crowd, name, np.array(a, dtype=np.float64))
     redo = np.empty(crowd.n, dtype=bool)
     robot = rz is not None
     due = _goals(

@@ -7,7 +7,6 @@ points at a time, so they are compiled loops.
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -54,7 +53,7 @@ class Obstacles:
         pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
         out = np.zeros(len(pts), dtype=bool)
         if self._outlines is not None:
-            _inside(pts, self.segments, self._outlines, out)
+            _inside(pts, self.segments, *self._outlines, out)
         return out
 
     def free_mask(self, points: FloatArray, r: float) -> NDArray[np.bool_]:
@@ -88,48 +87,41 @@ class Obstacles:
         return out
 
 
-class _Outlines(NamedTuple):
-    """Per closed outline: its segments ``first .. first + size - 1``, and where a crossing
-    test can count at all: a point with ``y`` below ``y_lo``, at or above ``y_hi``, or ``x``
-    at or beyond ``x_hi`` crosses none of its segments."""
-
-    first: NDArray[np.int64]
-    size: NDArray[np.int64]
-    y_lo: FloatArray
-    y_hi: FloatArray
-    x_hi: FloatArray
-
-
-def _outline_bounds(s: FloatArray, starts: NDArray[np.int64] | None) -> _Outlines | None:
-    """The outlines of segments ``s`` starting at ``starts`` (None: none); ValueError
-    unless they start at 0, ascend and none is empty."""
+def _outline_bounds(
+    s: FloatArray, starts: NDArray[np.int64] | None
+) -> tuple[NDArray[np.int64], NDArray[np.int64], FloatArray] | None:
+    """The closed outlines of segments ``s`` starting at ``starts`` (None: none): each one's
+    first segment, its number of segments, and ``(3, Q)`` rows ``y_lo``, ``y_hi``, ``x_hi``
+    of where a crossing test can count at all (a point with ``y`` below ``y_lo``, at or above
+    ``y_hi``, or ``x`` at or beyond ``x_hi`` crosses none of its segments). ValueError unless
+    the outlines start at 0, ascend and none is empty."""
     if starts is None or len(s) == 0:
         return None
     first = np.asarray(starts, dtype=np.int64).ravel()
     size = np.diff(np.append(first, len(s)))
     if len(first) == 0 or first[0] != 0 or (size <= 0).any():
         raise ValueError(f"outline_starts must ascend from 0 over {len(s)} segments: {starts!r}")
-    return _Outlines(
-        first=first,
-        size=size,
-        y_lo=np.minimum.reduceat(np.minimum(s[:, 1], s[:, 3]), first),
-        y_hi=np.maximum.reduceat(np.maximum(s[:, 1], s[:, 3]), first),
-        x_hi=np.maximum.reduceat(np.maximum(s[:, 0], s[:, 2]), first),
+    box = np.stack(
+        [
+            np.minimum.reduceat(np.minimum(s[:, 1], s[:, 3]), first),
+            np.maximum.reduceat(np.maximum(s[:, 1], s[:, 3]), first),
+            np.maximum.reduceat(np.maximum(s[:, 0], s[:, 2]), first),
+        ]
     )
+    return first, size, box
 
 
 @compiled
-def _inside(pts, seg, outlines, out):  # type: ignore[no-untyped-def]
+def _inside(pts, seg, first, size, box, out):  # type: ignore[no-untyped-def]
     """``out[i]``: point ``i`` has odd crossing parity for some outline (its ray toward +x
     crosses the outline's segments an odd number of times)."""
-    o = outlines
     for i in range(pts.shape[0]):
         x, y = pts[i, 0], pts[i, 1]
-        for q in range(o.first.shape[0]):
-            if not (o.y_lo[q] <= y < o.y_hi[q] and x < o.x_hi[q]):
+        for q in range(first.shape[0]):
+            if not (box[0, q] <= y < box[1, q] and x < box[2, q]):
                 continue
             odd = False
-            for k in range(o.first[q], o.first[q] + o.size[q]):
+            for k in range(first[q], first[q] + size[q]):
                 y0, y1 = seg[k, 1], seg[k, 3]
                 if (y0 > y) != (y1 > y):
                     x_cross = seg[k, 0] + (y - y0) / (y1 - y0) * (seg[k, 2] - seg[k, 0])
