@@ -26,6 +26,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from gymnasium.error import ClosedEnvironmentError, ResetNeeded
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
@@ -63,7 +64,10 @@ class DynMapVectorEnv(VectorEnv):
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        """Reset every sub-env (seeds as ``SyncVectorEnv``: ``seed + i`` or ``seed[i]``)."""
+        """Reset every sub-env (seeds as ``SyncVectorEnv``: ``seed + i`` or ``seed[i]``);
+        ``ClosedEnvironmentError`` after :meth:`close`."""
+        if self.closed:
+            raise ClosedEnvironmentError("reset() after close(): make a new vector env")
         if seed is None:
             seeds: list[int | None] = [None] * self.num_envs
         elif isinstance(seed, int) and not isinstance(seed, bool):
@@ -83,7 +87,10 @@ class DynMapVectorEnv(VectorEnv):
         self, actions: Any
     ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step every sub-env with its row of ``actions`` ``(num_envs, 2)``; NEXT_STEP
-        autoreset for those that ended on the previous step."""
+        autoreset for those that ended on the previous step. ``ResetNeeded`` before the
+        first :meth:`reset`, ``ClosedEnvironmentError`` after :meth:`close`."""
+        if self.closed:
+            raise ClosedEnvironmentError("step() after close(): make a new vector env")
         a = np.asarray(actions)
         if a.shape != (self.num_envs, 2):
             raise ValueError(f"actions must have shape ({self.num_envs}, 2), got {a.shape}")
@@ -110,7 +117,7 @@ class DynMapVectorEnv(VectorEnv):
                 self._truncations[i] = False
             else:
                 if not env._started:
-                    raise RuntimeError("call reset() before step()")
+                    raise ResetNeeded("call reset() before step()")
                 pose, collision = env._drive_vw(*vw[i])
                 driven.append((i, pose, collision))
         stepping = [self.envs[i] for i, _, _ in driven]

@@ -6,6 +6,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
+from gymnasium.error import ClosedEnvironmentError, ResetNeeded
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 import dynmap_sim  # noqa: F401  (registers the envs)
@@ -194,3 +195,16 @@ def test_same_numbers_when_sub_envs_end_at_different_steps() -> None:
     subsets = _step_alongside(vec, singles, _actions(20, n))
     assert subsets > 0
     vec.close()
+
+
+def test_step_and_reset_after_close_and_step_before_reset_raise() -> None:
+    vec = DynMapVectorEnv(num_envs=2, world="apartment")
+    with pytest.raises(ResetNeeded, match="reset"):
+        vec.step(np.zeros((2, 2), np.float32))
+    vec.reset(seed=0)
+    vec.step(np.zeros((2, 2), np.float32))
+    vec.close()
+    with pytest.raises(ClosedEnvironmentError, match="close"):
+        vec.step(np.zeros((2, 2), np.float32))
+    with pytest.raises(ClosedEnvironmentError, match="close"):
+        vec.reset(seed=0)
