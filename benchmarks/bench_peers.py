@@ -19,16 +19,13 @@ the range of the rounds' ratios beside it):
    another, in env-steps/s, and against ``SyncVectorEnv`` of the same 8 envs (``--envs``:
    other numbers of envs, each its own row).
 
-    python benchmarks/bench_peers.py [--steps 300] [--rounds 5] [--backend numpy|numba|both]
-        [--only peers|lab|vector] [--envs 8,16]
+    python benchmarks/bench_peers.py [--steps 300] [--rounds 5] [--only peers|lab|vector]
+        [--envs 8,16]
 
 ``--fingerprint`` times nothing: it prints a sha256 (16 hex digits) of every observation,
-reward, flag and info of fixed runs per backend (lab day 1 run 1, the lab lunch crowd,
-apartment day 15, the 10-people room, and vector envs of 4 lab and 4 apartment envs through
-autoresets), the check that a speed-up keeps the numbers bit for bit. With numba blocked:
-``python -c "import sys, runpy; sys.modules['numba'] = None;
-sys.argv = ['bench_peers.py', '--fingerprint']; runpy.run_path('benchmarks/bench_peers.py',
-run_name='__main__')"``.
+reward, flag and info of fixed runs (lab day 1 run 1, the lab lunch crowd, apartment day
+15, the 10-people room, and vector envs of 4 lab and 4 apartment envs through autoresets),
+the check that a speed-up keeps the numbers bit for bit.
 
 Timing thresholds are never checked in tests; this prints the figures and the issue's targets.
 """
@@ -202,13 +199,13 @@ def timed(fn: Callable[[], None], n: int) -> float:
     return n / (time.perf_counter() - t0)
 
 
-def our_env(tmp: Path, people: int, backend: str) -> DynMapEnv:
+def our_env(tmp: Path, people: int) -> DynMapEnv:
     path = tmp / f"peer-room-{people}.toml"
     path.write_text(our_world_toml(people))
     return DynMapEnv(
         world=path,
         people=people > 0,
-        sensor_options={"range_max_m": RANGE_MAX, "backend": backend},
+        sensor_options={"range_max_m": RANGE_MAX},
         max_episode_steps=10**9,
     )
 
@@ -283,7 +280,7 @@ def irsim_scan_rate(tmp: Path, steps: int) -> Callable[[], float]:
     return run
 
 
-def peers_table(steps: int, rounds: int, backends: list[str]) -> None:
+def peers_table(steps: int, rounds: int) -> None:
     try:
         import irsim
     except ImportError:
@@ -293,33 +290,25 @@ def peers_table(steps: int, rounds: int, backends: list[str]) -> None:
         )
         return
     print(f"identical world vs ir-sim {irsim.__version__} ({steps} steps a round, {rounds} rounds)")
-    print(
-        "| case | backend | ir-sim steps/s | dynmap_sim steps/s "
-        "| ratio: median of rounds (their range) |"
-    )
-    print("|---|---|---|---|---|")
+    print("| case | ir-sim steps/s | dynmap_sim steps/s | ratio: median of rounds (their range) |")
+    print("|---|---|---|---|")
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
-        for backend in backends:
-            cases = [
-                ("step with lidar", our_step_rate(our_env(tmp, 0, backend), steps),
-                 irsim_step_rate(tmp, 0, steps)),
-                ("step with lidar + 10 walking people",
-                 our_step_rate(our_env(tmp, 10, backend), steps), irsim_step_rate(tmp, 10, steps)),
-                ("lidar only", our_scan_rate(our_env(tmp, 0, backend), steps),
-                 irsim_scan_rate(tmp, steps)),
-            ]  # fmt: skip
-            for name, ours, ref in cases:
-                res = alternate(ours, ref, rounds)
-                print(f"| {name} | {backend} | {res.ref:,.0f} | {res.ours:,.0f} | {res} |")
-    print(
-        "targets (issue 13): >= 30x ir-sim with 10 people on numpy, >= 50x with numba\n",
-        flush=True,
-    )
+        cases = [
+            ("step with lidar", our_step_rate(our_env(tmp, 0), steps),
+             irsim_step_rate(tmp, 0, steps)),
+            ("step with lidar + 10 walking people", our_step_rate(our_env(tmp, 10), steps),
+             irsim_step_rate(tmp, 10, steps)),
+            ("lidar only", our_scan_rate(our_env(tmp, 0), steps), irsim_scan_rate(tmp, steps)),
+        ]  # fmt: skip
+        for name, ours, ref in cases:
+            res = alternate(ours, ref, rounds)
+            print(f"| {name} | {res.ref:,.0f} | {res.ours:,.0f} | {res} |")
+    print("target (issue 38): >= 50x ir-sim with 10 people\n", flush=True)
 
 
-def lab_crowd(steps: int, rounds: int, backend: str) -> None:
-    env = DynMapEnv(world="lab", sensor_options={"backend": backend})
+def lab_crowd(steps: int, rounds: int) -> None:
+    env = DynMapEnv(world="lab")
     day, run = lunch_run(env)
     env.reset(seed=0, options={"day": day, "run": run})
     n_people = env.world.people_poses().shape[0]
@@ -348,7 +337,7 @@ def lab_crowd(steps: int, rounds: int, backend: str) -> None:
         return timed(loop, n_naive)
 
     res = alternate(ours, ref, rounds)
-    print(f"lab lunch crowd (day {day} run {run}, {n_people} people), backend {backend}:")
+    print(f"lab lunch crowd (day {day} run {run}, {n_people} people):")
     print(
         f"  env {res.ours:,.0f} steps/s, naive pymunk loop {res.ref:,.0f} scans/s: {res} "
         "(target 10x)"
@@ -387,10 +376,7 @@ def vector(steps: int, rounds: int, n: int = 8) -> None:
         return timed(loop, steps * n)
 
     res = alternate(run_vec(vec), run_seq, rounds)
-    print(
-        f"vector env, {n} lab envs (with people; the numpy backend, which the vector env "
-        "batches), env-steps/s:"
-    )
+    print(f"vector env, {n} lab envs (with people), env-steps/s:")
     print(f"  make_vec {res.ours:,.0f}, {n} sequential envs {res.ref:,.0f}: {res} (target 3x)")
     res = alternate(run_vec(vec), run_vec(sync), rounds)
     print(f"  make_vec {res.ours:,.0f}, SyncVectorEnv {res.ref:,.0f}: {res}")
@@ -432,10 +418,8 @@ def _fingerprint_single(env: DynMapEnv, options: dict | None, steps: int = 300) 
     return h.hexdigest()[:16]
 
 
-def _fingerprint_vector(world: str, backend: str, steps: int, max_steps: int, opts) -> str:
-    vec = DynMapVectorEnv(
-        num_envs=4, world=world, max_episode_steps=max_steps, sensor_options={"backend": backend}
-    )
+def _fingerprint_vector(world: str, steps: int, max_steps: int, opts) -> str:
+    vec = DynMapVectorEnv(num_envs=4, world=world, max_episode_steps=max_steps)
     h = hashlib.sha256()
     _feed(h, vec.reset(seed=5, options=opts))
     for a in _fingerprint_actions(steps, 4):
@@ -443,38 +427,28 @@ def _fingerprint_vector(world: str, backend: str, steps: int, max_steps: int, op
     return h.hexdigest()[:16]
 
 
-def fingerprint(backends: list[str]) -> None:
-    """Print the sha256 of fixed single-env and vector-env runs for each backend."""
-    for b in backends:
-        lab = DynMapEnv(world="lab", sensor_options={"backend": b})
-        day, run = lunch_run(lab)
-        with tempfile.TemporaryDirectory() as d:
-            room = _fingerprint_single(our_env(Path(d), 10, b), None)
-        rows = [
-            ("lab d1r1", _fingerprint_single(lab, {"day": 1, "run": 1})),
-            (f"lab lunch d{day}r{run}", _fingerprint_single(lab, {"day": day, "run": run})),
-            ("apartment d15", _fingerprint_single(
-                DynMapEnv(world="apartment", sensor_options={"backend": b}), {"day": 15, "run": 1}
-            )),
-            ("room 10 people", room),
-            ("vector lab x4", _fingerprint_vector("lab", b, 120, 45, {"day": 1, "run": 2})),
-            ("vector apartment x4", _fingerprint_vector("apartment", b, 60, 25, None)),
-        ]  # fmt: skip
-        for name, digest in rows:
-            print(f"{b} {name}: {digest}", flush=True)
+def fingerprint() -> None:
+    """Print the sha256 of fixed single-env and vector-env runs."""
+    lab = DynMapEnv(world="lab")
+    day, run = lunch_run(lab)
+    with tempfile.TemporaryDirectory() as d:
+        room = _fingerprint_single(our_env(Path(d), 10), None)
+    rows = [
+        ("lab d1r1", _fingerprint_single(lab, {"day": 1, "run": 1})),
+        (f"lab lunch d{day}r{run}", _fingerprint_single(lab, {"day": day, "run": run})),
+        ("apartment d15", _fingerprint_single(DynMapEnv(world="apartment"), {"day": 15, "run": 1})),
+        ("room 10 people", room),
+        ("vector lab x4", _fingerprint_vector("lab", 120, 45, {"day": 1, "run": 2})),
+        ("vector apartment x4", _fingerprint_vector("apartment", 60, 25, None)),
+    ]
+    for name, digest in rows:
+        print(f"{name}: {digest}", flush=True)
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=300, help="steps per round")
     ap.add_argument("--rounds", type=int, default=5, help="alternating rounds (median kept)")
-    ap.add_argument(
-        "--backend",
-        choices=("numpy", "numba", "both"),
-        default="both",
-        help="the sensor and people backend of the peers and lab cases (the vector case runs"
-        " numpy: the vector env batches the numpy backend)",
-    )
     ap.add_argument(
         "--only", choices=("peers", "lab", "vector"), default=None, help="one case (default: all)"
     )
@@ -485,20 +459,13 @@ def main() -> None:
         "--fingerprint", action="store_true", help="print sha256s of fixed runs instead (no timing)"
     )
     args = ap.parse_args()
-    from dynmap_sim.jit import numba_available
-
-    backends = ["numpy", "numba"] if args.backend == "both" else [args.backend]
-    if "numba" in backends and not numba_available():
-        print('numba is not installed (extra "fast"): numba rows skipped')
-        backends.remove("numba")
     if args.fingerprint:
-        fingerprint(backends)
+        fingerprint()
         return
     if args.only in (None, "peers"):
-        peers_table(args.steps, args.rounds, backends)
+        peers_table(args.steps, args.rounds)
     if args.only in (None, "lab"):
-        for b in backends:
-            lab_crowd(args.steps, args.rounds, b)
+        lab_crowd(args.steps, args.rounds)
     if args.only in (None, "vector"):
         for n in (int(v) for v in args.envs.split(",")):
             vector(max(20, args.steps // 4), args.rounds, n)

@@ -5,12 +5,12 @@ Measured in the same run:
 * ``env`` — ``DynMapEnv(world="lab")`` steps/s, without people and with the lunch-time crowd
   (the run of day 1 with the most people, 13:15), driven by a fixed wavy action sequence;
 * ``lidar`` — one noise-free 683-beam scan (:meth:`Lidar.cast`) on the same geometry at
-  poses along the lab route, in us per ray (numpy backend, and numba when installed);
+  poses along the lab route, in us per ray (the compiled caster);
 * ``naive`` — the reference: one pymunk ``segment_query_first`` per beam on the *same*
   geometry (a pymunk space built from the ``GeometryView`` segments and circles).
 
 Targets (docs/architecture.md §7, issue 3): env step >= 10x the naive scan rate (about >= 2,500
-steps/s), lidar <= 1 us/ray with numpy and <= 0.3 us/ray with numba. Prints a table and
+steps/s), lidar <= 0.3 us/ray. Prints a table and
 writes JSON (package version, platform, figures).
 
     python benchmarks/bench_sim.py [--steps 3000] [--repeats 3] [--json PATH]
@@ -40,8 +40,7 @@ from dynmap_sim.sensors.lidar import NOISELESS, make_lidar
 
 TARGET_ENV_RATIO = 10.0
 TARGET_ENV_STEPS = 2500.0
-TARGET_US_PER_RAY_NUMPY = 1.0
-TARGET_US_PER_RAY_NUMBA = 0.3
+TARGET_US_PER_RAY = 0.3
 
 
 def actions(n: int) -> np.ndarray:
@@ -52,12 +51,12 @@ def actions(n: int) -> np.ndarray:
 
 
 def env_rate(
-    people: bool, day: int, run: int, steps: int, repeats: int, backend: str = "numpy"
+    people: bool, day: int, run: int, steps: int, repeats: int
 ) -> tuple[float, int, float]:
     """Best steps/s over ``repeats`` passes of the same ``steps`` steps (same seed and run,
     same actions: identical work each pass, so only machine load differs); also the number of
     people and the best steps per second of process CPU time."""
-    env = DynMapEnv(world="lab", people=people, sensor_options={"backend": backend})
+    env = DynMapEnv(world="lab", people=people)
     acts = actions(steps)
     env.reset(seed=0, options={"day": day, "run": run})
     for a in acts[:50]:  # warm-up (caches, allocator)
@@ -160,24 +159,12 @@ def main() -> None:
     spec = probe.laser_spec
     poses = route_poses(probe, args.scans)
 
-    # lidar (numpy), noise-free cast on the lunch-time geometry
+    # lidar, noise-free cast on the lunch-time geometry
     lidar = make_lidar("urg-04lx", noise=NOISELESS)
     lidar.cast(poses[0], geom)
     ours = [lidar.cast(p, geom)[0] for p in poses]
-    us_ray_numpy = best_time_per_item(lambda p: lidar.cast(p, geom), poses, args.repeats)
-    us_ray_numpy *= 1e6 / spec.n_beams
-
-    us_ray_numba = None
-    try:
-        from dynmap_sim.sensors.raycast_numba import numba_available
-
-        if numba_available():
-            lidar_nb = make_lidar("urg-04lx", noise=NOISELESS, backend="numba")
-            lidar_nb.cast(poses[0], geom)
-            t_nb = best_time_per_item(lambda p: lidar_nb.cast(p, geom), poses, args.repeats)
-            us_ray_numba = t_nb * 1e6 / spec.n_beams
-    except ImportError:
-        pass
+    us_ray = best_time_per_item(lambda p: lidar.cast(p, geom), poses, args.repeats)
+    us_ray *= 1e6 / spec.n_beams
 
     # naive reference on the same geometry
     space = naive_space(geom)
@@ -197,11 +184,6 @@ def main() -> None:
 
     rate_empty, _, cpu_empty = env_rate(False, day, run, args.steps, args.repeats)
     rate_crowd, n_people, cpu_crowd = env_rate(True, day, run, args.steps, args.repeats)
-    rate_empty_nb = rate_crowd_nb = None
-    if us_ray_numba is not None:
-        rate_empty_nb, _, _ = env_rate(False, day, run, args.steps, args.repeats, "numba")
-        rate_crowd_nb, _, _ = env_rate(True, day, run, args.steps, args.repeats, "numba")
-
     rows = [
         (
             "env steps/s, lab, no people",
@@ -216,37 +198,9 @@ def main() -> None:
             rate_crowd / TARGET_ENV_STEPS,
         ),
         ("naive pymunk scans/s (reference)", naive_scans_per_s, float("nan"), float("nan")),
-        (
-            "lidar us/ray, numpy",
-            us_ray_numpy,
-            TARGET_US_PER_RAY_NUMPY,
-            TARGET_US_PER_RAY_NUMPY / us_ray_numpy,
-        ),
+        ("lidar us/ray", us_ray, TARGET_US_PER_RAY, TARGET_US_PER_RAY / us_ray),
         ("lidar us/ray, naive pymunk", us_ray_naive, float("nan"), float("nan")),
     ]
-    if us_ray_numba is not None:
-        rows += [
-            (
-                "env steps/s, lab, no people, numba lidar",
-                rate_empty_nb,
-                TARGET_ENV_STEPS,
-                rate_empty_nb / TARGET_ENV_STEPS,
-            ),
-            (
-                "env steps/s, lab, lunch crowd, numba lidar",
-                rate_crowd_nb,
-                TARGET_ENV_STEPS,
-                rate_crowd_nb / TARGET_ENV_STEPS,
-            ),
-        ]
-        rows.append(
-            (
-                "lidar us/ray, numba",
-                us_ray_numba,
-                TARGET_US_PER_RAY_NUMBA,
-                TARGET_US_PER_RAY_NUMBA / us_ray_numba,
-            )
-        )
     print(f"dynmap_sim {dynmap_sim.__version__} on {platform.platform()}, {os.cpu_count()} CPUs")
     print(f"{'measure':<44} {'value':>10} {'target':>8} {'value/target':>13}")
     for name, v, tgt, ratio in rows:
@@ -264,7 +218,7 @@ def main() -> None:
         f"steps/s, naive {1.0 / t_naive_cpu:.1f} scans/s -> {cpu_ratio_empty:.1f}x / "
         f"{cpu_ratio_crowd:.1f}x"
     )
-    print(f"lidar speed-up over naive: {us_ray_naive / us_ray_numpy:.1f}x (numpy)")
+    print(f"lidar speed-up over naive: {us_ray_naive / us_ray:.1f}x")
     n_hits = int(sum(np.isfinite(r).sum() for r in ref))
     print(f"max |ours - pymunk| over {n_hits} hits: {max_diff:.2e} m")
 
@@ -282,8 +236,6 @@ def main() -> None:
         "n_people": n_people,
         "env_steps_per_s_no_people": rate_empty,
         "env_steps_per_s_crowd": rate_crowd,
-        "env_steps_per_s_no_people_numba": rate_empty_nb,
-        "env_steps_per_s_crowd_numba": rate_crowd_nb,
         "naive_scans_per_s": naive_scans_per_s,
         "env_over_naive_no_people": ratio_empty,
         "env_over_naive_crowd": ratio_crowd,
@@ -295,15 +247,13 @@ def main() -> None:
         "repeats": args.repeats,
         "steps": args.steps,
         "load_average": list(os.getloadavg()) if hasattr(os, "getloadavg") else None,
-        "lidar_us_per_ray_numpy": us_ray_numpy,
-        "lidar_us_per_ray_numba": us_ray_numba,
+        "lidar_us_per_ray": us_ray,
         "lidar_us_per_ray_naive": us_ray_naive,
         "max_abs_diff_vs_pymunk_m": max_diff,
         "targets": {
             "env_over_naive": TARGET_ENV_RATIO,
             "env_steps_per_s": TARGET_ENV_STEPS,
-            "us_per_ray_numpy": TARGET_US_PER_RAY_NUMPY,
-            "us_per_ray_numba": TARGET_US_PER_RAY_NUMBA,
+            "us_per_ray": TARGET_US_PER_RAY,
         },
     }
     args.json.parent.mkdir(parents=True, exist_ok=True)

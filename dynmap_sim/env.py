@@ -11,8 +11,10 @@ from typing import Any
 import gymnasium
 import numpy as np
 from gymnasium import spaces
+from gymnasium.error import ClosedEnvironmentError, ResetNeeded
 from numpy.typing import NDArray
 
+from dynmap_sim.errors import InputError
 from dynmap_sim.raster import CLASS_RGB, Canvas, polyline
 from dynmap_sim.robot.diff_drive import DiffDriveRobot, RobotParams
 from dynmap_sim.robot.route import RouteProgress
@@ -32,6 +34,11 @@ _LIDAR, _ODOM, _SLIP = 0x1DA2, 0x0D0, 0x511
 RESET_OPTIONS = ("day", "run")
 #: Largest ``render_size_px`` (a frame of 8192 x 8192 RGB is 200 MB).
 MAX_RENDER_SIZE_PX = 8192
+#: Longest step period ``dt_s`` [s]. The people's explicit Euler step relaxes their
+#: velocities with the time constant ``TAU_S`` = 0.5 s and is stable only below twice that,
+#: the robot's bumper sweeps one step's travel, and laser scanners deliver 5-75 scans a
+#: second: a longer step would not simulate the world, however long it ran.
+MAX_DT_S = 1.0
 
 
 def _real(v: Any) -> bool:
@@ -50,34 +57,47 @@ def _positive_int(v: Any) -> bool:
 def _check_args(
     render_mode: Any, max_episode_steps: Any, collision_penalty: Any, goal_tolerance_m: Any
 ) -> None:
-    """Check :class:`DynMapEnv`'s scalar arguments; ValueError naming the argument and value."""
+    """Check :class:`DynMapEnv`'s scalar arguments; InputError naming the argument and value."""
     modes = DynMapEnv.metadata["render_modes"]
     if render_mode is not None and render_mode not in modes:
-        raise ValueError(
+        raise InputError(
             f"render_mode {render_mode!r} is not supported; render modes: None, "
             + ", ".join(map(repr, modes))
             + " (env.render() returns an RGB image to show or save)"
         )
     if max_episode_steps is not None and not _positive_int(max_episode_steps):
-        raise ValueError(f"max_episode_steps must be an integer >= 1, got {max_episode_steps!r}")
+        raise InputError(f"max_episode_steps must be an integer >= 1, got {max_episode_steps!r}")
     if not (_real(collision_penalty) and collision_penalty >= 0):
-        raise ValueError(
+        raise InputError(
             f"collision_penalty must be a finite number >= 0, got {collision_penalty!r}"
         )
     if not (_real(goal_tolerance_m) and goal_tolerance_m > 0):
-        raise ValueError(f"goal_tolerance_m must be a finite number > 0, got {goal_tolerance_m!r}")
+        raise InputError(f"goal_tolerance_m must be a finite number > 0, got {goal_tolerance_m!r}")
+
+
+def _check_parts(lidar_noise: Any, robot: Any, encoder: Any) -> None:
+    """Check the types of :class:`DynMapEnv`'s parts (None: the defaults)."""
+    for name, value, cls in (
+        ("lidar_noise", lidar_noise, LidarNoise),
+        ("robot", robot, RobotParams),
+        ("encoder", encoder, EncoderNoise),
+    ):
+        if value is not None and not isinstance(value, cls):
+            raise InputError(f"{name} must be None or a {cls.__name__}, got {value!r}")
 
 
 def _check_args_more(people: Any, sensor_options: Any, dt_s: Any, render_size_px: Any) -> None:
     """Check the rest of :class:`DynMapEnv`'s arguments."""
     if not isinstance(people, bool | np.bool_):
-        raise ValueError(f"people must be True or False, got {people!r}")
+        raise InputError(f"people must be True or False, got {people!r}")
     if sensor_options is not None and not isinstance(sensor_options, dict):
-        raise ValueError(f"sensor_options must be a dict, got {sensor_options!r}")
-    if dt_s is not None and not (_real(dt_s) and dt_s > 0):
-        raise ValueError(f"dt_s must be a finite number > 0 (seconds), got {dt_s!r}")
+        raise InputError(f"sensor_options must be a dict, got {sensor_options!r}")
+    if dt_s is not None and not (_real(dt_s) and 0 < dt_s <= MAX_DT_S):
+        raise InputError(
+            f"dt_s must be a finite number in (0, {MAX_DT_S:g}] (seconds), got {dt_s!r}"
+        )
     if not (_positive_int(render_size_px) and render_size_px <= MAX_RENDER_SIZE_PX):
-        raise ValueError(
+        raise InputError(
             f"render_size_px must be an integer in 1..{MAX_RENDER_SIZE_PX}, got {render_size_px!r}"
         )
 
@@ -107,8 +127,11 @@ class DynMapEnv(gymnasium.Env):
     ## Action
 
     ``Box([-v_max, -omega_max], [v_max, omega_max], (2,), float32)``: the commanded forward
-    speed [m/s] and turn rate [rad/s]. Out-of-range actions are **clipped** to the box (and
-    then rate-limited by the robot's acceleration limits); NaN or infinite actions raise a
+    speed [m/s] and turn rate [rad/s]. Any real dtype is accepted (integers, ``uint8``,
+    ``float16``, ``float32``, ``float64``, or a list) and cast to float64 before use, so
+    an action's value, not its dtype, decides the step; booleans, complex numbers and
+    strings raise ``ValueError``. Out-of-range actions are **clipped** to the box (and then
+    rate-limited by the robot's acceleration limits); NaN or infinite actions raise a
     ``ValueError``.
 
     ## Reward
@@ -123,7 +146,10 @@ class DynMapEnv(gymnasium.Env):
     *Terminated* when the robot reaches the route's last waypoint (within
     ``goal_tolerance_m``) after following the whole route. *Truncated* after
     ``max_episode_steps`` steps (default: 3 x route length / 0.1 m/s / step period, i.e.
-    time enough to drive the route three times at 0.1 m/s).
+    time enough to drive the route three times at 0.1 m/s). Once an episode has ended
+    (terminated or truncated), ``step`` raises ``gymnasium.error.ResetNeeded`` until the
+    next ``reset`` (as before the first one); after ``close()``, ``reset`` and ``step``
+    raise ``gymnasium.error.ClosedEnvironmentError``.
 
     ## Info
 
@@ -142,17 +168,15 @@ class DynMapEnv(gymnasium.Env):
 
     ``world``: ``"lab"``, ``"apartment"``, a path to a world TOML file, or a ``WorldSpec``.
     ``sensor``: ``"urg-04lx"`` or ``"lms200"``; ``sensor_options``: preset overrides passed to
-    ``make_lidar`` (e.g. ``{"beams": 181, "mode": "cm", "mount_pose": (0.1, 0, 0)}``, or
-    ``{"backend": "numba"}`` for the compiled ray caster, noise model and people's step of
-    the ``fast`` extra, all numpy's numbers bit for bit; ``"auto"``: those when numba is
-    installed, numpy's caster where the compiled one cannot reproduce numpy's complex
-    arithmetic, which scenario experiments use);
+    ``make_lidar`` (e.g. ``{"beams": 181, "mode": "cm", "mount_pose": (0.1, 0, 0)}``);
     ``lidar_noise``: a ``LidarNoise``. ``people``: False removes all people. ``robot``:
     ``RobotParams`` (limits, wheel geometry with UMBmark errors ``E_d``/``E_b``, slip);
-    ``encoder``: ``EncoderNoise``. ``dt_s``: step period (default the scan period).
+    ``encoder``: ``EncoderNoise``. ``dt_s``: step period [s], at most ``MAX_DT_S`` (1 s;
+    default the scan period).
     ``render_mode``: None, ``"rgb_array"`` (``render()`` returns the frame) or ``"human"``
     (a window shows it at every reset and step, in real time; pygame, extra ``video``).
-    A bad argument raises ``ValueError`` naming it and its value.
+    A bad argument raises ``dynmap_sim.errors.InputError`` (a ``ValueError``) naming it and
+    its value, at construction.
 
     ## Seeding and episodes
 
@@ -199,8 +223,9 @@ class DynMapEnv(gymnasium.Env):
     ) -> None:
         _check_args(render_mode, max_episode_steps, collision_penalty, goal_tolerance_m)
         _check_args_more(people, sensor_options, dt_s, render_size_px)
+        _check_parts(lidar_noise, robot, encoder)
         if not isinstance(world, str | Path | WorldSpec):
-            raise ValueError(
+            raise InputError(
                 "world must be 'lab', 'apartment', a path to a world file or a WorldSpec, "
                 f"got {world!r}"
             )
@@ -214,10 +239,10 @@ class DynMapEnv(gymnasium.Env):
         self.robot_params = robot if robot is not None else RobotParams()
         self.encoder = encoder if encoder is not None else EncoderNoise()
         period = self.laser_spec.scan_period_s
-        if dt_s is None and not (_real(period) and period > 0.0):
-            raise ValueError(
-                f"the sensor's scan_period_s must be > 0 (it is the step period dt_s unless "
-                f"dt_s is given), got {period!r}"
+        if dt_s is None and not (_real(period) and 0.0 < period <= MAX_DT_S):
+            raise InputError(
+                f"the sensor's scan_period_s must be in (0, {MAX_DT_S:g}] s (it is the step "
+                f"period dt_s unless dt_s is given), got {period!r}"
             )
         self.dt_s = float(dt_s) if dt_s is not None else period
         self.collision_penalty = float(collision_penalty)
@@ -250,14 +275,15 @@ class DynMapEnv(gymnasium.Env):
         self._act_bounds = (tuple(self._act_lo.tolist()), tuple(self._act_hi.tolist()))
 
         self.world_seed = 0
-        # the fast extra's lidar also steps people with its kernels (numpy's numbers)
-        self.world = World(spec, seed=0, people_backend=self.lidar.backend)
+        self.world = World(spec, seed=0)
         self.robot = DiffDriveRobot(self.world.space, p, tuple(spec.robot.start))
         self.odometry = WheelOdometry(p.wheels, self.encoder)
         self._slot = -1  # index of the current run in the calendar (-1: none yet)
         self._started = False
         self._last: dict[str, Any] | None = None
         self._window: Any = None  # render_mode="human": a HumanWindow, opened lazily
+        self._ended = False  # the episode terminated or was truncated: reset before a step
+        self._closed = False
 
     # -- Gymnasium API ----------------------------------------------------------------------
     def reset(
@@ -265,15 +291,15 @@ class DynMapEnv(gymnasium.Env):
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         # every argument is checked before any state changes: a reset that raised leaves the
         # env as it was
+        if self._closed:
+            raise ClosedEnvironmentError("reset() after close(): make a new env")
         asked_slot = self._check_reset_args(seed, options)
         super().reset(seed=seed)
         if seed is None and not self._started:
             seed = int(self.np_random.integers(2**31))
         if seed is not None and int(seed) != self.world_seed:
             self.world_seed = int(seed)
-            self.world = World(
-                self.spec_world, seed=self.world_seed, people_backend=self.lidar.backend
-            )
+            self.world = World(self.spec_world, seed=self.world_seed)
             self.robot.attach(self.world.space)
         cal = self.world.calendar
         if asked_slot is not None:
@@ -293,6 +319,7 @@ class DynMapEnv(gymnasium.Env):
         self.odometry.reset()
         self.route.reset()
         self._steps = 0
+        self._ended = False
         pose = self.robot.pose
         self.route.update(float(pose[0]), float(pose[1]))
         return self._observe(pose, collision=False)
@@ -346,8 +373,7 @@ class DynMapEnv(gymnasium.Env):
         """The first part of a step: check ``action``, move the robot and count the
         odometry; the robot's new pose and the collision flag (then the world steps, then
         :meth:`_score`)."""
-        if not self._started:
-            raise RuntimeError("call reset() before step()")
+        self._check_steppable()
         kind = np.asarray(action).dtype.kind
         if kind not in "iuf":
             raise ValueError(
@@ -361,6 +387,16 @@ class DynMapEnv(gymnasium.Env):
         if not (math.isfinite(v) and math.isfinite(w)):
             raise ValueError(f"action must be finite (v_mps, omega_radps), got {a.tolist()}")
         return self._drive_vw(v, w)
+
+    def _check_steppable(self) -> None:
+        """Gymnasium's order of calls: no step after close, before the first reset or after
+        the episode ended (until the next reset)."""
+        if self._closed:
+            raise ClosedEnvironmentError("step() after close(): make a new env")
+        if not self._started:
+            raise ResetNeeded("call reset() before step()")
+        if self._ended:
+            raise ResetNeeded("the episode has ended (terminated or truncated): call reset()")
 
     def _drive_vw(self, v: float, w: float) -> tuple[FloatArray, bool]:
         """:meth:`_drive` of a checked action: finite ``v`` [m/s], ``w`` [rad/s]."""
@@ -382,6 +418,7 @@ class DynMapEnv(gymnasium.Env):
         reward = gained - (self.collision_penalty if collision else 0.0)
         terminated = self.route.done(x, y)
         truncated = self._steps >= self.max_episode_steps and not terminated
+        self._ended = terminated or truncated
         return pose, collision, float(reward), terminated, truncated
 
     def _observe(
@@ -503,10 +540,12 @@ class DynMapEnv(gymnasium.Env):
         return _render(self)
 
     def close(self) -> None:
-        """Close the ``"human"`` window, if one is open."""
+        """Close the ``"human"`` window, if one is open; the env takes no more ``reset`` or
+        ``step`` (closing again is a no-op)."""
         if self._window is not None:
             self._window.close()
             self._window = None
+        self._closed = True
         super().close()
 
 

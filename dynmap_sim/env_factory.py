@@ -31,12 +31,6 @@ ROBOT_PRESETS: dict[str, dict[str, Any]] = {"default": {}}
 #: The sensor when a scenario names none.
 DEFAULT_SENSOR = "urg-04lx"
 
-#: The lidar backend of a scenario's env unless its ``sensor.overrides`` name one:
-#: ``auto`` casts, adds noise and steps the people with numpy, or with the ``fast`` extra's
-#: compiled kernels, which give numpy's numbers bit for bit, so every install has the same
-#: numbers (:data:`dynmap_sim.sensors.lidar.LIDAR_BACKENDS`).
-SCENARIO_SENSOR_BACKEND = "auto"
-
 #: Shortest scan period a scenario may ask for [s]: it is the simulation step, and real
 #: scanners turn at 10-75 Hz (a microsecond period would simulate for days).
 MIN_SCAN_PERIOD_S = 0.005
@@ -51,7 +45,7 @@ class SimSpec:
     ``max_v_mps``, ...) plus ``wheels`` (``WheelGeometry``: UMBmark ``e_d``, ``e_b``, ...) and
     ``encoder`` (``EncoderNoise``); ``sensor_preset`` (None: ``urg-04lx``) and
     ``sensor_overrides``: ``make_lidar`` overrides (``LaserSpec`` fields, ``beams``, ``mode``,
-    ``mount_pose``, ``backend``: :data:`SCENARIO_SENSOR_BACKEND` when not given) and
+    ``mount_pose``) and
     ``noise`` (``LidarNoise`` fields).
     """
 
@@ -112,7 +106,7 @@ def _finite_number(v: Any) -> bool:
 
 def _sensor_kwargs(spec: SimSpec) -> dict[str, Any]:
     sensor = spec.sensor_preset or DEFAULT_SENSOR
-    opts = {"backend": SCENARIO_SENSOR_BACKEND, **spec.sensor_overrides}
+    opts = dict(spec.sensor_overrides)
     noise = opts.pop("noise", None)
     if noise is not None and not isinstance(noise, Mapping):
         raise SimSpecError(

@@ -15,24 +15,10 @@ truncated resets it (``reset()`` without seed: the next run of its calendar), ig
 action and returns its first observation with reward 0 and ``terminated = truncated =
 False``.
 
-Batched: the scans of all sub-envs are cast in one pass
-(:func:`~dynmap_sim.sensors.lidar.cast_many`: each env's shapes go into its sensor frame on
-their own, then the broad phase and intersections of every env's (beam, shape) pairs are one
-set of numpy calls), and their noise is one pass too (:meth:`Lidar.apply_noise_rows`: each
-env's draws from its own generator, in its own order, the arithmetic once), with the same
-numbers as one env at a time. The worlds step together too
-(:class:`~dynmap_sim.world.world.WorldBatch`): the people of all sub-envs on the numpy
-backend move in one social-force step (:class:`~dynmap_sim.world.people.batch.CrowdBatch`,
-whose crowds' state arrays are views of joint rows) and their legs are placed in one pass; the
-observations and infos of all sub-envs are written field by field as rows
-(:meth:`~dynmap_sim.env.InfoRows.write_steps`). Not batched: each sub-env's robot (pymunk
-contacts, slip and encoder draws, odometry) and its people's pymunk bodies near the robot
-run one after another. The robot's and odometry's arithmetic is a few dozen scalar
-operations per env: as numpy arrays of 8 envs it is slower than 8 scalar passes (the
-odometry of 8 envs, measured: 44 µs as one numpy pass against 31 µs one by one), and numpy's
-sines, cosines and minima need not round as ``math``'s do, so the numbers could drift from
-a single env's. ``benchmarks/bench_peers.py --only vector`` times the whole against
-sequential envs.
+The sub-envs step one after another (each robot, world, scan and noise draw as a lone env
+steps them: compiled kernels); their observations and infos are written field by field as
+rows of the batch arrays (:meth:`~dynmap_sim.env.InfoRows.write_steps`).
+``benchmarks/bench_peers.py --only vector`` times the whole against sequential envs.
 """
 
 from __future__ import annotations
@@ -40,12 +26,11 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from gymnasium.error import ClosedEnvironmentError, ResetNeeded
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from dynmap_sim.env import DynMapEnv, InfoRows
-from dynmap_sim.sensors.lidar import cast_many
-from dynmap_sim.world.world import WorldBatch
 
 
 class DynMapVectorEnv(VectorEnv):
@@ -72,16 +57,6 @@ class DynMapVectorEnv(VectorEnv):
         self._terminations = np.zeros(num_envs, dtype=np.bool_)
         self._truncations = np.zeros(num_envs, dtype=np.bool_)
         self._autoreset = np.zeros(num_envs, dtype=np.bool_)
-        self._worlds = WorldBatch()  # steps the sub-envs' worlds together
-        self._dt_s = first.dt_s  # the same for all (the same arguments)
-        # one noise pass for all scans needs the same laser, noise model and per-beam bias
-        lid = first.lidar
-        self._same_lidars = all(
-            e.lidar.spec == lid.spec
-            and e.lidar.noise == lid.noise
-            and np.array_equal(e.lidar._bias_m, lid._bias_m)
-            for e in self.envs
-        )
 
     def _obs(self) -> dict[str, np.ndarray]:
         return {"scan": self._rows.scan.copy(), "odom": self._rows.odom.copy()}
@@ -89,7 +64,10 @@ class DynMapVectorEnv(VectorEnv):
     def reset(
         self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        """Reset every sub-env (seeds as ``SyncVectorEnv``: ``seed + i`` or ``seed[i]``)."""
+        """Reset every sub-env (seeds as ``SyncVectorEnv``: ``seed + i`` or ``seed[i]``);
+        ``ClosedEnvironmentError`` after :meth:`close`."""
+        if self.closed:
+            raise ClosedEnvironmentError("reset() after close(): make a new vector env")
         if seed is None:
             seeds: list[int | None] = [None] * self.num_envs
         elif isinstance(seed, int) and not isinstance(seed, bool):
@@ -109,7 +87,10 @@ class DynMapVectorEnv(VectorEnv):
         self, actions: Any
     ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Step every sub-env with its row of ``actions`` ``(num_envs, 2)``; NEXT_STEP
-        autoreset for those that ended on the previous step."""
+        autoreset for those that ended on the previous step. ``ResetNeeded`` before the
+        first :meth:`reset`, ``ClosedEnvironmentError`` after :meth:`close`."""
+        if self.closed:
+            raise ClosedEnvironmentError("step() after close(): make a new vector env")
         a = np.asarray(actions)
         if a.shape != (self.num_envs, 2):
             raise ValueError(f"actions must have shape ({self.num_envs}, 2), got {a.shape}")
@@ -136,39 +117,32 @@ class DynMapVectorEnv(VectorEnv):
                 self._truncations[i] = False
             else:
                 if not env._started:
-                    raise RuntimeError("call reset() before step()")
+                    raise ResetNeeded("call reset() before step()")
                 pose, collision = env._drive_vw(*vw[i])
                 driven.append((i, pose, collision))
-        # the worlds of all envs that moved, stepped together (people in one batch)
         stepping = [self.envs[i] for i, _, _ in driven]
-        self._worlds.step(
-            [e.world for e in stepping],
-            self._dt_s,
-            [p for _, p, _ in driven],
-            [e.robot_params.radius_m for e in stepping],
-        )
         for env, (i, pose, collision) in zip(stepping, driven, strict=True):
+            env.world.step(env.dt_s, robot_pose=pose, robot_radius_m=env.robot_params.radius_m)
             _, _, r, term, trunc = env._score(pose, collision)
             self._rewards[i] = r
             self._terminations[i] = term
             self._truncations[i] = trunc
-        # the scans of all envs that moved, cast in one pass, their noise in one pass
         if driven:
-            envs = stepping
             poses = [p for _, p, _ in driven]
-            cast = cast_many([e.lidar for e in envs], poses, [e.world.geometry for e in envs])
-            true_r = cast[0]
-            if self._same_lidars and len(envs) > 1:
-                noisy = envs[0].lidar.apply_noise_rows(true_r, [e._rng_lidar for e in envs])
-            else:
-                noisy = np.stack(
-                    [
-                        e.lidar.apply_noise(r, e._rng_lidar)
-                        for e, r in zip(envs, true_r, strict=True)
-                    ]
-                )
+            casts = [
+                e.lidar.cast(p, e.world.geometry) for e, p in zip(stepping, poses, strict=True)
+            ]
+            true_r = np.stack([c[0] for c in casts])
+            hits = np.stack([c[1] for c in casts])
+            noisy = np.stack(
+                [
+                    e.lidar.apply_noise(r, e._rng_lidar)
+                    for e, r in zip(stepping, true_r, strict=True)
+                ]
+            )
             at = [i for i, _, _ in driven]
-            self._rows.write_steps(envs, at, poses, [c for _, _, c in driven], cast, noisy)
+            collisions = [c for _, _, c in driven]
+            self._rows.write_steps(stepping, at, poses, collisions, (true_r, hits), noisy)
         np.logical_or(self._terminations, self._truncations, out=self._autoreset)
         return (
             self._obs(),

@@ -6,10 +6,12 @@ import warnings
 import gymnasium
 import numpy as np
 import pytest
+from gymnasium.error import ClosedEnvironmentError, ResetNeeded
 from gymnasium.utils.env_checker import check_env
 
 import dynmap_sim  # noqa: F401  (registers the envs)
 from dynmap_sim.env import DynMapEnv
+from dynmap_sim.errors import InputError
 from dynmap_sim.registration import WORLDS_DIR
 from dynmap_sim.types import BEAM_CLASSES, LaserSpec
 
@@ -317,8 +319,13 @@ def test_world_env_needs_a_world():
         ({"collision_penalty": float("nan")}, "collision_penalty must be a finite number >= 0"),
         ({"render_size_px": 0}, "render_size_px must be an integer in 1..8192, got 0"),
         ({"goal_tolerance_m": -0.1}, "goal_tolerance_m must be a finite number > 0, got -0.1"),
-        ({"dt_s": 0.0}, "dt_s must be a finite number > 0 (seconds), got 0.0"),
-        ({"dt_s": float("inf")}, "dt_s must be a finite number > 0 (seconds), got inf"),
+        ({"dt_s": 0.0}, "dt_s must be a finite number in (0, 1] (seconds), got 0.0"),
+        ({"dt_s": float("inf")}, "dt_s must be a finite number in (0, 1] (seconds), got inf"),
+        ({"dt_s": 1e9}, "dt_s must be a finite number in (0, 1] (seconds), got 1000000000.0"),
+        ({"encoder": 5}, "encoder must be None or a EncoderNoise, got 5"),
+        ({"robot": "x"}, "robot must be None or a RobotParams, got 'x'"),
+        ({"lidar_noise": "x"}, "lidar_noise must be None or a LidarNoise, got 'x'"),
+        ({"sensor_options": {"scan_period_s": 5.0}}, "the sensor's scan_period_s must be in"),
         ({"people": "no"}, "people must be True or False, got 'no'"),
         ({"sensor_options": [1]}, "sensor_options must be a dict, got [1]"),
         (
@@ -327,8 +334,8 @@ def test_world_env_needs_a_world():
         ),
         (
             {"sensor_options": {"scan_period_s": 0.0}},
-            "the sensor's scan_period_s must be > 0 (it is the step period dt_s unless dt_s is "
-            "given), got 0.0",
+            "the sensor's scan_period_s must be in (0, 1] s (it is the step period dt_s unless "
+            "dt_s is given), got 0.0",
         ),
         (
             {"render_mode": "humans"},
@@ -337,9 +344,62 @@ def test_world_env_needs_a_world():
     ],
 )
 def test_constructor_arguments_are_checked_with_their_value(kwargs, msg):
-    with pytest.raises(ValueError) as ei:
+    with pytest.raises(InputError) as ei:
         DynMapEnv(**{"world": "apartment", **kwargs})
     assert str(ei.value).startswith(msg)
+    if "max_episode_steps" in kwargs:
+        return  # gymnasium.make takes it for its TimeLimit wrapper (-1: none, its convention)
+    with pytest.raises(InputError) as ei:  # the same at gymnasium.make, before any step
+        gymnasium.make("dynmap_sim/Apartment-v0", **kwargs)
+    assert str(ei.value).startswith(msg)
+
+
+def test_step_after_close_and_before_reset_raise():
+    env = DynMapEnv(world="apartment")
+    with pytest.raises(ResetNeeded, match="reset"):
+        env.step(np.zeros(2, np.float32))
+    env.reset(seed=0)
+    env.step(np.zeros(2, np.float32))
+    env.close()
+    env.close()  # a no-op
+    with pytest.raises(ClosedEnvironmentError, match="close"):
+        env.step(np.zeros(2, np.float32))
+    with pytest.raises(ClosedEnvironmentError, match="close"):
+        env.reset(seed=0)
+
+
+@pytest.mark.parametrize("end", ["truncated", "terminated"])
+def test_step_after_the_episode_ended_needs_a_reset(end):
+    env = DynMapEnv(world="apartment", max_episode_steps=3)
+    env.reset(seed=0)
+    if end == "terminated":  # the robot at the route's end, the route followed
+        route = env.spec_world.robot.route
+        env.route._k, env.route.progress_m = len(route) - 2, env.route.length_m
+        env.robot.set_pose((*route[-1], 0.0))
+    out = env.step(np.zeros(2, np.float32))
+    while not (out[2] or out[3]):
+        out = env.step(np.zeros(2, np.float32))
+    assert out[2] == (end == "terminated") and out[3] == (end == "truncated")
+    with pytest.raises(ResetNeeded, match="the episode has ended"):
+        env.step(np.zeros(2, np.float32))
+    env.reset()  # the next run
+    _, _, terminated, truncated, _ = env.step(np.zeros(2, np.float32))
+    assert not (terminated or truncated)
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.int64, np.float16, np.float32, np.float64])
+def test_actions_of_any_real_dtype_are_cast_to_float64(dtype):
+    """An action's value decides the step, whatever its dtype (documented cast)."""
+    outs = []
+    for action in (np.array([1, 0], dtype=dtype), np.array([1.0, 0.0])):
+        env = DynMapEnv(world="apartment")
+        env.reset(seed=1)
+        for _ in range(5):
+            obs, reward, *_ = env.step(action)
+        outs.append((obs["odom"], obs["scan"], reward))
+    np.testing.assert_array_equal(outs[0][0], outs[1][0])
+    np.testing.assert_array_equal(outs[0][1], outs[1][1])
+    assert outs[0][2] == outs[1][2]
 
 
 def test_rgb_array_list_through_make_collects_frames():

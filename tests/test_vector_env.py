@@ -6,6 +6,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
+from gymnasium.error import ClosedEnvironmentError, ResetNeeded
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 import dynmap_sim  # noqa: F401  (registers the envs)
@@ -132,14 +133,11 @@ def test_bad_arguments() -> None:
         gym.make_vec("dynmap_sim/World-v0", num_envs=2)
 
 
-@pytest.mark.parametrize("backend", ["numpy", "numba"])
-def test_same_numbers_with_people(backend) -> None:
-    """The lab's lunch crowd (people stepped in one batch on numpy, env by env on numba),
-    across autoresets into the next runs: every sub-env's observation, reward, flags,
-    people and true ranges equal a single env's with the same seed."""
-    if backend == "numba":
-        pytest.importorskip("numba")
-    kw = {"world": "lab", "max_episode_steps": 12, "sensor_options": {"backend": backend}}
+def test_same_numbers_with_people() -> None:
+    """The lab's lunch crowd, across autoresets into the next runs: every sub-env's
+    observation, reward, flags, people and true ranges equal a single env's with the same
+    seed."""
+    kw = {"world": "lab", "max_episode_steps": 12}
     n = 3
     vec = DynMapVectorEnv(num_envs=n, **kw)
     singles = [DynMapEnv(**kw) for _ in range(n)]
@@ -197,3 +195,16 @@ def test_same_numbers_when_sub_envs_end_at_different_steps() -> None:
     subsets = _step_alongside(vec, singles, _actions(20, n))
     assert subsets > 0
     vec.close()
+
+
+def test_step_and_reset_after_close_and_step_before_reset_raise() -> None:
+    vec = DynMapVectorEnv(num_envs=2, world="apartment")
+    with pytest.raises(ResetNeeded, match="reset"):
+        vec.step(np.zeros((2, 2), np.float32))
+    vec.reset(seed=0)
+    vec.step(np.zeros((2, 2), np.float32))
+    vec.close()
+    with pytest.raises(ClosedEnvironmentError, match="close"):
+        vec.step(np.zeros((2, 2), np.float32))
+    with pytest.raises(ClosedEnvironmentError, match="close"):
+        vec.reset(seed=0)

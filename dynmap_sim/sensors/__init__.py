@@ -1,7 +1,6 @@
 """Simulated sensors: laser scanners and wheel odometry (docs/architecture.md §4).
 
-* :mod:`~dynmap_sim.sensors.raycast` — exact batched ray casting (numpy), and
-  :mod:`~dynmap_sim.sensors.raycast_numba` its optional compiled twin (extra ``fast``);
+* :mod:`~dynmap_sim.sensors.raycast` — exact ray casting (a compiled kernel);
 * :mod:`~dynmap_sim.sensors.lidar` — URG-04LX / LMS200 presets, noise model, truth labels;
 * :mod:`~dynmap_sim.sensors.odometry` — wheel encoders with UMBmark systematic errors.
 """

@@ -28,6 +28,8 @@ the first surface it hits):
 
 Events 3-5 are mutually exclusive per beam (one uniform draw per beam is split into disjoint
 intervals), so each happens with exactly its probability, and they override a mixed pixel.
+The arithmetic between the draws runs in compiled loops; the draws are numpy's, from the
+generator passed in (so the same seed gives the same readings).
 
 Readings follow REP-117: ``+inf`` no return within ``range_max``, ``-inf`` a return closer than
 ``range_min``, ``NaN`` invalid. The truth labels (:class:`LidarReading` ``beam_object``,
@@ -43,8 +45,9 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
+from dynmap_sim.jit import compiled
 from dynmap_sim.se2 import compose
-from dynmap_sim.sensors.raycast import SegmentCache, beam_directions, cast_scan, cast_scans
+from dynmap_sim.sensors.raycast import beam_directions, cast_scan
 from dynmap_sim.types import LaserSpec
 
 FloatArray = NDArray[np.float64]
@@ -146,7 +149,6 @@ def make_lidar(
     mount_pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
     noise: LidarNoise | dict[str, float] | None = None,
     bias_seed: int = 0,
-    backend: str = "numpy",
     **overrides: Any,
 ) -> Lidar:
     """A :class:`Lidar` from a preset name, with overrides.
@@ -155,13 +157,13 @@ def make_lidar(
     ``mode`` (``"mm"``: 8.19 m, ``"cm"``: 81.9 m) select the variant. Any
     :class:`~dynmap_sim.types.LaserSpec` field (``n_beams``, ``range_max_m``, ...) may be
     overridden by keyword; ``noise`` is a :class:`LidarNoise` or a dict of fields to change in
-    the preset's noise model. ``backend`` is one of :data:`LIDAR_BACKENDS`: ``"numpy"``,
-    ``"numba"`` (extra ``fast``: the compiled ray casting of
-    :mod:`~dynmap_sim.sensors.raycast_numba` and noise model of
-    :mod:`~dynmap_sim.sensors.noise_numba`, whose readings are numpy's bit for bit) or
-    ``"auto"`` (those when numba is installed, numpy's casting where the compiled one could
-    not reproduce numpy's complex arithmetic).
+    the preset's noise model.
     """
+    if "backend" in overrides:
+        raise ValueError(
+            "the lidar option 'backend' is gone: the compiled ray caster and noise model are "
+            "the only ones (remove the option)"
+        )
     variant = {k: overrides.pop(k) for k in ("beams", "mode") if k in overrides}
     if sensor == "urg-04lx":
         if variant:
@@ -178,35 +180,7 @@ def make_lidar(
     spec = replace(spec, mount_pose=tuple(float(v) for v in mount_pose), **overrides)
     if isinstance(noise, dict):
         noise = replace(preset_noise, **noise)
-    return Lidar(
-        spec, noise if noise is not None else preset_noise, bias_seed=bias_seed, backend=backend
-    )
-
-
-def cast_many(
-    lidars: list[Lidar], robot_poses: list[FloatArray], geoms: list[GeometryLike]
-) -> tuple[FloatArray, NDArray[np.int64]]:
-    """:meth:`Lidar.cast` of each lidar from its robot pose among its geometry, as rows:
-    noise-free ranges [m] and hit indices ``(len(lidars), n_beams)``; one
-    :func:`~dynmap_sim.sensors.raycast.cast_scans` pass for all when they are numpy
-    casters of the same beams (the same numbers as one by one)."""
-    first = lidars[0]
-    same = all(lid.spec == first.spec and lid._cast is cast_scan for lid in lidars)
-    if len(lidars) < 2 or not same:
-        casts = [lid.cast(p, g) for lid, p, g in zip(lidars, robot_poses, geoms, strict=True)]
-        return np.stack([c[0] for c in casts]), np.stack([c[1] for c in casts])
-    spec = first.spec
-    return cast_scans(
-        [lid.sensor_pose(p) for lid, p in zip(lidars, robot_poses, strict=True)],
-        spec.angle_min_rad,
-        spec.angle_increment_rad,
-        first._cos,
-        first._sin,
-        spec.range_max_m,
-        [lid._segments(g) for lid, g in zip(lidars, geoms, strict=True)],
-        [g.circles if g.circles.shape[0] else None for g in geoms],
-        first._u,
-    )
+    return Lidar(spec, noise if noise is not None else preset_noise, bias_seed=bias_seed)
 
 
 @dataclass
@@ -224,60 +198,10 @@ class LidarReading:
     beam_class: NDArray[np.int8]
 
 
-#: Lidar backends: ``numpy`` (casting and noise), ``numba`` (extra ``fast``: compiled
-#: casting, noise model and people's step), ``auto`` (the compiled ones when numba is
-#: installed and the compiled casting reproduces numpy's complex arithmetic on this install,
-#: :func:`~dynmap_sim.numpy_complex.numpy_complex_mode`, else numpy's casting; the
-#: compiled noise and people's step whenever numba is installed). The compiled noise and
-#: people's step give numpy's numbers bit for bit on every install, the casting wherever
-#: that mode is known (``numba`` casts in the fused mode elsewhere: numpy's ranges to
-#: rounding), so ``auto`` has numpy's numbers on every install.
-LIDAR_BACKENDS = ("numpy", "numba", "auto")
-
-
-def _caster(backend: str) -> Any:
-    """The casting function of ``backend``: :func:`~dynmap_sim.sensors.raycast.cast_scan`
-    or its compiled twin (see :data:`LIDAR_BACKENDS`)."""
-    if backend == "numpy":  # (numba is not even imported)
-        return cast_scan
-    from dynmap_sim.jit import kernel_backend
-    from dynmap_sim.numpy_complex import numpy_complex_mode
-    from dynmap_sim.sensors import raycast_numba
-
-    if backend == "auto":
-        exact = kernel_backend("auto") is not None and numpy_complex_mode() is not None
-        return raycast_numba.cast_scan_numba if exact else cast_scan
-    if not raycast_numba.numba_available():
-        raise ValueError('lidar backend "numba" needs numba: pip install "dynmap-sim[fast]"')
-    return raycast_numba.cast_scan_numba
-
-
-def _compiled_noise(backend: str) -> Any:
-    """The compiled noise of one scan for ``backend`` (numba; auto when installed:
-    :func:`dynmap_sim.jit.kernel_backend`), else None (numpy's)."""
-    if backend == "numpy":  # (numba is not even imported)
-        return None
-    from dynmap_sim.jit import kernel_backend
-
-    if kernel_backend(backend) is None:
-        return None
-    from dynmap_sim.sensors.noise_numba import noise_scan
-
-    return noise_scan
-
-
 class Lidar:
     """A laser scanner mounted on the robot at ``spec.mount_pose`` (``base_link`` frame)."""
 
-    def __init__(
-        self, spec: LaserSpec, noise: LidarNoise, bias_seed: int = 0, backend: str = "numpy"
-    ) -> None:
-        if backend not in LIDAR_BACKENDS:
-            raise ValueError(f"lidar backend must be one of {LIDAR_BACKENDS}, got {backend!r}")
-        self._cast = _caster(backend)
-        # the compiled noise of one scan (numba; auto when installed), None: numpy's
-        self._noise_scan: Any = _compiled_noise(backend)
-        self.backend = backend
+    def __init__(self, spec: LaserSpec, noise: LidarNoise, bias_seed: int = 0) -> None:
         if spec.n_beams < 2:
             raise ValueError(f"a laser scanner needs at least 2 beams, got {spec.n_beams}")
         if not (0.0 <= spec.range_min_m < spec.range_max_m and math.isfinite(spec.range_max_m)):
@@ -296,44 +220,8 @@ class Lidar:
         self._cos, self._sin = beam_directions(
             spec.angle_min_rad, spec.angle_increment_rad, spec.n_beams
         )
-        self._u = self._cos + 1j * self._sin
-        self._cache_key: tuple[int, np.ndarray] | None = None
-        self._cache: SegmentCache | None = None
         self._labels_key: tuple[np.ndarray, ...] | None = None
         self._labels: tuple[NDArray[np.int32], NDArray[np.int8]] | None = None
-
-    def __getstate__(self) -> dict[str, Any]:
-        """Pickle without the broad-phase cache (rebuilt on the next scan; its per-cell
-        candidate lists would only bloat checkpoints)."""
-        state = self.__dict__.copy()
-        state["_cache"] = None
-        state["_cache_key"] = None
-        if self.backend == "auto":  # resolved again where it is unpickled
-            state["_noise_scan"] = None
-            state["_cast"] = None
-        return state
-
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        """Restore; a lidar pickled before the compiled noise existed uses numpy's (the
-        same numbers), an ``auto`` one the compiled noise if this install has numba."""
-        self.__dict__.update(state)
-        self.__dict__.setdefault("_noise_scan", None)
-        if self.backend == "auto":
-            self._noise_scan = _compiled_noise("auto")
-            self._cast = _caster("auto")
-
-    def _segments(self, geom: GeometryLike) -> SegmentCache:
-        """Broad-phase data of the segments, rebuilt when the geometry changes.
-
-        The key holds the source array itself (not its ``id``), so a freed array's id being
-        reused by another world's array cannot serve stale geometry.
-        """
-        key = (int(geom.static_version), geom.segments)
-        ck = self._cache_key
-        if ck is None or ck[0] != key[0] or ck[1] is not key[1] or self._cache is None:
-            self._cache = SegmentCache.build(geom.segments)
-            self._cache_key = key
-        return self._cache
 
     def _label_tables(self, geom: GeometryLike) -> tuple[NDArray[np.int32], NDArray[np.int8]]:
         """Object index and class per hit index (segments, circles, then -1 / NONE)."""
@@ -342,10 +230,7 @@ class Lidar:
         if (
             lk is None
             or self._labels is None
-            or lk[0] is not src[0]
-            or lk[1] is not src[1]
-            or lk[2] is not src[2]
-            or lk[3] is not src[3]
+            or any(a is not b for a, b in zip(lk, src, strict=True))
         ):
             obj = np.concatenate([geom.segment_object, geom.circle_object, [-1]]).astype(np.int32)
             cls = np.concatenate([geom.segment_class, geom.circle_class, [0]]).astype(np.int8)
@@ -369,17 +254,15 @@ class Lidar:
     def cast(self, robot_pose: FloatArray, geom: GeometryLike) -> tuple[FloatArray, NDArray]:
         """Noise-free ranges [m] (``+inf``: no hit) and hit indices (see ``cast_scan``)."""
         spec = self.spec
-        circles = geom.circles if geom.circles.shape[0] else None
-        return self._cast(
+        return cast_scan(
             self.sensor_pose(robot_pose),
             spec.angle_min_rad,
             spec.angle_increment_rad,
             self._cos,
             self._sin,
             spec.range_max_m,
-            self._segments(geom),
-            circles,
-            self._u,
+            geom.segments,
+            geom.circles if geom.circles.shape[0] else None,
         )
 
     def scan(
@@ -409,146 +292,121 @@ class Lidar:
     ) -> NDArray[np.float32]:
         """REP-117 readings from noise-free ranges (see the module docstring for the model).
 
-        ``true_range_m`` has shape ``(..., n_beams)`` (a batch of scans is allowed; its draws
-        all come from ``rng``).
+        ``true_range_m`` has shape ``(..., n_beams)``; a batch of scans is noised scan after
+        scan, all draws from ``rng``.
         """
         r = np.asarray(true_range_m, dtype=np.float64)
-        if r.shape[-1] != self.spec.n_beams:
-            raise ValueError(f"expected (..., {self.spec.n_beams}) ranges, got shape {r.shape}")
-        if self._noise_scan is not None and r.ndim == 1:
-            # the numba backend: the same model in compiled loops (the same numbers)
-            spec = self.spec
-            return self._noise_scan(
-                np.ascontiguousarray(r),
-                rng,
-                self._bias_m,
-                self.noise,
-                spec.range_min_m,
-                spec.range_max_m,
-            )
-        return self._noise(r.reshape(-1, r.shape[-1]), [rng]).reshape(r.shape)
-
-    def apply_noise_rows(
-        self, true_range_m: FloatArray, rngs: list[np.random.Generator]
-    ) -> NDArray[np.float32]:
-        """:meth:`apply_noise` of each row of ``true_range_m`` ``(S, n_beams)`` with its own
-        generator ``rngs[i]``: row ``i`` reads what ``apply_noise(true_range_m[i], rngs[i])``
-        gives (the same draws in the same order), the arithmetic done once for all rows."""
-        r = np.asarray(true_range_m, dtype=np.float64)
-        if r.ndim != 2 or r.shape != (len(rngs), self.spec.n_beams):
-            raise ValueError(
-                f"expected ({len(rngs)}, {self.spec.n_beams}) ranges, got shape {r.shape}"
-            )
-        return self._noise(r, rngs)
-
-    def _noise(self, r: FloatArray, rngs: list[np.random.Generator]) -> NDArray[np.float32]:
-        """The noise model on ranges ``r`` ``(S, n_beams)`` whose rows fall into
-        ``len(rngs)`` equal groups of consecutive rows, group ``g`` drawing from ``rngs[g]``
-        (in the order one :meth:`apply_noise` of that group alone draws)."""
-        nz = self.noise
-        spec = self.spec
-        hit = r <= spec.range_max_m
-        # the hits' ranges, NaN elsewhere (also the mixed pixels' edge test below)
-        rn = np.where(hit, r, np.nan) if nz.p_mixed > 0.0 or nz.sigma_rel else r
-        if not nz.sigma_rel:
-            sigma = nz.sigma_m
-        elif nz.sigma_m > 0.0:
-            # fmax skips the NaN of no-hit beams: sigma_m there, as max(sigma_rel * 0, sigma_m)
-            sigma = np.fmax(nz.sigma_rel * rn, nz.sigma_m)
-        else:
-            sigma = np.maximum(nz.sigma_rel * np.where(hit, r, 0.0), nz.sigma_m)
-        if len(rngs) == 1:
-            out = rngs[0].standard_normal(r.shape)
-        else:
-            out = _row_draws(rngs, r.shape, "standard_normal")
-        out *= sigma
-        out += r + self._bias_m if nz.systematic_m else r  # inf stays inf
-        flat_out = out.reshape(-1)
-        flat_r = r.reshape(-1)
-        group_size = r.size // len(rngs)  # flat beams per group
-        if nz.p_mixed > 0.0:
-            # depth discontinuities between neighbours i, i+1 (NaN for no-hit beams: no edge)
-            # (NaN arithmetic and comparisons are quiet: no errstate needed)
-            edge = np.abs(rn[:, 1:] - rn[:, :-1]) > nz.mixed_jump_m
-            e = edge.ravel().nonzero()[0]
-            if e.size:
-                # flat index of the left beam of each edge (rows are n_beams long)
-                left = e + e // (spec.n_beams - 1) if r.shape[0] > 1 else e
-                # each group's edges with its generator (its draws in a lone group's order)
-                for g, left_g in _by_group(left.tolist(), group_size):
-                    _mixed_pixels(flat_out, flat_r, left_g, rngs[g], nz.p_mixed)
-        # one uniform per beam picks at most one of the rare events (disjoint intervals)
-        p1 = nz.p_dropout
-        p2 = p1 + nz.p_short
-        p3 = p2 + nz.p_invalid
-        if p3 > 0.0:
-            u = rngs[0].random(r.shape) if len(rngs) == 1 else _row_draws(rngs, r.shape, "random")
-            rare = ((u < p3) & hit).ravel().nonzero()[0]
-            if rare.size:
-                flat_u = u.reshape(-1)
-                for g, rare_g in _by_group(rare.tolist(), group_size):
-                    _rare_events(flat_out, flat_r, flat_u, rare_g, rngs[g], p1, p2, spec)
-        out[out < spec.range_min_m] = -np.inf
-        out[out > spec.range_max_m] = np.inf
-        return out.astype(np.float32)
+        n = self.spec.n_beams
+        if r.shape[-1:] != (n,):
+            raise ValueError(f"expected (..., {n}) ranges, got shape {r.shape}")
+        rows = np.ascontiguousarray(r.reshape(-1, n))
+        out = np.empty(rows.shape, dtype=np.float32)
+        for i in range(rows.shape[0]):
+            out[i] = _noise_scan(rows[i], rng, self._bias_m, self.noise, self.spec)
+        return out.reshape(r.shape)
 
 
-def _mixed_pixels(
-    out: FloatArray, r: FloatArray, left: list[int], rng: np.random.Generator, p_mixed: float
-) -> None:
-    """Mixed pixels of one scan (true ranges ``r``, readings ``out``) at the edges between
-    beams ``left[k]`` and ``left[k] + 1``: each edge's two beams (all left beams, then all
-    right beams) are picked with probability ``p_mixed`` and read a range uniformly between
-    the two surfaces. The draws and the arithmetic of the array form, one beam at a time
-    (the edges of a scan are a handful)."""
-    beams = left + [b + 1 for b in left]
-    others = [b + 1 for b in left] + left
-    pick = (rng.random(len(beams)) < p_mixed).tolist()
-    chosen = [(b, o) for b, o, p in zip(beams, others, pick, strict=True) if p]
-    w = rng.random(len(chosen)).tolist()
-    for (b, o), wk in zip(chosen, w, strict=True):
-        rb = r.item(b)
-        out[b] = rb + wk * (r.item(o) - rb)
+@compiled
+def _range_noise(r, out, bias, sigma, r_max, jump, left):  # type: ignore[no-untyped-def]
+    """Range noise in place: ``out`` (standard normal draws) := ``r + bias + out * s`` with
+    ``s = max(sigma_rel * r, sigma_m)`` (``r`` counting 0 for no hit; ``sigma = (sigma_m,
+    sigma_rel)``), and the left beams of the depth edges (``|r[i + 1] - r[i]| > jump``, both
+    hit) into ``left`` (``jump < 0``: none). Returns the number of edges."""
+    sigma_m, sigma_rel = sigma[0], sigma[1]
+    n = r.shape[0]
+    for i in range(n):
+        ri = r[i]
+        s = max(sigma_rel * (ri if ri <= r_max else 0.0), sigma_m)
+        out[i] = ri + bias[i] + out[i] * s
+    n_edges = 0
+    if jump >= 0.0:
+        for i in range(n - 1):
+            a, b = r[i], r[i + 1]
+            if a <= r_max and b <= r_max and abs(b - a) > jump:
+                left[n_edges] = i
+                n_edges += 1
+    return n_edges
 
 
-def _rare_events(
-    out: FloatArray,
+@compiled
+def _mixed_pixels(r, out, left, n_edges, pick, p_mixed, w):  # type: ignore[no-untyped-def]
+    """Mixed pixels: each edge's two beams (all left beams, then all right beams) whose
+    ``pick`` draw is below ``p_mixed`` read ``r[b] + w (r[o] - r[b])`` (``o`` the beam across
+    the edge, ``w`` the next weight draw). Returns the number of weights used."""
+    m = 0
+    for j in range(2 * n_edges):
+        if pick[j] < p_mixed:
+            b = left[j] if j < n_edges else left[j - n_edges] + 1
+            o = b + 1 if j < n_edges else b - 1
+            out[b] = r[b] + w[m] * (r[o] - r[b])
+            m += 1
+    return m
+
+
+@compiled
+def _rare_beams(r, u, p_any, r_max):  # type: ignore[no-untyped-def]
+    """The number of beams that hit with ``u < p_any`` (a rare event each)."""
+    m = 0
+    for i in range(r.shape[0]):
+        if r[i] <= r_max and u[i] < p_any:
+            m += 1
+    return m
+
+
+@compiled
+def _finish(r, out, u, short, p, r_min, r_max, res):  # type: ignore[no-untyped-def]
+    """Rare events of the beams that hit (``u < p[0]``: dropout ``+inf``; ``< p[1]``: a
+    short return ``r_min + short (r - r_min)``, one ``short`` draw per rare beam in order;
+    ``< p[2]``: NaN), then REP-117 (``-inf`` below ``r_min``, ``+inf`` beyond ``r_max``)
+    into the float32 readings ``res``."""
+    j = 0
+    for i in range(out.shape[0]):
+        v = out[i]
+        if u.shape[0] and r[i] <= r_max and u[i] < p[2]:
+            if u[i] < p[0]:
+                v = math.inf
+            elif u[i] < p[1]:
+                v = r_min + short[j] * (r[i] - r_min)
+            else:
+                v = math.nan
+            j += 1
+        if v < r_min:
+            v = -math.inf
+        elif v > r_max:
+            v = math.inf
+        res[i] = v
+
+
+_EMPTY = np.zeros(0)
+
+
+def _noise_scan(
     r: FloatArray,
-    u: FloatArray,
-    rare: list[int],
     rng: np.random.Generator,
-    p1: float,
-    p2: float,
+    bias: FloatArray,
+    nz: LidarNoise,
     spec: LaserSpec,
-) -> None:
-    """Dropouts (``u < p1``), short returns (``u < p2``) and invalid readings of the beams
-    ``rare`` of one scan (true ranges ``r``, readings ``out``, uniforms ``u``): one short
-    range drawn per rare beam, as the array form draws them, and the same arithmetic."""
-    rmin = spec.range_min_m
-    short = rng.random(len(rare)).tolist()
-    for i, sk in zip(rare, short, strict=True):
-        ui = u.item(i)
-        out[i] = math.inf if ui < p1 else (rmin + sk * (r.item(i) - rmin) if ui < p2 else math.nan)
-
-
-def _by_group(beams: list[int], group_size: int) -> list[tuple[int, list[int]]]:
-    """Ascending flat ``beams`` split by group (``group_size`` flat beams each): ``(group,
-    its beams)`` for each group that has some, in group order."""
-    out: list[tuple[int, list[int]]] = []
-    for b in beams:
-        g = b // group_size
-        if out and out[-1][0] == g:
-            out[-1][1].append(b)
-        else:
-            out.append((g, [b]))
-    return out
-
-
-def _row_draws(rngs: list[np.random.Generator], shape: tuple[int, ...], kind: str) -> FloatArray:
-    """An array of ``shape`` of ``kind`` draws (``"standard_normal"`` or ``"random"``) whose
-    rows fall into ``len(rngs)`` equal groups, group ``g`` drawn by ``rngs[g]`` in one call."""
-    out = np.empty(shape)
-    rows = shape[0] // len(rngs)
-    for g, rng in enumerate(rngs):
-        getattr(rng, kind)(out=out[g * rows : (g + 1) * rows])
-    return out
+) -> NDArray[np.float32]:
+    """The noisy readings of one scan's true ranges ``r`` ``(n,)`` (float64, C-contiguous),
+    drawn from ``rng``; ``bias`` is the lidar's per-beam systematic error."""
+    n = r.shape[0]
+    r_max = float(spec.range_max_m)
+    out = rng.standard_normal(n)
+    left = np.empty(n, dtype=np.int64)
+    sigma = np.array([nz.sigma_m, nz.sigma_rel])
+    jump = float(nz.mixed_jump_m) if nz.p_mixed > 0.0 else -1.0
+    n_edges = _range_noise(r, out, bias, sigma, r_max, jump, left)
+    if n_edges:
+        pick = rng.random(2 * n_edges)
+        w = rng.random(int((pick < nz.p_mixed).sum()))
+        _mixed_pixels(r, out, left, n_edges, pick, float(nz.p_mixed), w)
+    p1 = nz.p_dropout
+    p2 = p1 + nz.p_short
+    p = np.array([p1, p2, p2 + nz.p_invalid])
+    u = short = _EMPTY
+    if p[2] > 0.0:
+        u = rng.random(n)
+        short = rng.random(_rare_beams(r, u, p[2], r_max))
+    res = np.empty(n, dtype=np.float32)
+    _finish(r, out, u, short, p, float(spec.range_min_m), r_max, res)
+    return res

@@ -9,9 +9,7 @@ the run started, so weeks of stepping do not drift.
 
 from __future__ import annotations
 
-import itertools
 import math
-from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -21,10 +19,8 @@ from numpy.typing import NDArray
 from dynmap_sim.world.calendar import Calendar, RunSlot
 from dynmap_sim.world.geometry import GeometryView, StaticGeometry, build_static
 from dynmap_sim.world.people import Crowd, SocialForce
-from dynmap_sim.world.people.batch import CrowdBatch
 from dynmap_sim.world.people.legs import leg_centres_into
 from dynmap_sim.world.people.params import LEG_RADIUS_M
-from dynmap_sim.world.people.social_force import check_backend
 from dynmap_sim.world.polygons import FloatArray, polygon_edges
 from dynmap_sim.world.schedule import ObjectState, Schedule, Snapshot
 from dynmap_sim.world.spec import WorldSpec
@@ -69,13 +65,11 @@ class World:
     from ``SeedSequence((seed, tag, day, run))``, so any run is reproducible on its own.
     """
 
-    def __init__(self, spec: WorldSpec, seed: int = 0, people_backend: str = "numpy") -> None:
+    def __init__(self, spec: WorldSpec, seed: int = 0) -> None:
         if int(seed) < 0:
             raise ValueError(f"seed must be a non-negative integer, not {seed!r}")
         self.spec = spec
         self.seed = int(seed)
-        #: how people are stepped: "numpy", or "numba" (extra ``fast``; the same numbers)
-        self.people_backend = check_backend(people_backend)
         self.calendar = Calendar(spec.calendar)
         self.schedule = Schedule(spec, self.calendar)
         self._space = pymunk.Space()
@@ -179,16 +173,6 @@ class World:
         out[ns:, 2] = LEG_RADIUS_M
         return out
 
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        """Restore (a world pickled before the circles' template or the people's largest
-        radius existed gets them)."""
-        self.__dict__.update(state)
-        if "_circles_template" not in state:
-            self._circles_template = self._circles_start()
-        self.__dict__.setdefault("people_backend", "numpy")
-        if "_person_r_max" not in state:
-            self._person_r_max = self._largest_person_radius()
-
     def _largest_person_radius(self) -> float:
         """The largest body radius [m] of the run's people (0 without people)."""
         return float(self._crowd.radius.max()) if self._crowd.n else 0.0
@@ -198,9 +182,7 @@ class World:
         segments = np.concatenate(edges) if edges else np.zeros((0, 4))
         starts = np.cumsum([0] + [len(e) for e in edges[:-1]]).astype(np.int64)
         rng = np.random.default_rng(np.random.SeedSequence((self.seed, _PEOPLE_TAG, day, run)))
-        forces = SocialForce(
-            self.spec.people, segments, rng, outline_starts=starts, backend=self.people_backend
-        )
+        forces = SocialForce(self.spec.people, segments, rng, outline_starts=starts)
         active = []
         for p in self.spec.people:
             d0 = 1 if p.start is None else self.calendar.day_of(p.start) or 1
@@ -216,7 +198,7 @@ class World:
             circles = self._circles_template.copy()
             ns = self._static.circles.shape[0]
             out = circles[ns:, :2].view(np.complex128)[:, 0]
-            leg_centres_into(self._crowd, out, self._forces.backend_ops().legs)
+            leg_centres_into(self._crowd, out)
         else:
             circles = self._static.circles
         self._set_circles(circles)
@@ -384,93 +366,3 @@ def _near(z: Any, synced: Any, robot_xy: Any, near_m: Any) -> NDArray[np.bool_]:
 def _robot_xy(robot_pose: tuple[float, float, float] | FloatArray) -> FloatArray:
     """The robot's position ``(2,)`` from its pose."""
     return np.array((float(robot_pose[0]), float(robot_pose[1])))
-
-
-class WorldBatch:
-    """Steps many worlds at once (a vector env's), with the numbers of :meth:`World.step`
-    of each: the people of all worlds on the numpy backend move in one
-    :class:`~dynmap_sim.world.people.batch.CrowdBatch` step and their legs are placed in
-    one pass; the rest (clock, pymunk bodies near the robot, other backends) world by
-    world. Keeps the crowds' batch constants between steps (no module-level state)."""
-
-    def __init__(self) -> None:
-        self._crowds = CrowdBatch()
-        self._circles: _JointCircles | None = None
-
-    def step(
-        self,
-        worlds: Sequence[World],
-        dt_s: float,
-        robot_poses: Sequence[FloatArray],
-        robot_radius_m: Sequence[float],
-    ) -> None:
-        """:meth:`World.step` of each ``worlds[i]`` with robot ``robot_poses[i]`` of radius
-        ``robot_radius_m[i]``."""
-        batch: list[tuple[World, FloatArray, float]] = []
-        for w, pose, rr in zip(worlds, robot_poses, robot_radius_m, strict=True):
-            if w._crowd.n == 0 or not CrowdBatch.batchable(w._forces):
-                w.step(dt_s, robot_pose=pose, robot_radius_m=rr)
-                continue
-            w._tick(dt_s)
-            batch.append((w, _robot_xy(pose), rr))
-        if not batch:
-            return
-        self._crowds.step(
-            [w._forces for w, _, _ in batch],
-            [w._crowd for w, _, _ in batch],
-            dt_s,
-            [xy for _, xy, _ in batch],
-            [rr for _, _, rr in batch],
-        )
-        # the bodies near each robot (World._sync_bodies), tested for all people at once
-        z = self._crowds.positions()
-        counts = [w._crowd.n for w, _, _ in batch]
-        rz = np.array([complex(xy[0], xy[1]) for _, xy, _ in batch]).repeat(counts)
-        near_m = np.array([_near_m(dt_s, rr, w._person_r_max) for w, _, rr in batch]).repeat(counts)
-        synced = np.concatenate([w._synced for w, _, _ in batch])
-        near = _near(z, synced, rz, near_m)
-        first = list(itertools.accumulate(counts, initial=0))  # each world's first row, end
-        near_at = near.nonzero()[0]  # (rows of all worlds, ascending)
-        cuts = near_at.searchsorted(first).tolist()
-        rows0 = first[:-1]
-        for (w, _, _), a, b, row0 in zip(batch, cuts[:-1], cuts[1:], rows0, strict=True):
-            w._stale = True  # (as World._sync_bodies with a robot)
-            if b > a:
-                w._move_bodies(near_at[a:b] - row0)
-        # the circles of all worlds (World._refresh_people), legs placed in one pass
-        worlds = [w for w, _, _ in batch]
-        circles = self._circles
-        if circles is None or not circles.holds(worlds):
-            circles = self._circles = _JointCircles(worlds)
-        for w, c in zip(worlds, circles.place(self._crowds.leg_centres()), strict=True):
-            w._set_circles(c)
-
-
-class _JointCircles:
-    """The circles' templates (:meth:`World._circles_start`) of many worlds as the rows
-    of one array, and where their legs go: a step's circles of all worlds are one copy
-    and one placement of all legs, each world's a view of its rows."""
-
-    def __init__(self, worlds: list[World]) -> None:
-        self.templates = [w._circles_template for w in worlds]
-        sizes = [t.shape[0] for t in self.templates]
-        first = np.cumsum([0, *sizes]).tolist()
-        self.rows = [slice(a, b) for a, b in zip(first[:-1], first[1:], strict=True)]
-        self.template = np.concatenate(self.templates)
-        # each world's legs are its last 2 n rows
-        self.legs = np.concatenate(
-            [np.arange(b - 2 * w._crowd.n, b) for w, b in zip(worlds, first[1:], strict=True)]
-        )
-
-    def holds(self, worlds: list[World]) -> bool:
-        """True if these worlds still have the templates laid out here, in order."""
-        return len(worlds) == len(self.templates) and all(
-            w._circles_template is t for w, t in zip(worlds, self.templates, strict=True)
-        )
-
-    def place(self, leg_centres: NDArray[np.complex128]) -> list[FloatArray]:
-        """Each world's circles with its legs at ``leg_centres`` (``x + iy``, every world's
-        legs one after another)."""
-        circles = self.template.copy()
-        circles[:, :2].view(np.complex128)[self.legs, 0] = leg_centres
-        return [circles[s] for s in self.rows]

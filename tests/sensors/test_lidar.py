@@ -144,7 +144,7 @@ def test_same_seed_same_scan():
     np.testing.assert_array_equal(a, b)
 
 
-def test_pickled_lidar_drops_its_cache_and_scans_the_same():
+def test_pickled_lidar_scans_the_same():
     import pickle
 
     segs = np.array([[3.0, -5.0, 3.0, 5.0], [-2.0, -1.0, -2.0, 1.0]])
@@ -158,35 +158,40 @@ def test_pickled_lidar_drops_its_cache_and_scans_the_same():
         circle_class = np.array([5], np.int8)
         static_version = 0
 
-    lidar = make_lidar("urg-04lx", noise=NOISELESS)
+    lidar = make_lidar("urg-04lx")
     pose = np.array([0.2, 0.1, 0.3])
-    before = lidar.cast(pose, G)
     clone = pickle.loads(pickle.dumps(lidar))
-    assert clone._cache is None
-    after = clone.cast(pose, G)
-    np.testing.assert_array_equal(before[0], after[0])
-    np.testing.assert_array_equal(before[1], after[1])
+    a = lidar.scan(pose, G, np.random.default_rng(3))
+    b = clone.scan(pose, G, np.random.default_rng(3))
+    np.testing.assert_array_equal(a.ranges_m, b.ranges_m)
+    np.testing.assert_array_equal(a.beam_object, b.beam_object)
 
 
-@pytest.mark.parametrize(
-    "sensor,noise",
-    [
-        ("urg-04lx", None),
-        ("lms200", {"p_invalid": 0.01, "p_short": 0.02}),
-        ("urg-04lx", {"p_mixed": 0.0, "p_dropout": 0.0, "p_short": 0.0}),
-    ],
-)
-def test_apply_noise_rows_gives_each_row_its_own_apply_noise(sensor, noise):
-    """Rows noised together, each from its own generator, read what each row noised alone
-    reads (the same draws in the same order), bit for bit."""
-    lidar = make_lidar(sensor, noise=noise)
-    n = lidar.spec.n_beams
+def test_a_batch_is_noised_scan_after_scan():
+    """A batch of scans reads what the scans noised one after another from the same
+    generator read."""
+    lidar = make_lidar("lms200", noise={"p_invalid": 0.01, "p_short": 0.02})
     rng = np.random.default_rng(4)
-    true = rng.uniform(0.5, 7.0, (6, n))
-    true[:, ::7] = np.inf  # no returns, and depth edges next to them
-    true[2] = np.inf  # a row with no hit at all
-    true[3, 100:140] = 1.0  # a flat wall: edges at both ends only
-    rows = lidar.apply_noise_rows(true, [np.random.default_rng(10 + i) for i in range(6)])
-    for i in range(6):
-        alone = lidar.apply_noise(true[i], np.random.default_rng(10 + i))
-        assert np.array_equal(rows[i], alone, equal_nan=True)
+    true = rng.uniform(0.5, 7.0, (4, lidar.spec.n_beams))
+    true[:, ::7] = np.inf
+    batch = lidar.apply_noise(true, np.random.default_rng(10))
+    one = np.random.default_rng(10)
+    for i in range(4):
+        assert np.array_equal(batch[i], lidar.apply_noise(true[i], one), equal_nan=True)
+
+
+@pytest.mark.parametrize("where", ["make_lidar", "env", "scenario"])
+def test_the_old_backend_option_is_refused_in_one_line(where):
+    from dynmap_sim.env import DynMapEnv
+    from dynmap_sim.env_factory import SimSpec, SimSpecError, make_env, resolve_world
+
+    with pytest.raises(ValueError, match="'backend' is gone") as err:
+        if where == "make_lidar":
+            make_lidar("urg-04lx", backend="numba")
+        elif where == "env":
+            DynMapEnv(world="apartment", sensor_options={"backend": "auto"})
+        else:
+            make_env(SimSpec(world=resolve_world("apartment"), sensor_overrides={"backend": "x"}))
+    assert "\n" not in str(err.value)
+    if where == "scenario":
+        assert isinstance(err.value, SimSpecError) and err.value.field == "sensor"

@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from functools import partial
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -17,8 +15,8 @@ from dynmap_sim.world.people.dynamics import (
     StepConstants,
     goals_due,
     max_move_m,
+    move,
     social_force,
-    speed_factor,
 )
 from dynmap_sim.world.people.obstacles import Obstacles
 from dynmap_sim.world.people.params import STRIDE_M
@@ -36,29 +34,20 @@ class SocialForce:
         rng: np.random.Generator,
         broad_phase: bool = True,
         outline_starts: NDArray[np.int64] | None = None,
-        backend: str = "numpy",
     ) -> None:
         self.populations = populations
         self.rng = rng
         self.obstacles = Obstacles(segments, broad_phase, outline_starts)
         self._consts: StepConstants | None = None
         self._views: tuple[NDArray[Any], ...] | None = None
-        self._ops: StepOps | None = None
-        self.backend = check_backend(backend)
 
     def __getstate__(self) -> dict[str, Any]:
         """Pickle without the step's caches: the complex views (a pickled view would be a
         copy, no longer writing through to the crowd's arrays) and the constants; both are
-        made again on the next step (and the backend's operations)."""
+        made again on the next step."""
         state = self.__dict__.copy()
-        state["_views"] = state["_consts"] = state["_ops"] = None
+        state["_views"] = state["_consts"] = None
         return state
-
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        """Restore, dropping the caches of states pickled before they were left out."""
-        self.__dict__.update(state)
-        self._views = self._consts = self._ops = None
-        self.__dict__.setdefault("backend", "numpy")
 
     @property
     def segments(self) -> FloatArray:
@@ -94,7 +83,7 @@ class SocialForce:
             self.populations, self.obstacles, self.rng, time_s, day_active, keep_away
         )
 
-    def _constants(self, crowd: Crowd, robot_radius_m: float, k_cols: int) -> StepConstants:
+    def _constants(self, crowd: Crowd, robot_radius_m: float) -> StepConstants:
         """Per-crowd constants of :meth:`step` (radii, speeds), rebuilt when they change."""
         c = self._consts
         if (
@@ -103,10 +92,9 @@ class SocialForce:
             and c.v0 is crowd.v0
             and c.robot_radius_m == robot_radius_m
             and c.n == crowd.n
-            and c.k_cols == k_cols
         ):
             return c
-        c = StepConstants.build(crowd.radius, crowd.v0, robot_radius_m, k_cols)
+        c = StepConstants.build(crowd.radius, crowd.v0, robot_radius_m)
         self._consts = c
         return c
 
@@ -136,43 +124,27 @@ class SocialForce:
         """Advance ``crowd`` by ``dt_s`` seconds in place (explicit Euler + position correction).
 
         Positions and velocities are handled as complex numbers ``x + iy`` (views of
-        ``crowd.pos`` / ``crowd.vel``), and the exponentials fold their prefactors in
-        (``A exp((r - d) / B) = exp(ln A + r / B - d / B)``), so one step is a few dozen
-        numpy calls whatever the crowd size (the cost of a step is call overhead for the
-        crowds of the shipped worlds).
+        ``crowd.pos`` / ``crowd.vel``).
         """
         if crowd.n == 0:
             return
         z, v, goal = self._complex_views(crowd)
-        ops = self.backend_ops()
-        rows = ops.rows(self.obstacles, z)  # candidate segments (static geometry within REACH_M)
-        k = self._constants(crowd, robot_radius_m, rows.shape[1])
+        rows = self.obstacles.rows(z)  # candidate segments (static geometry within REACH_M)
+        k = self._constants(crowd, robot_radius_m)
         rz = None if robot_xy is None else complex(float(robot_xy[0]), float(robot_xy[1]))
-        force, pair_gap, wall_gap, robot_gap = ops.social_force(crowd, z, v, goal, rows, rz, k)
-        v += dt_s * force
-        v *= ops.speed_factor(v, k)  # H&M eq. 8
-        old = z.copy()
-        z += dt_s * v
-        # a move is at most dt * vmax (plus rounding): the robot's disc is checked only when
-        # someone was that close to it
+        force, pair_gap, wall_gap, robot_gap = social_force(z, v, goal, rows, rz, k)
+        old = move(z, v, force, dt_s, k)
+        # a move is at most dt * vmax (plus rounding): the robot's disc, other bodies and
+        # walls are checked only when someone was that close to them
         moved_max_m = max_move_m(dt_s, k.vmax_max)
         gaps = (pair_gap, wall_gap, robot_gap)
-        disp = correct(crowd, z, v, rows, rz, k, old, gaps, moved_max_m, ops.pair_push)
+        disp = correct(z, v, rows, rz, k, old, gaps, moved_max_m)
         crowd.phase += disp * (2 * np.pi / STRIDE_M)
-        redo = ops.goals_due(crowd, goal, z, dt_s, rz, k)
-        if redo is None or not redo.any():
+        redo = goals_due(crowd, goal, z, dt_s, rz, k)
+        if redo is None:
             return
         avoid = None if robot_xy is None else spawning.goal_avoid(robot_xy, robot_radius_m)
-        queries = ops.queries(self.obstacles)
-        spawning.renew_goals(crowd, redo, self.populations, queries, self.rng, avoid)
-
-    def backend_ops(self) -> StepOps:
-        """The backend's operations: numpy's (:mod:`.dynamics`) or, with the numba backend
-        (``auto`` when numba is installed), the kernels of :mod:`.dynamics_numba` (the same
-        numbers)."""
-        if self._ops is None:
-            self._ops = NUMPY_OPS if _runs_numpy(self.backend) else compiled_ops()
-        return self._ops
+        spawning.renew_goals(crowd, redo, self.populations, self.obstacles, self.rng, avoid)
 
     @staticmethod
     def legs(crowd: Crowd) -> tuple[FloatArray, NDArray[np.int32]]:
@@ -183,77 +155,3 @@ class SocialForce:
     def poses(crowd: Crowd) -> FloatArray:
         """People poses ``(P, 3)``: position and heading of motion [m, rad]."""
         return _legs.poses(crowd)
-
-
-#: People backends: numpy, numba (extra ``fast``; the same numbers), or auto (numba when it
-#: is installed, else numpy; resolved when the people step, so a pickled world resumes on
-#: either install).
-BACKENDS = ("numpy", "numba", "auto")
-
-
-def check_backend(backend: str) -> str:
-    """``backend`` if it is one of :data:`BACKENDS` and usable; ValueError otherwise."""
-    if backend not in BACKENDS:
-        raise ValueError(f"people backend must be one of {BACKENDS}, got {backend!r}")
-    if backend == "numba":
-        from dynmap_sim.jit import numba_available
-
-        if not numba_available():
-            raise ValueError('people backend "numba" needs numba: pip install "dynmap-sim[fast]"')
-    return backend
-
-
-def _runs_numpy(backend: str) -> bool:
-    """True where a checked ``backend`` steps with numpy's operations on this install
-    (``auto`` without numba: :func:`dynmap_sim.jit.kernel_backend`)."""
-    if backend == "numpy":  # (numba is not even imported)
-        return True
-    from dynmap_sim.jit import kernel_backend
-
-    return kernel_backend(backend) is None
-
-
-class StepOps(NamedTuple):
-    """What differs between the backends in a step of :meth:`SocialForce.step` and in
-    placing the legs."""
-
-    rows: Callable[[Obstacles, NDArray[np.complex128]], NDArray[np.complex128]]
-    social_force: Callable[..., tuple[NDArray[np.complex128], float, FloatArray, float]]
-    speed_factor: Callable[[NDArray[np.complex128], StepConstants], FloatArray]
-    #: who needs a new goal (a mask, or None when nobody does)
-    goals_due: Callable[..., NDArray[np.bool_] | None]
-    #: the compiled weights of the pair separation (None: numpy's)
-    pair_push: Callable[..., bool] | None
-    #: the compiled heading and swing of the legs (None: numpy's;
-    #: :func:`.legs.leg_centres_into`)
-    legs: Callable[..., None] | None
-    #: the obstacles' queries goal choice asks (free space, line of sight): the obstacles
-    #: themselves, or their compiled twin (:func:`.obstacles_numba.queries`)
-    queries: Callable[[Obstacles], spawning.GoalQueries]
-
-
-def _own_queries(obstacles: Obstacles) -> Obstacles:
-    """numpy's queries: the obstacles' own methods."""
-    return obstacles
-
-
-NUMPY_OPS = StepOps(Obstacles.rows, social_force, speed_factor, goals_due, None, None, _own_queries)
-
-
-def compiled_ops(python: bool = False) -> StepOps:
-    """:class:`StepOps` of the numba backend: :mod:`.dynamics_numba`'s functions with its
-    compiled kernels (imported on first use; ``python=True``: the plain-Python kernels, for
-    tests)."""
-    from dynmap_sim.world.people import dynamics_numba as dn
-    from dynmap_sim.world.people import obstacles_numba
-
-    kern = dn.Kernels(python=python)
-    return StepOps(
-        partial(dn.candidate_rows, kern),
-        partial(dn.social_force, kern),
-        partial(dn.speed_factor, kern),
-        partial(dn.goals_due, kern),
-        kern.pair_push,
-        kern.legs,
-        partial(obstacles_numba.queries, python=python),
-    )

@@ -25,8 +25,7 @@ SPECULATE = 4
 
 
 class GoalQueries(Protocol):
-    """What spawning and goal choice ask of the static geometry: :class:`.Obstacles`, or its
-    compiled twin (:class:`.obstacles_numba.CompiledQueries`, the same answers)."""
+    """What spawning and goal choice ask of the static geometry (:class:`.Obstacles`)."""
 
     segments: FloatArray
 
