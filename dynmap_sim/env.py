@@ -174,7 +174,7 @@ class DynMapEnv(gymnasium.Env):
     ``encoder``: ``EncoderNoise``. ``dt_s``: step period [s], at most ``MAX_DT_S`` (1 s;
     default the scan period).
     ``render_mode``: None, ``"rgb_array"`` (``render()`` returns the frame) or ``"human"``
-    (a window shows it at every reset and step, in real time; pygame, extra ``video``).
+    (a matplotlib window shows it at every reset and step, in real time).
     A bad argument raises ``dynmap_sim.errors.InputError`` (a ``ValueError``) naming it and
     its value, at construction.
 
