@@ -263,6 +263,21 @@ def _cmd_render_world(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_generate(args: argparse.Namespace) -> int:
+    """Write a generated world (and a scenario); bad input is one line and exit status 2."""
+    from dynmap_sim.world.generator import GeneratorError, parse_param, write_world
+
+    try:
+        params = dict(parse_param(t) for t in args.param or ())
+        g = write_world(args.kind, args.seed, args.output, params, args.scenario, args.force)
+    except GeneratorError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {args.output}" + (f" and {args.scenario}" if args.scenario else ""))
+    print(f"{g.spec.name}: " + ", ".join(f"{k} {v}" for k, v in g.counts.items()))
+    return 0
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     from dynmap_sim.analysis.scenarios import load_scenario
     from dynmap_sim.errors import InputError
@@ -746,6 +761,20 @@ def build_parser() -> argparse.ArgumentParser:
         "its folder must exist",
     )
     s.set_defaults(func=_cmd_render_world)
+
+    s = sub.add_parser("generate", help="generate a world (apartment, office, lab, hall)")
+    s.add_argument("kind", help="apartment, office, lab or hall")
+    s.add_argument("--seed", required=True, help="an integer >= 0: same seed, same file")
+    s.add_argument("-o", "--output", required=True, metavar="FILE", help="world file to write")
+    s.add_argument("--scenario", metavar="FILE", help="also write a scenario touring the world")
+    s.add_argument(
+        "--param",
+        action="append",
+        metavar="KEY=VALUE",
+        help="a generator parameter (repeatable); docs/worlds/generated.md lists them",
+    )
+    s.add_argument("--force", action="store_true", help="replace existing files")
+    s.set_defaults(func=_cmd_generate)
 
     s = sub.add_parser("run", help="run a multi-day experiment from a scenario file")
     s.add_argument("scenario", help="scenario TOML file")

@@ -1,0 +1,102 @@
+"""Route blocks: an object closing the passage the route takes, for a day or two, marked
+``blocks_route``; some leave a way round (the grid A* finds another path between the
+neighbouring waypoints), some none."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from dynmap_sim.world.generator.grid import Grid, astar, path_cost, with_polygons
+from dynmap_sim.world.generator.place import Placer, outline, rounded_pose
+
+#: Widest passage [m] one object closes.
+MAX_SPAN_M = 3.2
+
+
+def _span(grid: Grid, p, n) -> tuple[float, float]:
+    """Free distance [m] from ``p`` along ``+n`` and ``-n`` to the first occupied cell."""
+    out = []
+    for s in (1.0, -1.0):
+        d = 0.0
+        while d < MAX_SPAN_M:
+            q = p + s * (d + 0.5 * grid.cell) * n
+            i, j = grid.index(*q)
+            if grid.occupied[i, j]:
+                break
+            d += 0.5 * grid.cell
+        out.append(d)
+    return out[0], out[1]
+
+
+def _candidates(route: np.ndarray, rng) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """Points on the route's legs, away from the waypoints: ``(leg, point, unit along)``."""
+    out = []
+    for k in range(len(route) - 1):
+        a, b = route[k], route[k + 1]
+        length = float(np.hypot(*(b - a)))
+        if length < 3.0:
+            continue
+        u = (b - a) / length
+        for s in np.arange(1.2, length - 1.2, 0.6):
+            out.append((k, a + s * u, u))
+    order = rng.permutation(len(out))
+    return [out[i] for i in order]
+
+
+def draw_blocks(
+    grid: Grid,
+    placer: Placer,
+    route: np.ndarray,
+    rng,
+    p: dict,
+    days: int,
+    n_runs: int,
+):
+    """Blocking objects and their add/remove events: ``blocks_with_way_round`` of one sort and
+    ``blocks_without_way_round`` of the other; the counts placed and, per block, which sort."""
+    want = {True: int(p["blocks_with_way_round"]), False: int(p["blocks_without_way_round"])}
+    got = {True: 0, False: 0}
+    radius = float(p["robot_radius_m"])
+    objects: list[dict[str, Any]] = []
+    events: list[dict[str, Any]] = []
+    notes: dict[str, str] = {}
+    day = 2  # day 1 stays as drawn: the route is checked feasible on it
+    for k, q, u in _candidates(route, rng)[:120]:
+        if got[True] >= want[True] and got[False] >= want[False]:
+            break
+        n = np.array([-u[1], u[0]])
+        lp, ln = _span(grid, q, n)
+        if lp + ln > MAX_SPAN_M or lp + ln < 2 * radius + 0.1:
+            continue
+        centre = q + 0.5 * (lp - ln) * n
+        obj = {
+            "id": f"route_block_{len(objects)}",
+            "kind": "furniture",
+            "size": [round(lp + ln - 0.04, 3), round(float(rng.uniform(0.6, 1.0)), 3)],
+            "pose": rounded_pose(centre[0], centre[1], float(np.arctan2(n[1], n[0]))),
+            "present": False,
+        }
+        poly = outline(obj)
+        if not placer.free(poly, 0.0, {"keepout", "lane"}):
+            continue
+        blocked = with_polygons(grid, [poly])
+        way = astar(blocked, path_cost(blocked, radius + 0.05), route[k], route[k + 1]) is not None
+        if got[way] >= want[way] or day > days:
+            continue
+        placer.add(poly, obj["id"])
+        start = int(rng.integers(day, days + 1))
+        run = int(rng.integers(1, n_runs + 1))
+        end = min(days + 1, start + int(rng.integers(1, 3)))
+        notes[obj["id"]] = "a way round" if way else "no way round"
+        objects.append(obj)
+        events.append({"action": "add", "target": obj["id"], "at": start, "run": run,
+                       "blocks_route": True})
+        if end <= days:
+            events.append({"action": "remove", "target": obj["id"], "at": end})
+        day = end
+        got[way] += 1
+    counts = {"block_way_round": got[True], "block_no_way_round": got[False]}
+    return objects, events, counts, notes
+
