@@ -31,7 +31,11 @@ def lab_with(n: int, seed: int = 0) -> dict:
     """The lab world's file dict with ``n`` extra 0.2 m boxes at least 0.4 m from every wall."""
     data = tomllib.loads((WORLDS_DIR / "lab.toml").read_text(encoding="utf-8"))
     segs = np.array(
-        [[*a, *b] for w in data["walls"] for a, b in zip(w["points"], w["points"][1:], strict=False)],
+        [
+            [*a, *b]
+            for w in data["walls"]
+            for a, b in zip(w["points"], w["points"][1:], strict=False)
+        ],
         dtype=np.float64,
     )
     x0, y0, x1, y1 = data["bounds"]
@@ -56,7 +60,12 @@ def lab_with(n: int, seed: int = 0) -> dict:
         data["schedule"].append({"action": "remove", "group": f"bench_group_{i // 10}", "at": day})
         x, y = pts[i]
         data["schedule"].append(
-            {"action": "move", "target": f"bench_box_{i}", "at": day, "pose": [round(float(x), 3), round(float(y), 3), 0.7854]}
+            {
+                "action": "move",
+                "target": f"bench_box_{i}",
+                "at": day,
+                "pose": [round(float(x), 3), round(float(y), 3), 0.7854],
+            }
         )
     return data
 

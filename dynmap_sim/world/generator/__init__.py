@@ -75,6 +75,7 @@ class GeneratedWorld:
     spec: WorldSpec
     header: list[str]
     counts: dict[str, int]
+    blocks: dict[str, str]  # route-block object id -> "a way round" | "no way round"
 
     def toml(self) -> str:
         """The world file's text."""
@@ -116,7 +117,9 @@ def generate(kind: str, seed: int, params: Mapping[str, Any] | None = None) -> G
     input. Each concern draws from its own child of ``SeedSequence([seed, kind])``."""
     kind, seed, p = check_kind(kind), check_seed(seed), resolve_params(params)
     ss = np.random.SeedSequence([seed, KINDS.index(kind)])
-    rng = dict(zip(_STREAMS, (np.random.default_rng(s) for s in ss.spawn(len(_STREAMS))), strict=True))
+    rng = dict(
+        zip(_STREAMS, (np.random.default_rng(s) for s in ss.spawn(len(_STREAMS))), strict=True)
+    )
     plan = draw_plan(kind, rng["plan"], p)
     placer = Placer(plan.walls)
     fur = furnish(plan, rng["furnish"], placer, float(p["clutter_per_10m2"]))
@@ -125,14 +128,19 @@ def generate(kind: str, seed: int, params: Mapping[str, Any] | None = None) -> G
     visit, closable = _route_rooms(plan, rng["route"])
     ch = draw_changes(plan, fur, placer, rng["changes"], p, n_runs, closable)
     closed = tuple(f"door_closed:{d}" for d in closable)
-    polys = placer.polygons(skip=("keepout", "lane", "door_closed:")) + [
-        q for q, t in zip(placer.polygons(), placer.tags, strict=True) if t.startswith(closed)
-    ]
+    polys = placer.polygons(skip=("keepout", "lane", "door_closed:")) + placer.polygons(only=closed)
     grid = rasterize(plan.bounds, polys)
     radius = float(p["robot_radius_m"])
     route = draw_route(grid, plan, fur, visit, radius)
     blocks, block_events, block_counts, notes = draw_blocks(
-        grid, placer, route, rng["blocks"], p, int(p["days"]), n_runs
+        grid,
+        rasterize(plan.bounds, placer.polygons(only="wall")),
+        placer,
+        route,
+        rng["blocks"],
+        p,
+        int(p["days"]),
+        n_runs,
     )
     heading = float(np.arctan2(route[1][1] - route[0][1], route[1][0] - route[0][0]))
     counts = {**ch.counts, **block_counts}
@@ -148,12 +156,14 @@ def generate(kind: str, seed: int, params: Mapping[str, Any] | None = None) -> G
         "walls": plan.walls,
         "objects": fur.objects + ch.objects + blocks,
         "schedule": sorted(ch.events + block_events, key=_sort_key),
-        "people": draw_people(plan, rng["people"], p, [tuple(q) for q in route], {r.id for r in visit}),
+        "people": draw_people(
+            plan, rng["people"], p, [tuple(q) for q in route], {r.id for r in visit}
+        ),
     }
     header = _header(kind, seed, p, counts, notes)
     spec = parse_world(data, f"<generated {kind} seed {seed}>")
     _check_day_one(spec, seed, radius)
-    return GeneratedWorld(data, spec, header, counts)
+    return GeneratedWorld(data, spec, header, counts, notes)
 
 
 def _check_day_one(spec: WorldSpec, seed: int, radius: float) -> None:
@@ -197,8 +207,7 @@ def write_world(
         sp = Path(scenario)
         head = [f"A tour of the generated world {g.spec.name} over its whole calendar."]
         files[sp] = scenario_toml(
-            f"{g.spec.name}-tour", relative_world(Path(out), sp), g.spec.calendar.n_days, seed,
-            head
+            f"{g.spec.name}-tour", relative_world(Path(out), sp), g.spec.calendar.n_days, seed, head
         )
     try:
         write_atomically(files)

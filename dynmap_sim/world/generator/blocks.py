@@ -10,6 +10,15 @@ import numpy as np
 
 from dynmap_sim.world.generator.grid import Grid, astar, path_cost, with_polygons
 from dynmap_sim.world.generator.place import Placer, outline, rounded_pose
+from dynmap_sim.world.polygons import polyline_clearance
+
+
+def polyline_legs_clearance(route: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """Clearance [m] of each leg of ``route`` from the convex ``poly``."""
+    return np.array(
+        [polyline_clearance(route[j : j + 2], [poly])[0] for j in range(len(route) - 1)]
+    )
+
 
 #: Widest passage [m] one object closes.
 MAX_SPAN_M = 3.2
@@ -30,8 +39,8 @@ def _span(grid: Grid, p, n) -> tuple[float, float]:
     return out[0], out[1]
 
 
-def _candidates(route: np.ndarray, rng) -> list[tuple[int, np.ndarray, np.ndarray]]:
-    """Points on the route's legs, away from the waypoints: ``(leg, point, unit along)``."""
+def _candidates(route: np.ndarray, rng) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Points on the route's legs, away from the waypoints: ``(point, unit along)``."""
     out = []
     for k in range(len(route) - 1):
         a, b = route[k], route[k + 1]
@@ -40,13 +49,20 @@ def _candidates(route: np.ndarray, rng) -> list[tuple[int, np.ndarray, np.ndarra
             continue
         u = (b - a) / length
         for s in np.arange(1.2, length - 1.2, 0.6):
-            out.append((k, a + s * u, u))
+            out.append((a + s * u, u))
     order = rng.permutation(len(out))
     return [out[i] for i in order]
 
 
+def _joined(grid: Grid, radius: float, route: np.ndarray, legs) -> bool:
+    """True where grid A* joins the two waypoints of every leg in ``legs``."""
+    cost = path_cost(grid, radius)
+    return all(astar(grid, cost, route[j], route[j + 1]) is not None for j in legs)
+
+
 def draw_blocks(
     grid: Grid,
+    walls: Grid,
     placer: Placer,
     route: np.ndarray,
     rng,
@@ -55,7 +71,10 @@ def draw_blocks(
     n_runs: int,
 ):
     """Blocking objects and their add/remove events: ``blocks_with_way_round`` of one sort and
-    ``blocks_without_way_round`` of the other; the counts placed and, per block, which sort."""
+    ``blocks_without_way_round`` of the other; the counts placed and, per block, which sort.
+    A block leaves a way round where, for every leg it obstructs, grid A* still joins the
+    leg's two waypoints round everything the schedule ever puts down (``grid``: so at every
+    run); it leaves none where A* finds no way even between the bare ``walls``."""
     want = {True: int(p["blocks_with_way_round"]), False: int(p["blocks_without_way_round"])}
     got = {True: 0, False: 0}
     radius = float(p["robot_radius_m"])
@@ -63,7 +82,7 @@ def draw_blocks(
     events: list[dict[str, Any]] = []
     notes: dict[str, str] = {}
     day = 2  # day 1 stays as drawn: the route is checked feasible on it
-    for k, q, u in _candidates(route, rng)[:120]:
+    for q, u in _candidates(route, rng)[:120]:
         if got[True] >= want[True] and got[False] >= want[False]:
             break
         n = np.array([-u[1], u[0]])
@@ -81,8 +100,10 @@ def draw_blocks(
         poly = outline(obj)
         if not placer.free(poly, 0.0, {"keepout", "lane"}):
             continue
-        blocked = with_polygons(grid, [poly])
-        way = astar(blocked, path_cost(blocked, radius + 0.05), route[k], route[k + 1]) is not None
+        legs = np.flatnonzero(polyline_legs_clearance(route, poly) < radius + 0.05)
+        way = _joined(with_polygons(grid, [poly]), radius + 0.05, route, legs)
+        if not way and _joined(with_polygons(walls, [poly]), radius, route, legs):
+            continue  # a way round between the walls, but not past everything ever put down
         if got[way] >= want[way] or day > days:
             continue
         placer.add(poly, obj["id"])
@@ -91,12 +112,12 @@ def draw_blocks(
         end = min(days + 1, start + int(rng.integers(1, 3)))
         notes[obj["id"]] = "a way round" if way else "no way round"
         objects.append(obj)
-        events.append({"action": "add", "target": obj["id"], "at": start, "run": run,
-                       "blocks_route": True})
+        events.append(
+            {"action": "add", "target": obj["id"], "at": start, "run": run, "blocks_route": True}
+        )
         if end <= days:
             events.append({"action": "remove", "target": obj["id"], "at": end})
         day = end
         got[way] += 1
     counts = {"block_way_round": got[True], "block_no_way_round": got[False]}
     return objects, events, counts, notes
-

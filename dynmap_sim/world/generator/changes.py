@@ -12,11 +12,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-
 from dynmap_sim.world.generator.furnish import Furnished, inner_box
-from dynmap_sim.world.generator.place import HALF_PI, Placer, box_poly, inside, outline
-from dynmap_sim.world.generator.place import rounded_pose
+from dynmap_sim.world.generator.place import (
+    HALF_PI,
+    Placer,
+    inside,
+    outline,
+    rounded_pose,
+)
 from dynmap_sim.world.generator.plan import Plan, Room
 
 #: Rooms large enough for an exhibition, by use.
@@ -43,7 +46,9 @@ class _Drawer:
     def when(self, first: int = 1) -> tuple[int, int]:
         """A day in ``first .. days`` and a run of it."""
         first = min(first, self.days)
-        return int(self.rng.integers(first, self.days + 1)), int(self.rng.integers(1, self.n_runs + 1))
+        return int(self.rng.integers(first, self.days + 1)), int(
+            self.rng.integers(1, self.n_runs + 1)
+        )
 
     def count(self, per_week: float) -> int:
         return int(self.rng.poisson(per_week * self.days / 5.0))
@@ -188,11 +193,18 @@ def _exhibitions(dr: _Drawer) -> None:
     for k in range(int(dr.p["exhibitions"])):
         room = max(dr.rooms(_EXHIBITION_ROOMS), key=lambda r: r.area_m2 * dr.rng.uniform(0.5, 1))
         group = f"exhibition_{k}"
-        items = [("poster", (1.0, 0.1), False), ("stand", 0.3, True), ("display", (1.2, 0.6), False)]
+        items = [
+            ("poster", (1.0, 0.1), False),
+            ("stand", 0.3, True),
+            ("display", (1.2, 0.6), False),
+        ]
         placed = 0
         for i in range(int(dr.rng.integers(3, 7))):
             name, size, circ = items[i % len(items)]
-            placed += dr.new_object(room, f"{group}_{name}", size, "exhibit", circ, group=group) is not None
+            placed += (
+                dr.new_object(room, f"{group}_{name}", size, "exhibit", circ, group=group)
+                is not None
+            )
         if not placed:
             continue
         start = int(dr.rng.integers(1, dr.days + 1))
@@ -226,8 +238,14 @@ def _growth(dr: _Drawer) -> None:
         obj["radius_m"] = r  # reserved at its full size, written at its first
         start_scale = round(float(dr.rng.uniform(0.6, 0.9)), 2)
         dr.out.events.append(
-            {"action": "grow", "target": obj["id"], "start": 1, "end": dr.days,
-             "scale_start": start_scale, "scale_end": end_scale}
+            {
+                "action": "grow",
+                "target": obj["id"],
+                "start": 1,
+                "end": dr.days,
+                "scale_start": start_scale,
+                "scale_end": end_scale,
+            }
         )
         n += 1
     dr.out.counts["grow"] = n
@@ -243,8 +261,3 @@ def draw_changes(
         family(dr)
     _doors(dr, closable)
     return dr.out
-
-
-def region_poly(region) -> np.ndarray:
-    """A shuffle region as a polygon."""
-    return box_poly(region)

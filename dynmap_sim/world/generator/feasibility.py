@@ -75,12 +75,28 @@ def _static_problems(spec: WorldSpec) -> list[RouteProblem]:
     for k in range(len(route) - 1):
         if np.hypot(*(route[k + 1] - route[k])) < 1e-9:
             x, y = route[k]
-            out.append(RouteProblem(0, 0, f"robot.route.{k}", float(x), float(y),
-                                    f"leg {k}->{k + 1} has no length (a repeated waypoint)"))
+            out.append(
+                RouteProblem(
+                    0,
+                    0,
+                    f"robot.route.{k}",
+                    float(x),
+                    float(y),
+                    f"leg {k}->{k + 1} has no length (a repeated waypoint)",
+                )
+            )
     if spec.robot.route_length_m < 1e-9:
         x, y = route[0]
-        out.append(RouteProblem(0, 0, "robot.route", float(x), float(y),
-                                "the route ends where it starts with nothing between"))
+        out.append(
+            RouteProblem(
+                0,
+                0,
+                "robot.route",
+                float(x),
+                float(y),
+                "the route ends where it starts with nothing between",
+            )
+        )
     return out
 
 
@@ -113,11 +129,15 @@ def leg_problems(
         if gap is not None:
             msg = f"leg {k}->{k + 1} {gap}"
         elif not way:
-            msg = (f"leg {k}->{k + 1} is blocked by {culprit.id!r} ({culprit.kind}) and there is "
-                   f"no way round for a robot of radius {radius:.2f} m")
+            msg = (
+                f"leg {k}->{k + 1} is blocked by {culprit.id!r} ({culprit.kind}) and there is "
+                f"no way round for a robot of radius {radius:.2f} m"
+            )
         else:
-            msg = (f"leg {k}->{k + 1} goes through {culprit.id!r} ({culprit.kind}); the robot "
-                   "must find a way round")
+            msg = (
+                f"leg {k}->{k + 1} goes through {culprit.id!r} ({culprit.kind}); the robot "
+                "must find a way round"
+            )
         out.append(RouteProblem(day, run, loc, x, y, msg))
     return out
 

@@ -157,7 +157,10 @@ class Furnisher:
                 w, d = (size[1], size[0]) if turn else size
             if x1 - x0 < w or y1 - y0 < d:
                 continue
-            pose = (self.rng.uniform(x0 + w / 2, x1 - w / 2), self.rng.uniform(y0 + d / 2, y1 - d / 2))
+            pose = (
+                self.rng.uniform(x0 + w / 2, x1 - w / 2),
+                self.rng.uniform(y0 + d / 2, y1 - d / 2),
+            )
             obj = self.put(room, name, size, (*pose, HALF_PI if turn else 0.0), role, **kw)
             if obj is not None:
                 return obj
@@ -261,16 +264,26 @@ class Furnisher:
                 seg = length / n
                 for i in range(n):
                     cx = lo + (i + 0.5) * seg
-                    self.put(room, "shelf", (seg - 0.02, depth), (cx, y + 0.5 * depth, 0.0),
-                             "shelf", group=f"shelf_row_{k}", gap=0.0)
+                    self.put(
+                        room,
+                        "shelf",
+                        (seg - 0.02, depth),
+                        (cx, y + 0.5 * depth, 0.0),
+                        "shelf",
+                        group=f"shelf_row_{k}",
+                        gap=0.0,
+                    )
             y += depth + aisle
             k += 1
             if y <= top:  # the aisle north of this row
                 self.out.aisles.append((west + 0.6, y - 0.5 * aisle, xb + 1.5))
         ya = y0 + 3.0 if not self.out.aisles else self.out.aisles[0][1]
-        lanes = [((xb + 1.5, y0 + 2.0), (xb + 1.5, top + 1.5)), ((xm, ya), (xm, top + 1.5)),
-                 ((x0 + 1.0, top + 1.5), (xb + 1.5, top + 1.5)),
-                 ((x0 + 1.0, y0 + 3.1), (xb + 1.5, y0 + 3.1))]
+        lanes = [
+            ((xb + 1.5, y0 + 2.0), (xb + 1.5, top + 1.5)),
+            ((xm, ya), (xm, top + 1.5)),
+            ((x0 + 1.0, top + 1.5), (xb + 1.5, top + 1.5)),
+            ((x0 + 1.0, y0 + 3.1), (xb + 1.5, y0 + 3.1)),
+        ]
         lanes += [((a, y), (b, y)) for a, y, b in self.out.aisles]
         for a, b in lanes:
             self.placer.add(ccw(thick_segment(a, b, LANE_M)), "lane")
@@ -284,8 +297,16 @@ class Furnisher:
         n = int(self.rng.integers(2, 5))
         for x in np.linspace(x0, x1, n + 2)[1:-1]:
             length = float(self.rng.uniform(2.2, 3.5))
-            self.put(room, "partition", (length, 0.08), (x, y0 + 0.5 * length, HALF_PI),
-                     "partition", kind="wall", group="partitions", gap=0.0)
+            self.put(
+                room,
+                "partition",
+                (length, 0.08),
+                (x, y0 + 0.5 * length, HALF_PI),
+                "partition",
+                kind="wall",
+                group="partitions",
+                gap=0.0,
+            )
 
 
 def _living(f: Furnisher, r: Room) -> None:

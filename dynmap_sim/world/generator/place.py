@@ -62,9 +62,15 @@ class Placer:
         self._boxes = np.vstack([self._boxes, box])
         self.tags.append(tag)
 
-    def polygons(self, skip: tuple[str, ...] = ()) -> list[FloatArray]:
-        """The occupied outlines whose tag starts with none of ``skip``."""
-        return [p for p, t in zip(self._polys, self.tags, strict=True) if not t.startswith(skip)]
+    def polygons(
+        self, skip: tuple[str, ...] = (), only: str | tuple[str, ...] | None = None
+    ) -> list[FloatArray]:
+        """The occupied outlines whose tag starts with none of ``skip`` (and with ``only``)."""
+        return [
+            p
+            for p, t in zip(self._polys, self.tags, strict=True)
+            if not (skip and t.startswith(skip)) and (only is None or t.startswith(only))
+        ]
 
     def free(self, poly: FloatArray, gap: float = 0.05, ignore: set[str] | None = None) -> bool:
         """True where ``poly`` keeps ``gap`` [m] from every occupied outline (but ``ignore``)."""
@@ -85,8 +91,9 @@ class Placer:
 
 
 def inside(poly: FloatArray, box, margin: float = 0.0) -> bool:
-    """True where ``poly`` lies in ``box`` shrunk by ``margin``."""
-    lo, hi = poly.min(axis=0), poly.max(axis=0)
+    """True where ``poly`` lies in ``box`` shrunk by ``margin`` (to a micrometre: headings
+    are written to 1e-4 rad)."""
+    lo, hi = poly.min(axis=0) + 1e-6, poly.max(axis=0) - 1e-6
     return bool(
         lo[0] >= box[0] + margin
         and lo[1] >= box[1] + margin

@@ -6,21 +6,45 @@ from __future__ import annotations
 import datetime as dt
 from typing import Any
 
-import numpy as np
-
 from dynmap_sim.world.generator.furnish import inner_box
 from dynmap_sim.world.generator.plan import Plan, Room
 
 #: Clock times a run may start at, as in the papers (morning, after lunch, early evening).
-RUN_TIMES = ("08:30", "09:00", "09:30", "10:30", "11:30", "13:15", "14:00", "15:00", "16:30", "17:30")
+RUN_TIMES = (
+    "08:30",
+    "09:00",
+    "09:30",
+    "10:30",
+    "11:30",
+    "13:15",
+    "14:00",
+    "15:00",
+    "16:30",
+    "17:30",
+)
 
 _PROFILES = {  # [hour, fraction of the group present]
     "residents": [[0.0, 1.0], [7.5, 1.0], [8.5, 0.4], [17.0, 0.4], [18.5, 1.0], [24.0, 1.0]],
-    "staff": [[0.0, 0.0], [8.0, 0.2], [9.5, 0.5], [12.0, 1.0], [13.5, 1.0], [15.0, 0.6],
-              [17.5, 0.3], [19.0, 0.0]],
+    "staff": [
+        [0.0, 0.0],
+        [8.0, 0.2],
+        [9.5, 0.5],
+        [12.0, 1.0],
+        [13.5, 1.0],
+        [15.0, 0.6],
+        [17.5, 0.3],
+        [19.0, 0.0],
+    ],
     "visitors": [[0.0, 0.0], [9.0, 0.1], [11.0, 0.4], [14.0, 1.0], [16.0, 1.0], [18.0, 0.0]],
-    "workers": [[0.0, 0.0], [6.0, 0.6], [8.0, 1.0], [12.0, 0.5], [13.0, 1.0], [17.0, 0.8],
-                [18.0, 0.0]],
+    "workers": [
+        [0.0, 0.0],
+        [6.0, 0.6],
+        [8.0, 1.0],
+        [12.0, 0.5],
+        [13.0, 1.0],
+        [17.0, 0.8],
+        [18.0, 0.0],
+    ],
 }
 _GROUPS = {  # kind -> (group id, profile, share, room uses, speed range)
     "apartment": [("residents", "residents", 1.0, None, (0.5, 1.1))],
@@ -79,8 +103,3 @@ def draw_calendar(rng, p: dict) -> dict[str, Any]:
         cal["holidays"] = [start + dt.timedelta(days=int(rng.integers(1, 5)) + 7)]
     cal["runs"] = [RUN_TIMES[int(k)] for k in runs]
     return cal
-
-
-def spread(points: list[tuple]) -> list[tuple]:
-    """``points`` as plain float tuples (for goals)."""
-    return [(float(x), float(y)) for x, y in np.asarray(points).reshape(-1, 2)]

@@ -28,7 +28,9 @@ def room_places(grid: Grid, plan: Plan, room: Room, n: int, need: float) -> list
     ii, jj = np.nonzero(sub >= need)
     if not len(ii):
         return []
-    pts = np.stack([grid.x0 + (jj + j0 + 0.5) * grid.cell, grid.y0 + (ii + i0 + 0.5) * grid.cell], 1)
+    pts = np.stack(
+        [grid.x0 + (jj + j0 + 0.5) * grid.cell, grid.y0 + (ii + i0 + 0.5) * grid.cell], 1
+    )
     score = np.minimum(sub[ii, jj], 1.0)
     picked = [int(np.argmax(score))]
     while len(picked) < n:
@@ -71,7 +73,11 @@ def visits(grid: Grid, plan: Plan, fur: Furnished, rooms: list[Room], need: floa
 def draw_route(grid: Grid, plan: Plan, fur: Furnished, rooms: list[Room], radius: float):
     """Waypoints ``(K, 2)`` of a closed route through ``rooms`` (start = end)."""
     cost = path_cost(grid, radius + 0.1)
-    places = [q for q in visits(grid, plan, fur, rooms, radius + 0.35) if np.isfinite(cost[grid.index(*q)])]
+    places = [
+        q
+        for q in visits(grid, plan, fur, rooms, radius + 0.35)
+        if np.isfinite(cost[grid.index(*q)])
+    ]
     route: list[FloatArray] = []
     kept = [places[0]]
     for q in places[1:] + [places[0]]:
