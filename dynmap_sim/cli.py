@@ -201,15 +201,28 @@ def _cmd_validate(args: argparse.Namespace) -> int:
             data = read_toml(path, FileError)  # refuses devices, FIFOs and huge files at once
             # a world file has no "world" key (is_scenario_file cannot read a file with a BOM)
             if is_scenario_file(path) or isinstance(data.get("world"), str):
-                load_scenario(path)
+                spec = load_world(load_scenario(path).world_path)
             else:
-                load_world(path)
+                spec = load_world(path)
         except (WorldFileError, ScenarioFileError, FileError) as exc:
             print(exc, file=sys.stderr)
             status = 1
         else:
             print(f"{path}: OK")
+            _route_warnings(path, spec)
     return status
+
+
+def _route_warnings(path: str, spec: Any) -> None:
+    """Warn (stderr) where a robot of the default radius cannot follow the route on a day."""
+    from dynmap_sim.world.generator import route_problems
+
+    for pr in route_problems(spec):
+        when = f"day {pr.day} run {pr.run}: " if pr.day else ""
+        print(
+            f"warning: {path}: {when}{pr.field} at ({pr.x:.2f}, {pr.y:.2f}): {pr.message}",
+            file=sys.stderr,
+        )
 
 
 def _cmd_schema(args: argparse.Namespace) -> int:
@@ -238,6 +251,16 @@ def _cmd_render_world(args: argparse.Namespace) -> int:
         out = image_path(out)
     except ValueError as exc:
         raise InputError(f"-o {args.output}: {exc}") from None
+    if len(args.world) > 1:  # a sheet of several worlds, each at day 1 run 1
+        from dynmap_sim.world.render import render_worlds
+
+        if not args.sheet or args.day is not None or args.run is not None:
+            raise InputError("several worlds make one sheet: pass --sheet, without --day/--run")
+        existed = out.exists()
+        specs = [_load_world_arg(w) for w in args.world]
+        print(_wrote(render_worlds(specs, seed=args.seed, out_path=out), existed))
+        return 0
+    args.world = args.world[0]
     spec = _load_world_arg(args.world)
     cal = Calendar(spec.calendar)
     if args.sheet:
@@ -742,7 +765,9 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("render-world", help="draw a world at a day and run (or a sheet)")
     s.add_argument(
         "world",
-        help=f"a world file, or a shipped world's name ({', '.join(_shipped_worlds())})",
+        nargs="+",
+        help=f"a world file, or a shipped world's name ({', '.join(_shipped_worlds())}); "
+        "with --sheet, several worlds make one sheet of their first runs",
     )
     s.add_argument("--day", type=_positive, help="working day of the calendar (default: 1)")
     s.add_argument("--run", type=_positive, help="run of that day (default: 1)")

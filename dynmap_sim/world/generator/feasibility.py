@@ -1,9 +1,10 @@
 """Can a robot of a given radius follow a world's route on a given day? (world side: truth)
 
-Each run's geometry (walls and the objects present, doors as they stand) is rasterized
-(:mod:`~dynmap_sim.world.generator.grid`); a leg whose straight line comes within the robot's
-radius of an obstacle is a problem unless the schedule put that obstacle there on purpose
-(``blocks_route``); then grid A* says whether the robot can get round it at all. A doorway
+In each run's geometry (walls and the objects present, doors as they stand) a leg whose
+straight line comes within the robot's radius of an obstacle (exact distances from points
+every 2.5 cm) is a problem unless the schedule put that obstacle there on purpose
+(``blocks_route``); then grid A* (:mod:`~dynmap_sim.world.generator.grid`) says whether the
+robot can get round it at all. A doorway
 narrower than the robot and a route with no length are named as such.
 """
 
@@ -15,7 +16,12 @@ import numpy as np
 
 from dynmap_sim.world.calendar import Calendar
 from dynmap_sim.world.generator.grid import CELL_M, Grid, astar, path_cost, rasterize
-from dynmap_sim.world.polygons import point_segment_distance, points_in_convex, polygon_edges
+from dynmap_sim.world.polygons import (
+    ccw,
+    point_segment_distance,
+    points_in_convex,
+    polygon_edges,
+)
 from dynmap_sim.world.schedule import ObjectState, Schedule
 from dynmap_sim.world.spec import WorldSpec
 
@@ -100,32 +106,59 @@ def _static_problems(spec: WorldSpec) -> list[RouteProblem]:
     return out
 
 
+def _clearances(pts: np.ndarray, objs: tuple[ObjectState, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """Exact distance [m] from each point ``(P, 2)`` to the nearest object (0 inside one) and
+    that object's index."""
+    edges = [polygon_edges(o.polygon) for o in objs]
+    owner = np.repeat(np.arange(len(objs)), [len(e) for e in edges])
+    d = point_segment_distance(pts, np.concatenate(edges))  # (P, E)
+    for k, o in enumerate(objs):  # a point inside an outline is at 0
+        lo, hi = o.polygon.min(axis=0), o.polygon.max(axis=0)
+        cand = np.flatnonzero(np.all((pts >= lo) & (pts <= hi), axis=1))
+        if len(cand):
+            inside = cand[points_in_convex(pts[cand], ccw(o.polygon))]
+            d[np.ix_(inside, np.flatnonzero(owner == k))] = 0.0
+    best = np.argmin(d, axis=1)
+    return d[np.arange(len(pts)), best], owner[best]
+
+
 def leg_problems(
-    spec: WorldSpec, objs: tuple[ObjectState, ...], grid: Grid, day: int, run: int, radius: float
+    spec: WorldSpec, objs: tuple[ObjectState, ...], day: int, run: int, radius: float
 ) -> list[RouteProblem]:
-    """Problems of the route's legs in one run's geometry ``objs`` rasterized as ``grid``."""
+    """Problems of the route's legs in one run's geometry ``objs``; grid A* (built only when
+    a leg is obstructed) says whether there is a way round."""
     route = spec.robot.route
     out: list[RouteProblem] = []
-    cost = None
+    grid: Grid | None = None
+    step = 0.5 * CELL_M
+    boxes = np.array([[*o.polygon.min(axis=0), *o.polygon.max(axis=0)] for o in objs])
     for k in range(len(route) - 1):
         a, b = route[k], route[k + 1]
-        n = max(2, int(np.hypot(*(b - a)) / (0.5 * grid.cell)) + 1)
-        pts = a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
-        clear = grid.clearance_at(pts)
-        if clear.min() > radius:
+        lo, hi = np.minimum(a, b) - radius - 0.05, np.maximum(a, b) + radius + 0.05
+        near = np.flatnonzero(
+            (boxes[:, 0] <= hi[0])
+            & (boxes[:, 2] >= lo[0])
+            & (boxes[:, 1] <= hi[1])
+            & (boxes[:, 3] >= lo[1])
+        )
+        if not len(near):
             continue
-        bad = pts[clear <= radius]
-        hits = [_nearest(objs, q)[0][1] for q in bad[:: max(1, len(bad) // 8)]]
-        if all(o.blocks_route for o in hits):
-            continue  # put on the route on purpose: the driver knows
-        worst = bad[int(np.argmin(grid.clearance_at(bad)))]
-        culprit = next(o for o in hits if not o.blocks_route)
-        loc = f"robot.route.{k}"
-        gap = _gap_walls(objs, worst, radius)
-        if cost is None:
+        n = max(2, int(np.hypot(*(b - a)) / step) + 1)
+        pts = a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
+        clear, who_near = _clearances(pts, tuple(objs[i] for i in near))
+        who = near[who_near]
+        bad = clear <= radius
+        if not bad.any() or all(objs[i].blocks_route for i in np.unique(who[bad])):
+            continue  # clear, or blocked on purpose (the driver knows)
+        mine = bad & np.array([not objs[i].blocks_route for i in who])
+        worst = int(np.flatnonzero(mine)[np.argmin(clear[mine])])
+        culprit = objs[who[worst]]
+        x, y = float(pts[worst][0]), float(pts[worst][1])
+        gap = _gap_walls(objs, pts[worst], radius)
+        if grid is None:
+            grid = rasterize(spec.bounds, [o.polygon for o in objs], grid_cell(spec))
             cost = path_cost(grid, radius)
         way = astar(grid, cost, a, b) is not None
-        x, y = float(worst[0]), float(worst[1])
         if gap is not None:
             msg = f"leg {k}->{k + 1} {gap}"
         elif not way:
@@ -138,7 +171,7 @@ def leg_problems(
                 f"leg {k}->{k + 1} goes through {culprit.id!r} ({culprit.kind}); the robot "
                 "must find a way round"
             )
-        out.append(RouteProblem(day, run, loc, x, y, msg))
+        out.append(RouteProblem(day, run, f"robot.route.{k}", x, y, msg))
     return out
 
 
@@ -159,15 +192,13 @@ def route_problems(
     out = _static_problems(spec)
     seen_geometry: set = set()
     seen_problem: set = set()
-    cell = grid_cell(spec)
     for day, run in slots:
         objs = sched.object_states(seed, cal.slot_index(day, run))
         key = tuple((o.id, o.polygon.round(3).tobytes()) for o in objs if o.kind != "wall")
         if key in seen_geometry:
             continue
         seen_geometry.add(key)
-        grid = rasterize(spec.bounds, [o.polygon for o in objs], cell)
-        for pr in leg_problems(spec, objs, grid, day, run, radius):
+        for pr in leg_problems(spec, objs, day, run, radius):
             if (pr.field, pr.message) not in seen_problem:
                 seen_problem.add((pr.field, pr.message))
                 out.append(pr)
