@@ -183,7 +183,7 @@ def simplify(grid: Grid, path: FloatArray, want_m: float) -> FloatArray:
         best = i + 1
         j = min(i + 4, last)
         while True:
-            need = min(want_m, float(clear[i : j + 1].min()) - 0.5 * grid.cell)
+            need = min(want_m, float(clear[i : j + 1].min()) - 0.25 * grid.cell)
             if grid.segment_clearance(path[i], path[j]) < need:
                 break
             best = j

@@ -7,6 +7,7 @@ down, straightened into few waypoints.
 from __future__ import annotations
 
 import numpy as np
+from scipy.ndimage import label
 
 from dynmap_sim.world.generator.furnish import Furnished, inner_box
 from dynmap_sim.world.generator.grid import Grid, astar, path_cost, simplify
@@ -73,22 +74,29 @@ def visits(grid: Grid, plan: Plan, fur: Furnished, rooms: list[Room], need: floa
 def draw_route(grid: Grid, plan: Plan, fur: Furnished, rooms: list[Room], radius: float):
     """Waypoints ``(K, 2)`` of a closed route through ``rooms`` (start = end)."""
     cost = path_cost(grid, radius + 0.1)
-    places = [
-        q
-        for q in visits(grid, plan, fur, rooms, radius + 0.35)
-        if np.isfinite(cost[grid.index(*q)])
-    ]
+    labels, _ = label(np.isfinite(cost), structure=np.ones((3, 3)))
+    places = [q for q in visits(grid, plan, fur, rooms, radius + 0.35) if labels[grid.index(*q)]]
+    # the places the robot can reach from one another: the free region holding most of them
+    region = np.bincount([labels[grid.index(*q)] for q in places]).argmax()
+    places = [q for q in places if labels[grid.index(*q)] == region]
+    if len(places) < 2:
+        raise RuntimeError("fewer than two places of the plan can be reached")
     route: list[FloatArray] = []
-    kept = [places[0]]
-    for q in places[1:] + [places[0]]:
-        path = astar(grid, cost, kept[-1], q)
-        if path is None:
-            continue  # a place the robot cannot reach: left out
+    for a, b in zip(places, places[1:] + places[:1], strict=True):
+        path = astar(grid, cost, a, b)
+        assert path is not None  # same free region
         route.append(simplify(grid, path, WANT_M))
-        kept.append(q)
     pts = np.concatenate([route[0][:1], *[leg[1:] for leg in route]])
-    keep = [0]
+    pts = np.round(pts, 2)
+    keep = [0]  # a waypoint close to the last one kept goes if the leg past it stays clear
     for k in range(1, len(pts)):
-        if np.hypot(*(pts[k] - pts[keep[-1]])) > 0.25 or k == len(pts) - 1:
+        close = np.hypot(*(pts[k] - pts[keep[-1]])) <= 0.25
+        if (
+            close
+            and k + 1 < len(pts)
+            and grid.segment_clearance(pts[keep[-1]], pts[k + 1]) > radius + 0.1
+        ):
+            continue
+        if not np.array_equal(pts[k], pts[keep[-1]]):
             keep.append(k)
-    return np.round(pts[keep], 2)
+    return pts[keep]
