@@ -196,28 +196,33 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     from dynmap_sim.world import WorldFileError, load_world
 
     status = 0
+    seen: dict[Path, list[Any]] = {}
     for path in args.files:
         try:
             data = read_toml(path, FileError)  # refuses devices, FIFOs and huge files at once
             # a world file has no "world" key (is_scenario_file cannot read a file with a BOM)
             if is_scenario_file(path) or isinstance(data.get("world"), str):
-                spec = load_world(load_scenario(path).world_path)
+                world = load_scenario(path).world_path
             else:
-                spec = load_world(path)
+                world = Path(path)
+            spec = load_world(world)
         except (WorldFileError, ScenarioFileError, FileError) as exc:
             print(exc, file=sys.stderr)
             status = 1
         else:
             print(f"{path}: OK")
-            _route_warnings(path, spec)
+            _route_warnings(path, spec, world.resolve(), seen)
     return status
 
 
-def _route_warnings(path: str, spec: Any) -> None:
-    """Warn (stderr) where a robot of the default radius cannot follow the route on a day."""
+def _route_warnings(path: str, spec: Any, world: Path, seen: dict[Path, list[Any]]) -> None:
+    """Warn (stderr) where a robot of the default radius cannot follow the route on a day
+    (each world checked once per command)."""
     from dynmap_sim.world.generator import route_problems
 
-    for pr in route_problems(spec):
+    if world not in seen:
+        seen[world] = route_problems(spec)
+    for pr in seen[world]:
         when = f"day {pr.day} run {pr.run}: " if pr.day else ""
         print(
             f"warning: {path}: {when}{pr.field} at ({pr.x:.2f}, {pr.y:.2f}): {pr.message}",
