@@ -128,18 +128,24 @@ def _moves(dr: _Drawer) -> None:
     dr.out.counts["move"] = n
 
 
-def _adds(dr: _Drawer) -> None:
-    kinds = [("new_cabinet", (1.0, 0.45)), ("boxes", (0.6, 0.4)), ("new_table", (1.2, 0.7))]
-    n = 0
-    for _ in range(dr.count(dr.p["add_per_week"])):
-        name, size = kinds[int(dr.rng.integers(len(kinds)))]
+def _new_pieces(dr: _Drawer, action: str, n: int, choose) -> None:
+    """``n`` new pieces ``choose()`` -> ``(name, size)``, each put in place by ``action``."""
+    placed = 0
+    for _ in range(n):
+        name, size = choose()
         obj = dr.new_object(dr.pick_room(), name, size, present=False)
         if obj is None:
             continue
         day, run = dr.when(2)
-        dr.out.events.append({"action": "add", "target": obj["id"], "at": day, "run": run})
-        n += 1
-    dr.out.counts["add"] = n
+        dr.out.events.append({"action": action, "target": obj["id"], "at": day, "run": run})
+        placed += 1
+    dr.out.counts[action] = placed
+
+
+def _adds(dr: _Drawer) -> None:
+    kinds = [("new_cabinet", (1.0, 0.45)), ("boxes", (0.6, 0.4)), ("new_table", (1.2, 0.7))]
+    n = dr.count(dr.p["add_per_week"])
+    _new_pieces(dr, "add", n, lambda: kinds[int(dr.rng.integers(len(kinds)))])
 
 
 def _removes(dr: _Drawer) -> None:
@@ -215,15 +221,7 @@ def _exhibitions(dr: _Drawer) -> None:
 
 
 def _installs(dr: _Drawer) -> None:
-    n = 0
-    for _ in range(int(dr.p["installs"])):
-        obj = dr.new_object(dr.pick_room(), "radiator", (1.2, 0.12), present=False)
-        if obj is None:
-            continue
-        day, run = dr.when(2)
-        dr.out.events.append({"action": "install", "target": obj["id"], "at": day, "run": run})
-        n += 1
-    dr.out.counts["install"] = n
+    _new_pieces(dr, "install", int(dr.p["installs"]), lambda: ("radiator", (1.2, 0.12)))
 
 
 def _growth(dr: _Drawer) -> None:

@@ -124,6 +124,11 @@ class _Builder:
             return round(0.5 * (lo + hi), 2)
         return round(float(self.rng.uniform(lo + margin, hi - margin)), 2)
 
+    def walls(self, lines) -> None:
+        """Inner walls ``(id, a, b)``, each cut at its doorways."""
+        for wid, a, b in lines:
+            self.wall(wid, a, b)
+
     def wall(self, wid: str, a: tuple[float, float], b: tuple[float, float]) -> None:
         """An inner wall from ``a`` to ``b`` (axis-aligned), cut at the doorways on it."""
         t = self.plan.thickness
@@ -181,11 +186,11 @@ def _apartment(b: _Builder) -> None:
     b.doorway("hallway", "living", b.gap_centre(0, k), y1, True, False)
     b.doorway("hallway", "kitchen", b.gap_centre(k, w), y1, True, bool(rng.random() < 0.5))
     b.doorway("living", "kitchen", k, b.gap_centre(y1, d), False, False)
-    b.wall("hall_s", (0, y0), (w, y0))
-    b.wall("hall_n", (0, y1), (w, y1))
-    b.wall("living_kitchen", (k, y1), (k, d))
-    for i, x in enumerate(xs[1:-1]):
-        b.wall(f"south_{i}", (x, 0), (x, y0))
+    b.walls(
+        [("hall_s", (0, y0), (w, y0)), ("hall_n", (0, y1), (w, y1))]
+        + [("living_kitchen", (k, y1), (k, d))]
+        + [(f"south_{i}", (x, 0), (x, y0)) for i, x in enumerate(xs[1:-1])]
+    )
 
 
 def _office(b: _Builder) -> None:
@@ -212,13 +217,12 @@ def _office(b: _Builder) -> None:
     b.doorway("corridor", "openplan", b.gap_centre(m, m + 0.4 * (L - m)), yc, True, False)
     b.doorway("corridor", "openplan", b.gap_centre(L - 0.4 * (L - m), L), yc, True, False)
     b.doorway("openplan", "lobby", L, b.gap_centre(yc, d), False, False)
-    b.wall("corridor_s", (0, ds), (L, ds))
-    b.wall("corridor_n", (0, yc), (L, yc))
-    b.wall("lobby_s", (L, 0), (L, ds))
-    b.wall("lobby_n", (L, yc), (L, d))
-    b.wall("meeting_e", (m, yc), (m, d))
-    for i, x in enumerate(xs[1:-1]):
-        b.wall(f"office_wall_{i}", (x, 0), (x, ds))
+    b.walls(
+        [("corridor_s", (0, ds), (L, ds)), ("corridor_n", (0, yc), (L, yc))]
+        + [("lobby_s", (L, 0), (L, ds)), ("lobby_n", (L, yc), (L, d))]
+        + [("meeting_e", (m, yc), (m, d))]
+        + [(f"office_wall_{i}", (x, 0), (x, ds)) for i, x in enumerate(xs[1:-1])]
+    )
 
 
 def _lab(b: _Builder) -> None:
