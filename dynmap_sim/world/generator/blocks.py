@@ -10,14 +10,21 @@ import numpy as np
 
 from dynmap_sim.world.generator.grid import Grid, astar, path_cost, with_polygons
 from dynmap_sim.world.generator.place import Placer, outline, rounded_pose
-from dynmap_sim.world.polygons import polyline_clearance
+from dynmap_sim.world.polygons import (
+    ccw,
+    points_in_convex,
+    polygon_edges,
+    segment_pair_distances,
+)
 
 
 def polyline_legs_clearance(route: np.ndarray, poly: np.ndarray) -> np.ndarray:
-    """Clearance [m] of each leg of ``route`` from the convex ``poly``."""
-    return np.array(
-        [polyline_clearance(route[j : j + 2], [poly])[0] for j in range(len(route) - 1)]
-    )
+    """Clearance [m] of each leg of ``route`` from the convex ``poly`` (0 where it enters)."""
+    legs = np.concatenate([route[:-1], route[1:]], axis=1)
+    d = segment_pair_distances(legs, polygon_edges(poly)).min(axis=1)
+    inside = points_in_convex(route, ccw(poly))
+    d[inside[:-1] | inside[1:]] = 0.0
+    return d
 
 
 #: Widest passage [m] one object closes.
