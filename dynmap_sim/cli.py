@@ -198,20 +198,38 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     from dynmap_sim.world import WorldFileError, load_world
 
     status = 0
+    seen: dict[Path, list[Any]] = {}
     for path in args.files:
         try:
             data = read_toml(path, FileError)  # refuses devices, FIFOs and huge files at once
             # a world file has no "world" key (is_scenario_file cannot read a file with a BOM)
             if is_scenario_file(path) or isinstance(data.get("world"), str):
-                load_scenario(path)
+                world = load_scenario(path).world_path
             else:
-                load_world(path)
+                world = Path(path)
+            spec = load_world(world)
         except (WorldFileError, ScenarioFileError, FileError) as exc:
             print(exc, file=sys.stderr)
             status = 1
         else:
             print(f"{path}: OK")
+            _route_warnings(path, spec, world.resolve(), seen)
     return status
+
+
+def _route_warnings(path: str, spec: Any, world: Path, seen: dict[Path, list[Any]]) -> None:
+    """Warn (stderr) where a robot of the default radius cannot follow the route on a day
+    (each world checked once per command)."""
+    from dynmap_sim.world.generator import route_problems
+
+    if world not in seen:
+        seen[world] = route_problems(spec)
+    for pr in seen[world]:
+        when = f"day {pr.day} run {pr.run}: " if pr.day else ""
+        print(
+            f"warning: {path}: {when}{pr.field} at ({pr.x:.2f}, {pr.y:.2f}): {pr.message}",
+            file=sys.stderr,
+        )
 
 
 def _cmd_schema(args: argparse.Namespace) -> int:
@@ -240,6 +258,16 @@ def _cmd_render_world(args: argparse.Namespace) -> int:
         out = image_path(out)
     except ValueError as exc:
         raise InputError(f"-o {args.output}: {exc}") from None
+    if len(args.world) > 1:  # a sheet of several worlds, each at day 1 run 1
+        from dynmap_sim.world.render import render_worlds
+
+        if not args.sheet or args.day is not None or args.run is not None:
+            raise InputError("several worlds make one sheet: pass --sheet, without --day/--run")
+        existed = out.exists()
+        specs = [_load_world_arg(w) for w in args.world]
+        print(_wrote(render_worlds(specs, seed=args.seed, out_path=out), existed))
+        return 0
+    args.world = args.world[0]
     spec = _load_world_arg(args.world)
     cal = Calendar(spec.calendar)
     if args.sheet:
@@ -262,6 +290,21 @@ def _cmd_render_world(args: argparse.Namespace) -> int:
         day, run = args.day or 1, args.run or 1
         out = render_snapshot(spec, seed=args.seed, day=day, run=run, out_path=out)
     print(_wrote(out, existed))
+    return 0
+
+
+def _cmd_generate(args: argparse.Namespace) -> int:
+    """Write a generated world (and a scenario); bad input is one line and exit status 2."""
+    from dynmap_sim.world.generator import GeneratorError, parse_param, write_world
+
+    try:
+        params = dict(parse_param(t) for t in args.param or ())
+        g = write_world(args.kind, args.seed, args.output, params, args.scenario, args.force)
+    except GeneratorError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {args.output}" + (f" and {args.scenario}" if args.scenario else ""))
+    print(f"{g.spec.name}: " + ", ".join(f"{k} {v}" for k, v in g.counts.items()))
     return 0
 
 
@@ -886,7 +929,9 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("render-world", help="draw a world at a day and run (or a sheet)")
     s.add_argument(
         "world",
-        help=f"a world file, or a shipped world's name ({', '.join(_shipped_worlds())})",
+        nargs="+",
+        help=f"a world file, or a shipped world's name ({', '.join(_shipped_worlds())}); "
+        "with --sheet, several worlds make one sheet of their first runs",
     )
     s.add_argument("--day", type=_positive, help="working day of the calendar (default: 1)")
     s.add_argument("--run", type=_positive, help="run of that day (default: 1)")
@@ -905,6 +950,20 @@ def build_parser() -> argparse.ArgumentParser:
         "its folder must exist",
     )
     s.set_defaults(func=_cmd_render_world)
+
+    s = sub.add_parser("generate", help="generate a world (apartment, office, lab, hall)")
+    s.add_argument("kind", help="apartment, office, lab or hall")
+    s.add_argument("--seed", required=True, help="an integer >= 0: same seed, same file")
+    s.add_argument("-o", "--output", required=True, metavar="FILE", help="world file to write")
+    s.add_argument("--scenario", metavar="FILE", help="also write a scenario touring the world")
+    s.add_argument(
+        "--param",
+        action="append",
+        metavar="KEY=VALUE",
+        help="a generator parameter (repeatable); docs/worlds/generated.md lists them",
+    )
+    s.add_argument("--force", action="store_true", help="replace existing files")
+    s.set_defaults(func=_cmd_generate)
 
     s = sub.add_parser("run", help="run a multi-day experiment from a scenario file")
     s.add_argument("scenario", help="scenario TOML file")

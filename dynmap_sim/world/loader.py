@@ -16,7 +16,7 @@ from pydantic import ValidationError
 
 from dynmap_sim.errors import FileError, pydantic_errors, read_toml
 from dynmap_sim.world.calendar import Calendar
-from dynmap_sim.world.polygons import sat_separation, transform
+from dynmap_sim.world.polygons import edge_normals, sat_separation, transform
 from dynmap_sim.world.schedule import wall_pieces
 from dynmap_sim.world.spec import (
     AddEvent,
@@ -113,6 +113,44 @@ def check_world(spec: WorldSpec) -> list[tuple[str, str]]:
     return errs
 
 
+class _WallIndex:
+    """Wall pieces in a uniform grid of their bounding boxes, with their SAT axes: a query
+    tests only the pieces whose cells a polygon's box touches, so checking N objects against
+    W walls costs about N times the walls nearby, not N x W."""
+
+    def __init__(self, walls: list[tuple[str, np.ndarray]], cell: float = 2.0) -> None:
+        self.walls = walls
+        self.axes = [edge_normals(p) for _, p in walls]
+        self.cell = cell
+        self.cells: dict[tuple[int, int], list[int]] = {}
+        for k, (_, p) in enumerate(walls):
+            for key in self._keys(p.min(axis=0), p.max(axis=0)):
+                self.cells.setdefault(key, []).append(k)
+
+    def _keys(self, lo: np.ndarray, hi: np.ndarray):
+        c = self.cell
+        i0, j0 = int(np.floor(lo[0] / c)), int(np.floor(lo[1] / c))
+        i1, j1 = int(np.floor(hi[0] / c)), int(np.floor(hi[1] / c))
+        if (i1 - i0 + 1) * (j1 - j0 + 1) > 4096:  # a huge box: every wall is a candidate
+            yield None
+            return
+        for i in range(i0, i1 + 1):
+            for j in range(j0, j1 + 1):
+                yield (i, j)
+
+    def near(self, poly: np.ndarray, margin: float = 0.0) -> list[int]:
+        """Indices (in file order) of the wall pieces whose cells ``poly``'s box touches."""
+        lo, hi = poly.min(axis=0) - margin, poly.max(axis=0) + margin
+        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+            return list(range(len(self.walls)))
+        out: set[int] = set()
+        for key in self._keys(lo, hi):
+            if key is None:
+                return list(range(len(self.walls)))
+            out.update(self.cells.get(key, ()))
+        return sorted(out)
+
+
 def _in_bounds(x: float, y: float, bounds: tuple[float, float, float, float]) -> bool:
     """True where the point ``(x, y)`` lies in ``bounds`` (a NaN coordinate does not)."""
     bx0, by0, bx1, by1 = bounds
@@ -126,9 +164,13 @@ def _box_outside(box, bounds: tuple[float, float, float, float]) -> bool:
     return x0 < bx0 or y0 < by0 or x1 > bx1 or y1 > by1
 
 
-def _first_wall_crossed(poly: np.ndarray, walls: list[tuple[str, np.ndarray]]) -> str | None:
-    """Id of the first wall piece that ``poly`` overlaps, or None."""
-    for pid, wp in walls:
+def _first_wall_crossed(
+    poly: np.ndarray, walls: list[tuple[str, np.ndarray]], index: _WallIndex | None = None
+) -> str | None:
+    """Id of the first wall piece (in file order) that ``poly`` overlaps, or None."""
+    near = range(len(walls)) if index is None else index.near(poly)
+    for k in near:
+        pid, wp = walls[k]
         if sat_separation(poly, wp) < 0:
             return pid
     return None
@@ -161,21 +203,24 @@ def _check_ids(spec: WorldSpec) -> tuple[_Errors, dict[str, ObjectSpec]]:
 def _check_schedule(spec: WorldSpec, cal: Calendar, objects: dict[str, ObjectSpec]) -> _Errors:
     """Each event in turn: its references, times, installations and shuffle region."""
     errs: _Errors = []
-    groups = {o.group for o in spec.objects if o.group is not None}
+    groups: dict[str, list[ObjectSpec]] = {}
+    for o in spec.objects:
+        if o.group is not None:
+            groups.setdefault(o.group, []).append(o)
     installed: dict[str, int] = {}  # permanently installed object -> day of installation
     for i, ev in enumerate(spec.schedule):
         loc = f"schedule.{i}"
         errs += _event_references(ev, loc, objects, groups)
         time_errs, days = _event_times(ev, loc, cal)
         errs += time_errs
-        errs += _event_installations(spec, ev, loc, days, installed)
+        errs += _event_installations(groups, ev, loc, days, installed)
         if isinstance(ev, ShuffleEvent):
-            errs += _shuffle_region(spec, ev, loc)
+            errs += _shuffle_region(spec, ev, loc, groups.get(ev.group, []))
     return errs
 
 
 def _event_references(
-    ev: Any, loc: str, objects: dict[str, ObjectSpec], groups: set[str]
+    ev: Any, loc: str, objects: dict[str, ObjectSpec], groups: dict[str, list[ObjectSpec]]
 ) -> _Errors:
     """An event's target is a known object (a door for door events), its group a known one."""
     errs: _Errors = []
@@ -221,41 +266,46 @@ def _event_times(ev: Any, loc: str, cal: Calendar) -> tuple[_Errors, dict[str, i
 
 
 def _event_installations(
-    spec: WorldSpec, ev: Any, loc: str, days: dict[str, int | None], installed: dict[str, int]
+    groups: dict[str, list[ObjectSpec]],
+    ev: Any,
+    loc: str,
+    days: dict[str, int | None],
+    installed: dict[str, int],
 ) -> _Errors:
     """Record installations in ``installed``; a later removal or presence of one is an error."""
     errs: _Errors = []
     if isinstance(ev, InstallEvent):
-        for oid in _event_object_ids(spec, ev):
+        for oid in _event_object_ids(groups, ev):
             installed[oid] = days.get("at") or 0
     if isinstance(ev, RemoveEvent) or (isinstance(ev, PresentEvent)):
-        for oid in _event_object_ids(spec, ev):
+        for oid in _event_object_ids(groups, ev):
             if oid in installed and (days.get("at") or days.get("start") or 0) >= installed[oid]:
                 errs.append((loc, f"{oid!r} is a permanent installation and cannot be removed"))
     return errs
 
 
-def _event_object_ids(spec: WorldSpec, ev: Any) -> list[str]:
+def _event_object_ids(groups: dict[str, list[ObjectSpec]], ev: Any) -> list[str]:
     """Ids an event applies to: its target, else every object of its group."""
     target = getattr(ev, "target", None)
     group = getattr(ev, "group", None)
-    return [target] if target else [o.id for o in spec.objects if o.group == group]
+    return [target] if target else [o.id for o in groups.get(group, [])]
 
 
-def _shuffle_region(spec: WorldSpec, ev: ShuffleEvent, loc: str) -> _Errors:
+def _shuffle_region(
+    spec: WorldSpec, ev: ShuffleEvent, loc: str, members: list[ObjectSpec]
+) -> _Errors:
     """A shuffle region lies in the bounds and fits each object of its group (turned if it may)."""
     errs: _Errors = []
     x0, y0, x1, y1 = ev.region
     if _box_outside(ev.region, spec.bounds):
         errs.append((f"{loc}.region", "region is outside the world bounds"))
-    for o in spec.objects:
-        if o.group == ev.group:
-            theta = 0.0 if ev.rotate else o.pose[2]
-            v = transform(o.local_vertices(), (0.0, 0.0, theta))
-            w, h = v.max(axis=0) - v.min(axis=0)
-            fits = (w <= x1 - x0 and h <= y1 - y0) or (ev.rotate and h <= x1 - x0 and w <= y1 - y0)
-            if not fits:
-                errs.append((f"{loc}.region", f"{o.id!r} does not fit in the region"))
+    for o in members:
+        theta = 0.0 if ev.rotate else o.pose[2]
+        v = transform(o.local_vertices(), (0.0, 0.0, theta))
+        w, h = v.max(axis=0) - v.min(axis=0)
+        fits = (w <= x1 - x0 and h <= y1 - y0) or (ev.rotate and h <= x1 - x0 and w <= y1 - y0)
+        if not fits:
+            errs.append((f"{loc}.region", f"{o.id!r} does not fit in the region"))
     return errs
 
 
@@ -288,21 +338,47 @@ def _check_object_poses(
     """At each of its poses, fully grown, an object is in the bounds and not inside a wall."""
     errs: _Errors = []
     scale = _max_scales(spec, objects)
+    index = _WallIndex(walls)
+    local = {oid: o.local_vertices() for oid, o in objects.items()}
     for loc, oid, pose in _object_poses(spec, objects):
         o = objects.get(oid)
         if o is None:
             continue
-        poly = transform(o.local_vertices(), pose, scale[oid])
+        if not _pose_in_bounds(pose, spec.bounds):
+            errs.append((loc, _pose_message("object", oid, pose, spec.bounds)))
+            continue
+        poly = transform(local[oid], pose, scale[oid])
         if o.kind != "wall":
-            for pid, wp in walls:
-                depth = -sat_separation(poly, wp)
+            axes = edge_normals(poly)
+            for k in index.near(poly):
+                depth = -sat_separation(poly, walls[k][1], axes, index.axes[k])
                 if depth > WALL_TOLERANCE_M:
+                    pid = walls[k][0]
                     errs.append((loc, f"object {oid!r} is inside wall {pid!r} by {depth:.2f} m"))
                     break
         lo, hi = poly.min(axis=0), poly.max(axis=0)
         if _box_outside((lo[0], lo[1], hi[0], hi[1]), spec.bounds):
             errs.append((loc, f"object {oid!r} is outside the world bounds"))
     return errs
+
+
+#: Largest heading [rad] a pose may give (a few turns either way).
+MAX_HEADING_RAD = 100.0
+
+
+def _pose_in_bounds(pose, bounds) -> bool:
+    """True where a pose's position lies in ``bounds`` and its heading is a few turns."""
+    return _in_bounds(pose[0], pose[1], bounds) and abs(pose[2]) <= MAX_HEADING_RAD
+
+
+def _pose_message(what: str, oid: str | None, pose, bounds) -> str:
+    name = f"{what} {oid!r}" if oid else what
+    if abs(pose[2]) > MAX_HEADING_RAD:
+        return f"{name}: heading {pose[2]:g} rad is not within +-{MAX_HEADING_RAD:g}"
+    return (
+        f"{name} at ({pose[0]:g}, {pose[1]:g}) is outside the world bounds "
+        f"[{', '.join(f'{b:g}' for b in bounds)}]"
+    )
 
 
 def _check_wall_points(spec: WorldSpec) -> _Errors:
@@ -319,19 +395,30 @@ def _check_route(spec: WorldSpec, walls: list[tuple[str, np.ndarray]]) -> _Error
     """No leg of the robot's route goes through a wall; its waypoints lie in the bounds."""
     errs: _Errors = []
     route = np.array(spec.robot.waypoints, dtype=np.float64)
+    inside = [_in_bounds(x, y, spec.bounds) for x, y in route]
+    bx0, by0, bx1, by1 = spec.bounds
+    w, h = bx1 - bx0, by1 - by0
+    near = [_in_bounds(x, y, (bx0 - w, by0 - h, bx1 + w, by1 + h)) for x, y in route]
+    index = _WallIndex(walls)
     for k in range(len(route) - 1):
-        pid = _first_wall_crossed(_segment_poly(route[k], route[k + 1]), walls)
+        if not (near[k] and near[k + 1]):
+            continue  # far out of the world (reported below): no wall to go through
+        pid = _first_wall_crossed(_segment_poly(route[k], route[k + 1]), walls, index)
         if pid is not None:
             errs.append((f"robot.route.{k}", f"route leg {k}->{k + 1} goes through wall {pid!r}"))
     for k, (x, y) in enumerate(route):
-        if not _in_bounds(x, y, spec.bounds):
-            errs.append((f"robot.route.{k}", "waypoint outside the world bounds"))
+        if not inside[k]:
+            errs.append(
+                (f"robot.route.{k}", f"waypoint ({x:g}, {y:g}) is outside the world bounds")
+            )
     return errs
 
 
 def _check_start(spec: WorldSpec, walls: list[tuple[str, np.ndarray]]) -> _Errors:
-    """The robot's start (a 0.4 m square) is not inside a wall."""
+    """The robot's start is in the bounds and (a 0.4 m square) not inside a wall."""
     sx, sy, _ = spec.robot.start
+    if not _pose_in_bounds(spec.robot.start, spec.bounds):
+        return [("robot.start", _pose_message("start pose", None, spec.robot.start, spec.bounds))]
     start = np.array(
         [[sx - 0.2, sy - 0.2], [sx + 0.2, sy - 0.2], [sx + 0.2, sy + 0.2], [sx - 0.2, sy + 0.2]]
     )

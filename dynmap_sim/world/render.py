@@ -169,3 +169,28 @@ def render_sheet(spec: WorldSpec, seed: int = 0, out_path: str | Path = "sheet.p
     fig.savefig(out, dpi=100, bbox_inches="tight")
     plt.close(fig)
     return out
+
+
+def render_worlds(
+    specs: list[WorldSpec], seed: int = 0, out_path: str | Path = "worlds.png"
+) -> Path:
+    """Draw several worlds side by side, each at the start of day 1, to ``out_path`` (see
+    :func:`image_path`); returns the file written."""
+    out = image_path(out_path)
+    ncol = min(4, len(specs))
+    nrow = int(np.ceil(len(specs) / ncol))
+    aspect = max((s.bounds[3] - s.bounds[1]) / (s.bounds[2] - s.bounds[0]) for s in specs)
+    pw = 4.5
+    fig, axes = plt.subplots(
+        nrow, ncol, figsize=(pw * ncol, (pw * aspect + 0.5) * nrow + 0.6), squeeze=False
+    )
+    for ax in axes.flat:
+        ax.set_axis_off()
+    for ax, spec in zip(axes.flat, specs, strict=False):
+        ax.set_axis_on()
+        world = World(spec, seed=seed)
+        draw_snapshot(ax, spec, world.snapshot(1, 1), f"{spec.name}: {_title(world, 1, 1)}")
+    _legend(fig)
+    fig.savefig(out, dpi=100, bbox_inches="tight")
+    plt.close(fig)
+    return out

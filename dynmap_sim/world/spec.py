@@ -104,6 +104,8 @@ When = Annotated[
 Weekday = Literal["mon", "tue", "wed", "thu", "fri", "sat", "sun"]
 WEEKDAYS: tuple[str, ...] = ("mon", "tue", "wed", "thu", "fri", "sat", "sun")
 MAX_EXTENT_M = 1000.0
+#: Largest coordinate [m] of the bounds: far from the origin float64 loses the millimetres.
+MAX_COORD_M = 1e6
 _HHMM = re.compile(r"^([01]?\d|2[0-3]):([0-5]\d)$")
 
 
@@ -463,4 +465,6 @@ class WorldSpec(_Model):
         _check_box(v)
         if v[2] - v[0] > MAX_EXTENT_M or v[3] - v[1] > MAX_EXTENT_M:
             raise ValueError(f"a world is at most {MAX_EXTENT_M:.0f} m across")
+        if max(abs(c) for c in v) > MAX_COORD_M:
+            raise ValueError(f"bounds must lie within {MAX_COORD_M:g} m of the origin")
         return v
