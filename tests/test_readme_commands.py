@@ -266,6 +266,16 @@ TOML = _of("toml")
 @pytest.mark.parametrize("block", TOML, ids=[b.id for b in TOML])
 def test_toml_example_validates(block, tmp_path, capsys):
     data = tomllib.loads(block.code)
+    if {"worlds", "scenario"} <= set(data):  # a benchmark suite, as if in benchmarks/suites/
+        from dynmap_sim.env_factory import generator_kinds
+        from dynmap_sim.experiments.benchmark import load_suite
+
+        (tmp_path / "worlds").symlink_to(ROOT / "worlds")
+        suite = tmp_path / "benchmarks" / "suites" / "example.toml"
+        suite.parent.mkdir(parents=True)
+        suite.write_text(block.code)
+        load_suite(suite, kinds=generator_kinds())  # raises with every error
+        return
     if _is_world(data) or _is_scenario(data):
         path = tmp_path / "example.toml"
         path.write_text(block.code)
