@@ -134,3 +134,12 @@ def test_a_bad_suite_is_one_clear_error_and_writes_nothing(
         suite = load_suite(_suite(tmp_path, edit(SUITE)), kinds=("office",))
         prepare_benchmark(suite, out, _no_generator)
     assert not out.exists() or not any(p.name != ".staging" for p in out.iterdir())
+
+
+@pytest.mark.parametrize("path", sorted((ROOT / "benchmarks" / "suites").glob("*.toml")), ids=str)
+def test_every_shipped_suite_loads(path: Path) -> None:
+    from dynmap_sim.env_factory import generator_kinds
+
+    suite = load_suite(path, kinds=generator_kinds())
+    assert len(suite.worlds) >= 24 and suite.days == (1, 5)
+    assert {w.kind for w in suite.worlds} == set(generator_kinds())
