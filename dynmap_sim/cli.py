@@ -1014,6 +1014,8 @@ def _disk_full_message(args: argparse.Namespace, exc: BaseException) -> str:
         what = "the disk is full" + (f" (no space left writing {name})" if name else "")
         folder = str(getattr(args, "out", None) or getattr(args, "dir", None) or "the folder")
     if args.command == "run":
+        if isinstance(exc, DiskFullError):  # it knows how many runs are kept
+            return f"{what}; {exc.what_is_kept()}"
         return (
             f"{what}; the runs finished so far are kept in {folder}: free some space, then the "
             "same command with --resume continues after them"

@@ -182,12 +182,13 @@ class ExperimentRunner:
                 self.db.close()
                 raise
         else:
-            self.db = ResultsDB.create(out_dir, overwrite=overwrite)  # locks the folder
-            try:
-                self._write_meta()
-            except BaseException:
-                self.db.close()
-                raise
+            sc = scenario
+            self.db = ResultsDB.create(  # locks the folder
+                out_dir,
+                overwrite=overwrite,
+                meta=self._meta(),
+                localizers=[(loc.display, loc.name, dict(loc.params)) for loc in sc.localizers],
+            )
         self.loop.keep_people = self.keep_scans  # the people's tracks go with the ranges
         try:
             self.state = state if state is not None else self._fresh_state()
@@ -248,9 +249,10 @@ class ExperimentRunner:
             )
 
     # ------------------------------------------------------------------ setup
-    def _write_meta(self) -> None:
+    def _meta(self) -> dict[str, Any]:
+        """The experiment's metadata (``meta`` of its results store)."""
         sc = self.scenario
-        self.db.set_meta(
+        return dict(
             scenario=sc.model_dump(mode="json"),
             scenario_path=str(sc.source_path) if sc.source_path else None,
             scenario_name=sc.name,
@@ -268,7 +270,6 @@ class ExperimentRunner:
             keep_scans=self.keep_scans,
             complete=False,
         )
-        self.db.set_localizers([(loc.display, loc.name, dict(loc.params)) for loc in sc.localizers])
 
     def _fresh_state(self) -> EngineState:
         sc = self.scenario

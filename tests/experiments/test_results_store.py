@@ -54,10 +54,11 @@ def record(day, run, n=20, n_loc=2, offset=0.1):
 
 
 def make_db(tmp_path):
-    db = ResultsDB.create(tmp_path)
-    db.set_meta(first_date="2026-01-05", days=[1, 1])
-    db.set_localizers([("a", "odometry", {}), ("b", "odometry", {"var_per_m": 0.1})])
-    return db
+    return ResultsDB.create(
+        tmp_path,
+        meta={"first_date": "2026-01-05", "days": [1, 1], "seed": 7, "experiment_hash": "h"},
+        localizers=[("a", "odometry", {}), ("b", "odometry", {"var_per_m": 0.1})],
+    )
 
 
 def test_write_run_rows_summaries_and_checkpoint(tmp_path):
@@ -99,6 +100,9 @@ def test_mismatched_or_corrupt_checkpoint_is_refused(tmp_path):
 
 def test_existing_results_are_not_clobbered_and_garbage_is_refused(tmp_path):
     make_db(tmp_path).close()
+    make_db(tmp_path).close()  # a store without a finished run holds nothing to lose
+    with make_db(tmp_path) as db:
+        db.write_run(record(1, 1), [], True, None, "h", 7)
     with pytest.raises(InputError, match="already holds results"):
         ResultsDB.create(tmp_path)
     ResultsDB.create(tmp_path, overwrite=True).close()
