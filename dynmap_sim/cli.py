@@ -191,7 +191,7 @@ def _refuse_world_file(path: str) -> None:
 
 def _cmd_validate(args: argparse.Namespace) -> int:
     from dynmap_sim.analysis.scenarios import load_scenario
-    from dynmap_sim.errors import FileError, read_toml
+    from dynmap_sim.errors import FileError, InputError, read_toml
     from dynmap_sim.experiments.scenario import ScenarioFileError, is_scenario_file
     from dynmap_sim.world import WorldFileError, load_world
 
@@ -201,14 +201,17 @@ def _cmd_validate(args: argparse.Namespace) -> int:
             data = read_toml(path, FileError)  # refuses devices, FIFOs and huge files at once
             # a world file has no "world" key (is_scenario_file cannot read a file with a BOM)
             if is_scenario_file(path) or isinstance(data.get("world"), str):
-                load_scenario(path)
+                from dynmap_sim.experiments.runner import scenario_size
+
+                size = f" ({scenario_size(load_scenario(path)).describe()})"
             else:
+                size = ""
                 load_world(path)
-        except (WorldFileError, ScenarioFileError, FileError) as exc:
+        except (WorldFileError, ScenarioFileError, FileError, InputError) as exc:
             print(exc, file=sys.stderr)
             status = 1
         else:
-            print(f"{path}: OK")
+            print(f"{path}: OK{size}")
     return status
 
 
@@ -1032,7 +1035,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``dynmap-sim``; returns the exit status."""
     args = build_parser().parse_args(argv)
     from dynmap_sim.errors import InputError
-    from dynmap_sim.experiments.bench import LocalizerError
+    from dynmap_sim.experiments.localizer_pool import LocalizerError
     from dynmap_sim.experiments.results import is_disk_full
 
     try:

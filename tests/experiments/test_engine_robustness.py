@@ -20,7 +20,7 @@ from test_workers import run, scenario, tables  # noqa: E402
 from dynmap_sim.cli import main  # noqa: E402
 from dynmap_sim.errors import InputError  # noqa: E402
 from dynmap_sim.experiments import results as results_mod  # noqa: E402
-from dynmap_sim.experiments.bench import LocalizerContractError  # noqa: E402
+from dynmap_sim.experiments.localizer_pool import LocalizerContractError  # noqa: E402
 from dynmap_sim.experiments.results import DiskFullError, ResultsDB  # noqa: E402
 from dynmap_sim.experiments.results.checkpoints import CheckpointStore  # noqa: E402
 from dynmap_sim.experiments.runner import ExperimentRunner  # noqa: E402

@@ -244,7 +244,7 @@ def test_a_newer_format_is_refused(tmp_path):
 
 
 def test_declarations_are_checked_where_they_are_made():
-    from dynmap_sim.experiments.bench import DiagnosticsRecorder
+    from dynmap_sim.experiments.localizer_pool import DiagnosticsRecorder
 
     with pytest.raises(ValueError, match="lower case"):
         Diagnostic("Scan Loglik", "float64")
