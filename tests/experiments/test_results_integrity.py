@@ -118,9 +118,8 @@ EDITS = {
     "DELETE FROM day_summaries WHERE day = 1": "day_summaries rows of day 1 do not match",
     "UPDATE meta SET value = '5' WHERE key = 'seed'": r"meta table was edited \(values "
     "changed: seed\\)",
-    "UPDATE estimates SET err_m = err_m * 10": r"per-scan errors \(estimates.err_m\) of "
-    "localizer 0 on day 1 are not the distances",
-    "UPDATE estimates SET x = x + 1 WHERE day = 2": "localizer 0 on day 2 are not",
+    "UPDATE estimates SET err_m = err_m * 10": "the day_summaries row of localizer 0 on day 1 "
+    "does not summarize its scans",
     "UPDATE runs SET collisions = 5 WHERE day = 3": "runs rows of day 3 run 1 do not match",
     "UPDATE run_summaries SET mean_error_m = 1": "run_summaries rows of day 1 run 1",
     "UPDATE day_summaries SET mean_error_m = 1, max_error_m = 1": "day_summaries rows",
@@ -148,6 +147,19 @@ def test_an_edited_folder_is_refused_by_readers_and_resume(tmp_path, finished, s
         ResultsDB.open(bad)
     assert "\n" not in str(err.value) and str(err.value).startswith(str(bad))
     with pytest.raises(InputError, match=words):
+        fresh(scn, bad, resume=True)
+
+
+def test_an_edited_estimate_is_refused_before_a_resume(tmp_path, finished):
+    """The errors no longer the distances of the estimates: the writer checks every one
+    (the readers' numbers come from the errors, which the day summaries guard)."""
+    scn, out, _ = finished
+    bad = tmp_path / "bad"
+    shutil.copytree(out, bad)
+    con = sqlite3.connect(bad / "results.db")
+    con.executescript("UPDATE estimates SET x = x + 1 WHERE day = 2")
+    con.close()
+    with pytest.raises(InputError, match="estimates.err_m. of localizer 0 on day 2 are not"):
         fresh(scn, bad, resume=True)
 
 

@@ -6,8 +6,9 @@ every run's rows, and the derived tables checked against the per-scan rows they 
 * ``digests`` holds, per run (and per day for ``day_summaries``, run 0), the SHA-256 of the
   rows of each of :data:`GUARDED` (``runs``, ``run_summaries``, ``events``, ...);
 * the per-scan rows are checked by SQL: each run's ``scans`` and ``estimates`` as many as
-  ``runs.n_steps``, each ``err_m`` the distance of its estimate from the truth, each
-  ``day_summaries`` row's count, mean and largest error those of the day's scans;
+  ``runs.n_steps``, each ``day_summaries`` row's count, mean and largest error those of the
+  day's scans, and (before a resume) each ``err_m`` the distance of its estimate from the
+  truth;
 * the checkpoint's checksum covers :func:`cover_digest` (the metadata's and the runs'
   digests), so a run deleted with its digests is refused too.
 
@@ -172,30 +173,29 @@ def check_digests(con: sqlite3.Connection, path: Path) -> None:
         raise DamagedResults(path, f"{_where((d, r))} was deleted from the runs table")
 
 
-def check_scans(con: sqlite3.Connection, path: Path, n_loc: int) -> None:
-    """The per-scan rows agree with ``runs`` and ``day_summaries`` (see the module doc)."""
+def check_scans(con: sqlite3.Connection, path: Path, n_loc: int, deep: bool = False) -> None:
+    """The per-scan rows agree with ``runs`` and ``day_summaries`` (see the module doc);
+    ``deep``: each error is also the distance of its estimate from the truth (a join of
+    every estimate with its scan: 8 s for a million estimates here, so only before a
+    resume; the readers' numbers come from the errors, which the day summaries check)."""
+    steps = {}
     for d, r, n, got in con.execute(
         "SELECT r.day, r.run, r.n_steps, (SELECT count(*) FROM scans s WHERE s.day = r.day "
         "AND s.run = r.run) FROM runs r ORDER BY r.day, r.run"
     ):
         if n != got:
             raise DamagedResults(path, f"{_where((d, r))} has {got} scans, not {n}")
-    counts = con.execute(
-        "SELECT e.day, e.run, count(*), count(DISTINCT e.loc), r.n_steps FROM estimates e "
-        "LEFT JOIN runs r USING (day, run) GROUP BY e.day, e.run ORDER BY e.day, e.run"
-    ).fetchall()
-    for d, r, n, locs, steps in counts:
-        if steps is None or n != locs * steps or locs != n_loc:
-            raise DamagedResults(
-                path, f"{_where((d, r))} has {n} estimates, not {n_loc} x {steps or 0}"
-            )
-    dx = "(e.x - s.x) * (e.x - s.x) + (e.y - s.y) * (e.y - s.y)"
+        steps[(d, r)] = n
+    counts: dict[tuple[int, int], list[int]] = {}
+    for _, d, r, n in con.execute("SELECT loc, day, run, count(*) FROM estimates GROUP BY 1, 2, 3"):
+        counts.setdefault((d, r), []).append(n)
+    for key in sorted(set(counts) | set(steps)):
+        n = steps.get(key, 0)
+        if counts.get(key, []) != [n] * n_loc:
+            got = sum(counts.get(key, []))
+            raise DamagedResults(path, f"{_where(key)} has {got} estimates, not {n_loc} x {n}")
     rows = con.execute(
-        "SELECT e.loc, e.day, count(*), avg(CASE WHEN s.x IS NOT NULL THEN e.err_m END), "
-        "max(CASE WHEN s.x IS NOT NULL THEN e.err_m END), "
-        f"max(coalesce(abs(e.err_m - sqrt({dx})), "
-        f"CASE WHEN e.err_m IS NULL AND sqrt({dx}) IS NULL THEN 0 ELSE 1 END)) "
-        "FROM estimates e JOIN scans s USING (day, run, step) GROUP BY e.loc, e.day"
+        "SELECT loc, day, count(*), avg(err_m), max(err_m) FROM estimates GROUP BY loc, day"
     ).fetchall()
     days = {
         (loc, day): (n, mean, top)
@@ -203,19 +203,33 @@ def check_scans(con: sqlite3.Connection, path: Path, n_loc: int) -> None:
             "SELECT loc, day, n_scans, mean_error_m, max_error_m FROM day_summaries"
         )
     }
-    for loc, day, n, mean, top, off in rows:
-        where = f"localizer {loc} on day {day}"
-        if off is not None and off > TOLERANCE_M:
-            raise DamagedResults(
-                path,
-                f"the per-scan errors (estimates.err_m) of {where} are not the distances "
-                "of its estimates from the truth",
-            )
+    for loc, day, n, mean, top in rows:
         if (loc, day) in days and not _same_summary(days[(loc, day)], (n, mean, top)):
             raise DamagedResults(
                 path,
-                f"the day_summaries row of {where} does not summarize its scans "
-                f"(stored n, mean, max {days[(loc, day)]}, the scans give {(n, mean, top)})",
+                f"the day_summaries row of localizer {loc} on day {day} does not summarize "
+                f"its scans (stored n, mean, max {days[(loc, day)]}, the scans give "
+                f"{(n, mean, top)})",
+            )
+    if deep:
+        _check_errors(con, path)
+
+
+def _check_errors(con: sqlite3.Connection, path: Path) -> None:
+    """Each stored error is the distance of its estimate from the truth."""
+    dx = "(e.x - s.x) * (e.x - s.x) + (e.y - s.y) * (e.y - s.y)"
+    rows = con.execute(
+        "SELECT e.loc, e.day, "
+        f"max(coalesce(abs(e.err_m - sqrt({dx})), "
+        f"CASE WHEN e.err_m IS NULL AND sqrt({dx}) IS NULL THEN 0 ELSE 1 END)) "
+        "FROM estimates e JOIN scans s USING (day, run, step) GROUP BY e.loc, e.day"
+    )
+    for loc, day, off in rows:
+        if off is not None and off > TOLERANCE_M:
+            raise DamagedResults(
+                path,
+                f"the per-scan errors (estimates.err_m) of localizer {loc} on day {day} are "
+                "not the distances of its estimates from the truth",
             )
 
 

@@ -120,7 +120,7 @@ class ResultsDB(ResultsReader):
         db = cls(path, con, held)
         try:
             if verify:
-                db.verify()
+                db.verify(deep=lock)
             fmt = db.format
             if fmt > RESULTS_FORMAT:
                 raise InputError(
@@ -132,7 +132,7 @@ class ResultsDB(ResultsReader):
             raise
         return db
 
-    def verify(self) -> None:
+    def verify(self, deep: bool = False) -> None:
         """Refuse a damaged file, edited metadata, or derived rows that do not match the
         per-scan rows (in one snapshot; :mod:`.integrity`; results formats before 4 are
         only checked for a damaged file and their metadata)."""
@@ -145,7 +145,7 @@ class ResultsDB(ResultsReader):
             check_meta(self.path, rows, guarded)
             if guarded:
                 check_digests(con, self.path)
-                check_scans(con, self.path, len(self.labels()))
+                check_scans(con, self.path, len(self.labels()), deep)
                 row = self._checkpoints.row()
                 if row is not None:
                     self._checkpoints.verify(row, cover_digest(con, self._checksums()))
