@@ -43,7 +43,7 @@ class DiskFullError(InputError):
         are = "is" if self.runs_kept == 1 else "are"
         return (
             f"the {runs} finished so far {are} kept in {self.folder}: free some space, then "
-            "the same command with --resume continues after them"
+            f"the same command with --resume continues after {'it' if are == 'is' else 'them'}"
         )
 
 
