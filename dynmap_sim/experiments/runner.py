@@ -109,10 +109,9 @@ def default_workers(
 
 
 #: What the size estimate takes a scan to cost [ms of CPU] on a 2-core machine: the
-#: simulation (ci-apartment: 603 scans in 1.5 s), and each localizer but dead reckoning (the
-#: lab replica's 1,034 s of CPU for 104k scans of five localizers). Rough figures: the
-#: estimate says what to expect within a factor of two or so (workers share the localizers'
-#: part; the first runs also compile and load), not a timing.
+#: simulation, and each localizer but dead reckoning (docs/tuning/store.md says where the
+#: figures come from). Rough: the estimate says what to expect within a factor of two or
+#: so, not a timing.
 SIM_MS_PER_SCAN = 2.5
 LOCALIZER_MS_PER_SCAN = 1.5
 #: Localizers whose update costs next to nothing.

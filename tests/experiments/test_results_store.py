@@ -270,3 +270,15 @@ def test_declarations_are_checked_where_they_are_made():
     assert rec.out.per_run["timescale_counts"].tolist() == [1, 0, 0, 0, 2]
     with pytest.raises(ValueError, match="'path_m' is not a declared per-run value"):
         rec.end_run(Undeclared())
+
+
+def test_results_of_format_3_are_read_but_not_continued(tmp_path):
+    """Format 3 (before the checksums) is read without them and refused for a resume."""
+    with make_db(tmp_path) as db:
+        db.write_run(record(1, 1), [], True, Checkpoint(1, 1, 2, {}), "h", 7)
+        db.con.execute("DROP TABLE digests")
+        db.set_meta(results_format=3)
+    with ResultsDB.open(tmp_path) as db:
+        assert db.format == 3 and len(db.per_scan(0)["err_m"]) == 20
+        with pytest.raises(InputError, match="format 3 .*before the checksums.* not continued"):
+            db.load_checkpoint("h", 7)

@@ -176,8 +176,8 @@ def check_digests(con: sqlite3.Connection, path: Path) -> None:
 def check_scans(con: sqlite3.Connection, path: Path, n_loc: int, deep: bool = False) -> None:
     """The per-scan rows agree with ``runs`` and ``day_summaries`` (see the module doc);
     ``deep``: each error is also the distance of its estimate from the truth (a join of
-    every estimate with its scan: 8 s for a million estimates here, so only before a
-    resume; the readers' numbers come from the errors, which the day summaries check)."""
+    every estimate with its scan, the slowest check, so only before a resume: the readers'
+    numbers come from the errors, which the day summaries check)."""
     steps = {}
     for d, r, n, got in con.execute(
         "SELECT r.day, r.run, r.n_steps, (SELECT count(*) FROM scans s WHERE s.day = r.day "
