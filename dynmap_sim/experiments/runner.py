@@ -80,8 +80,8 @@ def localizer_seeds(seed: int, n: int) -> list[np.random.Generator]:
 
 
 #: Experiments with at most this much robot time [s] (known from ``driver.max_run_s``) run
-#: their localizers in-process: starting worker processes (about 0.7 s) costs more than it
-#: saves (ci-apartment-mcl, 2 runs of 20 s: 1.8 s in-process, 2.5 s with 2 workers).
+#: their localizers in-process: starting worker processes costs more than it saves
+#: (docs/tuning/store.md).
 SMALL_EXPERIMENT_S = 120.0
 
 
@@ -97,10 +97,8 @@ def default_workers(
     driver runs in lock-step in the main process) are exactly one more than that count, each
     gets its own worker: sharing would make the pool move localizers between workers after
     the first runs' timings, which waits for every run in flight (the simulation stalls).
-    Measured on the H&W replica (three localizers riding along, two cores): 4:20 / 4:18 wall
-    with 2 workers, 3:43 with 3. Not beyond one extra: the main job (four riding along) took
-    84.5 s with 2 workers and 94.4 s with 4 (each worker's start-up and its copy of the
-    stream)."""
+    Not beyond one extra: each worker's start-up and its copy of the stream then cost more
+    than sharing (docs/tuning/store.md)."""
     if n_localizers < 2 or (robot_time_s is not None and robot_time_s <= SMALL_EXPERIMENT_S):
         return 1
     base = max(1, min(2, os.cpu_count() or 1, n_localizers))
