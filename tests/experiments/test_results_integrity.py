@@ -125,12 +125,14 @@ EDITS = {
     "UPDATE day_summaries SET mean_error_m = 1, max_error_m = 1": "day_summaries rows",
     "UPDATE digests SET sha256 = 'x' WHERE tbl = 'day_summaries' AND day = 2": "day 2 do not",
     "DELETE FROM scans WHERE day = 2 AND step = 3": "day 2 run 1 has 50 scans, not 51",
-    "DELETE FROM runs WHERE day = 2; DELETE FROM digests WHERE day = 2": "day 2 run 1 has "
+    "DELETE FROM digests WHERE day = 2 AND tbl = 'run_summaries'": "day 2 run 1 has "
     "run_summaries rows without a checksum",
     "UPDATE meta SET value = '{not json' WHERE key = 'days'": "meta value 'days' is not JSON",
     "DELETE FROM meta WHERE key IN ('days', 'checkpoint_format')": r"rows deleted: "
     "checkpoint_format, days",
     "DELETE FROM meta": "meta has no checksums row",
+    "DELETE FROM runs WHERE day = 3; DELETE FROM digests WHERE day = 3": "meta says the "
+    "experiment is complete but 2 of its 3 runs are stored",
     "UPDATE checkpoint SET next_index = 2": "the checkpoint is corrupt",
 }
 

@@ -28,7 +28,8 @@ from dynmap_sim.errors import InputError
 
 #: Meta keys every results folder has (a reader needs them).
 REQUIRED_META = ("days", "seed")
-#: Meta keys that change after the experiment began (not part of its identity).
+#: Meta keys that change after the experiment began (not part of its identity; ``complete``
+#: is checked against the stored runs instead of its checksum: :func:`check_complete`).
 MUTABLE_META = ("complete", "checksums")
 #: The per-run tables guarded by a digest of their rows, with the order of a run's rows.
 GUARDED = (
@@ -116,7 +117,7 @@ def check_meta(path: Path, rows: list[tuple[str, str]], guarded: bool) -> dict[s
         texts = dict(rows)
         missing = sorted(k for k in sums if k not in texts)
         changed = sorted(
-            k for k, t in texts.items() if k != "checksums" and sums.get(k) != value_hash(t)
+            k for k, t in texts.items() if k not in MUTABLE_META and sums.get(k) != value_hash(t)
         )
         parts = [f"rows deleted: {', '.join(missing)}"] if missing else []
         parts += [f"values changed: {', '.join(changed)}"] if changed else []
@@ -130,6 +131,18 @@ def check_meta(path: Path, rows: list[tuple[str, str]], guarded: bool) -> dict[s
             "written by dynmap_sim)",
         )
     return meta
+
+
+def check_complete(con: sqlite3.Connection, path: Path, meta: dict[str, Any]) -> None:
+    """A folder marked ``complete`` holds a run for each of its slots."""
+    slots = meta.get("slots")
+    if meta.get("complete") is True and isinstance(slots, list):
+        n = con.execute("SELECT count(*) FROM runs").fetchone()[0]
+        if n != len(slots):
+            raise DamagedResults(
+                path,
+                f"meta says the experiment is complete but {n} of its {len(slots)} runs are stored",
+            )
 
 
 def check_integrity(con: sqlite3.Connection, path: Path) -> None:

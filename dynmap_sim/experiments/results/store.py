@@ -21,6 +21,7 @@ from dynmap_sim.experiments.results.folder import (
     orphaned_checkpoint,
 )
 from dynmap_sim.experiments.results.integrity import (
+    check_complete,
     check_digests,
     check_integrity,
     check_meta,
@@ -142,8 +143,9 @@ class ResultsDB(ResultsReader):
         try:
             rows = con.execute("SELECT key, value FROM meta").fetchall()
             guarded = self._guarded(rows)
-            check_meta(self.path, rows, guarded)
+            meta = check_meta(self.path, rows, guarded)
             if guarded:
+                check_complete(con, self.path, meta)
                 check_digests(con, self.path)
                 check_scans(con, self.path, len(self.labels()), deep)
                 row = self._checkpoints.row()
