@@ -256,7 +256,7 @@ def bench_kernels(rng: np.random.Generator, repeats: int) -> None:
 
 # ---------------------------------------------------------------------- replay of a scenario
 def record_streams(scenario_path: str, days: tuple[int, int], cache: Path) -> list:
-    """The scenario's run streams (:class:`~dynmap_sim.experiments.bench.RunStream`) of
+    """The scenario's run streams (:class:`~dynmap_sim.experiments.localizer_pool.RunStream`) of
     ``days``: simulated with the steering localizer alone (the others do not change the
     stream), pickled to ``cache`` and read from there next time."""
     if cache.exists():

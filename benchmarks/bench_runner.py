@@ -136,7 +136,7 @@ def bench_scoring(repeat: int, n_scans: int = 1350, n_beams: int = 683) -> None:
     ``PointClassTally.add``, the reference) against held scans scored at once
     (``SCORE_BATCH`` at a time, ``add_scans``) on the same synthetic classes; the sums must
     be identical."""
-    from dynmap_sim.experiments.bench import SCORE_BATCH
+    from dynmap_sim.experiments.localizer_pool import SCORE_BATCH
     from dynmap_sim.metrics import PointClassTally, confusion_matrix
 
     rng = np.random.default_rng(0)

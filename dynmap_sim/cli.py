@@ -193,7 +193,7 @@ def _refuse_world_file(path: str) -> None:
 
 def _cmd_validate(args: argparse.Namespace) -> int:
     from dynmap_sim.analysis.scenarios import load_scenario
-    from dynmap_sim.errors import FileError, read_toml
+    from dynmap_sim.errors import FileError, InputError, read_toml
     from dynmap_sim.experiments.scenario import ScenarioFileError, is_scenario_file
     from dynmap_sim.world import WorldFileError, load_world
 
@@ -204,15 +204,19 @@ def _cmd_validate(args: argparse.Namespace) -> int:
             data = read_toml(path, FileError)  # refuses devices, FIFOs and huge files at once
             # a world file has no "world" key (is_scenario_file cannot read a file with a BOM)
             if is_scenario_file(path) or isinstance(data.get("world"), str):
-                world = load_scenario(path).world_path
+                from dynmap_sim.experiments.runner import scenario_size
+
+                scenario = load_scenario(path)
+                world = scenario.world_path
+                size = f" ({scenario_size(scenario).describe()})"
             else:
-                world = Path(path)
+                world, size = Path(path), ""
             spec = load_world(world)
-        except (WorldFileError, ScenarioFileError, FileError) as exc:
+        except (WorldFileError, ScenarioFileError, FileError, InputError) as exc:
             print(exc, file=sys.stderr)
             status = 1
         else:
-            print(f"{path}: OK")
+            print(f"{path}: OK{size}")
             _route_warnings(path, spec, world.resolve(), seen)
     return status
 
@@ -1232,6 +1236,8 @@ def _disk_full_message(args: argparse.Namespace, exc: BaseException) -> str:
         what = "the disk is full" + (f" (no space left writing {name})" if name else "")
         folder = str(getattr(args, "out", None) or getattr(args, "dir", None) or "the folder")
     if args.command == "run":
+        if isinstance(exc, DiskFullError):  # it knows how many runs are kept
+            return f"{what}; {exc.what_is_kept()}"
         return (
             f"{what}; the runs finished so far are kept in {folder}: free some space, then the "
             "same command with --resume continues after them"
@@ -1248,7 +1254,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of ``dynmap-sim``; returns the exit status."""
     args = build_parser().parse_args(argv)
     from dynmap_sim.errors import InputError
-    from dynmap_sim.experiments.bench import LocalizerError
+    from dynmap_sim.experiments.localizer_pool import LocalizerError
     from dynmap_sim.experiments.results import is_disk_full
 
     try:

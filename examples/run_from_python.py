@@ -4,7 +4,7 @@
 
 The results folder holds ``results.db`` (SQLite); any SQLite client reads it. Tables:
 ``scans`` (truth per scan), ``estimates`` (per scan and localizer), ``run_summaries``,
-``day_summaries``, ``events``, ``localizers``, ``meta`` (see dynmap_sim/experiments/results.py).
+``day_summaries``, ``events``, ``localizers``, ``meta`` (see dynmap_sim/experiments/results/).
 """
 
 from __future__ import annotations

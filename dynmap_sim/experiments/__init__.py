@@ -3,7 +3,7 @@
 * :mod:`.scenario` — scenario files (TOML, validated; ``load_scenario``);
 * :mod:`.runner` — ``run_experiment``: days x runs, localizers side by side, checkpoints;
 * :mod:`.drivers` — who steers a run (the ``tour`` operator sees the truth);
-* :mod:`.bench` — the localizer bench: a run's stream through every localizer, in-process
+* :mod:`.localizer_pool` — the localizer bench: a run's stream through every localizer, in-process
   or in worker processes;
 * :mod:`.results` — the SQLite results store (one per experiment);
 * :mod:`.replay` — mapping and localizers on a recorded CARMEN log.

@@ -3,8 +3,10 @@
 ``env.reset(seed, day, run)``, the run's :class:`~dynmap_sim.types.Prior`, then every control
 step: record the sensors (odometry, scan) and the truth (``info["truth"]``), carry out a
 kidnapping when one is due, ask the driver for the action, ``env.step``. The result is an
-:class:`Episode`: the run's sensor stream (:class:`~dynmap_sim.experiments.bench.RunStream`,
-what the localizers consume) and its truth (what the metrics compare them with).
+:class:`Episode`: the run's sensor stream
+(:class:`~dynmap_sim.experiments.localizer_pool.RunStream`, what the localizers consume) and
+its truth (what the metrics compare them with), recorded scan by scan by a
+:class:`RunRecorder`.
 
 Truth reaches the loop only through ``info["truth"]`` and the env's documented read-only
 views (:mod:`dynmap_sim.truth`: ``world_facts()``, ``obstacles()``); the loop acts on the
@@ -12,7 +14,7 @@ world only through ``env.step`` and ``env.teleport`` (a kidnapping). The driver 
 only when it declares ``sees_truth``.
 
 A driver that steers on a localizer's estimate gets it in lock-step: the loop feeds that
-localizer each scan as it is recorded (:class:`~dynmap_sim.experiments.bench.LocalizerRun`,
+localizer each scan as it is recorded (:class:`~dynmap_sim.experiments.localizer_pool.LocalizerRun`,
 the same calls the localizer bench makes on a recorded stream) and hands the estimate to the
 driver before it acts.
 
@@ -25,6 +27,7 @@ seen-before point-class truth, :class:`~dynmap_sim.metrics.SeenPlaces`) — is t
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -34,7 +37,9 @@ from numpy.typing import NDArray
 from dynmap_sim.agent.localizer import Localizer
 from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
 from dynmap_sim.agent.planning.grid_dijkstra import GridDijkstra
-from dynmap_sim.experiments.bench import (
+from dynmap_sim.experiments.drivers import Driver, RunStart, StepInput
+from dynmap_sim.experiments.drivers.tour import plan_through_waypoints, static_clearance_grid
+from dynmap_sim.experiments.localizer_pool import (
     CHUNK_SCANS,
     LocalizerOutput,
     LocalizerRun,
@@ -42,8 +47,6 @@ from dynmap_sim.experiments.bench import (
     RunStream,
     ScanChunk,
 )
-from dynmap_sim.experiments.drivers import Driver, RunStart, StepInput
-from dynmap_sim.experiments.drivers.tour import plan_through_waypoints, static_clearance_grid
 from dynmap_sim.experiments.results import PeopleTrack
 from dynmap_sim.experiments.scenario import Kidnapping, PriorConfig
 from dynmap_sim.metrics import (
@@ -76,8 +79,8 @@ _PERSON = int(BeamClass.PERSON)
 
 class StreamSink(Protocol):
     """Where :meth:`EpisodeLoop.run` hands a run's stream as it is recorded (the localizer
-    bench: :class:`~dynmap_sim.experiments.bench.LocalizerPool`,
-    :class:`~dynmap_sim.experiments.bench.InProcessLocalizers`)."""
+    bench: :class:`~dynmap_sim.experiments.localizer_pool.LocalizerPool`,
+    :class:`~dynmap_sim.experiments.localizer_pool.InProcessLocalizers`)."""
 
     def begin(self, header: RunHeader, capacity: int = 1024) -> None: ...
 
@@ -86,36 +89,109 @@ class StreamSink(Protocol):
     def end(self) -> None: ...
 
 
-def _chunk(
-    t_l: list[float],
-    odom_l: list[FloatArray],
-    scan_l: list[NDArray[np.float32]],
-    class_l: list[NDArray[np.int8]],
-    point_l: list[NDArray[np.int8]],
-    start: int,
-) -> ScanChunk:
-    """The recorded scans from ``start`` on, as the stream's arrays hold them."""
-    n = len(t_l) - start
-    return ScanChunk(
-        np.asarray(t_l[start:], dtype=np.float64),
-        np.asarray(odom_l[start:], dtype=np.float64).reshape(n, 3),
-        np.asarray(scan_l[start:], dtype=np.float32).reshape(n, -1),
-        np.asarray(class_l[start:], dtype=np.int8).reshape(n, -1),
-        np.asarray(point_l[start:], dtype=np.int8).reshape(n, -1),
-    )
+class RunRecorder:
+    """What a run records at every scan, as it is recorded: the sensor stream (stamps,
+    odometry, scan, beam classes, the seen-before point classes), the truth (pose, bumper
+    flag, clearance to people [m]), the people's positions (when kept) and which objects
+    the laser hit. :meth:`chunk` hands the scans recorded since the last chunk to the
+    localizer pool; :meth:`stream` and the ``*_array`` methods give the whole run."""
+
+    def __init__(
+        self,
+        seen_mask: NDArray[np.bool_],
+        person_clearance: Callable[[FloatArray], float],
+        people_of: Callable[[], Any] | None = None,
+    ) -> None:
+        self.seen_mask = seen_mask
+        self.hit_objects = np.zeros(len(seen_mask), dtype=bool)
+        self._person_clearance = person_clearance
+        self._people_of = people_of
+        #: the run's crowd (its ids and radii are fixed; None: people not kept)
+        self.crowd = people_of() if people_of is not None else None
+        self.t: list[float] = []
+        self.odom: list[FloatArray] = []
+        self.scan: list[NDArray[np.float32]] = []
+        self.beam_class: list[NDArray[np.int8]] = []
+        self.point_truth: list[NDArray[np.int8]] = []
+        self.truth: list[FloatArray] = []
+        self.collision: list[bool] = []
+        self.person_clearance_m: list[float] = []
+        self.people: list[FloatArray] = []
+        self.sent = 0  # scans handed to the pool
+
+    def __len__(self) -> int:
+        return len(self.t)
+
+    def record(self, obs: Any, truth: Any, collision: bool) -> tuple[float, FloatArray]:
+        """Record one scan (copies: the history must not change if a producer reuses its
+        arrays); its time [s] and true pose."""
+        pose = np.array(truth["pose"], dtype=np.float64)
+        t_s = float(truth["time"][2])
+        self.t.append(t_s)
+        self.odom.append(np.array(obs["odom"], dtype=np.float64))
+        self.scan.append(np.array(obs["scan"], dtype=np.float32))
+        classes = np.array(truth["beam_class"], dtype=np.int8)
+        self.beam_class.append(classes)
+        beam_object = np.asarray(truth.get("beam_object", ()), dtype=np.int64)
+        if beam_object.shape != classes.shape:
+            beam_object = np.full(classes.shape, -1, dtype=np.int64)
+        self.point_truth.append(seen_before_point_classes(classes, beam_object, self.seen_mask))
+        n_obj = len(self.hit_objects)
+        self.hit_objects[beam_object[(beam_object >= 0) & (beam_object < n_obj)]] = True
+        self.truth.append(pose)
+        self.collision.append(collision)
+        self.person_clearance_m.append(self._person_clearance(pose))
+        if self.crowd is not None and self._people_of is not None:
+            self.people.append(_positions(self._people_of(), self.crowd.ids))
+        return t_s, pose
+
+    def last(self) -> tuple[FloatArray, NDArray[np.float32], NDArray[np.int8], NDArray[np.int8]]:
+        """The last scan's odometry, ranges, beam classes and point classes."""
+        return self.odom[-1], self.scan[-1], self.beam_class[-1], self.point_truth[-1]
+
+    def chunk(self) -> ScanChunk:
+        """The scans recorded since the last chunk, as the stream's arrays hold them."""
+        start, n = self.sent, len(self.t) - self.sent
+        self.sent = len(self.t)
+        return ScanChunk(
+            np.asarray(self.t[start:], dtype=np.float64),
+            np.asarray(self.odom[start:], dtype=np.float64).reshape(n, 3),
+            np.asarray(self.scan[start:], dtype=np.float32).reshape(n, -1),
+            np.asarray(self.beam_class[start:], dtype=np.int8).reshape(n, -1),
+            np.asarray(self.point_truth[start:], dtype=np.int8).reshape(n, -1),
+        )
+
+    def stream(self, index: int, prior: Prior, last_of_day: bool) -> RunStream:
+        n = len(self.t)
+        return RunStream(
+            index=index,
+            prior=prior,
+            stamps_s=np.asarray(self.t, dtype=np.float64),
+            odom=np.asarray(self.odom, dtype=np.float64).reshape(-1, 3),
+            scans=np.asarray(self.scan, dtype=np.float32).reshape(n, -1),
+            beam_class=np.asarray(self.beam_class, dtype=np.int8).reshape(n, -1),
+            last_of_day=last_of_day,
+            point_truth=np.asarray(self.point_truth, dtype=np.int8).reshape(n, -1),
+        )
+
+    def truth_array(self) -> FloatArray:
+        return np.asarray(self.truth, dtype=np.float64).reshape(-1, 3)
+
+    def people_track(self) -> PeopleTrack | None:
+        """The people at every scan (None: not kept)."""
+        if self.crowd is None:
+            return None
+        ids = self.crowd.ids
+        xy = np.asarray(self.people, dtype=np.float64).reshape(len(self.t), len(ids), 2)
+        return PeopleTrack(ids, np.array(self.crowd.radius, dtype=np.float64), xy)
 
 
 @dataclass
 class EngineState:
-    """A driver that steers on a localizer's estimate gets it in lock-step: the loop feeds that
-    localizer each scan as it is recorded (:class:`~dynmap_sim.experiments.bench.LocalizerRun`,
-    the same calls the localizer bench makes on a recorded stream) and hands the estimate to the
-    driver before it acts.
-
-    What carries over between runs besides the localizers (checkpointed after each run):
-        the ``driver``, the engine's ``rng`` (kidnapping times and places) and ``seen``, the
-        places at which the robot has seen each object in the runs so far (the truth of
-        H&W's point classes: an object not seen at its place before is semi-static)."""
+    """What carries over between runs besides the localizers (checkpointed after each run):
+    the ``driver``, the engine's ``rng`` (kidnapping times and places) and ``seen``, the
+    places at which the robot has seen each object in the runs so far (the truth of H&W's
+    point classes: an object not seen at its place before is semi-static)."""
 
     driver: Driver
     rng: np.random.Generator
@@ -177,6 +253,38 @@ class LoopConfig:
     max_run_s: float | None
     prior: PriorConfig
     kidnappings: tuple[Kidnapping, ...]
+
+
+@dataclass
+class _Run:
+    """One run as :meth:`EpisodeLoop.run` drives it: what it set up before the first step."""
+
+    index: int
+    facts: WorldFacts
+    obstacles: Any
+    prior: Prior
+    kidnaps: list[_Kidnap]
+    static_grid: ClearanceGrid
+    places: Any
+    radius_m: float
+    shortest_m: float
+    recorder: RunRecorder
+    lockstep: LocalizerRun | None
+    max_steps: int | None
+    last_of_day: bool
+
+
+@dataclass
+class _Drive:
+    """How the control loop ended: the last step and time [s], the env's flags, the route
+    progress (fraction of the world's route) and the loop's events."""
+
+    step: int = 0
+    t_s: float = 0.0
+    terminated: bool = False
+    truncated: bool = False
+    progress: float = 0.0
+    events: list[tuple[int, float, str, str]] = field(default_factory=list)
 
 
 class EpisodeLoop:
@@ -241,180 +349,194 @@ class EpisodeLoop:
         the (label, localizer) the driver steers on, updated here scan by scan in lock-step
         (its estimate goes to the driver; its output to :attr:`Episode.steered`). ``bench``:
         the other localizers, handed the stream in chunks of
-        :data:`~dynmap_sim.experiments.bench.CHUNK_SCANS` scans as it is recorded."""
+        :data:`~dynmap_sim.experiments.localizer_pool.CHUNK_SCANS` scans as it is recorded."""
         slot = self.slots[i]
-        cfg = self.config
-        driver, rng = state.driver, state.rng
-        obs, info = self.env.reset(seed=cfg.seed, options={"day": slot.day, "run": slot.run})
+        obs, info = self.env.reset(
+            seed=self.config.seed, options={"day": slot.day, "run": slot.run}
+        )
+        run = self._begin(i, state, info, steer, bench)
+        drive = self._drive(run, state, obs, info, bench)
+        return self._finish(run, state, drive, bench)
+
+    def _begin(
+        self,
+        i: int,
+        state: EngineState,
+        info: dict[str, Any],
+        steer: tuple[str, Localizer] | None,
+        bench: StreamSink | None,
+    ) -> _Run:
+        """After ``env.reset``: the run's prior, truth views and recorder; the driver and the
+        localizers begin the run."""
+        slot = self.slots[i]
         facts = self.u.world_facts()  # after reset: another seed builds another world
         obstacles = self.u.obstacles()
         prior = self.prior(i, facts)
         start = np.asarray(info["truth"]["pose"], dtype=np.float64)
-        sees = driver.sees_truth
-        driver.begin_run(RunStart(prior, start if sees else None, obstacles if sees else None))
-        kidnaps = self._kidnaps(slot, rng)
+        sees = state.driver.sees_truth
+        state.driver.begin_run(
+            RunStart(prior, start if sees else None, obstacles if sees else None)
+        )
+        kidnaps = self._kidnaps(slot, state.rng)
         static_grid = static_clearance_grid(obstacles, GRID_RESOLUTION_M)
         # the seen-before truth of H&W's point classes: each object's place now, and whether
         # the robot saw it there in an earlier run
-        n_obj = len(obstacles.object_ids)
         places = object_places(
-            n_obj,
+            len(obstacles.object_ids),
             obstacles.segments,
             obstacles.segment_object,
             obstacles.circles,
             obstacles.circle_object,
         )
-        seen_mask = state.seen.seen_before(obstacles.object_ids, places)
-        hit_objects = np.zeros(n_obj, dtype=bool)
         radius_m = float(self.u.robot_radius_m)
-        free_clearance_m = radius_m + FREE_MARGIN_M
-        shortest_m = self._shortest_path_m(start, static_grid, free_clearance_m)
-        person_l: list[float] = []
         people_of = getattr(self.u, "people", None) if self.keep_people else None
-        crowd = people_of() if people_of is not None else None
-        people_l: list[FloatArray] = []
-        events: list[tuple[int, float, str, str]] = []
+        recorder = RunRecorder(
+            state.seen.seen_before(obstacles.object_ids, places),
+            lambda pose: self._person_clearance_m(pose, radius_m),
+            people_of,
+        )
+        cfg = self.config
         max_steps = int(round(cfg.max_run_s / self.dt_s)) if cfg.max_run_s is not None else None
-        lockstep = None
         limit = max_steps if max_steps is not None else getattr(self.u, "max_episode_steps", 0)
+        last_of_day = i + 1 == len(self.slots) or self.slots[i + 1].day != slot.day
+        lockstep = None
         if steer is not None:
             lockstep = LocalizerRun(steer[0], steer[1], prior, capacity=int(limit) + 1)
-        last_of_day = i + 1 == len(self.slots) or self.slots[i + 1].day != slot.day
         if bench is not None:
             bench.begin(RunHeader(i, prior, last_of_day), int(limit) + 1)
-        sent = 0  # scans handed to the bench
-        estimate = None
-        t_l: list[float] = []
-        odom_l: list[FloatArray] = []
-        scan_l: list[NDArray[np.float32]] = []
-        class_l: list[NDArray[np.int8]] = []
-        point_l: list[NDArray[np.int8]] = []
-        truth_l: list[FloatArray] = []
-        coll_l: list[bool] = []
-        terminated = truncated = False
+        return _Run(
+            index=i,
+            facts=facts,
+            obstacles=obstacles,
+            prior=prior,
+            kidnaps=kidnaps,
+            static_grid=static_grid,
+            places=places,
+            radius_m=radius_m,
+            shortest_m=self._shortest_path_m(start, static_grid, radius_m + FREE_MARGIN_M),
+            recorder=recorder,
+            lockstep=lockstep,
+            max_steps=max_steps,
+            last_of_day=last_of_day,
+        )
+
+    def _drive(
+        self,
+        run: _Run,
+        state: EngineState,
+        obs: Any,
+        info: dict[str, Any],
+        bench: StreamSink | None,
+    ) -> _Drive:
+        """The control loop: record each scan, feed the lock-stepped localizer and the pool,
+        carry out a due kidnapping, let the driver act, step the env."""
+        driver, rec, sees = state.driver, run.recorder, state.driver.sees_truth
+        out = _Drive()
         collision = False
-        step = 0
-        progress_frac = 0.0
+        estimate = None
         while True:
             truth = info["truth"]
-            pose = np.array(truth["pose"], dtype=np.float64)  # copies: the history must not
-            t_s = float(truth["time"][2])  # change if a producer reuses its arrays
-            t_l.append(t_s)
-            odom_l.append(np.array(obs["odom"], dtype=np.float64))
-            scan_l.append(np.array(obs["scan"], dtype=np.float32))
-            class_l.append(np.array(truth["beam_class"], dtype=np.int8))
-            beam_object = np.asarray(truth.get("beam_object", ()), dtype=np.int64)
-            if beam_object.shape != class_l[-1].shape:
-                beam_object = np.full(class_l[-1].shape, -1, dtype=np.int64)
-            point_l.append(seen_before_point_classes(class_l[-1], beam_object, seen_mask))
-            hit = beam_object[(beam_object >= 0) & (beam_object < n_obj)]
-            hit_objects[hit] = True
-            truth_l.append(pose)
-            coll_l.append(collision)
-            person_l.append(self._person_clearance_m(pose, radius_m))
-            if crowd is not None:
-                people_l.append(_positions(people_of(), crowd.ids))
-            if lockstep is not None:
-                estimate = lockstep.update(t_s, odom_l[-1], scan_l[-1], class_l[-1], point_l[-1])
-            progress_frac = float(info.get("route_progress", progress_frac))
-            if bench is not None and len(t_l) - sent >= CHUNK_SCANS:
-                bench.feed(_chunk(t_l, odom_l, scan_l, class_l, point_l, sent))
-                sent = len(t_l)
-            if terminated or truncated or driver.done:
+            t_s, pose = rec.record(obs, truth, collision)
+            out.t_s = t_s
+            odom, scan, classes, points = rec.last()
+            if run.lockstep is not None:
+                estimate = run.lockstep.update(t_s, odom, scan, classes, points)
+            out.progress = float(info.get("route_progress", out.progress))
+            if bench is not None and len(rec) - rec.sent >= CHUNK_SCANS:
+                bench.feed(rec.chunk())
+            if out.terminated or out.truncated or driver.done:
                 break
-            if max_steps is not None and step >= max_steps:
-                events.append((step, t_s, "time_limit", f"stopped after {cfg.max_run_s} s"))
+            if run.max_steps is not None and out.step >= run.max_steps:
+                stop = f"stopped after {self.config.max_run_s} s"
+                out.events.append((out.step, t_s, "time_limit", stop))
                 break
-            if kidnaps and kidnaps[0].step <= step:
-                kp = kidnaps.pop(0)
-                target = kp.pose if kp.pose is not None else self._random_route_pose(rng)
-                free = static_grid.nearest_free(target[:2], free_clearance_m, KIDNAP_SEARCH_M)
-                if free is None:
-                    events.append((step, t_s, "kidnap_skipped", "no free place near the target"))
-                else:
-                    new_pose = np.array([free[0], free[1], target[2]])
-                    self.u.teleport(new_pose)
-                    if sees:
-                        driver.teleported(new_pose, t_s)
-                    events.append((step, t_s, "kidnap", f"to {np.round(new_pose, 3).tolist()}"))
-                    pose = new_pose
+            if run.kidnaps and run.kidnaps[0].step <= out.step:
+                pose = self._kidnap(run, state, out, pose)
             action = driver.act(
                 StepInput(
                     t_s=t_s,
-                    odom=Odometry(pose=odom_l[-1].copy(), stamp_s=t_s),
-                    scan=Scan(ranges_m=scan_l[-1].copy(), stamp_s=t_s),
+                    odom=Odometry(pose=odom.copy(), stamp_s=t_s),
+                    scan=Scan(ranges_m=scan.copy(), stamp_s=t_s),
                     bumped=collision,
                     estimate=estimate,
                     pose=pose if sees else None,
                     people=truth["people"] if sees else None,
                 )
             )
-            obs, _, terminated, truncated, info = self.env.step(action)
+            obs, _, out.terminated, out.truncated, info = self.env.step(action)
             collision = bool(info.get("collision", False))
-            step += 1
-        events += [
-            (step, t_s, "kidnap_not_reached", f"planned at step {kp.step}") for kp in kidnaps
+            out.step += 1
+        return out
+
+    def _kidnap(self, run: _Run, state: EngineState, out: _Drive, pose: FloatArray) -> FloatArray:
+        """Carry out the next kidnapping (to free space near its target); the pose after."""
+        kp = run.kidnaps.pop(0)
+        target = kp.pose if kp.pose is not None else self._random_route_pose(state.rng)
+        free_m = run.radius_m + FREE_MARGIN_M
+        free = run.static_grid.nearest_free(target[:2], free_m, KIDNAP_SEARCH_M)
+        step, t_s = out.step, out.t_s
+        if free is None:
+            out.events.append((step, t_s, "kidnap_skipped", "no free place near the target"))
+            return pose
+        new_pose = np.array([free[0], free[1], target[2]])
+        self.u.teleport(new_pose)
+        if state.driver.sees_truth:
+            state.driver.teleported(new_pose, t_s)
+        out.events.append((step, t_s, "kidnap", f"to {np.round(new_pose, 3).tolist()}"))
+        return new_pose
+
+    def _finish(
+        self, run: _Run, state: EngineState, drive: _Drive, bench: StreamSink | None
+    ) -> Episode:
+        """End the run (driver, pool, lock-stepped localizer, seen places) and measure it."""
+        cfg, driver, rec, obstacles = self.config, state.driver, run.recorder, run.obstacles
+        events = drive.events + [
+            (drive.step, drive.t_s, "kidnap_not_reached", f"planned at step {kp.step}")
+            for kp in run.kidnaps
         ]
         driver_events, skipped = list(driver.events), driver.skipped_waypoints
         finished = driver.done
         driver_stats = dict(driver.stats())
         driver.end_run()
-        state.seen.remember(obstacles.object_ids, places, hit_objects & ~_people(obstacles))
-        truth_arr = np.asarray(truth_l, dtype=np.float64).reshape(-1, 3)
+        hit = rec.hit_objects & ~_people(obstacles)
+        state.seen.remember(obstacles.object_ids, run.places, hit)
+        truth = rec.truth_array()
         static_circles = obstacles.circles[obstacles.circle_class != BeamClass.PERSON]
+        person = np.asarray(rec.person_clearance_m, dtype=np.float64)
         clearance = np.minimum(
-            clearances(truth_arr[:, :2], radius_m, obstacles.segments, static_circles),
-            np.asarray(person_l),
+            clearances(truth[:, :2], run.radius_m, obstacles.segments, static_circles), person
         )
-        end_m = float(np.hypot(*(truth_arr[-1, :2] - cfg.route[-1])))
+        end_m = float(np.hypot(*(truth[-1, :2] - cfg.route[-1])))
         # the env measures progress along the world's whole route; the driven route may be
         # its leading part (route_fraction)
-        share = path_length_m(cfg.route) / max(path_length_m(facts.route), 1e-12)
-        progress_on_route = min(1.0, progress_frac / max(share, 1e-12))
+        share = path_length_m(cfg.route) / max(path_length_m(run.facts.route), 1e-12)
+        progress_on_route = min(1.0, drive.progress / max(share, 1e-12))
         if bench is not None:
-            if len(t_l) > sent:
-                bench.feed(_chunk(t_l, odom_l, scan_l, class_l, point_l, sent))
+            if len(rec) > rec.sent:
+                bench.feed(rec.chunk())
             bench.end()
-        steered = lockstep.finish(last_of_day) if lockstep is not None else None
-        stream = RunStream(
-            index=i,
-            prior=prior,
-            stamps_s=np.asarray(t_l, dtype=np.float64),
-            odom=np.asarray(odom_l, dtype=np.float64).reshape(-1, 3),
-            scans=np.asarray(scan_l, dtype=np.float32).reshape(len(t_l), -1),
-            beam_class=np.asarray(class_l, dtype=np.int8).reshape(len(t_l), -1),
-            last_of_day=last_of_day,
-            point_truth=np.asarray(point_l, dtype=np.int8).reshape(len(t_l), -1),
-        )
+        steered = run.lockstep.finish(run.last_of_day) if run.lockstep is not None else None
         return Episode(
-            index=i,
-            stream=stream,
-            truth=truth_arr,
-            collision=np.asarray(coll_l, dtype=bool),
+            index=run.index,
+            stream=rec.stream(run.index, run.prior, run.last_of_day),
+            truth=truth,
+            collision=np.asarray(rec.collision, dtype=bool),
             events=sorted(events + driver_events, key=lambda e: e[0]),
-            terminated=bool(terminated or finished),
-            route_progress=progress_frac,
+            terminated=bool(drive.terminated or finished),
+            route_progress=drive.progress,
             skipped_waypoints=skipped,
             segments=np.array(obstacles.segments, dtype=np.float64),
             segment_class=np.array(obstacles.segment_class, dtype=np.int8),
             steered=steered,
             clearance_m=clearance,
-            person_clearance_m=np.asarray(person_l, dtype=np.float64),
+            person_clearance_m=person,
             goal_reached=goal_reached(
-                bool(terminated), progress_on_route, end_m, truth_arr, cfg.route
+                bool(drive.terminated), progress_on_route, end_m, truth, cfg.route
             ),
-            shortest_path_m=shortest_m,
+            shortest_path_m=run.shortest_m,
             driver_stats=driver_stats,
             driver_artifacts=dict(driver.run_artifacts()),
-            people=(
-                PeopleTrack(
-                    crowd.ids,
-                    np.array(crowd.radius, dtype=np.float64),
-                    np.asarray(people_l, dtype=np.float64).reshape(len(t_l), len(crowd.ids), 2),
-                )
-                if crowd is not None
-                else None
-            ),
+            people=rec.people_track(),
         )
 
     def _shortest_path_m(self, start: FloatArray, grid: ClearanceGrid, clearance_m: float) -> float:

@@ -49,7 +49,7 @@ from dynmap_sim import se2
 from dynmap_sim.agent.grid import OccupancyGrid
 from dynmap_sim.agent.localizer import Localizer, MapUser, ScanMapUser, make_localizer
 from dynmap_sim.errors import InputError
-from dynmap_sim.experiments.bench import DiagnosticsRecorder, LocalizerRun
+from dynmap_sim.experiments.localizer_pool import DiagnosticsRecorder, LocalizerRun
 from dynmap_sim.experiments.reference import (
     REFERENCE_TOLERANCE_S,
     ReferenceMatch,

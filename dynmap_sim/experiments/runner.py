@@ -3,7 +3,7 @@
 For every run of the chosen days: ``env.reset(seed, day, run)``, build the :class:`Prior`, let
 the driver drive (it follows the true pose) and record the run's (odometry, scan) stream; the
 *same* stream feeds every localizer, in chunks as it is recorded: ``begin_run``, ``update``
-per scan, ``end_run``, and ``end_day`` after the day's last run (:mod:`.bench`). With
+per scan, ``end_run``, and ``end_day`` after the day's last run (:mod:`.localizer_pool`). With
 ``workers > 1`` the localizers work in worker processes on run ``i`` as this process
 simulates it (and may still be on runs ``i - 2`` and ``i - 1``); the numbers are the same as
 with ``workers=1`` (all in this process).
@@ -21,6 +21,7 @@ import dataclasses
 import hashlib
 import os
 import pickle
+import sys
 import time
 from collections import deque
 from pathlib import Path
@@ -32,14 +33,14 @@ from dynmap_sim.agent.localizer import Localizer, make_localizer
 from dynmap_sim.env_factory import SimSpecError
 from dynmap_sim.env_factory import make_env as build_env
 from dynmap_sim.errors import InputError
-from dynmap_sim.experiments.bench import (
+from dynmap_sim.experiments.drivers import DriverContext, clip_route, make_driver
+from dynmap_sim.experiments.episode import EngineState, Episode, EpisodeLoop, LoopConfig
+from dynmap_sim.experiments.localizer_pool import (
     InProcessLocalizers,
     LocalizerOutput,
     LocalizerPool,
     pickle_localizer,
 )
-from dynmap_sim.experiments.drivers import DriverContext, clip_route, make_driver
-from dynmap_sim.experiments.episode import EngineState, Episode, EpisodeLoop, LoopConfig
 from dynmap_sim.experiments.results import Checkpoint, ResultsDB, RunRecord
 from dynmap_sim.experiments.scenario import Scenario
 from dynmap_sim.metrics import NavRunSummary, RunSummary, nav_run_summary, run_summary
@@ -79,8 +80,8 @@ def localizer_seeds(seed: int, n: int) -> list[np.random.Generator]:
 
 
 #: Experiments with at most this much robot time [s] (known from ``driver.max_run_s``) run
-#: their localizers in-process: starting worker processes (about 0.7 s) costs more than it
-#: saves (ci-apartment-mcl, 2 runs of 20 s: 1.8 s in-process, 2.5 s with 2 workers).
+#: their localizers in-process: starting worker processes costs more than it saves
+#: (docs/tuning/store.md).
 SMALL_EXPERIMENT_S = 120.0
 
 
@@ -96,15 +97,76 @@ def default_workers(
     driver runs in lock-step in the main process) are exactly one more than that count, each
     gets its own worker: sharing would make the pool move localizers between workers after
     the first runs' timings, which waits for every run in flight (the simulation stalls).
-    Measured on the H&W replica (three localizers riding along, two cores): 4:20 / 4:18 wall
-    with 2 workers, 3:43 with 3. Not beyond one extra: the main job (four riding along) took
-    84.5 s with 2 workers and 94.4 s with 4 (each worker's start-up and its copy of the
-    stream)."""
+    Not beyond one extra: each worker's start-up and its copy of the stream then cost more
+    than sharing (docs/tuning/store.md)."""
     if n_localizers < 2 or (robot_time_s is not None and robot_time_s <= SMALL_EXPERIMENT_S):
         return 1
     base = max(1, min(2, os.cpu_count() or 1, n_localizers))
     n_bench = n_localizers - n_steered
     return n_bench if base >= 2 and n_bench == base + 1 else base  # one worker: no moves
+
+
+#: What the size estimate takes a scan to cost [ms of CPU] on a 2-core machine: the
+#: simulation, and each localizer but dead reckoning (docs/tuning/store.md says where the
+#: figures come from). Rough: the estimate says what to expect within a factor of two or
+#: so, not a timing.
+SIM_MS_PER_SCAN = 2.5
+LOCALIZER_MS_PER_SCAN = 1.5
+#: Localizers whose update costs next to nothing.
+CHEAP_LOCALIZERS = ("odometry",)
+
+
+@dataclasses.dataclass(frozen=True)
+class ExperimentSize:
+    """How big an experiment is: ``runs``, ``robot_s`` of robot time [s] (each run until its
+    route ends at the driver's speed, or ``max_run_s``) and an estimated ``wall_s`` [s]."""
+
+    runs: int
+    robot_s: float
+    wall_s: float
+
+    def describe(self) -> str:
+        return (
+            f"{self.runs} run{'s' * (self.runs != 1)}, {_duration(self.robot_s)} of robot "
+            f"time, roughly {_duration(self.wall_s)} of wall time"
+        )
+
+
+def experiment_size(
+    scenario: Scenario, n_runs: int, route: np.ndarray, scan_period_s: float
+) -> ExperimentSize:
+    """The size of ``n_runs`` runs of ``scenario`` along ``route`` ``(N, 2)`` [m] (the driven
+    part), scanned every ``scan_period_s`` [s]."""
+    d = scenario.driver
+    run_s = float(np.sum(np.hypot(*np.diff(route, axis=0).T))) / d.speed_mps
+    if d.max_run_s is not None:
+        run_s = min(run_s, float(d.max_run_s))
+    robot_s = n_runs * run_s
+    heavy = sum(1 for loc in scenario.localizers if loc.name not in CHEAP_LOCALIZERS)
+    ms = SIM_MS_PER_SCAN + LOCALIZER_MS_PER_SCAN * heavy
+    return ExperimentSize(n_runs, robot_s, robot_s / scan_period_s * ms / 1e3)
+
+
+def scenario_size(scenario: Scenario, days: tuple[int, int] | None = None) -> ExperimentSize:
+    """:func:`experiment_size` of ``scenario`` (its days, or ``days``), from its env."""
+    env = make_env(scenario)
+    try:
+        u = env.unwrapped
+        facts = u.world_facts()
+        lo, hi = days if days is not None else scenario.days
+        n = sum(1 for s in facts.slots if lo <= s.day <= hi)
+        route = clip_route(np.asarray(facts.route, float), scenario.driver.route_fraction)
+        return experiment_size(scenario, n, route, float(u.laser_spec.scan_period_s))
+    finally:
+        env.close()
+
+
+def _duration(s: float) -> str:
+    if s < 120:
+        return f"{s:.0f} s"
+    if s < 7200:
+        return f"{s / 60:.0f} min"
+    return f"{s / 3600:.1f} h"
 
 
 class ExperimentRunner:
@@ -162,6 +224,10 @@ class ExperimentRunner:
             workers = default_workers(len(scenario.localizers), robot_s, steered)
         self.workers = int(workers)
         self.hash = experiment_hash(scenario, self.seed, days)
+        #: the experiment's size (the runs still to do are from :attr:`start_index` on)
+        self.size = experiment_size(
+            scenario, len(self.slots), self.route, float(self.laser.scan_period_s)
+        )
         self.start_index = 0
         state: EngineState | None = None
         #: the localizers pickled after the last stored run (None: fresh, in _fresh_locs)
@@ -182,12 +248,13 @@ class ExperimentRunner:
                 self.db.close()
                 raise
         else:
-            self.db = ResultsDB.create(out_dir, overwrite=overwrite)  # locks the folder
-            try:
-                self._write_meta()
-            except BaseException:
-                self.db.close()
-                raise
+            sc = scenario
+            self.db = ResultsDB.create(  # locks the folder
+                out_dir,
+                overwrite=overwrite,
+                meta=self._meta(),
+                localizers=[(loc.display, loc.name, dict(loc.params)) for loc in sc.localizers],
+            )
         self.loop.keep_people = self.keep_scans  # the people's tracks go with the ranges
         try:
             self.state = state if state is not None else self._fresh_state()
@@ -248,9 +315,10 @@ class ExperimentRunner:
             )
 
     # ------------------------------------------------------------------ setup
-    def _write_meta(self) -> None:
+    def _meta(self) -> dict[str, Any]:
+        """The experiment's metadata (``meta`` of its results store)."""
         sc = self.scenario
-        self.db.set_meta(
+        return dict(
             scenario=sc.model_dump(mode="json"),
             scenario_path=str(sc.source_path) if sc.source_path else None,
             scenario_name=sc.name,
@@ -268,7 +336,6 @@ class ExperimentRunner:
             keep_scans=self.keep_scans,
             complete=False,
         )
-        self.db.set_localizers([(loc.display, loc.name, dict(loc.params)) for loc in sc.localizers])
 
     def _fresh_state(self) -> EngineState:
         sc = self.scenario
@@ -350,6 +417,9 @@ class ExperimentRunner:
 
         n = len(self.slots)
         last = n if stop_after is None else min(n, stop_after)
+        if progress:  # the size first: a calendar of many runs can take hours
+            todo = f" ({n - self.start_index} to do)" if self.start_index else ""
+            print(f"{self.scenario.name}: {self.size.describe()}{todo}", file=sys.stderr)
         bar = Bar(
             total=n,
             initial=self.start_index,

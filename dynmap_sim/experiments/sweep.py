@@ -56,7 +56,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from dynmap_sim.errors import FileError, InputError, pydantic_errors, read_toml
-from dynmap_sim.experiments.bench import WORKER_THREAD_ENV
+from dynmap_sim.experiments.localizer_pool import WORKER_THREAD_ENV
 from dynmap_sim.experiments.results import DB_NAME, FolderLock, ResultsDB
 from dynmap_sim.experiments.runner import experiment_hash, run_experiment
 from dynmap_sim.experiments.scenario import (

@@ -12,7 +12,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 
 from dynmap_sim.analysis.report import write_report  # noqa: E402
-from dynmap_sim.experiments.bench import LocalizerError  # noqa: E402
+from dynmap_sim.experiments.localizer_pool import LocalizerError  # noqa: E402
 from dynmap_sim.experiments.results import ResultsDB  # noqa: E402
 from dynmap_sim.experiments.runner import run_experiment  # noqa: E402
 from dynmap_sim.experiments.scenario import parse_scenario  # noqa: E402

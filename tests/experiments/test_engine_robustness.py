@@ -20,8 +20,9 @@ from test_workers import run, scenario, tables  # noqa: E402
 from dynmap_sim.cli import main  # noqa: E402
 from dynmap_sim.errors import InputError  # noqa: E402
 from dynmap_sim.experiments import results as results_mod  # noqa: E402
-from dynmap_sim.experiments.bench import LocalizerContractError  # noqa: E402
+from dynmap_sim.experiments.localizer_pool import LocalizerContractError  # noqa: E402
 from dynmap_sim.experiments.results import DiskFullError, ResultsDB  # noqa: E402
+from dynmap_sim.experiments.results.checkpoints import CheckpointStore  # noqa: E402
 from dynmap_sim.experiments.runner import ExperimentRunner  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -95,9 +96,11 @@ def test_an_edited_next_index_is_refused_as_corrupt(tmp_path, value):
     con.close()
     with pytest.raises(InputError, match="checkpoint is corrupt"):
         runner(scn, out, resume=True)
-    # the refused resume let go of the folder
+    # the refused resume let go of the folder (whose checkpoint a reader refuses too)
     runner(scn, out.parent / "other").db.close()
-    ResultsDB.open(out, lock=True).close()
+    ResultsDB.open(out, lock=True, verify=False).close()
+    with pytest.raises(InputError, match="checkpoint is corrupt"):
+        ResultsDB.open(out)
 
 
 def test_every_checkpoint_field_is_covered_by_the_checksum(tmp_path):
@@ -174,13 +177,13 @@ def test_a_full_disk_keeps_the_finished_runs_and_leaves_no_tmp_files(tmp_path, m
     con.close()
     assert sorted(p.name for p in (out / "checkpoint").iterdir()) == ["loc0-1.pkl", "loc1-1.pkl"]
     # SQLite's own "database or disk is full"
-    real_put = ResultsDB._put_checkpoint
+    real_put = CheckpointStore.put
 
     def full_db(self, *a):
         real_put(self, *a)
         raise sqlite3.OperationalError("database or disk is full")
 
-    monkeypatch.setattr(ResultsDB, "_put_checkpoint", full_db)
+    monkeypatch.setattr(CheckpointStore, "put", full_db)
     with pytest.raises(DiskFullError):
         run(scn, out, workers=1, resume=True)
     monkeypatch.undo()
@@ -194,13 +197,16 @@ def test_a_full_disk_keeps_the_finished_runs_and_leaves_no_tmp_files(tmp_path, m
 def test_the_cli_says_the_disk_is_full_in_one_line(tmp_path, monkeypatch, capsys):
     path = ROOT / "worlds" / "scenarios" / "ci-apartment.toml"
     out = tmp_path / "o"
-    monkeypatch.setattr(results_mod.ResultsDB, "_write_localizer_files", _full)
+    monkeypatch.setattr(CheckpointStore, "write_localizer_files", _full)
     assert main(["run", str(path), "--out", str(out), "-q"]) == 1
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "Traceback" not in err
     assert err.startswith("error: the disk is full")
-    assert f"the runs finished so far are kept in {out}" in err and "--resume" in err
+    # the first run failed: the message says so (not "the runs finished so far are kept")
+    assert f"no run had finished; {out} holds the experiment's store" in err and "--resume" in err
     monkeypatch.undo()
+    assert main(["run", str(path), "--out", str(out), "-q"]) == 0  # it starts afresh
+    capsys.readouterr()
     # the report: said clearly too
     assert main(["run", str(path), "--out", str(tmp_path / "r"), "-q"]) == 0
     capsys.readouterr()

@@ -54,10 +54,11 @@ def record(day, run, n=20, n_loc=2, offset=0.1):
 
 
 def make_db(tmp_path):
-    db = ResultsDB.create(tmp_path)
-    db.set_meta(first_date="2026-01-05", days=[1, 1])
-    db.set_localizers([("a", "odometry", {}), ("b", "odometry", {"var_per_m": 0.1})])
-    return db
+    return ResultsDB.create(
+        tmp_path,
+        meta={"first_date": "2026-01-05", "days": [1, 1], "seed": 7, "experiment_hash": "h"},
+        localizers=[("a", "odometry", {}), ("b", "odometry", {"var_per_m": 0.1})],
+    )
 
 
 def test_write_run_rows_summaries_and_checkpoint(tmp_path):
@@ -99,6 +100,9 @@ def test_mismatched_or_corrupt_checkpoint_is_refused(tmp_path):
 
 def test_existing_results_are_not_clobbered_and_garbage_is_refused(tmp_path):
     make_db(tmp_path).close()
+    make_db(tmp_path).close()  # a store without a finished run holds nothing to lose
+    with make_db(tmp_path) as db:
+        db.write_run(record(1, 1), [], True, None, "h", 7)
     with pytest.raises(InputError, match="already holds results"):
         ResultsDB.create(tmp_path)
     ResultsDB.create(tmp_path, overwrite=True).close()
@@ -240,7 +244,7 @@ def test_a_newer_format_is_refused(tmp_path):
 
 
 def test_declarations_are_checked_where_they_are_made():
-    from dynmap_sim.experiments.bench import DiagnosticsRecorder
+    from dynmap_sim.experiments.localizer_pool import DiagnosticsRecorder
 
     with pytest.raises(ValueError, match="lower case"):
         Diagnostic("Scan Loglik", "float64")
@@ -266,3 +270,15 @@ def test_declarations_are_checked_where_they_are_made():
     assert rec.out.per_run["timescale_counts"].tolist() == [1, 0, 0, 0, 2]
     with pytest.raises(ValueError, match="'path_m' is not a declared per-run value"):
         rec.end_run(Undeclared())
+
+
+def test_results_of_format_3_are_read_but_not_continued(tmp_path):
+    """Format 3 (before the checksums) is read without them and refused for a resume."""
+    with make_db(tmp_path) as db:
+        db.write_run(record(1, 1), [], True, Checkpoint(1, 1, 2, {}), "h", 7)
+        db.con.execute("DROP TABLE digests")
+        db.set_meta(results_format=3)
+    with ResultsDB.open(tmp_path) as db:
+        assert db.format == 3 and len(db.per_scan(0)["err_m"]) == 20
+        with pytest.raises(InputError, match="format 3 .*before the checksums.* not continued"):
+            db.load_checkpoint("h", 7)

@@ -233,3 +233,43 @@ def test_declared_diagnostics_reach_the_store(tmp_path, workers):
         notes = db.artifacts(0, "day_note")
         assert [(day, a["updates"].tolist()) for day, a in notes] == [(1, [51]), (2, [51])]
         assert db.declared(1) == () and "map_slot" not in db.per_scan(1)
+
+
+@pytest.mark.parametrize(
+    ("localizers", "max_run_s", "robot_s", "wall_s"),
+    [
+        (["odometry"], None, 60.0, 600 * 2.5e-3),  # 10 m at 0.5 m/s: 20 s a run
+        (["odometry", "static-mcl", "dynamic-map"], None, 60.0, 600 * 5.5e-3),
+        (["odometry"], 5.0, 15.0, 150 * 2.5e-3),  # stopped by max_run_s
+    ],
+)
+def test_the_experiments_size_is_its_runs_robot_time_and_an_estimate(
+    tmp_path, localizers, max_run_s, robot_s, wall_s
+):
+    from dynmap_sim.experiments.runner import experiment_size
+
+    scn = parse_scenario(
+        {
+            "name": "size",
+            "days": [1, 3],
+            "world": str(ROOT / "worlds" / "apartment.toml"),
+            "driver": {"speed_mps": 0.5, "max_run_s": max_run_s},
+            "localizers": [{"name": n, "label": f"l{k}"} for k, n in enumerate(localizers)],
+        },
+        tmp_path / "s.toml",
+    )
+    route = np.array([[0.0, 0.0], [6.0, 0.0], [6.0, 4.0]])
+    size = experiment_size(scn, 3, route, 0.1)
+    assert (size.runs, size.robot_s) == (3, pytest.approx(robot_s))
+    assert size.wall_s == pytest.approx(wall_s)
+
+
+def test_validate_and_run_state_the_experiments_size(tmp_path, capsys):
+    from dynmap_sim.cli import main
+
+    path = ROOT / "worlds" / "scenarios" / "ci-apartment.toml"
+    assert main(["validate", str(path)]) == 0
+    assert f"{path}: OK (3 runs, 60 s of robot time, roughly " in capsys.readouterr().out
+    assert main(["run", str(path), "--out", str(tmp_path / "o")]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith("ci-apartment: 3 runs, 60 s of robot time, roughly ")

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dynmap_sim.experiments.bench import RunStream, localize_run
+from dynmap_sim.experiments.localizer_pool import RunStream, localize_run
 from dynmap_sim.types import Prior
 
 sys.path.insert(0, str(Path(__file__).parent))

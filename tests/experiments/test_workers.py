@@ -15,7 +15,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from fake_env import FakeEnv  # noqa: E402
 
 from dynmap_sim.errors import InputError  # noqa: E402
-from dynmap_sim.experiments.bench import LocalizerError  # noqa: E402
+from dynmap_sim.experiments.localizer_pool import LocalizerError  # noqa: E402
 from dynmap_sim.experiments.runner import ExperimentRunner, default_workers  # noqa: E402
 from dynmap_sim.experiments.scenario import parse_scenario  # noqa: E402
 
@@ -140,7 +140,7 @@ def test_an_unpicklable_localizer_is_named_before_any_worker_starts(tmp_path):
 def test_the_pool_does_not_wait_for_its_workers_and_reports_a_failed_start(tmp_path):
     """The workers start (imports, the localizers' states) while the first run is simulated;
     a worker that cannot take its localizers is reported, by name, at the first result."""
-    from dynmap_sim.experiments.bench import LocalizerPool
+    from dynmap_sim.experiments.localizer_pool import LocalizerPool
 
     scn = scenario(tmp_path, days=[1, 1])
     r = ExperimentRunner(scn, tmp_path / "o", scn.days, 0, resume=False, env=FakeEnv())
@@ -159,7 +159,7 @@ def test_the_pool_does_not_wait_for_its_workers_and_reports_a_failed_start(tmp_p
 
 
 def test_rebalancing_moves_localizers_and_keeps_the_numbers(tmp_path):
-    from dynmap_sim.experiments.bench import LocalizerPool
+    from dynmap_sim.experiments.localizer_pool import LocalizerPool
 
     scn = scenario(tmp_path)
     r = ExperimentRunner(scn, tmp_path / "o", scn.days, 0, resume=False, env=FakeEnv())
@@ -198,7 +198,7 @@ def test_three_runs_in_flight_and_a_rebalance_between_keep_the_numbers(tmp_path)
     """The pool takes further runs before the first is collected (LocalizerPool.depth); a
     rebalance then collects the runs in flight first and moves the localizers' states after
     them: the outputs are the in-process ones, in order."""
-    from dynmap_sim.experiments.bench import LocalizerPool
+    from dynmap_sim.experiments.localizer_pool import LocalizerPool
 
     scn = scenario(tmp_path, days=[1, 4])
     r = ExperimentRunner(scn, tmp_path / "o", scn.days, 0, resume=False, env=FakeEnv())
@@ -234,7 +234,7 @@ def test_three_runs_in_flight_and_a_rebalance_between_keep_the_numbers(tmp_path)
 def test_light_workers_yield_the_cpu_once_and_only_with_one_localizer_each(tmp_path):
     """A worker whose localizer took under LIGHT_WORKER_SHARE of the busiest one's time gets
     LIGHT_WORKER_NICE; the busiest keeps its priority; workers sharing localizers never."""
-    from dynmap_sim.experiments.bench import LIGHT_WORKER_NICE, LocalizerPool
+    from dynmap_sim.experiments.localizer_pool import LIGHT_WORKER_NICE, LocalizerPool
 
     scn = scenario(tmp_path)
     fresh = ExperimentRunner(scn, tmp_path / "o", scn.days, 0, resume=False, env=FakeEnv())

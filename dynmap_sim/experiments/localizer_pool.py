@@ -67,7 +67,7 @@ LIGHT_WORKER_NICE = 10
 
 #: Native thread pools in a worker: one thread each, unless the environment says otherwise.
 #: The worker processes are the parallelism; OpenBLAS's own threads in every worker would
-#: oversubscribe the cores (measured: the lab localizers ran ~1.4x slower that way).
+#: oversubscribe the cores (the lab localizers ran slower that way: docs/tuning/store.md).
 WORKER_THREAD_ENV = {
     "OPENBLAS_NUM_THREADS": "1",
     "OMP_NUM_THREADS": "1",
@@ -840,10 +840,8 @@ class LocalizerPool:
         heaviest localizer (the experiment's critical path) falls behind while light ones
         finish early and leave a core idle at the end. Niced, the light ones take what the
         simulation and the heavy worker leave (the simulation waits for runs in flight, the
-        worker for scans), and the pool's depth bounds how far they lag. On the H&W replica
-        (main process, three workers, two cores) the heaviest worker used to finish 15 s
-        after the others with one core idle; niced, 5 s (measured together with other speed
-        work, not alone). Only the schedule changes, never a number; ignored where the
+        worker for scans), and the pool's depth bounds how far they lag
+        (docs/tuning/store.md). Only the schedule changes, never a number; ignored where the
         platform has no ``setpriority`` or refuses it."""
         setpriority = getattr(os, "setpriority", None)
         if setpriority is None or len(self.workers) < 2:
