@@ -41,7 +41,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from dynmap_sim.agent.navigation.route_numba import locate_segment, numba_available
+from dynmap_sim.jit import compiled
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
@@ -119,8 +119,8 @@ class RouteMemoryParams:
     pass_tolerance_m: float = 0.2
     #: §5.1 places the robot on the segment at minimal lateral distance. Where a route passes
     #: a place twice (into a room and back out the same doorway) that is ambiguous, and the
-    #: position flipped to the other pass, so the robot drove the room's loop again and again
-    #: (office floor, day 1: six times round office A). So the tracked route's segments within
+    #: position can flip to the other pass, sending the robot round the room's loop again
+    #: (docs/tuning/navigation.md). So the tracked route's segments within
     #: this arc length [m] of the last tracked position (either way) are preferred: the
     #: nearest of them wins unless another segment is ``continuity_m`` nearer. 2 m is far
     #: more than a robot drives between two scans, far less than a room's loop.
@@ -298,6 +298,58 @@ def _project(p: FloatArray, a: FloatArray, b: FloatArray) -> tuple[FloatArray, .
     return u, proj, np.hypot(*(p - proj).T)
 
 
+class SegmentArrays(NamedTuple):
+    """Every segment of every route for :func:`locate_segment`: starts and ends ``(S, 2)``
+    [m], route ids ``(S,)``, the start's arc length on its route ``(S,)`` [m] and the
+    lengths ``(S,)`` [m]."""
+
+    a: FloatArray
+    b: FloatArray
+    rid: IntArray
+    s0: FloatArray
+    length: FloatArray
+
+
+@compiled
+def locate_segment(  # type: ignore[no-untyped-def]
+    px, py, segs, prefer_route, prefer_along_m, use_prefer, use_along, window_m, continuity_m
+):
+    """:meth:`RouteMemory.locate`'s search over ``segs`` (:class:`SegmentArrays`) for the
+    point ``(px, py)`` [m]: the index ``k`` of the segment picked, its clamped fraction ``u``,
+    distance [m] and projection ``(qx, qy)`` [m]; ``k = -1`` without segments. With
+    ``use_prefer`` route ``prefer_route``'s nearest segment wins a tie; with ``use_along``
+    its segments within ``window_m`` of ``prefer_along_m`` along it win unless another is
+    ``continuity_m`` [m] nearer. The first of equal minima wins."""
+    a, b, rid, s0, seg_len = segs
+    k, k2, k3 = -1, -1, -1
+    best, best2, best3 = 0.0, 0.0, 0.0
+    u_k, u_k2, u_k3 = 0.0, 0.0, 0.0
+    for i in range(a.shape[0]):
+        ax, ay = a[i, 0], a[i, 1]
+        dx, dy = b[i, 0] - ax, b[i, 1] - ay
+        len2 = dx * dx + dy * dy
+        t = ((px - ax) * dx + (py - ay) * dy) / (len2 if len2 > 1e-18 else 1e-18)
+        u = t if t > 0.0 else 0.0  # numpy's clip: max(t, 0), then min(., 1)
+        u = u if u < 1.0 else 1.0
+        dist = np.hypot(px - (ax + u * dx), py - (ay + u * dy))
+        if k < 0 or dist < best:
+            k, best, u_k = i, dist, u
+        if use_prefer and rid[i] == prefer_route:
+            if k2 < 0 or dist < best2:
+                k2, best2, u_k2 = i, dist, u
+            if use_along and abs(s0[i] + u * seg_len[i] - prefer_along_m) <= window_m:
+                if k3 < 0 or dist < best3:
+                    k3, best3, u_k3 = i, dist, u
+    if k2 >= 0 and best2 <= best + 1e-9:
+        k, best, u_k = k2, best2, u_k2
+    if k3 >= 0 and best3 <= best + continuity_m:
+        k, best, u_k = k3, best3, u_k3
+    if k < 0:
+        return -1, 0.0, 0.0, 0.0, 0.0
+    ax, ay = a[k, 0], a[k, 1]
+    return k, u_k, best, ax + u_k * (b[k, 0] - ax), ay + u_k * (b[k, 1] - ay)
+
+
 @dataclass
 class _Track:
     """Short-term state on one route: the last arc length [m] and time [s] on it."""
@@ -349,6 +401,8 @@ class _Segments:
     cum_list: dict[int, list[float]]
     #: per segment: ``(rid, seg, from, to, ax, ay, bx, by, s0, length, l)`` as Python numbers
     rows: list[tuple[Any, ...]]
+    #: the arrays :func:`locate_segment` searches
+    arrays: SegmentArrays
 
 
 class RouteMemory:
@@ -359,13 +413,8 @@ class RouteMemory:
     :meth:`forget` at each long-term update (e.g. the end of a run), :meth:`graph` to plan.
     """
 
-    def __init__(self, params: RouteMemoryParams | None = None, backend: str = "auto") -> None:
-        if backend not in ("auto", "numba", "numpy"):
-            raise ValueError(f"backend must be auto, numba or numpy, got {backend!r}")
+    def __init__(self, params: RouteMemoryParams | None = None) -> None:
         self.params = params or RouteMemoryParams()
-        #: :meth:`locate`'s search: "auto" the numba kernel of :mod:`.route_numba` when numba
-        #: is installed (the same numbers), "numpy" the vectorized numpy code
-        self.backend = backend
         self.routes: dict[int, Route] = {}
         #: Blocked edges ``(from_id, to_id)``: infinite cost until seen free (§6.3).
         self.blocked: set[tuple[int, int]] = set()
@@ -481,7 +530,9 @@ class RouteMemory:
                 cum=cum,
                 cum_list={k: c.tolist() for k, c in cum.items()},
                 rows=[],
+                arrays=SegmentArrays(aa, bb, np.zeros(0, np.int64), np.zeros(0), np.zeros(0)),
             )
+            sg.arrays = SegmentArrays(aa, bb, sg.rid, sg.s0, sg.length)
             cols = (sg.rid, sg.seg, sg.fr, sg.to, aa[:, 0], aa[:, 1], bb[:, 0], bb[:, 1])
             sg.rows = list(zip(*(c.tolist() for c in (*cols, sg.s0, sg.length, sg.l)), strict=True))
             self._segs = sg
@@ -509,58 +560,29 @@ class RouteMemory:
     def _locate_xy(
         self, px: float, py: float, prefer_route: int | None, prefer_along_m: float | None
     ) -> RoutePosition | None:
-        """:meth:`locate` at ``(px, py)`` [m]."""
+        """:meth:`locate` at ``(px, py)`` [m] (None at a non-finite one)."""
         s = self._segments()
         if not s.rows:
             return None
-        if self.backend != "numpy" and numba_available() and math.isfinite(px + py):
-            k, u_k, dist_k, qx, qy = locate_segment(
-                px,
-                py,
-                s.a,
-                s.b,
-                s.rid,
-                s.s0,
-                s.length,
-                prefer_route,
-                prefer_along_m,
-                self.params.continuity_window_m,
-                self.params.continuity_m,
-            )
-        else:
-            p = np.array([px, py])
-            k, u_k, dist_k, qx, qy = self._locate_numpy(p, s, prefer_route, prefer_along_m)
+        if not math.isfinite(px + py):
+            return None
+        k, u_k, dist_k, qx, qy = locate_segment(
+            px,
+            py,
+            s.arrays,
+            -1 if prefer_route is None else prefer_route,
+            0.0 if prefer_along_m is None else prefer_along_m,
+            prefer_route is not None,
+            prefer_along_m is not None,
+            self.params.continuity_window_m,
+            self.params.continuity_m,
+        )
         rid, seg, fr, to, ax, ay, bx, by, s0, length, hw = s.rows[k]
         lateral = ((bx - ax) * (py - ay) - (by - ay) * (px - ax)) / length if length > 0 else 0.0
         # RoutePosition's fields in order (positional: this runs every step)
         return RoutePosition(
             rid, seg, fr, to, u_k, s0 + u_k * length, dist_k, lateral, hw, dist_k <= hw, (qx, qy)
         )
-
-    def _locate_numpy(
-        self,
-        p: FloatArray,
-        s: _Segments,
-        prefer_route: int | None,
-        prefer_along_m: float | None,
-    ) -> tuple[int, float, float, float, float]:
-        """:meth:`locate`'s search vectorized: ``(k, u, distance, qx, qy)`` of the segment."""
-        u, proj, dist = _project(p, s.a, s.b)
-        k = int(np.argmin(dist))
-        if prefer_route is not None:
-            mine = np.flatnonzero(s.rid == prefer_route)
-            if mine.size:
-                k2 = int(mine[np.argmin(dist[mine])])
-                if dist[k2] <= dist[k] + 1e-9:
-                    k = k2
-                if prefer_along_m is not None:
-                    along = s.s0[mine] + u[mine] * s.length[mine]
-                    cont = mine[np.abs(along - prefer_along_m) <= self.params.continuity_window_m]
-                    if cont.size:
-                        k3 = int(cont[np.argmin(dist[cont])])
-                        if dist[k3] <= dist[k] + self.params.continuity_m:
-                            k = k3
-        return k, float(u[k]), float(dist[k]), float(proj[k][0]), float(proj[k][1])
 
     # ------------------------------------------------------------------ §5.2 learning
     def reset_run(self) -> None:
@@ -1097,11 +1119,8 @@ class RouteMemory:
 
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
-        self.__dict__.setdefault("backend", "auto")  # pickled before there was a choice
-        self._segs = None  # caches (older pickles held the segments' dict form)
+        self._segs = None  # caches
         self._graph = None
-        if any(isinstance(acc, np.ndarray) for acc in self._pending.values()):
-            self._pending = {k: [float(x) for x in acc] for k, acc in self._pending.items()}
 
 
 def _reaching(g: RouteGraph, target: int) -> set[int]:

@@ -76,12 +76,12 @@ from dynmap_sim.agent.navigation.route_memory import (
     RouteMemoryParams,
     RoutePosition,
 )
-from dynmap_sim.agent.navigation.route_numba import cut_probe, numba_available
 from dynmap_sim.agent.params import config_from_params
 from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
 from dynmap_sim.agent.planning.costmap import Costmap, CostmapParams, samples_along
 from dynmap_sim.agent.planning.grid_astar import GridAStar, plan_around
 from dynmap_sim.agent.planning.route_astar import PlannedPath, plan_route
+from dynmap_sim.jit import compiled
 from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Prior, Scan
 
 FloatArray = NDArray[np.float64]
@@ -106,7 +106,7 @@ class StackParams:
     #: the follower's (and the tour operator's) pace; H&W's Roomba drove ≈ 0.2-0.3 m/s.
     speed_mps: float = 0.35
     #: Corridor half-width ``l`` of the prior's route [m]: the route memory's width for
-    #: recorded routes (a ≈ 1.2 m doorway minus a 0.4 m robot leaves ± 0.35 m, issue 15 L10).
+    #: recorded routes (a ≈ 1.2 m doorway minus a 0.4 m robot leaves ± 0.35 m).
     route_half_width_m: float = 0.35
     #: Hard clearance = robot radius + this [m], for the follower and grid A*: 5 cm covers
     #: the costmap's cell size, so no plan or offset touches an inflated obstacle cell.
@@ -127,13 +127,12 @@ class StackParams:
     #: A loop (a prior route whose end is within ``goal_arm_m`` of its start) is driven
     #: through via points every this many metres of it, in order, then to its end (nav2's
     #: NavigateThroughPoses); 0: the goal only. Without them the run's task is "reach the
-    #: start again": once the route memory joins a recorded route near the start to one near
-    #: the end, route A* takes that shortcut (office floor: 0 of 20 runs went round, each
-    #: "reached" its goal after 2-6 m). Two via points at thirds were too few: in the lab the
-    #: shortest way to the first one skipped 16 m of the loop (1 of 15 runs went round). 5 m
-    #: is shorter than any stretch a recorded route could cut off with profit, and longer
-    #: than a block the robot must go round (a via point there is passed by the rule below).
-    #: The paper's routes had a start and an end (§7.1).
+    #: start again", and route A* takes any recorded route that joins the loop's end to its
+    #: start as a shortcut; too few via points let the shortest way to the next one skip
+    #: part of the loop (docs/tuning/navigation.md). 5 m is shorter than any stretch a
+    #: recorded route could cut off with profit, and longer than a block the robot must go
+    #: round (a via point there is passed by the rule below). The paper's routes had a start
+    #: and an end (§7.1).
     loop_via_spacing_m: float = 5.0
     #: A via point is passed when the estimate comes this close [m] (wider than the goal's
     #: tolerance: a via point only fixes the way round, a detour may pass it aside), when the
@@ -145,8 +144,8 @@ class StackParams:
     #: (which probes 1 m) has to stop in front of it.
     cut_check_m: float = 2.0
     #: The costmap's obstacle layer is updated at most this often [s] (nav2's local costmap
-    #: updates at 5 Hz): ray tracing a 683-beam scan costs ≈ 2 ms, and a robot at 0.35 m/s
-    #: moves 7 cm in 0.2 s, less than the controller's margins.
+    #: updates at 5 Hz): ray tracing a scan is the costmap's largest cost, and a robot at
+    #: 0.35 m/s moves 7 cm in 0.2 s, less than the controller's margins.
     costmap_period_s: float = 0.2
     #: Half-size [m] of the window around the robot whose clearance is recomputed after each
     #: costmap update (nav2's rolling local costmap); elsewhere the clearance of the last plan
@@ -174,9 +173,8 @@ class StackParams:
     #: The recovery's replan during a detour round a block that is still blocked plans the
     #: detour again from where the robot stands (on the costmap the recovery just cleared)
     #: instead of asking route A* first. Route A* cannot use the detour (it is no route
-    #: yet): it would send the robot the whole way round the loop back to the block (office
-    #: floor, corridor closed: a person in the open-plan aisle stopped the detour, the
-    #: replan turned the robot back and every run of the closure ended at the time limit).
+    #: yet): it would send the robot the whole way round a loop back to the block
+    #: (docs/tuning/navigation.md).
     keep_detour_on_recovery: bool = True
     #: Tunables of the parts; the stack sets the robot radius, speed and hard clearance. A
     #: scenario gives them as tables (``[driver.params.follower]``): a mapping becomes the
@@ -260,10 +258,6 @@ class NavigationStack:
     (:attr:`replans`, :attr:`recoveries`, :attr:`stuck_s`, :attr:`monitor_stops`,
     :attr:`monitor_slowdowns`), :attr:`events`, :meth:`planned_path`, :attr:`route_memory`.
     """
-
-    #: ``"auto"``: the corridor cut check in the numba kernel of :mod:`.route_numba` when
-    #: numba is installed (the same numbers); ``"numpy"``: always in numpy
-    backend: str = "auto"
 
     def __init__(
         self, laser: LaserSpec, robot_radius_m: float, params: StackParams | None = None
@@ -824,21 +818,18 @@ class NavigationStack:
         n_seg = int(np.searchsorted(end_m, p.cut_check_m + 1.0, side="right")) + 1
         verts = verts[: n_seg + 1]
         lin = np.linspace(-1.0, 1.0, p.cut_offsets)
-        if self.backend != "numpy" and numba_available():
-            pts, cut = cut_probe(
-                verts,
-                hw_seg,
-                float(grid.resolution_m),
-                float(p.cut_check_m),
-                lin,
-                grid.clearance_m,
-                float(grid.origin[0]),
-                float(grid.origin[1]),
-                float(grid.resolution_m),
-                float(self.min_clearance_m),
-            )
-        else:
-            pts, cut = cut_stations(verts, hw_seg, grid, p.cut_check_m, lin, self.min_clearance_m)
+        pts, cut = cut_probe(
+            verts,
+            hw_seg,
+            float(grid.resolution_m),
+            float(p.cut_check_m),
+            lin,
+            grid.clearance_m,
+            float(grid.origin[0]),
+            float(grid.origin[1]),
+            float(grid.resolution_m),
+            float(self.min_clearance_m),
+        )
         return first_cut_stretch(pts, cut)
 
     def _go_around(self, t_s: float, pose: FloatArray, grid: ClearanceGrid) -> bool:
@@ -997,32 +988,60 @@ class NavigationStack:
         return state
 
 
-def cut_stations(
-    verts: FloatArray,
-    hw_seg: FloatArray,
-    grid: ClearanceGrid,
-    cut_check_m: float,
-    lin: FloatArray,
-    min_clearance_m: float,
-) -> tuple[FloatArray, NDArray[np.bool_]]:
-    """The cut check's stations in numpy (the numba kernel
-    :func:`~.route_numba.cut_probe` computes the same): centre-line samples of the polyline
-    ``verts (K, 2)`` [m] every grid cell up to ``cut_check_m`` along it, and whether each is
-    cut (every lateral offset ``lin * l`` of its segment's half-width ``hw_seg`` has less
-    than ``min_clearance_m``)."""
-    pts, seg = samples_along(verts[:-1], verts[1:], grid.resolution_m, False)
-    if len(pts) == 0:
-        return pts, np.zeros(0, dtype=bool)
-    step = np.hypot(*np.diff(pts, axis=0).T)
-    along = np.concatenate([[0.0], np.cumsum(step)])
-    keep = along <= cut_check_m
-    pts, seg = pts[keep], seg[keep]
-    d = verts[1:] - verts[:-1]
-    t = d / np.maximum(np.hypot(*d.T), 1e-12)[:, None]
-    normal = np.stack([-t[:, 1], t[:, 0]], axis=1)[seg]
-    offsets = lin[None, :] * hw_seg[seg][:, None]
-    probe = pts[:, None, :] + offsets[..., None] * normal[:, None, :]
-    return pts, np.all(grid.clearance_at(probe) < min_clearance_m, axis=1)
+@compiled
+def cut_probe(  # type: ignore[no-untyped-def]
+    verts, hw_seg, step_m, max_along_m, lin, clearance, ox, oy, res, min_clearance_m
+):
+    """The cut check's stations (:meth:`NavigationStack._cut_ahead`, H&W §6.3): samples every
+    ``step_m`` along the polyline ``verts (S+1, 2)`` (each segment from its
+    start, end excluded) whose summed steps are within ``max_along_m``: their points
+    ``(K, 2)`` and whether every lateral offset ``lin * l`` (``l = hw_seg`` of the segment,
+    along its left normal) has less than ``min_clearance_m`` in the grid ``clearance``
+    (cell ``(0, 0)`` centred at ``(ox, oy)``, ``res`` [m])."""
+    n_seg = verts.shape[0] - 1
+    counts = np.empty(n_seg, np.int64)
+    lengths = np.empty(n_seg)
+    total = 0
+    for i in range(n_seg):
+        lengths[i] = np.hypot(verts[i + 1, 0] - verts[i, 0], verts[i + 1, 1] - verts[i, 1])
+        c = np.int64(np.ceil(lengths[i] / step_m))
+        counts[i] = c if c > 1 else 1
+        total += counts[i]
+    pts = np.empty((total, 2))
+    cut = np.zeros(total, np.bool_)
+    h, w = clearance.shape
+    k = 0
+    along = 0.0
+    px, py = 0.0, 0.0
+    for i in range(n_seg):
+        ax, ay = verts[i, 0], verts[i, 1]
+        dx, dy = verts[i + 1, 0] - ax, verts[i + 1, 1] - ay
+        length = lengths[i]
+        nrm = length if length > 1e-12 else 1e-12
+        nx, ny = -(dy / nrm), dx / nrm
+        for m in range(counts[i]):
+            t = m * step_m
+            u = t / length if length > 0 else 0.0
+            x, y = ax + u * dx, ay + u * dy
+            if k > 0:
+                along += np.hypot(x - px, y - py)
+                if not along <= max_along_m:
+                    return pts[:k], cut[:k]
+            px, py = x, y
+            pts[k, 0], pts[k, 1] = x, y
+            all_cut = True
+            for j in range(lin.shape[0]):
+                off = lin[j] * hw_seg[i]
+                r = np.int64(np.rint((y + off * ny - oy) / res))
+                col = np.int64(np.rint((x + off * nx - ox) / res))
+                r = min(max(r, 0), h - 1)
+                col = min(max(col, 0), w - 1)
+                if not clearance[r, col] < min_clearance_m:
+                    all_cut = False
+                    break
+            cut[k] = all_cut
+            k += 1
+    return pts[:k], cut[:k]
 
 
 def first_cut_stretch(pts: FloatArray, cut: NDArray[np.bool_]) -> FloatArray | None:
