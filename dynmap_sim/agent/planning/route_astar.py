@@ -1,6 +1,6 @@
 """A* on the route graph, minimizing travel time: Hentschel & Wagner 2011 §6.2 (eq. 18).
 
-The graph is :meth:`dynmap_sim.agent.navigation.RouteMemory.graph`: nodes are waypoints,
+The graph is :class:`.route_graph.RouteGraph` (built by the route memory): nodes are waypoints,
 edges are route segments and joins costed in seconds (learned travel time, else length /
 ``v``; ``inf`` while blocked, §6.3). ``g`` sums those costs; ``h`` is the straight-line
 distance to the goal over a speed ``v_h`` (H&W: "the straight-line distance divided by the
@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from dynmap_sim.agent.navigation.route_memory import Edge, RouteGraph
+from dynmap_sim.agent.planning.route_graph import Edge, RouteGraph
 
 FloatArray = NDArray[np.float64]
 

@@ -16,7 +16,9 @@ import numpy as np
 import pytest
 
 from dynmap_sim.agent.navigation import RouteMemory
-from dynmap_sim.agent.navigation.route_memory import SegmentArrays, _project, locate_segment
+from dynmap_sim.agent.navigation.route_tracking import locate_segment
+from dynmap_sim.agent.navigation.routes import SegmentArrays, build_graph
+from dynmap_sim.agent.planning.route_graph import project_onto_segments as _project
 
 DAY_S = 86_400.0
 DETOUR = [(0.0, 0.0), (3.0, 0.0), (3.0, 1.2), (7.0, 1.2), (7.0, 0.0), (10.0, 0.0)]
@@ -29,10 +31,10 @@ def straight(now_s: float = 0.0) -> RouteMemory:
 def assert_cache_fresh(mem: RouteMemory) -> None:
     """The cached geometry equals a rebuild from the routes, bit for bit, and the graph one
     of a copy that never had a cache."""
-    cached = mem._segments()
+    cached = mem.route_set.segments()
     fresh = copy.deepcopy(mem)
-    fresh._segs = None
-    rebuilt = fresh._segments()
+    fresh.route_set.changed()
+    rebuilt = fresh.route_set.segments()
     for name in ("a", "b", "l", "rid", "seg", "fr", "to", "s0", "length"):
         np.testing.assert_array_equal(getattr(cached, name), getattr(rebuilt, name), name)
     assert cached.cum.keys() == mem.routes.keys()
@@ -76,7 +78,7 @@ def test_tracking_with_the_cache_learns_what_recomputation_learns(drive_fn):
             np.concatenate([np.linspace(pts[j], pts[j + 1], 40) for j in range(len(pts) - 1)])
         ):
             pose = [xy[0], xy[1], 0.0]
-            dropped._segs = None
+            dropped.route_set.changed()
             assert kept.observe(pose, t0 + 0.1 * k) == dropped.observe(pose, t0 + 0.1 * k)
     assert json.dumps(kept.to_dict()) == json.dumps(dropped.to_dict())  # NaN as text
     for r, q in zip(kept.routes.values(), dropped.routes.values(), strict=True):
@@ -144,13 +146,13 @@ def test_the_graph_is_reused_only_while_its_inputs_are_the_same(drive_fn):
     assert mem.graph() is g  # nothing changed
     ids = mem.routes[0].ids
     mem.block((int(ids[3]), int(ids[4])))
-    assert mem.graph() is not g and mem.graph().edges == mem._build_graph().edges
+    assert mem.graph() is not g and mem.graph().edges == build_graph(mem.route_set).edges
     assert math.isinf(next(e for e in mem.graph().edges if e.u == ids[3]).travel_time_s)
     mem.unblock((int(ids[3]), int(ids[4])))
     assert mem.graph().edges == g.edges
     mem.routes[0].wp[1:, 5] = 1.0  # edited in place: travel times learned elsewhere
-    assert mem.graph().edges == mem._build_graph().edges
+    assert mem.graph().edges == build_graph(mem.route_set).edges
     assert all(e.learned for e in mem.graph().edges)
     drive_fn(mem, DETOUR, 0.25, 100.0)  # a new route, splits, learned times
-    assert mem.graph().edges == mem._build_graph().edges
+    assert mem.graph().edges == build_graph(mem.route_set).edges
     assert any(e.route_id == 1 for e in mem.graph().edges)

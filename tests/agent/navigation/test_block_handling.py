@@ -8,12 +8,12 @@ import math
 
 import numpy as np
 
-from dynmap_sim.agent.navigation.stack import (
-    NavigationStack,
+from dynmap_sim.agent.navigation.block_handling import (
     _clamped_projection,
     cut_probe,
     first_cut_stretch,
 )
+from dynmap_sim.agent.navigation.stack import NavigationStack
 from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
 from dynmap_sim.types import LaserSpec
 
