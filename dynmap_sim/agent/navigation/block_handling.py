@@ -94,9 +94,14 @@ class BlockHandling:
     def edges_through(
         self, g: RouteGraph, cut: FloatArray, tol_m: float
     ) -> list[tuple[int, int]] | None:
-        """The passable route edges of ``g`` (not joins) whose segment passes within
-        ``tol_m`` of the cut points; None when ``g`` has no passable route edge."""
-        segs = [e for e in g.edges if e.route_id != JOIN and math.isfinite(e.travel_time_s)]
+        """The passable route segments of ``g`` (not joins, in their own direction: a block
+        holds both ways) that pass within ``tol_m`` of the cut points; None when ``g`` has
+        no passable route segment."""
+        segs = [
+            e
+            for e in g.edges
+            if e.route_id != JOIN and not e.reverse and math.isfinite(e.travel_time_s)
+        ]
         if not segs:
             return None
         a = g.xy[[g.index[e.u] for e in segs]]

@@ -179,7 +179,8 @@ def forget(
 
 def _bypassed(g: RouteGraph, r: Route, a: int, b: int) -> bool:
     """Is waypoint ``b`` of ``r`` reachable in ``g`` from waypoint ``a`` without segments
-    a..b?"""
+    a..b, in the routes' direction (forgetting keeps what driving the routes as recorded
+    needs)?"""
     gone = {int(i) for i in r.ids[a + 1 : b]}
     cut = {(int(r.ids[k - 1]), int(r.ids[k])) for k in range(a + 1, b + 1)}
     start, goal = int(r.ids[a]), int(r.ids[b])
@@ -187,7 +188,13 @@ def _bypassed(g: RouteGraph, r: Route, a: int, b: int) -> bool:
     while todo:
         n = todo.popleft()
         for e in g.out[n]:
-            if e.v in seen or e.v in gone or (e.u, e.v) in cut or not np.isfinite(e.travel_time_s):
+            if (
+                e.reverse
+                or e.v in seen
+                or e.v in gone
+                or (e.u, e.v) in cut
+                or not np.isfinite(e.travel_time_s)
+            ):
                 continue
             if e.v == goal:
                 return True

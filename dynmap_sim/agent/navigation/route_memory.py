@@ -6,8 +6,9 @@ A :class:`RouteMemory` holds routes ``R = {r_i}`` (eq. 16) of waypoints (eq. 17,
 * :mod:`.routes` — the routes, their blocked edges and the edits learning makes (add, split,
   cut), and the directed :class:`~dynmap_sim.agent.planning.route_graph.RouteGraph` built
   from them (§6.2): nodes are waypoints, edges segments costed by travel time (learned, else
-  length / ``v``) plus join edges between nearby waypoints of different routes; blocked edges
-  (:meth:`RouteMemory.block`, §6.3) cost ``inf`` until seen free. Cf. nav2_route's
+  length / ``v``) plus join edges between nearby waypoints of different routes and each
+  segment's reverse at a higher cost; blocked edges (:meth:`RouteMemory.block`, §6.3) cost
+  ``inf`` both ways until seen free. Cf. nav2_route's
   TimeScorer, which costs an edge by its measured traversal time, else length / speed limit.
 * :mod:`.route_tracking` — **short-term memory (§5.1)**: the robot's position relative to
   every segment of every route (:meth:`RouteMemory.locate`), and inside a corridor the
@@ -191,13 +192,14 @@ class RouteMemory:
 
     # ------------------------------------------------------------------ graph, blocks
     def block(self, edge: tuple[int, int]) -> None:
-        """Mark edge ``(from_id, to_id)`` blocked: infinite cost until :meth:`unblock` or until
-        the robot drives it (H&W §6.3)."""
+        """Mark edge ``(from_id, to_id)`` blocked, both ways: infinite cost until
+        :meth:`unblock` or until the robot drives it (H&W §6.3)."""
         self.blocked.add((int(edge[0]), int(edge[1])))
 
     def unblock(self, edge: tuple[int, int]) -> None:
-        """The edge was seen free again."""
+        """The edge was seen free again (both ways)."""
         self.blocked.discard((int(edge[0]), int(edge[1])))
+        self.blocked.discard((int(edge[1]), int(edge[0])))
 
     def graph(self) -> RouteGraph:
         """The directed route graph (§6.2): nodes are waypoints, edges the segments (cost:

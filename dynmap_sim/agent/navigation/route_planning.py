@@ -187,12 +187,12 @@ class RoutePlanning:
     ) -> tuple[PlannedPath | None, int]:
         """Route A* when the route graph cannot reach the goal (e.g. forgetting dropped the
         stretch or the join that led to it): the graph plus a **bridge** from each dead end
-        (a node without a passable way on) to the goal node, grid A* on the costmap's
-        clearance, costed at ``speed_mps``. So the robot drives what is left of its routes
-        and crosses the gap on the costmap, and a loop's start still leaves the goal
-        (``leave_goal_m`` as for any route plan). The bridges' grid paths are in the plan's
-        ``xy`` (their interior points have node id :data:`BRIDGE`); None when no dead end
-        has a grid path to the goal or the graph none to a dead end."""
+        (a node without a passable way on in the routes' direction) to the goal node, grid
+        A* on the costmap's clearance, costed at ``speed_mps``. So the robot drives what is
+        left of its routes and crosses the gap on the costmap, and a loop's start still
+        leaves the goal (``leave_goal_m`` as for any route plan). The bridges' grid paths
+        are in the plan's ``xy`` (their interior points have node id :data:`BRIDGE`); None
+        when no dead end has a grid path to the goal or the graph none to a dead end."""
         if g.node_ids.size == 0:
             return None, 0
         p = self.params
@@ -226,7 +226,7 @@ class RoutePlanning:
         legs: dict[tuple[int, int], FloatArray] = {}
         bridges = []
         for n in g.node_ids.tolist():
-            if n == goal or any(math.isfinite(e.travel_time_s) for e in g.out[n]):
+            if n == goal or any(math.isfinite(e.travel_time_s) and not e.reverse for e in g.out[n]):
                 continue
             xy = g.position(n)
             start = grid.nearest_free(xy, self.min_clearance_m, 0.5)

@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynmap_sim.agent.navigation.routes import DT, Route, RouteSet, T, X, Y
+from dynmap_sim.agent.planning.route_graph import both_ways
 from dynmap_sim.jit import compiled
 
 FloatArray = NDArray[np.float64]
@@ -276,7 +277,7 @@ class RouteTracker:
         a = self.params.travel_time_alpha
         r.wp[j, DT] = dt_s if not np.isfinite(old) else (1.0 - a) * old + a * dt_s
         r.wp[j, T] = t_s
-        self.route_set.blocked.discard((int(r.ids[j - 1]), int(r.ids[j])))
+        self.route_set.blocked -= both_ways({(int(r.ids[j - 1]), int(r.ids[j]))})
 
     def _adapt(self, r: Route, waypoint_id: int, t_s: float) -> None:
         """Move a waypoint ``coord_alpha`` of the mean driven lateral offset (once per pass).

@@ -37,6 +37,13 @@ nav2 composes its servers:
    CollisionMonitor`): every command, the recovery's included, is filtered by the raw scan in
    the robot frame, so a wrong estimate or a controller bug cannot drive into an obstacle.
 
+A route may be driven against its direction at ``RouteMemoryParams.reverse_cost_factor``
+times its travel time (a route that returns through a doorway it passed), and a block holds
+both ways. When the recovery gives up, an ``unreachable`` event says why the goal was not
+reached (:attr:`NavigationStack.unreachable_cause`): no way exists on the routes or the
+costmap, the localizer is lost (its position std above ``lost_std_m``; ``lost`` and
+``found`` events mark when), or the robot was stuck on a way that exists.
+
 The run ends for the stack when the estimate is within ``goal_tolerance_m`` of the goal
 (:attr:`NavigationStack.done`); a route that ends where it starts (a loop) is driven through
 via points (every ``loop_via_spacing_m`` of it, passed within ``via_tolerance_m`` or once
@@ -81,7 +88,7 @@ from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
 from dynmap_sim.agent.planning.costmap import Costmap
 from dynmap_sim.agent.planning.grid_astar import GridAStar
 from dynmap_sim.agent.planning.route_astar import PlannedPath
-from dynmap_sim.agent.planning.route_graph import RouteGraph
+from dynmap_sim.agent.planning.route_graph import RouteGraph, both_ways
 from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Prior, Scan
 
 __all__ = ["DAY_S", "NavMode", "NavigationStack", "PlanRequest", "StackParams"]
@@ -90,6 +97,19 @@ FloatArray = NDArray[np.float64]
 
 #: Seconds per day: the route memory's clock is ``prior.day * DAY_S + t_s``.
 DAY_S = 86_400.0
+
+#: Why a goal was not reached (:attr:`NavigationStack.unreachable_cause`): no way exists on
+#: the routes or the costmap, the localizer is lost, or the robot was stuck on a way that
+#: exists (the recovery gave up).
+NO_WAY, LOST, STUCK = "no_way", "lost", "stuck"
+
+
+def position_std_m(cov: FloatArray) -> float:
+    """The standard deviation [m] along the larger axis of a pose covariance's x-y ellipse
+    (the square root of the 2 x 2 block's largest eigenvalue); inf when it is not finite."""
+    a, b, c = float(cov[0, 0]), float(cov[0, 1]), float(cov[1, 1])
+    top = 0.5 * (a + c) + math.hypot(0.5 * (a - c), b)
+    return math.sqrt(max(top, 0.0)) if math.isfinite(top) else math.inf
 
 
 class NavMode(enum.Enum):
@@ -177,6 +197,11 @@ class NavigationStack:
         #: what the stack follows (:class:`NavMode`)
         self.mode = NavMode.ROUTE
         self._request = PlanRequest.NONE
+        #: why the goal was not reached (:data:`NO_WAY`, :data:`LOST`, :data:`STUCK`), None
+        #: while it may be
+        self.unreachable_cause: str | None = None
+        self._no_way: str | None = None  # the last planning failure, while nothing is followed
+        self._lost_std_m: float | None = None  # the estimate's std while the localizer is lost
         self._events: list[tuple[float, str, str]] = []
         self._plan: PlannedPath | None = None  # the route plan (route mode; base of a detour)
         self._path: FloatArray | None = None  # what the follower follows
@@ -331,6 +356,7 @@ class NavigationStack:
             self._event(t_s, "bad_estimate", "non-finite pose estimate: stop")
             return self.monitor.filter(stop, scan, t_s)
         p = self.params
+        self._check_lost(t_s, estimate)
         if self._costmap_t is None or t_s - self._costmap_t >= p.costmap_period_s - 1e-9:
             self.costmap.update(pose, scan, self.laser)
             self._costmap_t = t_s
@@ -358,6 +384,7 @@ class NavigationStack:
             if act.kind == "give_up":
                 self.mode = NavMode.GAVE_UP
                 self._event(t_s, "gave_up", act.detail)
+                self._unreachable(t_s, act.detail)
                 cmd = stop
             elif act.kind == "replan":
                 if self.params.clear_costmap_on_replan:
@@ -389,6 +416,34 @@ class NavigationStack:
         ):
             self.mode = NavMode.DONE
             self._event(t_s, "goal", f"{to_goal:.2f} m from the goal")
+
+    def _check_lost(self, t_s: float, estimate: PoseEstimate) -> None:
+        """Record when the localizer gets lost (its position std above ``lost_std_m``) and
+        when it is found again (``lost`` / ``found`` events)."""
+        cov = np.asarray(estimate.cov, dtype=np.float64)
+        std = position_std_m(cov) if cov.shape == (3, 3) else 0.0
+        lost = std > self.params.lost_std_m
+        if lost and self._lost_std_m is None:
+            self._event(t_s, "lost", f"the localizer's position std is {std:.2f} m")
+        elif not lost and self._lost_std_m is not None:
+            self._event(t_s, "found", f"the localizer's position std is {std:.2f} m again")
+        self._lost_std_m = std if lost else None
+
+    def _unreachable(self, t_s: float, stuck_detail: str) -> None:
+        """The run ends without the goal: an ``unreachable`` event that says why."""
+        if self._lost_std_m is not None:
+            self.unreachable_cause = LOST
+            detail = (
+                f"the localizer is lost: its position std is {self._lost_std_m:.2f} m "
+                f"(> {self.params.lost_std_m:.2f} m)"
+            )
+        elif self._no_way is not None:
+            self.unreachable_cause = NO_WAY
+            detail = f"no way to the goal exists: {self._no_way}"
+        else:
+            self.unreachable_cause = STUCK
+            detail = f"stuck on the way to the goal: {stuck_detail}"
+        self._event(t_s, "unreachable", detail)
 
     def _force(self) -> None:
         """Plan at the next step (a recovery's pending replan stays one)."""
@@ -522,6 +577,7 @@ class NavigationStack:
         self._follow(plan.xy, plan.half_width_m)
 
     def _follow(self, path: FloatArray, half_widths: FloatArray) -> None:
+        self._no_way = None
         self._path = np.asarray(path, dtype=np.float64)
         self._path_hw = np.asarray(half_widths, dtype=np.float64)
         self.follower.set_path(self._path, self._path_hw)
@@ -555,7 +611,7 @@ class NavigationStack:
             assert self.route_memory is not None
             if (
                 plan is not None
-                and not (set(plan.edges) & set(self.route_memory.blocked))
+                and not (set(plan.edges) & both_ways(self.route_memory.blocked))
                 and self._cut_ahead(plan.xy, plan.half_width_m, grid, pose, seg0=0) is None
             ):
                 self._set_route_path(plan)
@@ -570,6 +626,8 @@ class NavigationStack:
         found = self.blocks.detour(base, base_hw, pose, grid)
         if found is None:
             self._event(t_s, "replan_failed", "no way around the block on the costmap")
+            if self.follower.blocked:
+                self._no_way = "no way around the block on the costmap"
             return False
         det, hw, rejoin, length = found
         self.mode = NavMode.DETOUR
@@ -635,6 +693,7 @@ class NavigationStack:
         if path is None:
             if self.mode is not NavMode.GRID or self._path is not None:
                 self._event(t_s, "no_path", "neither a route nor a grid path to the goal")
+            self._no_way = "neither a route nor a grid path on the costmap leads there"
             self.mode = NavMode.GRID
             self._plan = None
             self._path = None

@@ -93,6 +93,12 @@ class StackParams:
     #: yet): it would send the robot the whole way round a loop back to the block
     #: (docs/tuning/navigation.md).
     keep_detour_on_recovery: bool = True
+    #: The localizer counts as lost while the standard deviation of its position estimate
+    #: (the larger axis of the covariance's x-y ellipse) exceeds this [m]: a robot uncertain
+    #: by more than a doorway's width (≈ 1 m) cannot tell which doorway it stands in, so a
+    #: goal it fails to reach then is put down to the localizer (the ``lost`` and
+    #: ``unreachable`` events).
+    lost_std_m: float = 1.0
     #: Tunables of the parts; the stack sets the robot radius, speed and hard clearance. A
     #: scenario gives them as tables (``[driver.params.follower]``): a mapping becomes the
     #: part's dataclass, an unknown key is an error that lists the known ones.
@@ -115,7 +121,13 @@ class StackParams:
                     )
                 part = config_from_params(PART_PARAMS[f.name], owner, value)
                 object.__setattr__(self, f.name, part)
-        for name in ("speed_mps", "route_half_width_m", "replan_period_s", "goal_tolerance_m"):
+        for name in (
+            "speed_mps",
+            "route_half_width_m",
+            "replan_period_s",
+            "goal_tolerance_m",
+            "lost_std_m",
+        ):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0.0):
                 raise ValueError(f"StackParams.{name} must be finite and > 0, got {v!r}")

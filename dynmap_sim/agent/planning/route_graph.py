@@ -29,6 +29,8 @@ class Edge(NamedTuple):
 
     ``travel_time_s`` is the planning cost: the learned travel time, else ``length_m`` over
     the end waypoint's ``v``; ``inf`` while blocked. ``route_id`` is :data:`JOIN` for joins.
+    ``reverse``: a route segment driven against its direction (``u`` is the segment's end
+    waypoint), at a higher cost (``RouteMemoryParams.reverse_cost_factor``).
     """
 
     u: int
@@ -38,6 +40,12 @@ class Edge(NamedTuple):
     learned: bool
     half_width_m: float
     route_id: int
+    reverse: bool = False
+
+
+def both_ways(edges: set[tuple[int, int]]) -> set[tuple[int, int]]:
+    """``edges`` ``(u, v)`` with each one's reverse ``(v, u)``: a block holds both ways."""
+    return edges | {(v, u) for u, v in edges}
 
 
 @dataclass
@@ -95,12 +103,16 @@ class RouteGraph:
         self, xy: ArrayLike, exclude_to: int | None = None
     ) -> tuple[Edge, float, FloatArray] | None:
         """The passable route segment closest to ``xy``: ``(edge, progress ∈ [0, 1],
-        projection (2,))``, or None when there is none. Joins are not candidates, nor
-        segments ending at node ``exclude_to``."""
+        projection (2,))``, or None when there is none. Joins and reverse edges are not
+        candidates (:meth:`reverse_of` finds the latter), nor segments ending at node
+        ``exclude_to``."""
         segs = [
             e
             for e in self.edges
-            if e.route_id != JOIN and math.isfinite(e.travel_time_s) and e.v != exclude_to
+            if e.route_id != JOIN
+            and not e.reverse
+            and math.isfinite(e.travel_time_s)
+            and e.v != exclude_to
         ]
         if not segs:
             return None
@@ -109,6 +121,13 @@ class RouteGraph:
         u, proj, dist = project_onto_segments(np.asarray(xy, float)[:2], a, b)
         k = int(np.argmin(dist))
         return segs[k], float(u[k]), proj[k]
+
+    def reverse_of(self, e: Edge) -> Edge | None:
+        """The passable reverse edge of route segment ``e`` (``e.v -> e.u``), if any."""
+        for r in self.out.get(e.v, []):
+            if r.reverse and r.v == e.u and r.route_id == e.route_id:
+                return r if math.isfinite(r.travel_time_s) else None
+        return None
 
 
 def project_onto_segments(p: FloatArray, a: FloatArray, b: FloatArray) -> tuple[FloatArray, ...]:
@@ -122,10 +141,11 @@ def project_onto_segments(p: FloatArray, a: FloatArray, b: FloatArray) -> tuple[
 
 
 def reaching(g: RouteGraph, target: int) -> set[int]:
-    """Nodes of ``g`` from which ``target`` is reachable over passable edges (itself too)."""
+    """Nodes of ``g`` from which ``target`` is reachable over passable edges in the routes'
+    direction (no reverse edges; itself too)."""
     back: dict[int, list[int]] = {}
     for e in g.edges:
-        if np.isfinite(e.travel_time_s):
+        if np.isfinite(e.travel_time_s) and not e.reverse:
             back.setdefault(e.v, []).append(e.u)
     seen, todo = {target}, deque([target])
     while todo:
