@@ -28,7 +28,7 @@ from scipy import ndimage
 
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import OccupancyGrid
-from dynmap_sim.agent.planning.clearance_grid import build_clearance_grid
+from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid, build_clearance_grid
 from dynmap_sim.agent.planning.costmap import Costmap, CostmapParams
 from dynmap_sim.agent.planning.grid_astar import GridAStar, plan_around
 from dynmap_sim.agent.planning.grid_dijkstra import GridDijkstra
@@ -99,7 +99,8 @@ def main() -> None:
     t_edt = best_of(lambda: (cm._changed(), cm.clearance()), args.repeats)
     occ = cm.occupied_mask()
     t_scipy = best_of(lambda: ndimage.distance_transform_edt(~occ), args.repeats)
-    base = cm.clearance()
+    own = cm.clearance()  # a copy: the costmap's own clearance would be returned as is
+    base = ClearanceGrid(own.origin, own.resolution_m, own.clearance_m.copy())
     t_win = best_of(
         lambda: [cm.window_clearance(base, p[:2], 1.6, 0.8) for p in poses[::10]], args.repeats
     ) / len(poses[::10])
