@@ -6,12 +6,12 @@ ratios against references measured in the same run:
 
 1. ``Costmap.update`` per scan (obstacle layer: mark + clear all beams) against the existing
    one-scan tracer ``OccupancyGrid.from_scans`` on the same scan, and ``Costmap.clearance()``
-   (the inflation: a distance transform) against ``build_clearance_grid`` of the same walls;
-   first the numpy backend against the default one (the numba kernels of
-   :mod:`~dynmap_sim.agent.planning.costmap_numba` when installed), with the follower's
-   ``window_clearance``, and whether both leave identical marks;
-2. ``grid-astar`` per plan (search + string pulling; compiled kernel and pure Python)
-   against ``grid-dijkstra`` on the same grid and queries (with and without its graph built);
+   (the inflation: the compiled distance transform of
+   :mod:`~dynmap_sim.agent.planning.costmap_kernels`) against ``build_clearance_grid`` of the
+   same walls and scipy's ``distance_transform_edt`` of the same layers, and the follower's
+   ``window_clearance``;
+2. ``grid-astar`` per plan (search + string pulling) against ``grid-dijkstra`` on the same
+   grid and queries (with and without its graph built);
 3. ``plan_around`` (H&W §6.3 detour around a blocked path) per call.
 """
 
@@ -24,13 +24,12 @@ import time
 from pathlib import Path
 
 import numpy as np
+from scipy import ndimage
 
-import dynmap_sim.agent.planning.grid_astar as grid_astar
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import OccupancyGrid
-from dynmap_sim.agent.planning.clearance_grid import build_clearance_grid
+from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid, build_clearance_grid
 from dynmap_sim.agent.planning.costmap import Costmap, CostmapParams
-from dynmap_sim.agent.planning.costmap_numba import numba_available
 from dynmap_sim.agent.planning.grid_astar import GridAStar, plan_around
 from dynmap_sim.agent.planning.grid_dijkstra import GridDijkstra
 
@@ -90,32 +89,21 @@ def main() -> None:
     scans = [raycast(lp, URG.angles(), world, URG.range_max_m) for lp in lps]
 
     print("1. costmap (10 m x 12 m + 1 m margin at 5 cm, 683-beam scans)")
-    t_update, t_edt, t_win, marks = {}, {}, {}, {}
-    for backend in ("numpy", "auto"):  # auto: the numba kernels when numba is installed
-        cm = Costmap(CostmapParams(), (0.0, 0.0, 10.0, 12.0))
-        cm.set_static_segments(segs)
-        cm.backend = backend
-        cm.update(poses[0], scans[0], URG)  # compiles or loads the kernels
-        cm.clear_obstacles()
-        t0 = time.perf_counter()
-        changed = sum(cm.update(p, r, URG) for p, r in zip(poses, scans, strict=True))
-        t_update[backend] = (time.perf_counter() - t0) / len(scans)
-        t_edt[backend] = best_of(lambda cm=cm: (cm._changed(), cm.clearance()), args.repeats)
-        base = cm.clearance()
-        t_win[backend] = best_of(
-            lambda cm=cm, base=base: [
-                cm.window_clearance(base, p[:2], 1.6, 0.8) for p in poses[::10]
-            ],
-            args.repeats,
-        ) / len(poses[::10])
-        marks[backend] = cm.marks.copy()
-    same = np.array_equal(marks["numpy"], marks["auto"])
-    print(f"   kernels: {'numba' if numba_available() else 'none (numpy only)'}; "
-          f"marks of both backends identical: {same}")  # fmt: skip
-    for what, t in (("update", t_update), ("clearance()", t_edt), ("window_clearance", t_win)):
-        print(f"   {what:17s} numpy {1e3 * t['numpy']:6.3f} ms, auto {1e3 * t['auto']:6.3f} ms"
-              f"  -> ratio {t['auto'] / t['numpy']:.2f}")  # fmt: skip
-    t_update, t_edt = t_update["auto"], t_edt["auto"]
+    cm = Costmap(CostmapParams(), (0.0, 0.0, 10.0, 12.0))
+    cm.set_static_segments(segs)
+    cm.update(poses[0], scans[0], URG)  # compiles or loads the kernels
+    cm.clear_obstacles()
+    t0 = time.perf_counter()
+    changed = sum(cm.update(p, r, URG) for p, r in zip(poses, scans, strict=True))
+    t_update = (time.perf_counter() - t0) / len(scans)
+    t_edt = best_of(lambda: (cm._changed(), cm.clearance()), args.repeats)
+    occ = cm.occupied_mask()
+    t_scipy = best_of(lambda: ndimage.distance_transform_edt(~occ), args.repeats)
+    own = cm.clearance()  # a copy: the costmap's own clearance would be returned as is
+    base = ClearanceGrid(own.origin, own.resolution_m, own.clearance_m.copy())
+    t_win = best_of(
+        lambda: [cm.window_clearance(base, p[:2], 1.6, 0.8) for p in poses[::10]], args.repeats
+    ) / len(poses[::10])
     t_trace = best_of(
         lambda: OccupancyGrid.from_scans(poses[:1], scans[0][None], URG), args.repeats
     )
@@ -127,6 +115,9 @@ def main() -> None:
     print(f"   clearance() (EDT)      {1e3 * t_edt:7.2f} ms")
     print(f"   ref: build_clearance_grid(walls)       {1e3 * t_ref:7.2f} ms"
           f"  -> ratio clearance/ref {t_edt / t_ref:.2f}")  # fmt: skip
+    print(f"   ref: scipy distance_transform_edt      {1e3 * t_scipy:7.2f} ms"
+          f"  -> ratio clearance/scipy {t_edt / t_scipy:.2f}")  # fmt: skip
+    print(f"   window_clearance (1.6 m, 0.8 m) {1e3 * t_win:7.3f} ms")
     print(f"   per scan, update + clearance: {1e3 * (t_update + t_edt):.2f} ms "
           f"({100 * (t_update + t_edt) / 0.1:.1f} % of a 10 Hz scan period)")  # fmt: skip
 
@@ -149,19 +140,14 @@ def main() -> None:
 
         return best_of(run, args.repeats) / len(queries)
 
-    t_nb = per_plan(astar) if grid_astar._astar_nb is not None else float("nan")
-    t_nb_fresh = per_plan(astar, fresh=True) if grid_astar._astar_nb is not None else float("nan")
-    nb, grid_astar._astar_nb = grid_astar._astar_nb, None
-    t_py = per_plan(astar)
-    grid_astar._astar_nb = nb
+    t_as = per_plan(astar)
+    t_as_fresh = per_plan(astar, fresh=True)
     t_dj = per_plan(dijk)
     t_dj_fresh = per_plan(dijk, fresh=True)
     ms = 1e3
-    print(f"   grid-astar (numba)       {ms * t_nb:7.2f} ms/plan, new grid {ms * t_nb_fresh:7.2f}")
-    print(f"   grid-astar (pure Python) {ms * t_py:7.2f} ms/plan")
+    print(f"   grid-astar               {ms * t_as:7.2f} ms/plan, new grid {ms * t_as_fresh:7.2f}")
     print(f"   ref: grid-dijkstra       {ms * t_dj:7.2f} ms/plan, new grid {ms * t_dj_fresh:7.2f}")
-    r_nb, r_py = t_nb_fresh / t_dj_fresh, t_py / t_dj_fresh
-    print(f"   ratio A*/Dijkstra on a new grid: numba {r_nb:.2f}, Python {r_py:.2f}")
+    print(f"   ratio A*/Dijkstra on a new grid: {t_as_fresh / t_dj_fresh:.2f}")
 
     print("3. plan_around: a block on the path through the middle room")
     path = np.array([[1.5, 6.0], [8.8, 6.0]])

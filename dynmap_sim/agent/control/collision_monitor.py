@@ -1,4 +1,4 @@
-"""A safety stop between any controller and the robot (nav2's Collision Monitor, issue 15 item 3).
+"""A safety stop between any controller and the robot (nav2's Collision Monitor).
 
 nav2's Collision Monitor filters ``cmd_vel`` *after* the controller, straight from the sensor
 data and bypassing costmaps and planners, so that a controller bug (or a map in the wrong
@@ -23,10 +23,10 @@ the commanded forward speed, so a reversing command is checked behind):
   ``slowdown_ratio`` (nav2's ``slowdown_ratio``; scaling both keeps the commanded curvature).
 
 A beam that returns ``-inf`` (REP-117: something closer than ``range_min``) is a point at
-``range_min`` on that beam; ``+inf`` (no return) and ``NaN`` are no points. The work is a few
-vectorized operations over the beams. What the monitor did is counted
-(:attr:`CollisionMonitor.counts`) and its transitions recorded (:attr:`CollisionMonitor.events`)
-so a run can report them.
+``range_min`` on that beam; ``+inf`` (no return) and ``NaN`` are no points. The zones are
+checked in one compiled loop over the beams (:func:`monitor_action`). What the monitor did is
+counted (:attr:`CollisionMonitor.counts`) and its transitions recorded
+(:attr:`CollisionMonitor.events`) so a run can report them.
 
 Blind sector: the URG-04LX sees 240 degrees, so a reversing command is checked only against the
 part of the box behind the robot that the laser covers. Reversing is the recovery's business,
@@ -37,11 +37,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from dynmap_sim.agent.control.control_numba import monitor_action, numba_available
+from dynmap_sim.jit import compiled
 from dynmap_sim.types import LaserSpec, Scan
 
 FloatArray = NDArray[np.float64]
@@ -99,19 +100,65 @@ def count_in_box(points: FloatArray, x_min_m: float, x_max_m: float, half_width_
     return int(np.count_nonzero((x >= x_min_m) & (x <= x_max_m) & (np.abs(y) <= half_width_m)))
 
 
-#: the monitor's actions by :mod:`.control_numba`'s codes
+#: :func:`monitor_action`'s codes, least to most restrictive
+PASS_CODE, SLOWDOWN_CODE, STOP_CODE, FOOTPRINT_STOP_CODE = 0, 1, 2, 3
+#: the monitor's actions by :func:`monitor_action`'s codes
 _ACTIONS = (PASS, SLOWDOWN, STOP, FOOTPRINT_STOP)
+
+
+class Zones(NamedTuple):
+    """The monitor's zones for one command [m]: the footprint's radius, the stop box's and
+    the slowdown box's reach ahead and half-width (:meth:`CollisionMonitor.zones`)."""
+
+    footprint_r_m: float
+    stop_x_max_m: float
+    stop_half_width_m: float
+    slow_x_max_m: float
+    slow_half_width_m: float
+
+
+@compiled
+def monitor_action(ranges_m, cos_a, sin_a, mount_xy, range_min_m, v_mps, zones, min_points):  # type: ignore[no-untyped-def]
+    """The action's code (``*_CODE``) for forward speed ``v_mps`` [m/s] given one scan's
+    ranges [m], its beams' directions in the robot frame and the laser's mount position
+    ``mount_xy`` [m]: the most restrictive :class:`Zones` zone holding ``min_points``."""
+    mount_x_m, mount_y_m = mount_xy
+    footprint_r_m, stop_x_max_m, stop_half_width_m, slow_x_max_m, slow_half_width_m = zones
+    sign = math.copysign(1.0, v_mps)
+    n_foot = 0
+    n_stop = 0
+    n_slow = 0
+    for b in range(ranges_m.shape[0]):
+        r = ranges_m[b]
+        if r == -math.inf:
+            r = range_min_m
+        if not math.isfinite(r):
+            continue
+        x = mount_x_m + r * cos_a[b]
+        y = mount_y_m + r * sin_a[b]
+        if np.hypot(x, y) <= footprint_r_m:
+            n_foot += 1
+        ax = x * sign
+        ay = abs(y)
+        if ax >= 0.0 and ax <= stop_x_max_m and ay <= stop_half_width_m:
+            n_stop += 1
+        if ax >= 0.0 and ax <= slow_x_max_m and ay <= slow_half_width_m:
+            n_slow += 1
+    if n_foot >= min_points:
+        return FOOTPRINT_STOP_CODE
+    if v_mps == 0.0:
+        return PASS_CODE
+    if n_stop >= min_points:
+        return STOP_CODE
+    if n_slow >= min_points:
+        return SLOWDOWN_CODE
+    return PASS_CODE
 
 
 class CollisionMonitor:
     """Filters ``(v, omega)`` commands by the raw scan (module doc); ``params``:
     :class:`CollisionMonitorParams` fields.
-
-    :attr:`backend` ``"auto"`` checks the zones in the numba kernel of :mod:`.control_numba`
-    when numba is installed (the same actions), ``"numpy"`` in numpy.
     """
-
-    backend: str = "auto"
 
     def __init__(self, laser: LaserSpec, robot_radius_m: float, **params: float) -> None:
         self.laser = laser
@@ -125,12 +172,8 @@ class CollisionMonitor:
         self._beam_trig: tuple[FloatArray, FloatArray] | None = None
 
     def _action(self, v_mps: float, ranges_m: ArrayLike) -> str:
-        """:meth:`check` of the scan's points (:func:`scan_points`), by the kernel when
-        numba serves (:attr:`backend`)."""
-        if self.backend not in ("auto", "numba", "numpy"):
-            raise ValueError(f"backend must be auto, numba or numpy, got {self.backend!r}")
-        if self.backend == "numpy" or not numba_available():
-            return self.check(v_mps, scan_points(self.laser, ranges_m))
+        """The action for forward speed ``v_mps`` [m/s] given the scan's ranges (module
+        doc)."""
         r = np.asarray(ranges_m, dtype=np.float64).reshape(-1)
         if r.shape != (self.laser.n_beams,):
             raise ValueError(f"a scan of {self.laser.n_beams} beams expected, got {r.shape}")
@@ -142,13 +185,10 @@ class CollisionMonitor:
         code = monitor_action(
             r,
             *self._beam_trig,
-            float(self.laser.mount_pose[0]),
-            float(self.laser.mount_pose[1]),
+            (float(self.laser.mount_pose[0]), float(self.laser.mount_pose[1])),
             float(self.laser.range_min_m),
             float(v_mps),
-            p.robot_radius_m + p.footprint_margin_m,
-            *zones[STOP][1:],
-            *zones[SLOWDOWN][1:],
+            Zones(p.robot_radius_m + p.footprint_margin_m, *zones[STOP][1:], *zones[SLOWDOWN][1:]),
             int(p.min_points),
         )
         return _ACTIONS[code]
@@ -176,22 +216,6 @@ class CollisionMonitor:
                 r + p.slowdown_lateral_margin_m,
             ),
         }
-
-    def check(self, v_mps: float, points: FloatArray) -> str:
-        """The action for forward speed ``v_mps`` given scan points in the robot frame."""
-        p = self.params
-        d = np.hypot(points[:, 0], points[:, 1])
-        if np.count_nonzero(d <= p.robot_radius_m + p.footprint_margin_m) >= p.min_points:
-            return FOOTPRINT_STOP
-        if v_mps == 0.0:
-            return PASS
-        ahead = points * np.array([math.copysign(1.0, v_mps), 1.0])
-        zones = self.zones(v_mps)
-        if count_in_box(ahead, *zones[STOP]) >= p.min_points:
-            return STOP
-        if count_in_box(ahead, *zones[SLOWDOWN]) >= p.min_points:
-            return SLOWDOWN
-        return PASS
 
     def filter(
         self, command: ArrayLike, scan: Scan | ArrayLike, t_s: float | None = None

@@ -21,9 +21,9 @@ avoids is left to global replanning. This module is that controller:
   no dithering between equal offsets). The corridor narrows to the goal point over the last
   ``l`` metres of the path, so the robot ends on the path's end, not beside it.
 * **Blocked**: when no offset is free, :attr:`CorridorFollower.blocked` turns True and the
-  command is zero: H&W's cue for global replanning (issue 15's L11/L12).
+  command is zero: H&W's cue for global replanning.
 * **Speed** (the regulation of nav2's Regulated Pure Pursuit): the clearance law
-  :func:`speed_for_clearance` (issue 15 L13: ``v_max * clip((d - d_stop) / (d_full - d_stop),
+  :func:`speed_for_clearance` (``v_max * clip((d - d_stop) / (d_full - d_stop),
   0, 1)`` with a floor so a free offset is always driven), RPP's curvature regulation
   (``v * R / R_min`` below ``regulated_min_radius_m``), RPP's approach regulation on the last
   segment, and the external speed limit of :class:`.controller.Controller`.
@@ -38,11 +38,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
-from dynmap_sim.agent.control.control_numba import numba_available, probe_offsets
 from dynmap_sim.agent.control.controller import Controller, SpeedLimit, register_controller
 from dynmap_sim.agent.control.pure_pursuit import (
     advance_segment,
@@ -51,6 +51,7 @@ from dynmap_sim.agent.control.pure_pursuit import (
 )
 from dynmap_sim.agent.params import check_fields, coerce_fields
 from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
+from dynmap_sim.jit import compiled
 
 FloatArray = NDArray[np.float64]
 
@@ -70,7 +71,7 @@ class CorridorFollowerParams:
     turn_in_place_rad: float = 0.6
     #: a vertex within this distance is reached [m]
     goal_tolerance_m: float = 0.12
-    #: corridor half-width l where ``set_path`` gets none [m] (issue 15 L10: H&W's routes in a
+    #: corridor half-width l where ``set_path`` gets none [m] (H&W's routes in a
     #: doorway-sized apartment)
     default_half_width_m: float = 0.35
     #: candidate offsets across ``[-l, l]`` (odd, so the base path itself is one)
@@ -81,14 +82,14 @@ class CorridorFollowerParams:
     #: spacing of the probe points [m] (the grid's usual 5 cm cells)
     probe_step_m: float = 0.05
     #: clearance beyond which an offset is not better for more room [m] (= the full-speed
-    #: clearance of L13: more room would not make the robot faster)
+    #: clearance of the speed law: more room would not make the robot faster)
     clearance_enough_m: float = 0.8
     #: cost of an offset [m of clearance per m of offset]: back to the path when free
     offset_cost_per_m: float = 0.3
     #: cost of changing the offset [m of clearance per m]: hysteresis (< offset cost, so the
     #: robot still returns to the path)
     switch_cost_per_m: float = 0.1
-    #: clearance law (L13): zero speed at ``min_clearance_m``, full speed from this on [m]
+    #: clearance law: zero speed at ``min_clearance_m``, full speed from this on [m]
     full_speed_clearance_m: float = 0.8
     #: the clearance law looks this far ahead along the chosen offset [m]
     speed_probe_m: float = 0.5
@@ -143,7 +144,7 @@ class CorridorFollowerParams:
 
 def speed_for_clearance(clearance_m: float, p: CorridorFollowerParams) -> float:
     """The clearance law [m/s] (H&W §6.3 "speed reduced in dependence of the distance to the
-    perceived obstacles"; the shape of RPP's proximity regulation, issue 15 L13):
+    perceived obstacles"; the shape of RPP's proximity regulation):
     ``v_max * clip((d - d_stop) / (d_full - d_stop), 0, 1)`` with ``d_stop`` the hard
     clearance and ``d_full`` ``full_speed_clearance_m``, floored at ``min_speed_mps`` above
     ``d_stop`` (a free offset keeps ``d >= d_stop``, so it is always driven). Non-decreasing in
@@ -155,16 +156,150 @@ def speed_for_clearance(clearance_m: float, p: CorridorFollowerParams) -> float:
     return max(p.speed_mps * frac, min(p.min_speed_mps, p.speed_mps))
 
 
+class CorridorPath(NamedTuple):
+    """The path :func:`probe_offsets` probes: vertices ``(K, 2)`` [m], arc length at each
+    vertex ``(K,)`` [m], unit tangents and left normals of the segments ``(K-1, 2)`` and
+    their corridor half-widths ``(K-1,)`` [m]."""
+
+    path: FloatArray
+    cum: FloatArray
+    tangent: FloatArray
+    normal: FloatArray
+    seg_hw: FloatArray
+
+
+class ProbeAt(NamedTuple):
+    """Where the offsets are probed from: the robot's segment, its arc length [m], the carrot
+    and its arc length [m], the robot's position [m] and the current offset [m]."""
+
+    seg: int
+    s_robot: float
+    carrot_x: float
+    carrot_y: float
+    s_carrot: float
+    x_m: float
+    y_m: float
+    offset_m: float
+
+
+class GridView(NamedTuple):
+    """A clearance grid for the kernels: ``clear (H, W)`` [m], cell ``(0, 0)``'s centre and
+    the cell size [m]."""
+
+    clear: FloatArray
+    origin_x_m: float
+    origin_y_m: float
+    res_m: float
+
+
+class OffsetScore(NamedTuple):
+    """:class:`CorridorFollowerParams`' fields that judge an offset [m, m per m]."""
+
+    min_clearance_m: float
+    speed_probe_m: float
+    clearance_enough_m: float
+    offset_cost_per_m: float
+    switch_cost_per_m: float
+
+
+@compiled
+def probe_offsets(  # type: ignore[no-untyped-def]
+    corridor, at, steps_m, unit_offsets, way_fractions, grid, score_p, offsets_out, clear_near_out
+):
+    """The follower's offset choice (:meth:`CorridorFollower._choose_offset`) on the path
+    ``corridor`` (:class:`CorridorPath`) from ``at`` (:class:`ProbeAt`): fills the candidate
+    offsets ``unit_offsets * l`` [m] and each one's least clearance within ``speed_probe_m``
+    (along the shifted path at ``steps_m`` ahead, and on the way to the shifted carrot at
+    ``way_fractions``, in ``grid``: :class:`GridView`); returns the best free offset's index
+    (-1: none free) and the clearance at the robot [m]."""
+    path, cum, tangent, normal, seg_hw = corridor
+    seg, s_robot, carrot_x, carrot_y, s_carrot, x_m, y_m, offset_m = at
+    clear, origin_x_m, origin_y_m, res_m = grid
+    min_clearance_m, speed_probe_m, clearance_enough_m, offset_cost_per_m, switch_cost_per_m = (
+        score_p
+    )
+    n_off = unit_offsets.shape[0]
+    n_s = steps_m.shape[0]
+    n_seg = seg_hw.shape[0]
+    end_m = cum[cum.shape[0] - 1]
+    hw_seg = seg_hw[seg]
+    for o in range(n_off):
+        offsets_out[o] = unit_offsets[o] * hw_seg
+    h, w = clear.shape
+    # clearance_at (nearest cell, clipped to the grid) of the robot's position
+    row = min(max(np.int64(np.rint((y_m - origin_y_m) / res_m)), 0), h - 1)
+    col = min(max(np.int64(np.rint((x_m - origin_x_m) / res_m)), 0), w - 1)
+    here = clear[row, col]
+    need_way = min(min_clearance_m, here)
+    min_all = np.full(n_off, math.inf)
+    free = np.ones(n_off, np.bool_)
+    for o in range(n_off):
+        clear_near_out[o] = math.inf
+    # the shifted path ahead
+    idx = 0  # searchsorted(cum, s, "right"), s non-decreasing
+    for m in range(n_s):
+        s = min(s_robot + steps_m[m], end_m)
+        while idx < cum.shape[0] and cum[idx] <= s:
+            idx += 1
+        k = min(max(idx - 1, 0), n_seg - 1)
+        u = s - cum[k]
+        bx = path[k, 0] + u * tangent[k, 0]
+        by = path[k, 1] + u * tangent[k, 1]
+        nx, ny = normal[k, 0], normal[k, 1]
+        hw = min(seg_hw[k], max(end_m - s, 0.0))
+        near = s - s_robot <= speed_probe_m
+        for o in range(n_off):
+            d = min(max(offsets_out[o], -hw), hw)
+            row = min(max(np.int64(np.rint((by + d * ny - origin_y_m) / res_m)), 0), h - 1)
+            col = min(max(np.int64(np.rint((bx + d * nx - origin_x_m) / res_m)), 0), w - 1)
+            c = clear[row, col]
+            if c < min_all[o]:
+                min_all[o] = c
+            if not c >= min_clearance_m:
+                free[o] = False
+            if near and c < clear_near_out[o]:
+                clear_near_out[o] = c
+    # the way there: robot -> shifted carrot
+    hw_c = min(seg_hw[seg], max(end_m - s_carrot, 0.0))
+    nx, ny = normal[seg, 0], normal[seg, 1]
+    for o in range(n_off):
+        d = min(max(offsets_out[o], -hw_c), hw_c)
+        tx = carrot_x + d * nx
+        ty = carrot_y + d * ny
+        min_way = math.inf
+        for t in range(way_fractions.shape[0]):
+            f = way_fractions[t]
+            py = y_m + f * (ty - y_m)
+            px = x_m + f * (tx - x_m)
+            row = min(max(np.int64(np.rint((py - origin_y_m) / res_m)), 0), h - 1)
+            col = min(max(np.int64(np.rint((px - origin_x_m) / res_m)), 0), w - 1)
+            c = clear[row, col]
+            if c < min_way:
+                min_way = c
+            if not c >= need_way:
+                free[o] = False
+        if here >= min_clearance_m and min_way < clear_near_out[o]:
+            clear_near_out[o] = min_way
+    best = -1
+    best_score = -math.inf
+    for o in range(n_off):
+        if not free[o]:
+            continue
+        score = (
+            min(min_all[o], clearance_enough_m)
+            - offset_cost_per_m * abs(offsets_out[o])
+            - switch_cost_per_m * abs(offsets_out[o] - offset_m)
+        )
+        if best < 0 or score > best_score:
+            best, best_score = o, score
+    return best, here
+
+
 @register_controller("corridor-follower")
 class CorridorFollower(Controller):
     """H&W §6.3's hybrid controller (module doc); ``params``: :class:`CorridorFollowerParams`
     fields. ``set_path(path, half_widths)`` takes per-vertex corridor half-widths ``l``.
-
-    :attr:`backend` ``"auto"`` probes the offsets in the numba kernel of
-    :mod:`.control_numba` when numba is installed (the same numbers), ``"numpy"`` in numpy.
     """
-
-    backend: str = "auto"
 
     def __init__(self, speed_mps: float, min_clearance_m: float, **params: float) -> None:
         super().__init__(speed_mps, min_clearance_m)
@@ -230,11 +365,6 @@ class CorridorFollower(Controller):
         self._seg_len_list: list[float] = self._seg_len.tolist()
         self._normal_list: list[list[float]] = self._normal.tolist()
 
-    def __setstate__(self, state: dict[str, object]) -> None:
-        self.__dict__.update(state)
-        if self._path is not None and "_path_list" not in state:  # pickled before the floats
-            self._cache_floats()
-
     @property
     def segment(self) -> int:
         """Index of the segment being followed (its start vertex)."""
@@ -271,17 +401,6 @@ class CorridorFollower(Controller):
         u = min(max(float(rel @ self._tangent[seg]), 0.0), self._seg_len_list[seg])
         return self._cum_list[seg] + u, float(rel @ self._normal[seg])
 
-    def _half_width_at(self, s_m: FloatArray, seg: NDArray[np.int64]) -> FloatArray:
-        """The corridor half-width at arc lengths ``s_m`` on segments ``seg``, narrowing to
-        zero over the last ``l`` metres so the path ends on its end point."""
-        return np.minimum(self._seg_hw[seg], np.maximum(self._cum[-1] - s_m, 0.0))
-
-    def _shifted(self, s_m: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
-        """Base points, left normals and half-widths at arc lengths ``s_m`` of the path."""
-        k = np.clip(np.searchsorted(self._cum, s_m, side="right") - 1, 0, self._n_seg - 1)
-        base = self._path[k] + (s_m - self._cum[k])[:, None] * self._tangent[k]  # type: ignore[index]
-        return base, self._normal[k], self._half_width_at(s_m, k)
-
     def _choose_offset(
         self,
         xy: FloatArray,
@@ -295,74 +414,40 @@ class CorridorFollower(Controller):
         carrot included unless the robot stands inside the hard clearance: a free offset's
         value is then never below the hard clearance) and the clearance at the robot [m]."""
         p = self.params
-        if self.backend not in ("auto", "numba", "numpy"):
-            raise ValueError(f"backend must be auto, numba or numpy, got {self.backend!r}")
-        if self.backend != "numpy" and numba_available():
-            n = len(self._unit_offsets)
-            offsets, clear_near = np.empty(n), np.empty(n)
-            best, here = probe_offsets(
-                self._path,
-                self._cum,
-                self._tangent,
-                self._normal,
-                self._seg_hw,
+        n = len(self._unit_offsets)
+        offsets, clear_near = np.empty(n), np.empty(n)
+        best, here = probe_offsets(
+            CorridorPath(self._path, self._cum, self._tangent, self._normal, self._seg_hw),
+            ProbeAt(
                 self._seg,
                 float(s_robot),
-                self._probe_steps_m,
-                self._unit_offsets,
                 float(carrot[0]),
                 float(carrot[1]),
                 float(s_carrot),
                 float(xy[0]),
                 float(xy[1]),
-                self._way_fractions,
+                self._offset_m,
+            ),
+            self._probe_steps_m,
+            self._unit_offsets,
+            self._way_fractions,
+            GridView(
                 grid.clearance_m,
                 float(grid.origin[0]),
                 float(grid.origin[1]),
                 float(grid.resolution_m),
+            ),
+            OffsetScore(
                 p.min_clearance_m,
                 p.speed_probe_m,
                 p.clearance_enough_m,
                 p.offset_cost_per_m,
                 p.switch_cost_per_m,
-                self._offset_m,
-                offsets,
-                clear_near,
-            )
-            return (None if best < 0 else best), offsets, clear_near, here
-        hw_seg = float(self._seg_hw[self._seg])
-        offsets = self._unit_offsets * hw_seg  # (K,)
-        # the shifted path ahead: (K, M) points
-        s = s_robot + self._probe_steps_m
-        s = np.minimum(s, self._cum[-1])
-        base, normal, hw = self._shifted(s)
-        d = np.clip(offsets[:, None], -hw[None, :], hw[None, :])  # (K, M)
-        pts = base[None, :, :] + d[..., None] * normal[None, :, :]
-        clear = grid.clearance_at(pts)  # (K, M)
-        # the way there: robot -> shifted carrot (K, T)
-        hw_c = float(self._half_width_at(np.array([s_carrot]), np.array([self._seg]))[0])
-        targets = carrot + np.clip(offsets, -hw_c, hw_c)[:, None] * self._normal[self._seg]
-        w = self._way_fractions
-        way = xy + w[None, :, None] * (targets[:, None, :] - xy)
-        clear_way = grid.clearance_at(way)
-        # the robot may already be inside the hard clearance (something came to it): then the
-        # way out only must not get worse than where it stands
-        here = float(grid.clearance_at(xy))
-        need_way = min(p.min_clearance_m, here)
-        free = np.all(clear >= p.min_clearance_m, axis=1) & np.all(clear_way >= need_way, axis=1)
-        near = s - s_robot <= p.speed_probe_m
-        clear_near = clear[:, near].min(axis=1)
-        if here >= p.min_clearance_m:
-            clear_near = np.minimum(clear_near, clear_way.min(axis=1))
-        if not free.any():
-            return None, offsets, clear_near, here
-        score = (
-            np.minimum(clear.min(axis=1), p.clearance_enough_m)
-            - p.offset_cost_per_m * np.abs(offsets)
-            - p.switch_cost_per_m * np.abs(offsets - self._offset_m)
+            ),
+            offsets,
+            clear_near,
         )
-        score[~free] = -np.inf
-        return int(np.argmax(score)), offsets, clear_near, here
+        return (None if best < 0 else int(best)), offsets, clear_near, float(here)
 
     # ----------------------------------------------------------------- control
     def command(
@@ -405,7 +490,7 @@ class CorridorFollower(Controller):
             return np.zeros(2, dtype=np.float32)
         self._blocked = False
         self._offset_m = float(offsets[best])
-        # _half_width_at(s_carrot) on scalars
+        # the corridor's half-width at the carrot (narrowing over the path's last l metres)
         hw_c = min(seg_hw[seg], max(cum[-1] - s_carrot, 0.0))
         d_c = min(max(self._offset_m, -hw_c), hw_c)
         nx, ny = self._normal_list[seg]

@@ -12,11 +12,12 @@ Modelled on nav2's ``costmap_2d`` layered costmap (Marder-Eppstein et al. 2010; 
   ``raytrace_range_m`` (nav2's ``obstacle_max_range`` / ``raytrace_max_range``), at the
   *estimated* laser pose (robot pose estimate composed with the laser's mount pose), so that
   any localizer can drive; ``+inf`` readings (REP-117: nothing within range) clear up to
-  ``inf_clear_range_m`` (nav2's ``inf_is_valid``). Beams are traced all at once with numpy
-  by sampling each ray every half cell (no per-beam Bresenham loop);
-* **inflation**: instead of nav2's cost values, the Euclidean distance transform of the union
-  of the layers, a :class:`~.clearance_grid.ClearanceGrid` (clearance [m] per cell), which
-  the planners (``min_clearance_m`` = robot radius + margin) and controllers already use.
+  ``inf_clear_range_m`` (nav2's ``inf_is_valid``). Each ray is sampled every half cell by
+  the compiled kernel :func:`.costmap_kernels.mark_scan` (no per-beam Bresenham loop);
+* **inflation**: instead of nav2's cost values, the exact Euclidean distance transform of the
+  union of the layers (:func:`.costmap_kernels.clearance_window`), a
+  :class:`~.clearance_grid.ClearanceGrid` (clearance [m] per cell), which the planners
+  (``min_clearance_m`` = robot radius + margin) and controllers already use.
 
 **Persistence of marks.** nav2's obstacle layer keeps a mark until one ray passes through its
 cell. Here a cell holds a small count: each scan that hits it adds one (up to
@@ -41,24 +42,21 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy import ndimage
 
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import OCCUPIED, UNKNOWN, OccupancyGrid
 from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
-from dynmap_sim.agent.planning.costmap_numba import (
-    OFFSET_CELLS,
+from dynmap_sim.agent.planning.costmap_kernels import (
+    GridFrame,
+    ScanLimits,
     clearance_window,
     mark_scan,
-    numba_available,
 )
-from dynmap_sim.agent.planning.costmap_numba import window_clearance as window_clearance_nb
+from dynmap_sim.agent.planning.costmap_kernels import window_clearance as update_window
 from dynmap_sim.types import LaserSpec, Prior, Scan
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
-
-_OFFSET = OFFSET_CELLS  # cells: keeps ray coordinates positive so that truncation is floor
 
 
 @dataclass(frozen=True)
@@ -66,7 +64,7 @@ class CostmapParams:
     """Tunables of :class:`Costmap` (nav2 ``costmap_2d`` names where they exist)."""
 
     resolution_m: float = 0.05
-    """Cell size [m]. H&W's replanning grid (notes L12) and the agent's maps use 5 cm (nav2's
+    """Cell size [m]. H&W's replanning grid and the agent's maps use 5 cm (nav2's
     default); a 0.8 m doorway is 16 cells wide, enough for a 0.2 m robot radius."""
 
     margin_m: float = 1.0
@@ -143,7 +141,7 @@ def laser_pose(
     pose: FloatArray, mount_pose: tuple[float, float, float]
 ) -> tuple[float, float, float]:
     """:func:`dynmap_sim.se2.compose` of one robot pose ``(3,)`` and the laser's mount pose,
-    as floats: the same numpy operations on scalars instead of arrays (bit for bit)."""
+    as floats (the laser's pose in the map frame, [m, m, rad])."""
     ax, ay, ath = pose.tolist()
     bx, by, bth = (float(v) for v in mount_pose)
     c, s = np.cos(ath), np.sin(ath)
@@ -157,13 +155,7 @@ class Costmap:
 
     ``bounds = (xmin, ymin, xmax, ymax)`` [m] of the area (the prior's bounds); the grid
     covers it plus ``params.margin_m``. Picklable (plain arrays).
-
-    :attr:`backend` ``"auto"`` runs the scan update and the distance transforms in the numba
-    kernels of :mod:`.costmap_numba` when numba is installed (the same numbers), ``"numpy"``
-    always in numpy and scipy.
     """
-
-    backend: str = "auto"
 
     def __init__(
         self, params: CostmapParams | None, bounds: tuple[float, float, float, float]
@@ -279,110 +271,44 @@ class Costmap:
         p = self.params
         ranges = np.asarray(scan.ranges_m if isinstance(scan, Scan) else scan, dtype=np.float64)
         pose = np.asarray(pose, dtype=np.float64)
-        if self._compiled():
-            lx, ly, lth = laser_pose(pose, laser.mount_pose)
-            th = lth + self._angles(laser)
-            changed = mark_scan(
+        lx, ly, lth = laser_pose(pose, laser.mount_pose)
+        th = lth + self._angles(laser)
+        limits = ScanLimits(
+            float(laser.range_min_m),
+            float(laser.range_max_m),
+            float(p.raytrace_range_m),
+            float(p.inf_clear_range_m),
+            float(p.obstacle_range_m),
+            int(p.max_persistence_scans),
+        )
+        changed = bool(
+            mark_scan(
                 self.marks,
-                float(self.origin[0]),
-                float(self.origin[1]),
-                self.resolution_m,
-                lx,
-                ly,
+                self._frame(),
+                (lx, ly),
                 np.cos(th),
                 np.sin(th),
                 ranges,
-                float(laser.range_min_m),
-                float(laser.range_max_m),
-                float(p.raytrace_range_m),
-                float(p.inf_clear_range_m),
-                float(p.obstacle_range_m),
-                int(p.max_persistence_scans),
-                float(pose[0]),
-                float(pose[1]),
+                limits,
+                (float(pose[0]), float(pose[1])),
                 self._footprint,
                 self._seen_scratch(),
             )
-            if changed:
-                self._changed()
-            return changed
-        lp = se2.compose(pose, np.asarray(laser.mount_pose, float))
-        th = lp[2] + self._angles(laser)
-        direction = np.stack([np.cos(th), np.sin(th)], axis=1)
-        with np.errstate(invalid="ignore"):
-            valid = np.isfinite(ranges) & (ranges >= laser.range_min_m)
-            hit = valid & (ranges < laser.range_max_m)
-            no_return = (ranges == np.inf) | (valid & ~hit)
-        # clearing: each beam up to its reading (hits) or the +inf clearing range
-        clear_m = np.where(hit, np.minimum(ranges, p.raytrace_range_m), 0.0)
-        clear_m = np.where(no_return, min(p.inf_clear_range_m, p.raytrace_range_m), clear_m)
-        ends_xy = lp[:2] + direction * np.where(hit, ranges, 0.0)[:, None]
-        end_key, end_inside = self._keys(ends_xy)
-        # a hit beam never clears its own end cell
-        own_end = np.where(hit & end_inside, end_key, -1)
-        passed = np.zeros(self.marks.size, dtype=bool)
-        passed[self._ray_keys(lp[:2], direction, clear_m, own_end)] = True
-        passed = np.flatnonzero(passed)
-        marked = end_key[hit & end_inside & (ranges <= p.obstacle_range_m)]
-        footprint = self._footprint_keys(np.asarray(pose, dtype=np.float64))
-        flat = self.marks.reshape(-1)
-        touched = np.concatenate([passed, marked, footprint])
-        before = flat[touched] > 0
-        flat[passed] = np.maximum(flat[passed] - 1, 0)
-        flat[marked] = np.minimum(flat[marked] + 1, p.max_persistence_scans)
-        flat[footprint] = 0
-        changed = bool(np.any(before != (flat[touched] > 0)))
+        )
         if changed:
             self._changed()
         return changed
 
+    def _frame(self) -> GridFrame:
+        """The grid's place for the kernels."""
+        return GridFrame(float(self.origin[0]), float(self.origin[1]), self.resolution_m)
+
     def _seen_scratch(self) -> NDArray[np.uint8]:
         """The scan kernel's per-cell scratch (zero between calls)."""
-        seen = getattr(self, "_seen", None)  # (a costmap pickled before it had one)
+        seen = self._seen
         if seen is None or seen.size != self.marks.size:
             seen = self._seen = np.zeros(self.marks.size, dtype=np.uint8)
         return seen
-
-    def _ray_keys(
-        self, origin_xy: FloatArray, direction: FloatArray, length_m: FloatArray, end_key: IntArray
-    ) -> IntArray:
-        """Flat indices of the cells that rays ``origin + t * direction``, ``0 <= t <
-        length_m``, pass, except each ray's ``end_key`` (its hit cell, -1: none). All rays at
-        once on a (rays x samples) array, a sample every half cell; a cell a ray only clips
-        at a corner may be missed, which only clears less. Cells outside the grid are
-        dropped; a cell may be listed more than once."""
-        res = self.resolution_m
-        n = int(np.ceil(length_m.max(initial=0.0) / (0.5 * res)))
-        t_cells = (0.5 * np.arange(n)).astype(np.float32)  # sample distances [cells]
-        keep = t_cells[None, :] * res < length_m[:, None]  # (B, n)
-        o = self._ray_origin(origin_xy)
-        d = direction.astype(np.float32)
-        col = (o[0] + t_cells[None, :] * d[:, 0:1]).astype(np.int32) - _OFFSET
-        row = (o[1] + t_cells[None, :] * d[:, 1:2]).astype(np.int32) - _OFFSET
-        h, w = self.shape
-        keep &= (row >= 0) & (row < h) & (col >= 0) & (col < w)
-        key = row * w + col
-        keep &= key != end_key[:, None]
-        return key[keep]
-
-    def _ray_origin(self, origin_xy: FloatArray) -> NDArray[np.float32]:
-        """A ray origin in cells for truncation to the nearest cell (float32: 10x faster than
-        rint), offset by ``_OFFSET`` to stay >= 0."""
-        return ((origin_xy - self.origin) / self.resolution_m + 0.5 + _OFFSET).astype(np.float32)
-
-    def _compiled(self) -> bool:
-        """Whether the numba kernels serve (:attr:`backend`)."""
-        if self.backend not in ("auto", "numba", "numpy"):
-            raise ValueError(f"Costmap.backend must be auto, numba or numpy, got {self.backend!r}")
-        return self.backend != "numpy" and numba_available()
-
-    def _footprint_keys(self, pose: FloatArray) -> IntArray:
-        """Flat indices of the cells within ``footprint_clear_radius_m`` of the robot."""
-        ij = np.rint((pose[1::-1] - self.origin[::-1]) / self.resolution_m).astype(np.int64)
-        cells = ij + self._footprint
-        h, w = self.shape
-        ok = (cells[:, 0] >= 0) & (cells[:, 0] < h) & (cells[:, 1] >= 0) & (cells[:, 1] < w)
-        return cells[ok, 0] * w + cells[ok, 1]
 
     def clear_obstacles(self) -> None:
         """Forget every mark of the obstacle layer (nav2's ``ClearEntireCostmap`` recovery)."""
@@ -416,7 +342,7 @@ class Costmap:
     def _window_buffer(self, base: ClearanceGrid) -> FloatArray:
         """A copy of ``base``'s clearance for :meth:`window_clearance`: the last call's array
         with its window restored from ``base`` when it had the same ``base``."""
-        last = getattr(self, "_window", None)  # (a costmap pickled before it had one)
+        last = self._window
         if last is not None and last[0] is base:
             (a0, a1, b0, b1), clear = last[1], last[2]
             clear[a0:a1, b0:b1] = base.clearance_m[a0:a1, b0:b1]
@@ -427,13 +353,8 @@ class Costmap:
     def _distance_m(self, rows: tuple[int, int], cols: tuple[int, int]) -> FloatArray:
         """Distance [m] from each cell of the window ``rows x cols`` to the nearest obstacle
         of either layer inside it (inf when it has none): the exact Euclidean distance
-        transform (scipy's, or the numba kernel's, identical)."""
-        if self._compiled():
-            return clearance_window(self.static, self.marks, rows, cols, self.resolution_m)
-        occ = self.occupied_mask()[rows[0] : rows[1], cols[0] : cols[1]]
-        if not occ.any():
-            return np.full(occ.shape, np.inf)
-        return ndimage.distance_transform_edt(~occ) * self.resolution_m
+        transform."""
+        return clearance_window(self.static, self.marks, rows, cols, self.resolution_m)
 
     def window_clearance(
         self, base: ClearanceGrid, centre_xy: FloatArray, window_m: float, margin_m: float
@@ -442,10 +363,9 @@ class Costmap:
         of half-size ``window_m`` [m] around ``centre_xy`` recomputed from the current layers
         (nav2's rolling local costmap): exact where below ``margin_m`` [m] (obstacles up to
         ``margin_m`` outside the window are looked at), elsewhere in the window at least
-        ``margin_m`` (``base``'s value when larger). ``base`` is not changed. With the numba
-        kernels the grid's array is reused by the next call with the same ``base`` (only the
-        last window is restored from ``base``, no copy of the whole grid): use the grid before
-        calling again.
+        ``margin_m`` (``base``'s value when larger). ``base`` is not changed. The grid's array
+        is reused by the next call with the same ``base`` (only the last window is restored
+        from ``base``, no copy of the whole grid): use the grid before calling again.
 
         When ``base`` is this costmap's :meth:`clearance` and no obstacle cell changed since,
         ``base`` itself is returned: it is the answer (where the exact distance is below
@@ -461,18 +381,11 @@ class Costmap:
         c0, c1 = max(j - k_out, 0), min(j + k_out + 1, w)
         a0, a1 = max(i - k_in, 0), min(i + k_in + 1, h)
         b0, b1 = max(j - k_in, 0), min(j + k_in + 1, w)
-        if self._compiled():
-            clear = self._window_buffer(base)
-            window_clearance_nb(
-                self.static, self.marks, (r0, r1, c0, c1), (a0, a1, b0, b1), res, margin_m, clear
-            )
-            self._window = (base, (a0, a1, b0, b1), clear)
-            return ClearanceGrid(base.origin, res, clear)
-        local = self._distance_m((r0, r1), (c0, c1))
-        win = local[a0 - r0 : a1 - r0, b0 - c0 : b1 - c0]
-        clear = base.clearance_m.copy()
-        old = clear[a0:a1, b0:b1]
-        clear[a0:a1, b0:b1] = np.where(win < margin_m, win, np.maximum(old, margin_m))
+        clear = self._window_buffer(base)
+        update_window(
+            self.static, self.marks, (r0, r1, c0, c1), (a0, a1, b0, b1), res, margin_m, clear
+        )
+        self._window = (base, (a0, a1, b0, b1), clear)
         return ClearanceGrid(base.origin, res, clear)
 
     def __getstate__(self) -> dict[str, object]:

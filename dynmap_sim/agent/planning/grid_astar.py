@@ -18,10 +18,9 @@ goal is popped its cost is optimal and no node is reopened (Hart et al. 1968, Th
 the path costs exactly what Dijkstra's does. The cell path is then string-pulled
 (line-of-sight shortcuts, as ``grid-dijkstra`` does).
 
-The search kernel is plain Python (lists and ``heapq``), compiled by numba when the ``fast``
-extra is installed (:mod:`dynmap_sim.jit`).
+The search is one compiled kernel (:func:`_astar`, numba's ``heapq`` on a list).
 
-:func:`plan_around` is Hentschel & Wagner's §6.3 global replanning (notes L12): when the path
+:func:`plan_around` is Hentschel & Wagner's §6.3 global replanning: when the path
 ahead is blocked, plan from the robot to the first point of the path that is free beyond the
 block, then follow the rest of the path.
 """
@@ -43,7 +42,8 @@ FloatArray = NDArray[np.float64]
 _SQRT2 = math.sqrt(2.0)
 
 
-def _astar_py(free, penalty, h, w, src, dst, step_m, g, parent, closed):  # type: ignore[no-untyped-def]
+@compiled
+def _astar(free, penalty, h, w, src, dst, step_m, g, parent, closed):  # type: ignore[no-untyped-def]
     """A* from flat cell ``src`` to ``dst`` on an ``h x w`` grid; returns the path cost [m]
     (``inf`` when unreachable). ``free``/``penalty`` per cell; ``g`` (inf), ``parent`` (-1)
     and ``closed`` (0) are work buffers, ``parent`` holds the tree on return."""
@@ -88,9 +88,6 @@ def _astar_py(free, penalty, h, w, src, dst, step_m, g, parent, closed):  # type
     return math.inf
 
 
-_astar_nb = compiled(_astar_py)
-
-
 def astar_cells(
     free: NDArray[np.bool_], penalty: FloatArray, resolution_m: float, src: int, dst: int
 ) -> tuple[NDArray[np.int64], float] | None:
@@ -101,22 +98,12 @@ def astar_cells(
     n = h * w
     if not (free.flat[src] and free.flat[dst]):
         return None
-    if _astar_nb is not None:
-        g = np.full(n, np.inf)
-        parent = np.full(n, -1, dtype=np.int64)
-        cost = _astar_nb(
-            free.ravel().astype(np.uint8), np.ascontiguousarray(penalty, float).ravel(),
-            h, w, int(src), int(dst), float(resolution_m), g, parent, np.zeros(n, np.uint8),
-        )  # fmt: skip
-        par = parent
-    else:
-        g_list = [math.inf] * n
-        par_list = [-1] * n
-        cost = _astar_py(
-            free.ravel().tolist(), np.asarray(penalty, float).ravel().tolist(),
-            h, w, int(src), int(dst), float(resolution_m), g_list, par_list, bytearray(n),
-        )  # fmt: skip
-        par = par_list
+    g = np.full(n, np.inf)
+    par = np.full(n, -1, dtype=np.int64)
+    cost = _astar(
+        free.ravel().astype(np.uint8), np.ascontiguousarray(penalty, float).ravel(),
+        h, w, int(src), int(dst), float(resolution_m), g, par, np.zeros(n, np.uint8),
+    )  # fmt: skip
     if not math.isfinite(cost):
         return None
     cells = [int(dst)]

@@ -1,6 +1,6 @@
 """A* on the route graph, minimizing travel time: Hentschel & Wagner 2011 §6.2 (eq. 18).
 
-The graph is :meth:`dynmap_sim.agent.navigation.RouteMemory.graph`: nodes are waypoints,
+The graph is :class:`.route_graph.RouteGraph` (built by the route memory): nodes are waypoints,
 edges are route segments and joins costed in seconds (learned travel time, else length /
 ``v``; ``inf`` while blocked, §6.3). ``g`` sums those costs; ``h`` is the straight-line
 distance to the goal over a speed ``v_h`` (H&W: "the straight-line distance divided by the
@@ -29,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from dynmap_sim.agent.navigation.route_memory import Edge, RouteGraph
+from dynmap_sim.agent.planning.route_graph import Edge, RouteGraph
 
 FloatArray = NDArray[np.float64]
 
@@ -84,7 +84,9 @@ def astar(
     With ``leave_goal_m > 0`` the path must first reach a node farther than that from the
     goal (or start there) before it may end at the goal: A* runs on the graph's nodes paired
     with a flag "has left the goal" (a node is expanded at most once per flag). ``h`` is the
-    same for both, so it stays admissible and consistent. ``v_h``: the graph's
+    same for both, so it stays admissible and consistent. Reverse edges are not taken then:
+    the task is to drive round the loop in its direction, not out and back along it.
+    ``v_h``: the graph's
     :func:`heuristic_speed_mps` when the caller has it already."""
     if v_h is None:
         v_h = heuristic_speed_mps(graph, v_max_mps)
@@ -97,6 +99,7 @@ def astar(
     h_of = {n: 0.0 if math.isinf(v_h) else d / v_h for n, d in dist_m.items()}
     away = {n: leave_goal_m <= 0.0 or d > leave_goal_m for n, d in dist_m.items()}
 
+    leaving = leave_goal_m > 0.0
     s0 = (start, away[start])
     g: dict[tuple[int, bool], float] = {s0: 0.0}
     came: dict[tuple[int, bool], tuple[Edge, tuple[int, bool]]] = {}
@@ -120,7 +123,7 @@ def astar(
         g_n = g[state]
         for e in out:
             nxt = (e.v, left or away[e.v])
-            if not math.isfinite(e.travel_time_s) or nxt in done:
+            if not math.isfinite(e.travel_time_s) or nxt in done or (e.reverse and leaving):
                 continue
             cand = g_n + e.travel_time_s
             if cand < g.get(nxt, math.inf):
@@ -146,8 +149,9 @@ def plan_route(
 
     The robot enters the graph at its projection onto the nearest passable segment (heading
     on along the segment's direction, for the remaining fraction of its travel time) or at
-    the nearest node (straight-line distance / ``v_h``), whichever A* finds cheaper; so a
-    robot in the middle of a segment does not turn back to its start waypoint. Returns None
+    the nearest node (straight-line distance / ``v_h``), or back along the segment to its
+    start at the reverse edge's cost, whichever A* finds cheaper; so a robot in the middle of
+    a segment does not turn back to its start waypoint unless that is cheaper. Returns None
     when the graph is empty or the goal unreachable. With ``leave_goal_m > 0`` (a robot at
     the start of a loop route, which ends where it starts) the plan must get farther than
     that from the goal before it ends there (:func:`astar`), and no virtual start edge ends
@@ -177,10 +181,18 @@ def plan_route(
         starts = [Edge(START, near, d, 0.0 if math.isinf(v_h) else d / v_h, False, hw_near, -1)]
         hit = graph.nearest_edge(p, exclude_to=avoid)
     start_point = p
+    projected: list[Edge] = []  # start edges from the projection onto the segment
     if hit is not None:
         e, u, proj = hit
         rest_m, rest_s = (1.0 - u) * e.length_m, (1.0 - u) * e.travel_time_s
-        starts.append(Edge(START, e.v, rest_m, rest_s, e.learned, e.half_width_m, e.route_id))
+        projected.append(Edge(START, e.v, rest_m, rest_s, e.learned, e.half_width_m, e.route_id))
+        back = graph.reverse_of(e)
+        if back is not None and back.v != avoid and leave_goal_m <= 0.0:  # back, at its cost
+            projected.append(
+                Edge(START, e.u, u * e.length_m, u * back.travel_time_s, back.learned,
+                     e.half_width_m, e.route_id, True)
+            )  # fmt: skip
+        starts += projected
     found = astar(
         graph,
         START,
@@ -194,7 +206,7 @@ def plan_route(
     if found is None:
         return None
     cost, nodes, edges = found
-    if hit is not None and edges[0] is starts[-1]:
+    if any(edges[0] is s for s in projected):
         start_point = proj
     taken = tuple((e.u, e.v) for e in edges if e.u != START)
     rows = [graph.index[e.v] for e in edges]

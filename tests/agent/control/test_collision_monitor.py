@@ -141,3 +141,47 @@ def test_counts_and_events_record_what_it_did():
         m.filter([0.3, 0.0], s)
     assert m.counts == {PASS: 2, STOP: 3, SLOWDOWN: 2, FOOTPRINT_STOP: 0}
     assert [k for _, k, _ in m.events] == [STOP, SLOWDOWN, STOP]  # transitions only
+
+
+def action_by_points(monitor: CollisionMonitor, v_mps: float, ranges: np.ndarray) -> str:
+    """The monitor's action from its zones' definition, point by point (module doc)."""
+    p = monitor.params
+    pts = scan_points(monitor.laser, ranges).tolist()
+    zones = monitor.zones(v_mps)
+    sign = 1.0 if np.copysign(1.0, v_mps) > 0 else -1.0
+    foot = sum(np.hypot(x, y) <= p.robot_radius_m + p.footprint_margin_m for x, y in pts)
+    if foot >= p.min_points:
+        return FOOTPRINT_STOP
+    if v_mps == 0.0:
+        return PASS
+    for action in (STOP, SLOWDOWN):
+        x0, x1, hw = zones[action]
+        if sum(x0 <= x * sign <= x1 and abs(y) <= hw for x, y in pts) >= p.min_points:
+            return action
+    return PASS
+
+
+def test_the_kernels_action_is_the_zones_definition() -> None:
+    """Random boxes around the robot, REP-117 values and speeds (reversing, zero, -0.0,
+    forward): the action the definition gives, every action occurring."""
+    rng = np.random.default_rng(2)
+    seen = set()
+    for _ in range(300):
+        segs = []
+        for _ in range(rng.integers(0, 4)):
+            x, y, s = rng.uniform(-0.8, 0.8), rng.uniform(-0.8, 0.8), rng.uniform(0.02, 0.4)
+            segs.append(box(x, y, x + s, y + s))
+        if segs:
+            r = raycast(np.zeros(3), LASER.angles(), np.concatenate(segs), LASER.range_max_m)
+        else:
+            r = np.full(LASER.n_beams, np.inf)
+        bad = rng.random(r.shape)
+        r[bad < 0.02] = -np.inf
+        r[(bad > 0.02) & (bad < 0.03)] = np.nan
+        ranges = r.astype(np.float32)
+        v = float(rng.choice([0.0, -0.1, 0.1, 0.35, -0.0, rng.uniform(-0.4, 0.4)]))
+        mon = CollisionMonitor(LASER, 0.2)
+        mon.filter(np.array([v, 0.3]), Scan(ranges), 0.0)
+        assert mon.last_action == action_by_points(mon, v, ranges)
+        seen.add(mon.last_action)
+    assert len(seen) == 4

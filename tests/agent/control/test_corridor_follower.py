@@ -3,7 +3,6 @@ passing a box by a lateral offset inside the corridor, stopping and reporting ``
 speed law."""
 
 import math
-import pickle
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -177,19 +176,77 @@ def test_curvature_regulation_slows_tight_turns_unless_its_radius_is_zero():
     assert speeds[0.9] < 0.6 * SPEED_MPS
 
 
-def test_a_follower_pickled_before_its_float_caches_commands_the_same():
-    """A checkpoint of an older follower (its path's arrays, no float copies) unpickles to a
-    follower that commands as the fresh one."""
-    grid = grid_of(corridor())
-    fresh = follower()
-    fresh.set_path(np.array([[0.5, 1.0], [3.0, 1.0], [5.0, 2.0]]), np.full(3, 0.3))
-    state = dict(fresh.__dict__)
-    for name in ("_path_list", "_cum_list", "_seg_hw_list", "_seg_len_list", "_normal_list"):
-        del state[name]
-    old = CorridorFollower.__new__(CorridorFollower)
-    old.__dict__.update(state)
-    restored = pickle.loads(pickle.dumps(old))
-    for pose in ([0.6, 1.1, 0.1], [2.0, 0.9, -0.2], [3.5, 1.3, 0.4]):
-        np.testing.assert_array_equal(
-            restored.command(np.array(pose), grid), fresh.command(np.array(pose), grid)
+def choice_by_definition(c: CorridorFollower, xy, s_robot, carrot, s_carrot, grid):
+    """:meth:`CorridorFollower._choose_offset` from the module doc, point by point: each
+    offset shifts the path (narrowing to the end) and the way to the carrot; free when every
+    point keeps the hard clearance (the way: what the robot has, if less); the free one of
+    the best saturated clearance less the offset and switch costs wins (the first of equal
+    scores)."""
+    p = c.params
+    path, cum, end = c._path, c._cum, float(c._cum[-1])
+    seg = c._seg
+    offsets = c._unit_offsets * c._seg_hw[seg]
+    here = float(grid.clearance_at(xy))
+    need_way = min(p.min_clearance_m, here)
+    best, best_score, near_all = None, -np.inf, []
+    for d0 in offsets.tolist():
+        free, least, near = True, np.inf, np.inf
+        for step in c._probe_steps_m.tolist():
+            s = min(s_robot + step, end)
+            k = min(max(int(np.searchsorted(cum, s, side="right")) - 1, 0), c._n_seg - 1)
+            hw = min(c._seg_hw[k], max(end - s, 0.0))
+            q = path[k] + (s - cum[k]) * c._tangent[k] + min(max(d0, -hw), hw) * c._normal[k]
+            cl = float(grid.clearance_at(q))
+            least = min(least, cl)
+            free &= cl >= p.min_clearance_m
+            if s - s_robot <= p.speed_probe_m:
+                near = min(near, cl)
+        hw_c = min(c._seg_hw[seg], max(end - s_carrot, 0.0))
+        target = carrot + min(max(d0, -hw_c), hw_c) * c._normal[seg]
+        way = [float(grid.clearance_at(xy + f * (target - xy))) for f in c._way_fractions]
+        free &= min(way) >= need_way
+        if here >= p.min_clearance_m:
+            near = min(near, min(way))
+        near_all.append(near)
+        score = (
+            min(least, p.clearance_enough_m)
+            - p.offset_cost_per_m * abs(d0)
+            - p.switch_cost_per_m * abs(d0 - c._offset_m)
         )
+        if free and (best is None or score > best_score):
+            best, best_score = len(near_all) - 1, score
+    return best, offsets, np.array(near_all), here
+
+
+def test_the_offset_kernel_chooses_as_its_definition() -> None:
+    """Random paths (zero-length segments and narrowing ends included), poses, grids and
+    current offsets: the same best offset, offsets, clearances ahead and clearance here."""
+    rng = np.random.default_rng(5)
+    n_free = 0
+    for _ in range(25):
+        segs = [box(-1.0, -2.0, 7.0, 4.0)]
+        for _ in range(int(rng.integers(0, 8))):
+            x, y, s = rng.uniform(0.0, 6.0), rng.uniform(-1.5, 3.5), rng.uniform(0.05, 0.5)
+            segs.append(box(x, y, x + s, y + s))
+        grid = grid_of(np.concatenate(segs))
+        k = int(rng.integers(2, 7))
+        path = np.cumsum(rng.uniform(-1.0, 1.5, (k, 2)), axis=0) + [0.5, 0.5]
+        if rng.random() < 0.3:
+            path = np.insert(path, 1, path[1], axis=0)  # a zero-length segment
+        c = follower()
+        c.set_path(path, rng.uniform(0.0, 0.5, len(path)))
+        for _ in range(6):
+            c._seg = int(rng.integers(0, len(path) - 1))
+            c._offset_m = float(rng.uniform(-0.5, 0.5))
+            xy = path[c._seg] + rng.uniform(-0.6, 0.6, 2)
+            s_robot, _ = c._along(*xy)
+            a, b = path[c._seg], path[c._seg + 1]
+            carrot = a + rng.uniform(0.0, 1.0) * (b - a)
+            s_carrot = float(c._cum[c._seg]) + float(np.hypot(*(carrot - a)))
+            got = c._choose_offset(xy, s_robot, carrot, s_carrot, grid)
+            want = choice_by_definition(c, xy, s_robot, carrot, s_carrot, grid)
+            assert got[0] == want[0] and got[3] == want[3]
+            np.testing.assert_allclose(got[1], want[1], atol=1e-12)
+            np.testing.assert_allclose(got[2], want[2], atol=1e-12)
+            n_free += got[0] is not None
+    assert n_free > 10  # free offsets were chosen, not only blocked cases

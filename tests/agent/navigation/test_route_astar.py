@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
-from dynmap_sim.agent.navigation import Edge, RouteGraph, RouteMemory
+from dynmap_sim.agent.navigation import Edge, RouteGraph, RouteMemory, RouteMemoryParams
 from dynmap_sim.agent.planning.route_astar import START, astar, heuristic_speed_mps, plan_route
 
 #: Two ways from (0, 0) to (4, 0): straight (4 m) and over (2, 1.5) (5 m).
@@ -79,8 +79,46 @@ def test_the_start_is_projected_onto_the_nearest_segment():
 
 def test_empty_and_unreachable():
     assert plan_route(RouteMemory().graph(), [0, 0], [1, 1]) is None
-    mem = RouteMemory.from_prior(SHORT, 0.2, 0.35, 0.0, densify=False)
+    directed = RouteMemoryParams(reverse_cost_factor=math.inf)
+    mem = RouteMemory.from_prior(SHORT, 0.2, 0.35, 0.0, directed, densify=False)
     assert plan_route(mem.graph(), [4.0, 0.0], [0.0, 0.0]) is None  # routes are directed
+
+
+@pytest.mark.parametrize("factor", [1.0, 1.5, 3.0])
+def test_a_route_is_driven_backwards_at_its_reverse_cost(factor):
+    """Against the route's direction the plan follows the segments back, each at the
+    factor times its travel time (2 m at 0.2 m/s: 10 s forward)."""
+    params = RouteMemoryParams(reverse_cost_factor=factor)
+    mem = RouteMemory.from_prior(SHORT, 0.2, 0.35, 0.0, params, densify=False)
+    plan = plan_route(mem.graph(), [4.0, 0.0], [0.0, 0.0])
+    np.testing.assert_allclose(plan.xy, [(4.0, 0.0), (2.0, 0.0), (0.0, 0.0)])
+    assert plan.travel_time_s == pytest.approx(2 * 10.0 * factor)
+    assert plan.edges == ((1, 0),)  # the start's edge back to waypoint 1 is the projection's
+    forward = plan_route(mem.graph(), [0.0, 0.0], [4.0, 0.0])
+    assert forward.travel_time_s == pytest.approx(20.0)  # the route's direction: its own cost
+
+
+def test_a_robot_mid_segment_goes_back_along_it_when_that_is_shorter():
+    """On the tracked segment the plan may enter the graph backwards at the reverse cost; a
+    closer entry (the start waypoint straight ahead of it, at ``v_h``) is cheaper still."""
+    mem = RouteMemory.from_prior([(0.0, 0.0), (10.0, 0.0)], 0.2, 0.35, 0.0, densify=False)
+    mem.add_route([(0.0, 0.0), (0.0, 5.0)], 0.2, 0.35, 0.0)  # from the start, away
+    for start_on, back_s in (((0, 1), 1.5 * 1.0 / 0.2), (None, 1.0 / 0.2)):
+        plan = plan_route(mem.graph(), [1.0, 0.0], [0.0, 5.0], start_on=start_on)
+        np.testing.assert_allclose(plan.xy, [(1.0, 0.0), (0.0, 0.0), (0.0, 5.0)], atol=1e-12)
+        assert plan.travel_time_s == pytest.approx(back_s + 5.0 / 0.2, rel=1e-9)
+
+
+def test_a_block_holds_both_ways():
+    mem = RouteMemory.from_prior(SHORT, 0.2, 0.35, 0.0, densify=False)
+    mem.block((0, 1))
+    g = mem.graph()
+    costs = {(e.u, e.v): e.travel_time_s for e in g.edges}
+    assert math.isinf(costs[(0, 1)]) and math.isinf(costs[(1, 0)])
+    assert math.isfinite(costs[(1, 2)]) and math.isfinite(costs[(2, 1)])
+    assert plan_route(g, [4.0, 0.0], [0.0, 0.0]) is None  # the way back is blocked too
+    mem.unblock((1, 0))  # seen free from the other side
+    assert not mem.blocked
 
 
 @st.composite

@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 from dynmap_sim.agent.navigation import RouteMemory, RouteMemoryParams
-from dynmap_sim.agent.navigation.route_memory import DT, JOIN, T
+from dynmap_sim.agent.navigation.routes import DT, T
 from dynmap_sim.agent.planning.route_astar import plan_route
+from dynmap_sim.agent.planning.route_graph import JOIN
 
 DAY_S = 86_400.0
 
@@ -39,7 +40,9 @@ def test_a_place_passed_twice_keeps_the_pass_the_robot_is_on(drive_fn, window_m,
     mem = RouteMemory.from_prior(ROOM, 0.35, 0.35, 0.0, params=params)
     out_m = float(np.sum(np.hypot(*np.diff(np.array(ROOM[:6]), axis=0).T))) + 0.5
     drive_fn(mem, [*ROOM[:6], [4.0, -0.5]], 0.35, 0.0)
-    pos = mem.locate([4.0, -0.5, math.pi / 2], mem._track.route_id, mem._track.s_prev_m)
+    pos = mem.locate(
+        [4.0, -0.5, math.pi / 2], mem.tracker.track.route_id, mem.tracker.track.s_prev_m
+    )
     assert (abs(pos.along_m - out_m) < 0.3) is on_way_out
     plan = plan_route(mem.graph(), [4.0, -0.5], ROOM[-1], 0.35, start_on=(pos.from_id, pos.to_id))
     length = float(np.sum(np.hypot(*np.diff(plan.xy, axis=0).T)))

@@ -1,8 +1,9 @@
-"""The route memory's caches and kernel give what recomputation and numpy give.
+"""The route memory's caches give what recomputation gives, and its locate kernel what the
+closed-form projection onto each segment gives.
 
 The geometry cache (segments, arc lengths) must be dropped wherever a waypoint moves or a
-route is added, split, cut or forgotten; the numba search of ``locate`` must pick the same
-segment with the same numbers as the numpy one.
+route is added, split, cut or forgotten; the search of ``locate`` must pick the nearest
+segment by its rules (ties to the first, the tracked route, the continuity window).
 """
 
 from __future__ import annotations
@@ -15,8 +16,9 @@ import numpy as np
 import pytest
 
 from dynmap_sim.agent.navigation import RouteMemory
-from dynmap_sim.agent.navigation.route_memory import _project
-from dynmap_sim.agent.navigation.route_numba import locate_segment, numba_available
+from dynmap_sim.agent.navigation.route_tracking import locate_segment
+from dynmap_sim.agent.navigation.routes import SegmentArrays, build_graph
+from dynmap_sim.agent.planning.route_graph import project_onto_segments as _project
 
 DAY_S = 86_400.0
 DETOUR = [(0.0, 0.0), (3.0, 0.0), (3.0, 1.2), (7.0, 1.2), (7.0, 0.0), (10.0, 0.0)]
@@ -29,10 +31,10 @@ def straight(now_s: float = 0.0) -> RouteMemory:
 def assert_cache_fresh(mem: RouteMemory) -> None:
     """The cached geometry equals a rebuild from the routes, bit for bit, and the graph one
     of a copy that never had a cache."""
-    cached = mem._segments()
+    cached = mem.route_set.segments()
     fresh = copy.deepcopy(mem)
-    fresh._segs = None
-    rebuilt = fresh._segments()
+    fresh.route_set.changed()
+    rebuilt = fresh.route_set.segments()
     for name in ("a", "b", "l", "rid", "seg", "fr", "to", "s0", "length"):
         np.testing.assert_array_equal(getattr(cached, name), getattr(rebuilt, name), name)
     assert cached.cum.keys() == mem.routes.keys()
@@ -76,19 +78,26 @@ def test_tracking_with_the_cache_learns_what_recomputation_learns(drive_fn):
             np.concatenate([np.linspace(pts[j], pts[j + 1], 40) for j in range(len(pts) - 1)])
         ):
             pose = [xy[0], xy[1], 0.0]
-            dropped._segs = None
+            dropped.route_set.changed()
             assert kept.observe(pose, t0 + 0.1 * k) == dropped.observe(pose, t0 + 0.1 * k)
     assert json.dumps(kept.to_dict()) == json.dumps(dropped.to_dict())  # NaN as text
     for r, q in zip(kept.routes.values(), dropped.routes.values(), strict=True):
         np.testing.assert_array_equal(r.wp, q.wp)
 
 
-@pytest.mark.parametrize("python", [True, False])
-def test_the_locate_kernel_equals_numpy(python):
-    if not python and not numba_available():
-        pytest.skip("numba not installed")
+def first_min(dist: np.ndarray, among: np.ndarray) -> int | None:
+    """The first index of ``among`` (sorted) with the least ``dist``, None when empty."""
+    return None if among.size == 0 else int(among[np.argmin(dist[among])])
+
+
+def test_the_locate_kernel_picks_the_segment_its_rules_name():
+    """Random segments (zero-length ones, shared waypoints: exact ties): the kernel's pick
+    is the nearest segment (the first of equal ones), else the tracked route's nearest when
+    within 1e-9, else its nearest within the window along it when within ``continuity_m``;
+    its fraction, distance and projection are the closed-form projection's."""
     rng = np.random.default_rng(3)
-    for trial in range(200):
+    window, cont = 2.0, 0.35
+    for trial in range(300):
         n = int(rng.integers(1, 60))
         a = rng.uniform(-5, 5, (n, 2))
         b = a + rng.normal(0, 1, (n, 2)) * (rng.random((n, 1)) > 0.05)  # some zero-length
@@ -99,28 +108,36 @@ def test_the_locate_kernel_equals_numpy(python):
         p = a[int(rng.integers(n))] if trial % 3 == 0 else rng.uniform(-5, 5, 2)
         prefer = None if trial % 4 == 0 else int(rng.integers(0, 3))
         along = None if trial % 5 == 0 else float(rng.uniform(0, 20))
-        mem = RouteMemory(backend="numpy")
-        s = type("S", (), {"a": a, "b": b, "rid": rid, "s0": s0, "length": length})()
-        want = mem._locate_numpy(p, s, prefer, along)
-        got = locate_segment(p[0], p[1], a, b, rid, s0, length, prefer, along, 2.0, 0.35, python)
-        assert got == want
+        got = locate_segment(
+            p[0], p[1], SegmentArrays(a, b, rid, s0, length),
+            -1 if prefer is None else prefer, 0.0 if along is None else along,
+            prefer is not None, along is not None, window, cont,
+        )  # fmt: skip
         u, proj, dist = _project(p, a, b)
+        want = first_min(dist, np.arange(n))
+        if prefer is not None:
+            mine = np.flatnonzero(rid == prefer)
+            k2 = first_min(dist, mine)
+            if k2 is not None and dist[k2] <= dist[want] + 1e-9:
+                want = k2
+            if along is not None:
+                near = mine[np.abs(s0[mine] + u[mine] * length[mine] - along) <= window]
+                k3 = first_min(dist, near)
+                if k3 is not None and dist[k3] <= dist[want] + cont:
+                    want = k3
         k = got[0]
-        assert (got[1], got[2], got[3], got[4]) == (u[k], dist[k], proj[k][0], proj[k][1])
+        assert k == want
+        assert got[1] == pytest.approx(u[k], abs=1e-12)
+        assert got[2] == pytest.approx(dist[k], abs=1e-12)
+        np.testing.assert_allclose(got[3:], proj[k], atol=1e-12)
 
 
-def test_both_backends_locate_alike(drive_fn):
+def test_locate_of_a_non_finite_position_is_none(drive_fn):
     mem = straight()
     drive_fn(mem, DETOUR, 0.25, 100.0)
-    other = copy.deepcopy(mem)
-    other.backend = "numpy"
-    rng = np.random.default_rng(0)
-    for xy in rng.uniform([-1, -1], [11, 2], (300, 2)):
-        for rid, along in ((None, None), (0, None), (1, float(rng.uniform(0, 6)))):
-            assert mem.locate([*xy, 0.0], rid, along) == other.locate([*xy, 0.0], rid, along)
+    assert mem.locate([math.nan, 0.0, 0.0]) is None
+    assert mem.observe([math.inf, 0.0, 0.0], 200.0) is None
     assert math.isfinite(mem.locate([1.0, 0.1]).along_m)
-    with pytest.raises(ValueError, match="backend"):
-        RouteMemory(backend="gpu")
 
 
 def test_the_graph_is_reused_only_while_its_inputs_are_the_same(drive_fn):
@@ -129,13 +146,13 @@ def test_the_graph_is_reused_only_while_its_inputs_are_the_same(drive_fn):
     assert mem.graph() is g  # nothing changed
     ids = mem.routes[0].ids
     mem.block((int(ids[3]), int(ids[4])))
-    assert mem.graph() is not g and mem.graph().edges == mem._build_graph().edges
+    assert mem.graph() is not g and mem.graph().edges == build_graph(mem.route_set).edges
     assert math.isinf(next(e for e in mem.graph().edges if e.u == ids[3]).travel_time_s)
     mem.unblock((int(ids[3]), int(ids[4])))
     assert mem.graph().edges == g.edges
     mem.routes[0].wp[1:, 5] = 1.0  # edited in place: travel times learned elsewhere
-    assert mem.graph().edges == mem._build_graph().edges
+    assert mem.graph().edges == build_graph(mem.route_set).edges
     assert all(e.learned for e in mem.graph().edges)
     drive_fn(mem, DETOUR, 0.25, 100.0)  # a new route, splits, learned times
-    assert mem.graph().edges == mem._build_graph().edges
+    assert mem.graph().edges == build_graph(mem.route_set).edges
     assert any(e.route_id == 1 for e in mem.graph().edges)

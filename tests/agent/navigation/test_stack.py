@@ -11,7 +11,8 @@ import pytest
 from dynmap_sim.agent.control.corridor_follower import CorridorFollowerParams
 from dynmap_sim.agent.localizer import make_localizer
 from dynmap_sim.agent.navigation.policy import NavigationPolicy
-from dynmap_sim.agent.navigation.route_memory import RouteMemory, RoutePosition
+from dynmap_sim.agent.navigation.route_memory import RouteMemory
+from dynmap_sim.agent.navigation.route_tracking import RoutePosition
 from dynmap_sim.agent.navigation.stack import NavigationStack, StackParams
 from dynmap_sim.agent.planning.costmap import CostmapParams
 from dynmap_sim.env import DynMapEnv
@@ -254,7 +255,7 @@ def test_via_points_behind_a_detour_are_passed_but_not_the_loop_seen_at_its_star
     prior = Prior(np.array([0.0, 0.0, 0.0]), bounds=(-1, -1, 11, 11), route=loop, day=1, run=1)
     stack = NavigationStack(laser, 0.17)
     stack.begin_run(prior)
-    vias = [wid for _, wid in stack._vias]
+    vias = [wid for _, wid in stack.targets.vias]
     assert len(vias) == 7  # every 5 m of the 40 m loop, none within 2.5 m of its end
     prior_route = next(iter(stack.route_memory.routes.values()))
 
@@ -263,13 +264,13 @@ def test_via_points_behind_a_detour_are_passed_but_not_the_loop_seen_at_its_star
         xy = prior_route.xy[k]
         stack._route_pos = RoutePosition(0, k + 1, waypoint, waypoint + 1, 0.1, 0.0, 0.0, 0.0,
                                          0.35, True, (float(xy[0]), float(xy[1])))  # fmt: skip
-        stack._armed = True
-        stack._pass_vias(0.0, np.array([*xy, 0.0]))
+        stack.targets.armed = True
+        stack._check_goal(0.0, np.array([*xy, 0.0]))
 
     at(int(prior_route.ids[-2]))  # the last segment, 0.5 m before the start
-    assert stack._via_k == 0
+    assert stack.targets.via_k == 0
     at(vias[1] + 2)  # rejoined 1 m after the second via point
-    assert stack._via_k == 2
+    assert stack.targets.via_k == 2
 
 
 def _loop_stack_without_its_end():
@@ -295,7 +296,7 @@ def _loop_stack_without_its_end():
     mem = stack.route_memory
     r = next(iter(mem.routes.values()))
     r.ids, r.wp = r.ids[:-1], r.wp[:-1]  # the goal waypoint (0, 0) is gone
-    mem._segs = None
+    mem.route_set.changed()
     return stack, laser, prior
 
 

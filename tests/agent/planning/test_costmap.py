@@ -210,13 +210,11 @@ def test_cell_index_is_cell_of() -> None:
     np.testing.assert_array_equal(got, grid.cell_of(pts))
 
 
-@pytest.mark.parametrize("backend", ["numpy", "auto"])
-def test_window_of_an_unchanged_costmap_is_its_clearance(backend: str) -> None:
+def test_window_of_an_unchanged_costmap_is_its_clearance() -> None:
     """On the costmap's own clearance with no change since, the window clearance is that
     clearance (returned as is), as computed on a copy of it."""
     rng = np.random.default_rng(4)
     cm = Costmap(CostmapParams(), (0.0, 0.0, 6.0, 4.0))
-    cm.backend = backend
     cm.set_static_segments(box(0.0, 0.0, 6.0, 4.0))
     for _ in range(20):
         cm.marks = (rng.random(cm.shape) < rng.choice([0.0, 0.002, 0.02])).astype(np.int8)

@@ -12,7 +12,6 @@ from scipy import ndimage
 from scipy.sparse.csgraph import dijkstra
 from synthetic_scans import box
 
-import dynmap_sim.agent.planning.grid_astar as grid_astar
 from dynmap_sim.agent.planning.clearance_grid import (
     ClearanceGrid,
     build_clearance_grid,
@@ -28,16 +27,6 @@ MIN_C, PREF_C = 0.25, 0.32
 
 def clearance_of(occ: np.ndarray, res: float = RES) -> ClearanceGrid:
     return ClearanceGrid(np.zeros(2), res, ndimage.distance_transform_edt(~occ) * res)
-
-
-@pytest.fixture(params=["numba", "python"])
-def kernel(request, monkeypatch):
-    """Run each test with the compiled kernel (when numba is there) and the Python one."""
-    if request.param == "python":
-        monkeypatch.setattr(grid_astar, "_astar_nb", None)
-    elif grid_astar._astar_nb is None:
-        pytest.skip("numba not installed")
-    return request.param
 
 
 @st.composite
@@ -57,10 +46,9 @@ def grids(draw):
     return occ, int(src), int(dst)
 
 
-@pytest.mark.parametrize("python_kernel", [False, True])
 @settings(max_examples=60, deadline=None)
 @given(case=grids())
-def test_astar_cost_equals_dijkstra(case, python_kernel: bool) -> None:
+def test_astar_cost_equals_dijkstra(case) -> None:
     occ, src, dst = case
     res = 1.0
     grid = clearance_of(occ, res)
@@ -69,13 +57,7 @@ def test_astar_cost_equals_dijkstra(case, python_kernel: bool) -> None:
     want = dijkstra(graph, indices=src)[dst]
     free = grid.clearance_m >= min_c
     pen = clearance_penalty(grid.clearance_m, pref_c)
-    nb = grid_astar._astar_nb
-    if python_kernel:
-        grid_astar._astar_nb = None
-    try:
-        got = astar_cells(free, pen, res, src, dst)
-    finally:
-        grid_astar._astar_nb = nb
+    got = astar_cells(free, pen, res, src, dst)
     if not np.isfinite(want):
         assert got is None
         return
@@ -113,7 +95,7 @@ def min_clearance_along(p: np.ndarray, grid: ClearanceGrid) -> float:
 @pytest.mark.parametrize(
     ("start", "goal"), [((1, 1), (1, 11)), ((9, 1), (1, 6)), ((2.3, 3), (8, 11)), ((4, 1), (6, 1))]
 )
-def test_paths_keep_the_clearance_and_are_as_short_as_dijkstras(kernel, start, goal) -> None:
+def test_paths_keep_the_clearance_and_are_as_short_as_dijkstras(start, goal) -> None:
     grid = build_clearance_grid(room(), np.zeros((0, 3)), resolution_m=RES)
     astar, dijk = GridAStar(MIN_C, PREF_C), GridDijkstra(MIN_C, PREF_C)
     p = astar.plan(np.array(start, float), np.array(goal, float), grid)
@@ -125,7 +107,7 @@ def test_paths_keep_the_clearance_and_are_as_short_as_dijkstras(kernel, start, g
     assert path_length(p) <= 1.02 * path_length(q) + RES
 
 
-def test_unreachable_goal_gives_none(kernel) -> None:
+def test_unreachable_goal_gives_none() -> None:
     segs = np.concatenate([box(0, 0, 6, 4), [[3, 0, 3, 4]]])  # a wall splits the room
     grid = build_clearance_grid(segs, np.zeros((0, 3)), resolution_m=RES)
     planner = GridAStar(MIN_C, PREF_C)
@@ -153,7 +135,7 @@ def corridor() -> tuple[np.ndarray, ClearanceGrid]:
     return np.array([[0.5, 1.5], [3.0, 1.5], [7.0, 1.5], [9.5, 1.5]]), grid
 
 
-def test_plan_around_a_block_rejoins_the_path_behind_it(kernel) -> None:
+def test_plan_around_a_block_rejoins_the_path_behind_it() -> None:
     path, grid = corridor()
     planner = GridAStar(MIN_C, PREF_C)
     here = np.array([2.0, 1.4])
@@ -167,7 +149,7 @@ def test_plan_around_a_block_rejoins_the_path_behind_it(kernel) -> None:
     assert np.any(np.all(np.isclose(out, path[2]), axis=1))
 
 
-def test_plan_around_without_a_block_and_with_a_blocked_end(kernel) -> None:
+def test_plan_around_without_a_block_and_with_a_blocked_end() -> None:
     path, grid = corridor()
     planner = GridAStar(MIN_C, PREF_C)
     here = np.array([7.5, 1.6])  # beyond the block: nothing in the way
@@ -181,7 +163,7 @@ def test_plan_around_without_a_block_and_with_a_blocked_end(kernel) -> None:
     assert plan_around(path, np.array([2.0, 1.5]), closed, planner) is None
 
 
-def test_plan_around_a_block_just_before_the_goal(kernel) -> None:
+def test_plan_around_a_block_just_before_the_goal() -> None:
     path, grid = corridor()
     planner = GridAStar(MIN_C, PREF_C)
     short = np.array([[0.5, 1.5], [5.0, 1.5], [5.67, 1.5]])  # the first free point is its end
@@ -190,7 +172,7 @@ def test_plan_around_a_block_just_before_the_goal(kernel) -> None:
     assert np.all(np.hypot(*np.diff(out, axis=0).T) > 0)  # no repeated vertex
 
 
-def test_plan_around_from_behind_a_wall_reaches_the_path_on_the_grid(kernel) -> None:
+def test_plan_around_from_behind_a_wall_reaches_the_path_on_the_grid() -> None:
     """A robot on a detour, in a room whose wall separates it from the nearest point of the
     path (office floor, issue 15): the way back goes through the room's door, not through
     the wall, even though nothing blocks the path ahead of that point."""

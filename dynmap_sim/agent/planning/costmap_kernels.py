@@ -1,45 +1,42 @@
-"""Optional numba kernels of :class:`~.costmap.Costmap` (extra ``fast``).
+"""The compiled kernels of :class:`~.costmap.Costmap`.
 
 * :func:`mark_scan`: the obstacle layer's update by one scan (:meth:`.Costmap.update`) in one
-  loop over the beams, each ray walked sample by sample, instead of numpy's (beams x samples)
-  arrays. The arithmetic is the numpy code's, operation for operation (the ray samples in
-  float32, truncation to cells, ``rint`` for end points), so the marks are identical.
-* :func:`clearance_window`: the exact Euclidean distance transform of the union of the static
-  and the obstacle layer over a window of the grid (Felzenszwalb & Huttenlocher, "Distance
-  transforms of sampled functions", ToC 2012: a column pass, then the lower envelope of
-  parabolas per row), in integer squared cells with exact rational comparisons, so each
-  cell's ``sqrt(d2) * res`` equals ``scipy.ndimage.distance_transform_edt``'s bit for bit.
-
-Each kernel is plain Python (the reference the tests run against the numpy code), compiled
-with :func:`dynmap_sim.jit.compiled` when numba is installed.
+  loop over the beams, each ray walked every half cell (float32 samples truncated to cells,
+  ``rint`` for end points), skipping the samples in squares of blocks without marks.
+* :func:`clearance_window` / :func:`window_clearance`: the exact Euclidean distance transform
+  of the union of the static and the obstacle layer over a window of the grid (Felzenszwalb &
+  Huttenlocher, "Distance transforms of sampled functions", ToC 2012: a column pass, then the
+  lower envelope of parabolas per row) in integer squared cells, so each cell's
+  ``sqrt(d2) * res`` is the exact distance to the nearest obstacle cell's centre.
 """
 
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from dynmap_sim.jit import compiled
-from dynmap_sim.jit import numba_available as numba_available  # re-exported
 
 FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
-#: cells: keeps ray coordinates positive so that truncation is floor (as in :mod:`.costmap`)
+#: cells: keeps ray coordinates positive so that truncation is floor
 OFFSET_CELLS = 1 << 16
 
 
-#: side of the blocks [cells] whose lack of marks lets :func:`_mark_scan_py` skip ray samples
-#: (4: of 2, 3, 4 and 8 cells the fastest on the apartment's scans, by a little)
+#: side of the blocks [cells] whose lack of marks lets :func:`mark_scan` skip ray samples
+#: (4: the fastest of 2, 3, 4 and 8 cells, see docs/tuning/navigation.md)
 BLOCK = 4
 #: skipped samples keep this far [cells] inside their block: 6x float32's error of a ray
 #: sample's position near ``OFFSET_CELLS`` (half an ulp, 2^-8 cells, for each of two samples)
 BLOCK_MARGIN_CELLS = 0.05
 
 
-def _chessboard_distance_py(dist):  # type: ignore[no-untyped-def]
+@compiled
+def chessboard_distance(dist):  # type: ignore[no-untyped-def]
     """``dist`` ``(H, W)`` int64 in place: each entry := the least ``dist[q] + chessboard
     distance to q`` over all entries q (Rosenfeld & Pfaltz's two passes, 8-neighbours)."""
     h, w = dist.shape
@@ -63,11 +60,8 @@ def _chessboard_distance_py(dist):  # type: ignore[no-untyped-def]
             dist[i, j] = d
 
 
-#: the kernel :func:`_mark_scan_py` calls (numba compiles calls to compiled functions only)
-_chessboard_distance = compiled(_chessboard_distance_py) or _chessboard_distance_py
-
-
-def _slab_clip_py(s_lo, s_hi, p, d, inv_d, lo, hi):  # type: ignore[no-untyped-def]
+@compiled
+def _slab_clip(s_lo, s_hi, p, d, inv_d, lo, hi):  # type: ignore[no-untyped-def]
     """The travel interval ``[s_lo, s_hi]`` of a ray along one axis (position ``p``,
     direction ``d``, ``inv_d = 1 / d``) clipped to the slab ``lo <= p + s * d <= hi``; a ray
     parallel to the slab outside it gets ``s_hi = -1`` (no travel)."""
@@ -80,41 +74,49 @@ def _slab_clip_py(s_lo, s_hi, p, d, inv_d, lo, hi):  # type: ignore[no-untyped-d
     return s_lo, s_hi
 
 
-_slab_clip = compiled(_slab_clip_py) or _slab_clip_py
+class GridFrame(NamedTuple):
+    """Where a grid lies: the centre of its cell ``(0, 0)`` [m] and its cell size [m]."""
+
+    origin_x_m: float
+    origin_y_m: float
+    res_m: float
 
 
-def _mark_scan_py(  # type: ignore[no-untyped-def]
-    marks,
-    origin_x_m,
-    origin_y_m,
-    res_m,
-    lp_x_m,
-    lp_y_m,
-    cos_th,
-    sin_th,
-    ranges_m,
-    range_min_m,
-    range_max_m,
-    raytrace_range_m,
-    inf_clear_range_m,
-    obstacle_range_m,
-    max_persistence,
-    robot_x_m,
-    robot_y_m,
-    footprint_cells,
-    seen,
+class ScanLimits(NamedTuple):
+    """The ranges [m] :func:`mark_scan` reads a scan with (:class:`.CostmapParams` and the
+    laser's), and the most scans a mark survives (``max_persistence_scans``)."""
+
+    range_min_m: float
+    range_max_m: float
+    raytrace_range_m: float
+    inf_clear_range_m: float
+    obstacle_range_m: float
+    max_persistence: int
+
+
+@compiled
+def mark_scan(  # type: ignore[no-untyped-def]
+    marks, frame, laser_xy, cos_th, sin_th, ranges_m, limits, robot_xy, footprint_cells, seen
 ):
-    """Mark and clear ``marks`` (``(H, W)`` int8, in place) with one scan; True when a cell's
-    obstacle state changed. The beam directions come from the caller (numpy's
-    trigonometry); ``footprint_cells`` ``(K, 2)`` are the (row, col) offsets of the cells
-    around the robot's cell that are cleared; ``seen`` ``(H * W,)`` uint8 is scratch, zero
-    on entry and on return (no grid-sized allocation per scan)."""
+    """Mark and clear ``marks`` (``(H, W)`` int8, in place) with one scan taken from
+    ``laser_xy`` [m] on the grid ``frame`` (:class:`GridFrame`); True when a cell's obstacle
+    state changed. ``cos_th``/``sin_th``: the beams' directions in the map frame;
+    ``limits``: :class:`ScanLimits`; ``footprint_cells`` ``(K, 2)``: the (row, col) offsets
+    of the cells around the robot's cell at ``robot_xy`` that are cleared; ``seen``
+    ``(H * W,)`` uint8 is scratch, zero on entry and on return (no grid-sized allocation per
+    scan)."""
+    origin_x_m, origin_y_m, res_m = frame
+    lp_x_m, lp_y_m = laser_xy
+    robot_x_m, robot_y_m = robot_xy
+    range_min_m, range_max_m = limits.range_min_m, limits.range_max_m
+    raytrace_range_m, inf_clear_range_m = limits.raytrace_range_m, limits.inf_clear_range_m
+    obstacle_range_m, max_persistence = limits.obstacle_range_m, limits.max_persistence
     h, w = marks.shape
     flat = marks.reshape(-1)
-    # the ray origin in cells for truncation, offset to stay >= 0 (Costmap._ray_origin)
+    # the ray origin in cells for truncation, offset to stay >= 0
     ray_origin_x32 = np.float32((lp_x_m - origin_x_m) / res_m + 0.5 + OFFSET_CELLS)
     ray_origin_y32 = np.float32((lp_y_m - origin_y_m) / res_m + 0.5 + OFFSET_CELLS)
-    # the footprint's cells in the grid (Costmap._footprint_keys)
+    # the footprint's cells in the grid
     robot_row = np.int64(np.rint((robot_y_m - origin_y_m) / res_m))
     robot_col = np.int64(np.rint((robot_x_m - origin_x_m) / res_m))
     footprint_keys = np.empty(footprint_cells.shape[0], np.int64)
@@ -173,7 +175,7 @@ def _mark_scan_py(  # type: ignore[no-untyped-def]
         for j in range(bc0 * BLOCK, min((bc0 + nbc) * BLOCK, w)):
             if flat[i * w + j] > 0:
                 free[i // BLOCK - br0, j // BLOCK - bc0] = 0
-    _chessboard_distance(free)
+    chessboard_distance(free)
     passed = np.empty(1024, np.int64)
     n_passed = 0
     for b in range(n_beams):
@@ -258,15 +260,17 @@ def _mark_scan_py(  # type: ignore[no-untyped-def]
     return False
 
 
-def _distance_py(  # type: ignore[no-untyped-def]
-    static, marks, r0, r1, c0, c1, a0, a1, b0, b1, cap_cells, res_m, margin_m, out
-):
-    """Distance [m] ``d`` from each cell of ``[a0:a1, b0:b1]`` to the nearest obstacle cell
-    (``static`` or ``marks > 0``) of the window ``[r0:r1, c0:c1]`` that holds it, written to
-    ``out`` (grid-sized) as ``d`` where ``d < margin_m``, else ``max(out, margin_m)`` (with
+@compiled
+def _distance(static, marks, outer, inner, cap_cells, res_m, margin_m, out):  # type: ignore[no-untyped-def]
+    """Distance [m] ``d`` from each cell of the window ``inner`` ``(a0, a1, b0, b1)`` (rows
+    ``a0:a1``, columns ``b0:b1``) to the nearest obstacle cell (``static`` or ``marks > 0``)
+    of the window ``outer`` ``(r0, r1, c0, c1)`` that holds it, written to ``out``
+    (grid-sized) as ``d`` where ``d < margin_m``, else ``max(out, margin_m)`` (with
     ``margin_m = inf``: ``d``, inf without an obstacle). Obstacles more than ``cap_cells``
     away along their column are left out: ``d`` is exact up to ``cap_cells`` cells and never
     below the exact value."""
+    r0, r1, c0, c1 = outer
+    a0, a1, b0, b1 = inner
     h, w = r1 - r0, c1 - c0
     inf_cells = h + w + 1  # farther than any distance in the window
     g = np.empty((a1 - a0, w), np.int64)  # distance along the column [cells]
@@ -322,30 +326,19 @@ def _distance_py(  # type: ignore[no-untyped-def]
                 out[a0 + i, c0 + p] = max(out[a0 + i, c0 + p], margin_m)
 
 
-_mark_scan_nb = compiled(_mark_scan_py)
-_distance_nb = compiled(_distance_py)
-
-
-def mark_scan(*args: object, python: bool = False) -> bool:
-    """:func:`_mark_scan_py` compiled (its arguments; ``python``: the uncompiled kernel)."""
-    fn = _mark_scan_py if python or _mark_scan_nb is None else _mark_scan_nb
-    return bool(fn(*args))
-
-
 def clearance_window(
     static: NDArray[np.bool_],
     marks: NDArray[np.int8],
     rows: tuple[int, int],
     cols: tuple[int, int],
     res_m: float,
-    python: bool = False,
 ) -> FloatArray:
     """The exact clearance [m] of the window ``rows x cols`` of the layers (obstacles inside
-    it only; inf without one); ``python``: the uncompiled kernel."""
-    fn = _distance_py if python or _distance_nb is None else _distance_nb
+    it only; inf without one)."""
     (r0, r1), (c0, c1) = rows, cols
     out = np.zeros(static.shape)
-    fn(static, marks, r0, r1, c0, c1, r0, r1, c0, c1, r1 - r0 + c1 - c0, res_m, math.inf, out)
+    window = (r0, r1, c0, c1)
+    _distance(static, marks, window, window, r1 - r0 + c1 - c0, res_m, math.inf, out)
     return out[r0:r1, c0:c1]
 
 
@@ -357,12 +350,9 @@ def window_clearance(
     res_m: float,
     margin_m: float,
     out: FloatArray,
-    python: bool = False,
 ) -> None:
     """:meth:`.Costmap.window_clearance`'s update of ``out`` in the window ``inner`` (rows,
     cols: ``a0, a1, b0, b1``) from the obstacles in ``outer`` (``r0, r1, c0, c1``): the exact
-    distance where below ``margin_m`` [m], else ``max(out, margin_m)``; ``python``: the
-    uncompiled kernel."""
-    fn = _distance_py if python or _distance_nb is None else _distance_nb
+    distance where below ``margin_m`` [m], else ``max(out, margin_m)``."""
     cap_cells = int(math.ceil(margin_m / res_m)) + 1  # every distance < margin_m is exact
-    fn(static, marks, *outer, *inner, cap_cells, res_m, margin_m, out)
+    _distance(static, marks, outer, inner, cap_cells, res_m, margin_m, out)
