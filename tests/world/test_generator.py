@@ -153,3 +153,38 @@ def test_doorways_are_in_the_range_asked_for():
     g = generate("apartment", 3, {"door_min_m": 0.8, "door_max_m": 0.85, "days": 3})
     doors = [o for o in g.spec.objects if o.kind == "door"]
     assert doors and all(0.77 <= o.size[0] <= 0.84 for o in doors)  # leaf = opening - 2 cm
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_astar_finds_the_cheapest_path_dijkstra_finds(seed):
+    """The compiled A* against scipy's Dijkstra on the same 8-connected cell graph."""
+    from scipy.sparse import lil_matrix
+    from scipy.sparse.csgraph import dijkstra
+
+    from dynmap_sim.world.generator.grid import _astar_kernel
+
+    rng = np.random.default_rng(seed)
+    ny, nx = 14, 17
+    cost = rng.uniform(1.0, 4.0, (ny, nx))
+    cost[rng.random((ny, nx)) < 0.25] = np.inf
+    cost[0, 0] = cost[-1, -1] = 1.0
+    g = lil_matrix((ny * nx, ny * nx))
+    for i in range(ny):
+        for j in range(nx):
+            for di in (-1, 0, 1):
+                for dj in (-1, 0, 1):
+                    a, b = i + di, j + dj
+                    if (di or dj) and 0 <= a < ny and 0 <= b < nx:
+                        if np.isfinite(cost[i, j]) and np.isfinite(cost[a, b]):
+                            step = np.hypot(di, dj)
+                            g[i * nx + j, a * nx + b] = step * 0.5 * (cost[i, j] + cost[a, b])
+    best = dijkstra(g.tocsr(), indices=0)[ny * nx - 1]
+    path = _astar_kernel(cost, 0, ny * nx - 1)
+    if not np.isfinite(best):
+        assert len(path) == 0
+        return
+    i, j = np.divmod(path, nx)
+    steps = np.hypot(np.diff(i), np.diff(j))
+    total = float(np.sum(steps * 0.5 * (cost[i[:-1], j[:-1]] + cost[i[1:], j[1:]])))
+    assert path[0] == 0 and path[-1] == ny * nx - 1 and steps.max() < 1.5
+    assert total == pytest.approx(best, rel=1e-12)

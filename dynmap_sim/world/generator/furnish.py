@@ -407,6 +407,7 @@ def _workshop(f: Furnisher, r: Room) -> None:
 
 def _warehouse(f: Furnisher, r: Room) -> None:
     f.shelf_rows(r)
+    f.table_with_chairs(r, (1.6, 0.8), 4, "break_table", margin=1.0)
 
 
 _RECIPES = {

@@ -11,6 +11,7 @@ from scipy.ndimage import label
 
 from dynmap_sim.world.generator.furnish import Furnished, inner_box
 from dynmap_sim.world.generator.grid import Grid, astar, path_cost, simplify
+from dynmap_sim.world.generator.params import GeneratorError
 from dynmap_sim.world.generator.plan import Plan, Room
 from dynmap_sim.world.polygons import FloatArray
 
@@ -80,7 +81,10 @@ def draw_route(grid: Grid, plan: Plan, fur: Furnished, rooms: list[Room], radius
     region = np.bincount([labels[grid.index(*q)] for q in places]).argmax()
     places = [q for q in places if labels[grid.index(*q)] == region]
     if len(places) < 2:
-        raise RuntimeError("fewer than two places of the plan can be reached")
+        raise GeneratorError(
+            f"fewer than two places of this {plan.kind} can be reached by a robot of radius "
+            f"{radius:g} m; try a smaller robot_radius_m or wider doorways"
+        )
     route: list[FloatArray] = []
     for a, b in zip(places, places[1:] + places[:1], strict=True):
         path = astar(grid, cost, a, b)
