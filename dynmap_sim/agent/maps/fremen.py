@@ -90,6 +90,18 @@ class Fremen:
         self.sse = np.zeros((self.n_cells, self.max_order + 1), np.float64)
         self.n_scored = np.zeros(self.n_cells, np.int64)
 
+    def add_cells(self, n: int) -> int:
+        """Append ``n`` never-observed cells (a map that tracks only the cells it has seen
+        occupied grows as it sees new ones); the index of the first new cell."""
+        first = self.n_cells
+        self.n_cells += int(n)
+        self.n_obs = np.concatenate([self.n_obs, np.zeros(n, np.int64)])
+        self.sum_state = np.concatenate([self.sum_state, np.zeros(n)])
+        self.acc = np.concatenate([self.acc, np.zeros((n, *self.acc.shape[1:]))])
+        self.sse = np.concatenate([self.sse, np.zeros((n, self.sse.shape[1]))])
+        self.n_scored = np.concatenate([self.n_scored, np.zeros(n, np.int64)])
+        return first
+
     # ------------------------------------------------------------------ learning
     def update(
         self, times_s: ArrayLike, cells: ArrayLike, states: ArrayLike, score: bool = True

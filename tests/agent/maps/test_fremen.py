@@ -149,3 +149,14 @@ def test_bad_observations():
         f.update([0.0], [2], [1.0])
     with pytest.raises(ValueError):
         f.update([0.0, 1.0], [0], [1.0])
+
+
+def test_added_cells_start_unobserved_and_leave_the_others_unchanged():
+    f = Fremen(2, periods_s=[DAY_S, 3600.0], max_order=2)
+    f.update([0.0, 0.0, 900.0], [0, 1, 0], [1.0, 0.0, 1.0])
+    before = f.spectrum()
+    assert f.add_cells(3) == 2 and f.n_cells == 5
+    np.testing.assert_array_equal(f.spectrum([0, 1]), before)
+    assert np.all(f.mean([2, 3, 4]) == 0.5) and np.all(f.order[2:] == f.default_order)
+    f.update([1800.0], [4], [1.0])
+    assert f.mean([4])[0] == 1.0
