@@ -43,7 +43,9 @@ DAY_S = 86400.0
 class TemporalMapMCL(StaticMCL):
     """``static-mcl`` on the map a temporal model predicts for each run (module docstring).
 
-    ``config`` and ``overrides``: the MCL configuration, as ``static-mcl``'s;
+    ``config`` and ``overrides``: the MCL configuration, as ``static-mcl``'s (``walls-only``:
+    the first map is the prior's walls without the furniture, the map that configuration is
+    for, and later maps keep only what was seen);
     ``occupied_threshold``: probability above which a predicted cell is occupied (0.5: the
     more likely state); ``observation_interval_s`` [s]: the scans of one window make one
     observation per cell (600: much shorter than the 6 h shortest period the models resolve,
@@ -57,7 +59,7 @@ class TemporalMapMCL(StaticMCL):
         self,
         laser: LaserSpec,
         rng: np.random.Generator,
-        config: str = "tuned",
+        config: str = "walls-only",
         overrides: dict[str, Any] | None = None,
         occupied_threshold: float = 0.5,
         observation_interval_s: float = 600.0,
