@@ -15,18 +15,46 @@ Then the speed on synthetic data: learning and predicting ``--cells`` cells obse
 ``--times`` scan times (cell·observations per second of CPU, ``time.process_time``), with a
 reference measured in the same run on the same array (numpy's mean over time: the static
 model's learning) and the ratio.
+
+Last (``--localizer-days``, 0 to skip), the localizers ``fremen`` and ``markov-grid`` on a
+synthetic periodic room (URG-04LX scans of 683 beams from the tests' exact ray caster, a box
+there in the 08:00 run and gone in the 20:00 run of each day): scans per second of CPU of
+their updates and the CPU of their end-of-run learning, beside ``static-mcl`` walls-only on
+the prior walls on the same streams (the reference and the ratio), their mean position
+errors per day, and whether each one's map predicted for the next morning and evening holds
+the box.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from dynmap_sim.agent.grid import OCCUPIED
+from dynmap_sim.agent.localizer import make_localizer
 from dynmap_sim.agent.maps.fremen import WEEK_S, Fremen, default_periods
 from dynmap_sim.agent.maps.markov_grid import MarkovGrid
+from dynmap_sim.types import LaserSpec, Prior
+
+# the synthetic geometry the agent tests use (one exact ray caster, one drifting stream)
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from synthetic_scans import box, drifting_stream, polyline_path  # noqa: E402
+
+URG = LaserSpec(
+    name="urg-04lx",
+    n_beams=683,
+    angle_min_rad=-2.0862,
+    angle_increment_rad=2 * math.pi / 1024,
+    range_min_m=0.02,
+    range_max_m=5.6,
+    scan_period_s=0.1,
+    time_increment_s=0.0,
+)
 
 DEFAULT_DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "periodic-door"
 
@@ -130,6 +158,75 @@ def speed(n_cells: int, n_times: int, seed: int = 0) -> None:
     )
 
 
+def _room() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The walls (the prior), the box that comes and goes, the route (poses ``(T, 3)``)."""
+    pts = np.array([[0, 0], [8, 0], [8, 3], [5, 3], [5, 6], [0, 6]], float)
+    walls = np.concatenate([pts, np.roll(pts, -1, axis=0)], axis=1)
+    corners = np.array([[1.0, 1.0], [4.2, 1.0], [4.0, 3.8], [1.0, 3.6]])
+    return walls, box(2.6, 2.2, 3.2, 2.8), polyline_path(corners, 0.035, 0.1)
+
+
+def _box_held(loc, t_s: float, box_segs: np.ndarray) -> float:
+    """Share of the box's side midpoints with an occupied cell within a cell at ``t_s``."""
+    grid = loc.predicted_grid(t_s)
+    mid = 0.5 * (box_segs[:, :2] + box_segs[:, 2:])
+    ix, iy = grid.cell_of(mid)
+    occ = grid.occupancy == OCCUPIED
+    near = [occ[y - 1 : y + 2, x - 1 : x + 2].any() for x, y in zip(ix, iy, strict=True)]
+    return float(np.mean(near))
+
+
+def localizers(n_days: int, seed: int = 0) -> None:
+    """The localizers on the periodic room: speed against static-mcl, errors, the box."""
+    walls, box_segs, truth = _room()
+    rng = np.random.default_rng(seed)
+    labels = ("fremen", "markov-grid", "static-mcl")
+    locs = {
+        "fremen": make_localizer("fremen", laser=URG, rng=np.random.default_rng(1),
+                                 run_clock_s=8 * 3600.0, run_spacing_s=12 * 3600.0),
+        "markov-grid": make_localizer("markov-grid", laser=URG, rng=np.random.default_rng(1),
+                                      run_clock_s=8 * 3600.0, run_spacing_s=12 * 3600.0),
+        "static-mcl": make_localizer("static-mcl", laser=URG, rng=np.random.default_rng(1),
+                                     config="walls-only", map_source="prior-walls"),
+    }  # fmt: skip
+    cpu = dict.fromkeys(labels, 0.0)
+    learn = dict.fromkeys(("fremen", "markov-grid"), 0.0)
+    n_scans = 0
+    print(f"\nlocalizers on a periodic room ({URG.n_beams} beams, {len(truth)} scans a run, "
+          "a box at 08:00, none at 20:00); mean error [cm] per day, run 1 / run 2")  # fmt: skip
+    for day in range(1, n_days + 1):
+        errs = {k: [] for k in labels}
+        for run in (1, 2):
+            segs = walls if run == 2 else np.concatenate([walls, box_segs])
+            stream = drifting_stream(truth, segs, URG, rng)
+            n_scans += len(stream)
+            for k, loc in locs.items():
+                loc.begin_run(Prior(initial_pose=truth[0].copy(), walls=walls, day=day, run=run))
+                c0 = time.process_time()
+                ests = [loc.update(o, sc) for o, sc in stream]
+                cpu[k] += time.process_time() - c0
+                c0 = time.process_time()
+                loc.end_run()
+                if k in learn:
+                    learn[k] += time.process_time() - c0
+                err = np.hypot(*(np.array([e.mean[:2] for e in ests]) - truth[:, :2]).T)
+                errs[k].append(f"{100 * err.mean():.1f}")
+        for loc in locs.values():
+            loc.end_day()
+        morning, evening = day * 86400.0 + 8 * 3600.0, day * 86400.0 + 20 * 3600.0
+        held = "; ".join(f"{k} {_box_held(locs[k], morning, box_segs):.2f} / "
+                         f"{_box_held(locs[k], evening, box_segs):.2f}" for k in learn)  # fmt: skip
+        print(f"  day {day}: " + ", ".join(f"{k} {' / '.join(v)}" for k, v in errs.items())
+              + f"; box in the next day's 08:00 / 20:00 map: {held}")  # fmt: skip
+    ref = n_scans / cpu["static-mcl"]
+    for k in labels:
+        line = f"  {k:12} {n_scans / cpu[k]:7.0f} scans/s of CPU ({ref / (n_scans / cpu[k]):.2f}"
+        line += " x static-mcl's time)"
+        if k in learn:
+            line += f", learning {1e3 * learn[k] / (2 * n_days):.0f} ms of CPU a run"
+        print(line)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="the periodic-door folder")
@@ -137,9 +234,12 @@ def main() -> None:
     ap.add_argument("--max-order", type=int, default=5, help="most spectral components")
     ap.add_argument("--cells", type=int, default=20000, help="cells of the speed test")
     ap.add_argument("--times", type=int, default=50, help="scan times of the speed test")
+    ap.add_argument("--localizer-days", type=int, default=4, help="days of the localizers")
     args = ap.parse_args()
     door(args.data, args.n_periods, args.max_order)
     speed(args.cells, args.times)
+    if args.localizer_days > 0:
+        localizers(args.localizer_days)
 
 
 if __name__ == "__main__":
