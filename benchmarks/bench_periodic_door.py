@@ -28,7 +28,6 @@ the box.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import time
 from pathlib import Path
@@ -39,22 +38,15 @@ from dynmap_sim.agent.grid import OCCUPIED
 from dynmap_sim.agent.localizer import make_localizer
 from dynmap_sim.agent.maps.fremen import WEEK_S, Fremen, default_periods
 from dynmap_sim.agent.maps.markov_grid import MarkovGrid
-from dynmap_sim.types import LaserSpec, Prior
+from dynmap_sim.sensors.lidar import make_lidar
+from dynmap_sim.types import Prior
 
 # the synthetic geometry the agent tests use (one exact ray caster, one drifting stream)
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from synthetic_scans import box, drifting_stream, polyline_path  # noqa: E402
 
-URG = LaserSpec(
-    name="urg-04lx",
-    n_beams=683,
-    angle_min_rad=-2.0862,
-    angle_increment_rad=2 * math.pi / 1024,
-    range_min_m=0.02,
-    range_max_m=5.6,
-    scan_period_s=0.1,
-    time_increment_s=0.0,
-)
+#: The simulator's URG-04LX (683 beams).
+URG = make_lidar("urg-04lx").spec
 
 DEFAULT_DATA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "periodic-door"
 

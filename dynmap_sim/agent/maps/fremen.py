@@ -30,6 +30,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from dynmap_sim.agent.maps.cell_observations import cell_indices, observation_arrays
 from dynmap_sim.jit import compiled
 
 #: Seconds in a day and a week.
@@ -111,15 +112,9 @@ class Fremen:
         is first predicted by the current model at every order and the squared errors added
         to :attr:`sse` (the order selection). Observations at one time should be
         consecutive: the kernel evaluates the trigonometric terms once per distinct time."""
-        t = np.ascontiguousarray(times_s, np.float64).ravel()
-        c = np.ascontiguousarray(cells, np.int64).ravel()
-        s = np.ascontiguousarray(states, np.float64).ravel()
-        if not t.size == c.size == s.size:
-            raise ValueError("times_s, cells and states must have the same length")
+        t, c, s = observation_arrays(times_s, cells, states, self.n_cells)
         if t.size == 0:
             return
-        if c.min() < 0 or c.max() >= self.n_cells:
-            raise IndexError("cell index out of range")
         if score:
             self._score(t, c, s)
         _accumulate(t, c, s, self.omegas, self.acc, self.n_obs, self.sum_state)
@@ -196,9 +191,7 @@ class Fremen:
         return p[0] if t.ndim == 0 else p
 
     def _cells(self, cells: ArrayLike | None) -> NDArray[np.int64]:
-        if cells is None:
-            return np.arange(self.n_cells)
-        return np.asarray(cells, np.int64).reshape(-1)
+        return cell_indices(cells, self.n_cells)
 
 
 # ---------------------------------------------------------------------- compiled kernels

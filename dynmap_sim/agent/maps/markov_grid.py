@@ -27,6 +27,7 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from dynmap_sim.agent.maps.cell_observations import cell_indices, observation_arrays
 from dynmap_sim.jit import compiled
 
 #: Seconds in a week: the default prior rate is one change a week (see :class:`MarkovGrid`).
@@ -77,15 +78,9 @@ class MarkovGrid:
         """Add observations: cell ``cells[i]`` seen in state ``states[i]`` (>= 0.5 occupied)
         at ``times_s[i]`` [s], in time order per cell (an observation older than the cell's
         last one is an error, raised before anything is learned)."""
-        t = np.ascontiguousarray(times_s, np.float64).ravel()
-        c = np.ascontiguousarray(cells, np.int64).ravel()
-        s = np.ascontiguousarray(states, np.float64).ravel()
-        if not t.size == c.size == s.size:
-            raise ValueError("times_s, cells and states must have the same length")
+        t, c, s = observation_arrays(times_s, cells, states, self.n_cells)
         if t.size == 0:
             return
-        if c.min() < 0 or c.max() >= self.n_cells:
-            raise IndexError("cell index out of range")
         by_cell = np.argsort(c, kind="stable")
         cs, ts = c[by_cell], t[by_cell]
         same = cs[1:] == cs[:-1]
@@ -145,9 +140,7 @@ class MarkovGrid:
         return p[0] if t.ndim == 0 else p
 
     def _cells(self, cells: ArrayLike | None) -> NDArray[np.int64]:
-        if cells is None:
-            return np.arange(self.n_cells)
-        return np.asarray(cells, np.int64).reshape(-1)
+        return cell_indices(cells, self.n_cells)
 
 
 # ---------------------------------------------------------------------- compiled kernels
