@@ -120,19 +120,12 @@ class Fremen:
         _accumulate(t, c, s, self.omegas, self.acc, self.n_obs, self.sum_state)
 
     def _score(self, t: NDArray, c: NDArray, s: NDArray) -> None:
-        """Sum the squared prediction errors of every order on observations not yet learned."""
+        """Sum the squared prediction errors of every order on observations not yet learned
+        (the components once per distinct cell here, the predictions in a kernel)."""
         uc, inv = np.unique(c, return_inverse=True)
         mean, amp, phase, omega = self.components(uc, order=self.max_order)
-        terms = amp[inv] * np.cos(omega[inv] * t[:, None] + phase[inv])
-        pred = np.empty((t.size, self.max_order + 1))
-        pred[:, 0] = mean[inv]
-        pred[:, 1:] = mean[inv, None] + np.cumsum(terms, axis=1)
-        err = (np.clip(pred, 0.0, 1.0) - s[:, None]) ** 2
-        seen = self.n_obs[c] > 0  # a never-seen cell's prior says nothing about the order
-        idx = (c[seen, None] * (self.max_order + 1) + np.arange(self.max_order + 1)).ravel()
-        size = self.n_cells * (self.max_order + 1)
-        self.sse += np.bincount(idx, err[seen].ravel(), size).reshape(self.sse.shape)
-        self.n_scored += np.bincount(c[seen], minlength=self.n_cells)
+        model = (mean, amp, phase, omega)
+        _score_orders(t, c, s, inv.astype(np.int64), model, self.n_obs, self.sse, self.n_scored)
 
     # ------------------------------------------------------------------ the model
     @property
@@ -220,3 +213,26 @@ def _accumulate(times, cells, states, omegas, acc, n_obs, sum_state):  # pragma:
             acc[k, p, 1] -= x * sn[p]
             acc[k, p, 2] += cs[p]
             acc[k, p, 3] -= sn[p]
+
+
+@compiled
+def _score_orders(times, cells, states, inv, model, n_obs, sse, n_scored):  # pragma: no cover
+    """Add each observation's squared error of the prediction clipped to [0, 1] at every
+    order ``0 … M`` to ``sse[cell]``; ``model`` = (mean, amplitude, phase, ω) of the distinct
+    cells, strongest component first, row ``inv[i]`` for observation ``i``. A cell never
+    observed before is not scored (its prior says nothing about the order)."""
+    mean, amp, phase, omega = model
+    n_m = amp.shape[1]
+    for i in range(times.size):
+        k = cells[i]
+        if n_obs[k] == 0:
+            continue
+        u = inv[i]
+        p = mean[u]
+        e = min(max(p, 0.0), 1.0) - states[i]
+        sse[k, 0] += e * e
+        for m in range(n_m):
+            p += amp[u, m] * np.cos(omega[u, m] * times[i] + phase[u, m])
+            e = min(max(p, 0.0), 1.0) - states[i]
+            sse[k, m + 1] += e * e
+        n_scored[k] += 1

@@ -160,3 +160,25 @@ def test_added_cells_start_unobserved_and_leave_the_others_unchanged():
     assert np.all(f.mean([2, 3, 4]) == 0.5) and np.all(f.order[2:] == f.default_order)
     f.update([1800.0], [4], [1.0])
     assert f.mean([4])[0] == 1.0
+
+
+def test_scored_errors_are_the_predictions_errors_at_each_order():
+    """The order selection's summed errors equal those of :meth:`Fremen.predict` at each
+    order on the batch, computed before the batch is learned."""
+    rng = np.random.default_rng(9)
+    f = Fremen(3, periods_s=default_periods(WEEK_S, 14), max_order=3)
+    t0 = np.sort(rng.uniform(0, WEEK_S, 500))
+    f.update(t0, rng.integers(0, 2, t0.size), rng.random(t0.size) < 0.6)
+    t1 = np.sort(rng.uniform(WEEK_S, 2 * WEEK_S, 400))
+    c1 = rng.integers(0, 3, t1.size)  # cell 2 is new: not scored
+    s1 = (rng.random(t1.size) < 0.5).astype(float)
+    expected = np.zeros((3, 4))
+    for k in range(2):
+        m = c1 == k
+        for order in range(4):
+            p = f.predict(t1[m], [k], order=order)[:, 0]
+            expected[k, order] = np.sum((p - s1[m]) ** 2)
+    before = f.sse.copy()
+    f.update(t1, c1, s1)
+    np.testing.assert_allclose(f.sse - before, expected, rtol=1e-9, atol=1e-9)
+    assert f.n_scored[2] == 0 and f.n_scored[:2].sum() == np.sum(c1 < 2)
