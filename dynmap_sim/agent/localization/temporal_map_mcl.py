@@ -175,6 +175,24 @@ class TemporalMapMCL(StaticMCL):
             self._learn(float(np.mean(times[idx])), cells, states)
         self._scans = []
 
+    def day_artifacts(self) -> dict[str, dict[str, np.ndarray]]:
+        """``temporal_map``: the occupancy probability the model predicts for the time of the
+        day's last run after learning from it (``p_occupied`` ``(H, W)`` float32, rows along
+        y, NaN where never seen; ``origin_m``, ``resolution_m``, ``t_s``): what the model
+        expects there now, to set against the truth over the days."""
+        if self.frame is None or self.seen is None or not self.seen.any():
+            return {}
+        p = self._predict(self._run_time0_s).astype(np.float32)
+        p[~self.seen] = np.nan
+        return {
+            "temporal_map": {
+                "p_occupied": p.reshape(self.frame.shape),
+                "origin_m": self.frame.origin_xy_m.copy(),
+                "resolution_m": np.array(self.frame.resolution_m),
+                "t_s": np.array(self._run_time0_s),
+            }
+        }
+
     def _learn(self, t_s: float, cells: NDArray[np.int64], states: NDArray[np.float64]) -> None:
         assert self.seen is not None
         self.seen[cells] = True

@@ -41,5 +41,9 @@ def test_learns_a_daily_box_and_predicts_it_by_time_of_day(day_runs, box_cells_s
     assert box_cells_share(loc, day5 + 8 * 3600.0) > 0.8
     assert box_cells_share(loc, day5 + 20 * 3600.0) < 0.2
     assert np.all(loc.model.order[loc.index[loc.index >= 0]] <= loc.max_order)
+    art = loc.day_artifacts()["temporal_map"]
+    assert art["p_occupied"].shape == loc.frame.shape and float(art["t_s"]) == day5 - 4 * 3600.0
+    seen = np.isfinite(art["p_occupied"])
+    assert seen.any() and np.all((art["p_occupied"][seen] >= 0) & (art["p_occupied"][seen] <= 1))
     clone = pickle.loads(pickle.dumps(loc))
     np.testing.assert_array_equal(clone.model.acc, loc.model.acc)
