@@ -125,6 +125,8 @@ LOCALIZERS: Registry[Localizer] = Registry(
         "dynmap_sim.agent.localization.particle_filter",
         "dynmap_sim.agent.localization.dynamic_map_localizer",
         "dynmap_sim.agent.localization.adaptive_memory.localizer",
+        "dynmap_sim.agent.localization.fremen_localizer",
+        "dynmap_sim.agent.localization.markov_grid_localizer",
     ),
 )
 

@@ -1,0 +1,217 @@
+"""MCL on a time-specific map predicted by a temporal model of every cell (shared base).
+
+The base of ``fremen`` (:mod:`.fremen_localizer`) and ``markov-grid``
+(:mod:`.markov_grid_localizer`): at the start of each run the temporal model predicts every
+cell's occupancy probability at the run's time; the cells above ``occupied_threshold``
+become the occupied cells of an :class:`~dynmap_sim.agent.grid.OccupancyGrid` on which the
+project's MCL core (``static-mcl``'s :class:`~.particle_filter.AMCLFilter`, its likelihood
+field and recovery) localizes for the whole run, as Krajník et al. (ECMR 2015) localize on
+the FreMEn-predicted map of the time. At the end of the run the model learns from the run's
+scans at their estimated poses, as ``adaptive-memory`` learns its long-term map: the scans
+of each ``observation_interval_s`` window are traced into a grid
+(:meth:`OccupancyGrid.from_scans`), each cell it saw occupied or free is one observation
+of that cell at the window's middle time.
+
+The cell frame (origin, resolution, size) is the prior's walls rasterized to a 5 cm grid;
+the walls are the models' first observation (occupied), and the free space the prior implies
+is free in the first map without being an observation (the prior does not know the
+furniture: a "free" observation of a chair's cell a second before the run sees it would be
+a change). So both localizers need the prior's walls.
+
+The run's time [s] is ``(day − 1) · 86400`` plus the time of day: by default the first
+scan's stamp (an experiment stamps seconds since midnight), or ``run_clock_s + (run − 1) ·
+run_spacing_s`` when ``run_clock_s`` is set (a replayed log's clock is not the time of
+day), plus the time since the run's first scan. The map is therefore built at the run's
+first scan, not at :meth:`begin_run`.
+"""
+
+from __future__ import annotations
+
+from abc import abstractmethod
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from dynmap_sim.agent.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
+from dynmap_sim.agent.localization.particle_filter import StaticMCL
+from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Prior, Scan
+
+DAY_S = 86400.0
+
+
+class TemporalMapMCL(StaticMCL):
+    """``static-mcl`` on the map a temporal model predicts for each run (module docstring).
+
+    ``config`` and ``overrides``: the MCL configuration, as ``static-mcl``'s (``walls-only``:
+    the first map is the prior's walls without the furniture, the map that configuration is
+    for, and later maps keep only what was seen);
+    ``occupied_threshold``: probability above which a predicted cell is occupied (0.5: the
+    more likely state); ``observation_interval_s`` [s]: the scans of one window make one
+    observation per cell (600: much shorter than the 6 h shortest period the models resolve,
+    so a cell is taken constant within it, and long enough that a window sees most cells
+    near the route); ``learn_every_scans``: every k-th scan enters learning (5: neighbouring
+    scans see the same cells); ``run_clock_s``, ``run_spacing_s`` [s]: the run's time of day
+    when the stamps are not it (module docstring).
+    """
+
+    def __init__(
+        self,
+        laser: LaserSpec,
+        rng: np.random.Generator,
+        config: str = "walls-only",
+        overrides: dict[str, Any] | None = None,
+        occupied_threshold: float = 0.5,
+        observation_interval_s: float = 600.0,
+        learn_every_scans: int = 5,
+        run_clock_s: float | None = None,
+        run_spacing_s: float = 0.0,
+        **params: Any,
+    ) -> None:
+        super().__init__(laser, rng, config=config, map_source="prior-walls", overrides=overrides)
+        name = type(self).name
+        if params:
+            raise TypeError(f"{name}: unknown parameters {sorted(params)}")
+        if not 0.0 < occupied_threshold < 1.0:
+            raise ValueError(f"{name}: occupied_threshold must be in (0, 1)")
+        if not observation_interval_s > 0 or int(learn_every_scans) < 1:
+            raise ValueError(f"{name}: observation_interval_s > 0 and learn_every_scans >= 1")
+        self.occupied_threshold = float(occupied_threshold)
+        self.observation_interval_s = float(observation_interval_s)
+        self.learn_every_scans = int(learn_every_scans)
+        self.run_clock_s = None if run_clock_s is None else float(run_clock_s)
+        self.run_spacing_s = float(run_spacing_s)
+        #: The cell frame: the prior walls' grid (None before the first run).
+        self.frame: OccupancyGrid | None = None
+        #: Cells ever observed (flat ``H·W``): the others are unknown in a predicted map.
+        self.seen: NDArray[np.bool_] | None = None
+        self._prior: Prior | None = None
+        self._day_origin_s = 0.0
+        self._stamp0: float | None = None
+        self._run_time0_s = 0.0
+        self._n_scans = 0
+        self._scans: list[tuple[float, NDArray, NDArray]] = []
+
+    # -- the temporal model (subclasses) ---------------------------------------------------
+    @abstractmethod
+    def _make_model(self, n_cells: int) -> None:
+        """Create the temporal model of ``n_cells`` cells (the flat cell frame)."""
+
+    @abstractmethod
+    def _observe(self, t_s: float, cells: NDArray[np.int64], states: NDArray[np.float64]) -> None:
+        """Learn that ``cells`` (flat indices) were in ``states`` (1 occupied) at ``t_s``."""
+
+    @abstractmethod
+    def _predict(self, t_s: float) -> NDArray[np.float64]:
+        """Occupancy probability of every cell (flat ``H·W``) at ``t_s``."""
+
+    # -- the map ---------------------------------------------------------------------------
+    def predicted_grid(self, t_s: float) -> OccupancyGrid:
+        """The time-specific map at ``t_s`` [s]: cells seen and predicted above the
+        threshold occupied, the other seen cells free, never-seen cells unknown."""
+        assert self.frame is not None and self.seen is not None
+        p = self._predict(t_s)
+        occ = np.full(self.seen.size, UNKNOWN, np.int8)
+        occ[self.seen] = FREE
+        occ[self.seen & (p > self.occupied_threshold)] = OCCUPIED
+        f = self.frame
+        return OccupancyGrid(occ.reshape(f.shape), f.origin_xy_m, f.resolution_m, f.max_dist_m)
+
+    def _run_time(self, stamp_s: float) -> float:
+        """The run's clock [s] at a scan stamped ``stamp_s`` (module docstring)."""
+        if self._stamp0 is None:
+            self._stamp0 = float(stamp_s)
+            assert self._prior is not None
+            if self.run_clock_s is None:
+                tod = self._stamp0
+            else:
+                tod = self.run_clock_s + max(self._prior.run - 1, 0) * self.run_spacing_s
+            self._run_time0_s = self._day_origin_s + tod
+        return self._run_time0_s + (float(stamp_s) - self._stamp0)
+
+    # -- the run ---------------------------------------------------------------------------
+    def begin_run(self, prior: Prior) -> None:
+        if self.frame is None:
+            if prior.walls is None or len(prior.walls) == 0:
+                raise ValueError(f"{self.name} needs the prior's walls (its cell frame)")
+            seed = None if prior.initial_pose is None else np.asarray(prior.initial_pose)[:2]
+            self.frame = OccupancyGrid.from_segments(prior.walls, free_seed_xy_m=seed)
+            self.seen = np.zeros(self.frame.occupancy.size, bool)
+            self._make_model(self.seen.size)
+        self._prior = prior
+        self._day_origin_s = max(prior.day - 1, 0) * DAY_S
+        self._stamp0 = None
+        self._n_scans = 0
+        self._scans = []
+
+    def update(self, odom: Odometry, scan: Scan) -> PoseEstimate:
+        t = self._run_time(scan.stamp_s)
+        if self._prior is not None:  # the run's first scan: its map, then MCL's begin_run
+            prior, self._prior = self._prior, None
+            assert self.frame is not None and self.seen is not None
+            if not self.seen.any():  # the very first run: the walls are the first observation
+                walls = np.flatnonzero(self.frame.occupancy.ravel() == OCCUPIED)
+                self._learn(t, walls, np.ones(walls.size))
+                self.seen[self.frame.occupancy.ravel() == FREE] = True
+            self.set_map(self.predicted_grid(t))
+            super().begin_run(prior)
+        est = super().update(odom, scan)
+        if self._n_scans % self.learn_every_scans == 0:
+            self._scans.append((t, est.mean.copy(), np.asarray(scan.ranges_m, np.float64)))
+        self._n_scans += 1
+        return est
+
+    def end_run(self) -> None:
+        super().end_run()
+        if not self._scans:
+            return
+        times = np.array([s[0] for s in self._scans])
+        window = np.floor((times - times[0]) / self.observation_interval_s).astype(np.int64)
+        for w in np.unique(window):
+            idx = np.flatnonzero(window == w)
+            poses = np.array([self._scans[i][1] for i in idx])
+            ranges = np.array([self._scans[i][2] for i in idx])
+            cells, states = self._trace(poses, ranges)
+            self._learn(float(np.mean(times[idx])), cells, states)
+        self._scans = []
+
+    def day_artifacts(self) -> dict[str, dict[str, np.ndarray]]:
+        """``temporal_map``: the occupancy probability the model predicts for the time of the
+        day's last run after learning from it (``p_occupied`` ``(H, W)`` float32, rows along
+        y, NaN where never seen; ``origin_m``, ``resolution_m``, ``t_s``): what the model
+        expects there now, to set against the truth over the days."""
+        if self.frame is None or self.seen is None or not self.seen.any():
+            return {}
+        p = self._predict(self._run_time0_s).astype(np.float32)
+        p[~self.seen] = np.nan
+        return {
+            "temporal_map": {
+                "p_occupied": p.reshape(self.frame.shape),
+                "origin_m": self.frame.origin_xy_m.copy(),
+                "resolution_m": np.array(self.frame.resolution_m),
+                "t_s": np.array(self._run_time0_s),
+            }
+        }
+
+    def _learn(self, t_s: float, cells: NDArray[np.int64], states: NDArray[np.float64]) -> None:
+        assert self.seen is not None
+        self.seen[cells] = True
+        self._observe(t_s, cells, states)
+
+    def _trace(self, poses: NDArray, ranges: NDArray) -> tuple[NDArray[np.int64], NDArray]:
+        """Flat frame cells seen by scans at ``poses`` and their states (1: occupied)."""
+        f = self.frame
+        assert f is not None
+        g = OccupancyGrid.from_scans(poses, ranges, self.laser, resolution_m=f.resolution_m)
+        iy, ix = np.nonzero(g.occupancy != UNKNOWN)
+        fx, fy = f.cell_of(g.cell_centers(ix, iy))
+        h, w = f.shape
+        inside = (fx >= 0) & (fx < w) & (fy >= 0) & (fy < h)
+        cells = (fy * w + fx)[inside].astype(np.int64)
+        states = (g.occupancy[iy, ix] == OCCUPIED)[inside].astype(np.float64)
+        # the two lattices coincide (both on multiples of the resolution); a cell met twice
+        # by rounding keeps its occupied reading
+        order = np.lexsort((-states, cells))
+        cells, states = cells[order], states[order]
+        first = np.concatenate([[True], cells[1:] != cells[:-1]])
+        return cells[first], states[first]
