@@ -485,3 +485,23 @@ def test_mcl_uses_the_valid_readings_among_the_masked_beams(masked):
             and r[i] > 0 and (not masked or f.point_mask[i])]  # fmt: skip
     np.testing.assert_array_equal(got, r[keep])
     np.testing.assert_array_equal(ang, LASER.angles()[keep])
+
+
+@pytest.mark.parametrize("semistatic_map", ["run_start", "current"])
+def test_a_new_object_is_semistatic_all_day_against_the_run_start_map(semistatic_map):
+    """§4.4 against the long-term memory as the run began (``run_start``): the furniture the
+    walls prior lacks stays semistatic through day 1 and is static on day 2; against the
+    slot being written (``current``) it leaves the class within the first run."""
+    corners = np.array([[1.0, 1.0], [4.2, 1.0], [6.5, 1.5], [4.2, 1.2], [4.0, 3.8], [1.0, 3.6]])
+    truth = polyline_path(corners, step_m=0.05, turn_step_rad=0.15)
+    segs = room_segments(cupboard=True)
+    loc = make_localizer("adaptive-memory", laser=LASER, rng=np.random.default_rng(1),
+                         semistatic_map=semistatic_map)  # fmt: skip
+    rng = np.random.default_rng(0)
+    day1 = np.array([e.extras["n_semistatic"] for e in _run(loc, truth, segs, rng, day=1)[0]])
+    day2 = np.array([e.extras["n_semistatic"] for e in _run(loc, truth, segs, rng, day=2)[0]])
+    late = day1[len(day1) // 2 :].mean()
+    if semistatic_map == "run_start":
+        assert late > 20 and day2.mean() < 0.1 * late
+    else:
+        assert late < 0.2 * day1[:20].mean()

@@ -165,9 +165,9 @@ def test_point_covariances_are_eqs_12_to_14_as_matrix_products() -> None:
             np.testing.assert_allclose(covs[j], jac @ full @ jac.T, rtol=1e-9, atol=1e-15)
 
 
-def classes_reference(cls_v, lab, explained, n_boxes, veto, vi, n_beams):
-    """§4.4 point by point: a dynamic point whose box the map explains for at least ``veto``
-    of its points is static; a non-dynamic point the map does not explain is semistatic."""
+def classes_reference(cls_v, lab, explained, known, n_boxes, veto, vi, n_beams):
+    """§4.4 point by point: a dynamic point whose box a map explains for at least ``veto``
+    of its points is static; a non-dynamic point §4.4's map does not know is semistatic."""
     out = cls_v.copy()
     for j in range(len(out)):
         b = lab[j]
@@ -175,7 +175,7 @@ def classes_reference(cls_v, lab, explained, n_boxes, veto, vi, n_beams):
             share = np.mean(explained[lab == b])
             if share >= veto:
                 out[j] = 3
-        if out[j] != 1 and not explained[j]:
+        if out[j] != 1 and not known[j]:
             out[j] = 2
     classes = np.zeros(n_beams, np.int8)
     classes[vi] = out
@@ -193,8 +193,9 @@ def test_semistatic_classes_follow_section_4_4_point_by_point(veto: float) -> No
         cls_v = np.where(lab >= 0, rng.choice(np.array([1, 3], np.int8), len(vi)), 0)
         cls_v = cls_v.astype(np.int8)
         explained = rng.random(len(vi)) < rng.choice([0.1, 0.5, 0.9])
-        ref = classes_reference(cls_v, lab, explained, n_boxes, veto, vi, n_beams)
-        got = semistatic_classes(cls_v.copy(), lab.astype(np.intp), explained, n_boxes, veto,
-                                 vi.astype(np.intp), n_beams)  # fmt: skip
+        known = explained if rng.random() < 0.3 else rng.random(len(vi)) < 0.5
+        ref = classes_reference(cls_v, lab, explained, known, n_boxes, veto, vi, n_beams)
+        got = semistatic_classes(cls_v.copy(), lab.astype(np.intp), explained, known, n_boxes,
+                                 veto, vi.astype(np.intp), n_beams)  # fmt: skip
         np.testing.assert_array_equal(got[0], ref[0])
         np.testing.assert_array_equal(got[1], ref[1])

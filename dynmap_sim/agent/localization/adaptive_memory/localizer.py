@@ -75,6 +75,8 @@ NAME = "adaptive-memory"
 DAY_S = 86400.0
 #: Values of ``AdaptiveMemoryConfig.ltm_update_pose``.
 LTM_UPDATE_POSES = ("estimate", "predicted")
+#: Values of ``AdaptiveMemoryConfig.semistatic_map``.
+SEMISTATIC_MAPS = ("run_start", "current")
 
 
 @dataclass(frozen=True)
@@ -155,6 +157,14 @@ class AdaptiveMemoryConfig:
     #: Bearing noise [rad] (ours: the 0.36° step's quantization, 0.36°/sqrt(12)).
     sigma_alpha_rad: float = float(np.deg2rad(0.36) / np.sqrt(12.0))
     # -- semistatic test (§4.4) ------------------------------------------------------------
+    #: The long-term map a point is checked against (§4.4 names ``M_τ^LTM``; which state of
+    #: it the paper leaves open, docs/replicas/hentschel-wagner.md):
+    #: ``run_start`` (default): the current slot as it was when this run began, what earlier
+    #: runs put in long-term memory, so an object new today stays semistatic all day (Fig. 6:
+    #: 23 % on day 1, when only the walls are known); ``current``: the slot being written,
+    #: before this scan's points, where ``u`` of a new object's points make it static within
+    #: seconds. MCL's map and the dynamic veto use the current slot either way.
+    semistatic_map: str = "run_start"
     #: "Within the uncertainty of the scan point" (ours: Mahalanobis <= 2, at least 1.5
     #: cells), searched at most this many cells away.
     semistatic_sigma: float = 2.0
@@ -238,6 +248,8 @@ class AdaptiveMemoryConfig:
             raise ValueError(f"{NAME}: l_free and l_min must be <= 0")
         if self.l_occupied > self.l_max:
             raise ValueError(f"{NAME}: l_occupied must be <= l_max")
+        if self.semistatic_map not in SEMISTATIC_MAPS:
+            raise ValueError(f"{NAME}: semistatic_map must be one of {SEMISTATIC_MAPS}")
         if self.ltm_update_pose not in LTM_UPDATE_POSES:
             raise ValueError(f"{NAME}: ltm_update_pose must be one of {LTM_UPDATE_POSES}")
         if self.mcl_points not in ("static", "non-dynamic"):
@@ -441,6 +453,8 @@ class AdaptiveMemoryLocalizer(Localizer):
         )
         self._stamp0 = None
         self.ltm.activate(self._t0)
+        #: §4.4's map with ``semistatic_map = "run_start"``: the long-term memory before this run
+        self._run_start_map = self.ltm.map().copy() if c.semistatic_map == "run_start" else None
         self.tracker.reset()
         self.sm.clear()
         self.stm.clear()
@@ -495,6 +509,8 @@ class AdaptiveMemoryLocalizer(Localizer):
                                       c.sigma_alpha_rad, sig_r)  # fmt: skip
         cur = ltm.map()
         explained = cur.explained(pts, covs, self.lp)  # for step 4, before this scan's points
+        ref = self._run_start_map
+        known = explained if ref is None else ref.explained(pts, covs, self.lp)
         n_take = int(round(c.u * len(stat)))
         if c.ltm_min_explained > 0 and len(stat) and np.mean(explained[stat]) < c.ltm_min_explained:
             n_take = 0  # the map disagrees with most of the scan: the pose is not trusted
@@ -504,7 +520,7 @@ class AdaptiveMemoryLocalizer(Localizer):
             p_take, c_take = pts[take], covs[take]
             cur.update(laser_xy, p_take, c_take, self.lp, self._hits(p_take, c_take))
         # 4. the semistatic test (§4.4)
-        classes, n_class = self._final_classes(cls_v, lab, explained, len(boxes.length), vi,
+        classes, n_class = self._final_classes(cls_v, lab, explained, known, len(boxes.length), vi,
                                                len(ranges))  # fmt: skip
         self.stm.put(t, classes)  # short-term memory: the classified scan
         # 5. map selection and MCL (§6.1) on the static points
@@ -559,13 +575,16 @@ class AdaptiveMemoryLocalizer(Localizer):
         cls_v: NDArray[np.int8],
         lab: NDArray[np.intp],
         explained: NDArray[np.bool_],
+        known: NDArray[np.bool_],
         n_boxes: int,
         vi: NDArray[np.intp],
         n_beams: int,
     ) -> tuple[NDArray[np.int8], NDArray[np.int64]]:
-        """§4.4 (:func:`.ltm_map.semistatic_classes`) with ``ltm_veto_dynamic``."""
-        return semistatic_classes(cls_v, lab, explained, n_boxes, self.config.ltm_veto_dynamic,
-                                  vi, n_beams)  # fmt: skip
+        """§4.4 (:func:`.ltm_map.semistatic_classes`): the veto (``ltm_veto_dynamic``) on the
+        current map's verdicts ``explained``, semistatic what ``semistatic_map`` does not
+        ``known``."""
+        return semistatic_classes(cls_v, lab, explained, known, n_boxes,
+                                  self.config.ltm_veto_dynamic, vi, n_beams)  # fmt: skip
 
     def _reported_cov(self) -> tuple[FloatArray, float]:
         """The reported covariance (regularized) and its information's smallest eigenvalue,

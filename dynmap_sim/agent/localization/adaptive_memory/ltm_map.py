@@ -214,16 +214,18 @@ def point_covariances(
 
 
 def semistatic_classes(
-    cls_v: NDArray[np.int8], lab_v: NDArray[np.intp], explained: NDArray[np.bool_], n_boxes: int,
-    veto_share: float, vi: NDArray[np.intp], n_beams: int,
+    cls_v: NDArray[np.int8], lab_v: NDArray[np.intp], explained: NDArray[np.bool_],
+    known: NDArray[np.bool_], n_boxes: int, veto_share: float, vi: NDArray[np.intp], n_beams: int,
 ) -> tuple[NDArray[np.int8], NDArray[np.int64]]:  # fmt: skip
     """§4.4 on the valid returns' tracker classes ``cls_v`` (boxes ``lab_v``, -1 none; in
-    place): a dynamic point of a box at least ``veto_share`` of whose points the map
-    ``explained`` becomes static (``ltm_veto_dynamic``), then every non-dynamic point the
-    map does not explain semistatic. Returns the classes of all ``n_beams`` beams (unknown
-    where not valid; ``vi``: the valid returns' beams) and the count of each class."""
+    place): a dynamic point of a box at least ``veto_share`` of whose points a map
+    ``explained`` becomes static (``ltm_veto_dynamic``), then every non-dynamic point that
+    is not ``known`` (explained by §4.4's map) semistatic. Returns the classes of all
+    ``n_beams`` beams (unknown where not valid; ``vi``: the valid returns' beams) and the
+    count of each class."""
     return _semistatic_classes(cls_v, lab_v, np.asarray(explained, dtype=np.bool_),
-                               int(n_boxes), float(veto_share), vi, int(n_beams))  # fmt: skip
+                               np.asarray(known, dtype=np.bool_), int(n_boxes),
+                               float(veto_share), vi, int(n_beams))  # fmt: skip
 
 
 # -- kernels ------------------------------------------------------------------------------
@@ -372,7 +374,7 @@ def _point_covariances(pose, cov_pose, mount, ranges, angles, var_alpha, sigma_r
 
 
 @compiled
-def _semistatic_classes(cls_v, lab_v, explained, n_boxes, veto_share, vi, n_beams):  # type: ignore[no-untyped-def]
+def _semistatic_classes(cls_v, lab_v, explained, known, n_boxes, veto_share, vi, n_beams):  # type: ignore[no-untyped-def]
     """:func:`semistatic_classes` (class codes as :mod:`.object_tracker`'s: 0 unknown,
     1 dynamic, 2 semistatic, 3 static)."""
     n_pts = np.zeros(n_boxes, dtype=np.int64)
@@ -388,7 +390,7 @@ def _semistatic_classes(cls_v, lab_v, explained, n_boxes, veto_share, vi, n_beam
         b = lab_v[j]
         if cls_v[j] == 1 and b >= 0 and n_expl[b] >= veto_share * max(n_pts[b], 1):
             cls_v[j] = 3
-        if cls_v[j] != 1 and not explained[j]:
+        if cls_v[j] != 1 and not known[j]:
             cls_v[j] = 2
         classes[vi[j]] = cls_v[j]
         counts[cls_v[j]] += 1
