@@ -10,11 +10,11 @@ Per scan (the data flow of H&W Fig. 2):
 3. ``u`` of the tracker's static points update the current long-term slot's grid (eq. 1 picks
    the slot; :mod:`.ltm_map`, §4.3, eqs. 12-15), at the predicted pose (``ltm_update_pose``);
    a point the walls prior already explains adds free space only (``ltm_learn_prior_walls``).
-4. The semistatic test (§4.4), on the map as it was before this scan's points: a non-dynamic
-   point with no obstacle of that map within its uncertainty is semistatic; a fast box the
-   map mostly explains is not dynamic (``ltm_veto_dynamic``). Final classes: dynamic;
-   semistatic; static (tracked, slow, explained by the map); unknown (not associated,
-   explained by the map).
+4. The semistatic test (§4.4), on the long-term map as it was when the run began
+   (``semistatic_map``): a non-dynamic point with no obstacle of that map within its
+   uncertainty is semistatic; a fast box the current map mostly explains is not dynamic
+   (``ltm_veto_dynamic``). Final classes: dynamic; semistatic; static (tracked, slow,
+   explained by that map); unknown (not associated, explained by that map).
 5. MCL (§6.1) with the project's AMCL core (:class:`~dynmap_sim.agent.localization.
    particle_filter.AMCLFilter`, ``mcl_config``) on the static points only; with fewer than
    ``min_static_points`` the explained unknown points are added (the first scan of a run has
