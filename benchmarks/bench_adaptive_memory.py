@@ -7,8 +7,8 @@ Prints
    measured in the same run (the ratio: how many times the reference's time per scan
    adaptive-memory takes); target >= 300 scans/s. Both are warmed up first on the stream's
    first scans (throwaway instances), so that the one-time load of the compiled kernels
-   (numba, extra ``fast``: a fraction of a second per process) is not counted per scan; it
-   is printed;
+   (from numba's disk cache: a fraction of a second per process) is not counted per scan;
+   it is printed;
 2. the CPU per stage of one adaptive-memory scan (segmentation + tracking, long-term update,
    semistatic test, MCL) on the same scans;
 3. the long-term memory: bytes per m² (10 slots of 50 mm float32 log-odds cells) and for
@@ -16,8 +16,7 @@ Prints
 
 ``--fingerprint`` prints instead a SHA-256 of everything adaptive-memory returns on the
 stream (estimates, covariances, extras: point classes and diagnostics) and of its long-term
-grids after it: a change meant to be faster must leave it unchanged (with numba and with
-numba blocked).
+grids after it: a change meant to be faster must leave it unchanged.
 """
 
 from __future__ import annotations

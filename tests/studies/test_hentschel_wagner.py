@@ -75,6 +75,8 @@ def test_report_writes_the_study_figures_and_findings(small):
         "hw_ltm_day7.png",  # the latest map before day 7: day 2's
         "hw_findings.md",
         "hw_findings.json",
+        "hw_point_class_scores_per_day.png",
+        "hw_point_class_scores_per_day.csv",
         "point_classes_per_day.csv",
     } <= names
     assert "hw_ltm_day22.png" not in names  # no map after day 22 in a 2-day experiment
@@ -229,3 +231,26 @@ def test_day_22_map_with_route_memory_from_a_driving_localizer(tmp_path):
     names = {p.name for p in write_report(out)}
     assert {"hw_ltm_day22.png", "hw_ltm_day7.png"} - names == {"hw_ltm_day7.png"}
     assert "route_memory.png" in names
+
+
+def test_class_scores_per_day_are_each_days_confusion(small):
+    """Per day and class: precision and recall of that day's confusion against the truth,
+    the truth's own beam counts (day 1: every object new, day 2: none) and the CSV's rows."""
+    with ResultsDB.open(small) as db:
+        data = hw_data.load(db)
+    sc = hw_data.class_scores_per_day(data.shares)
+    assert sc.days.tolist() == [1, 2]
+    for k, tally in enumerate(data.shares.tallies):
+        c = tally.confusion[1:, 1:]
+        np.testing.assert_array_equal(sc.truth_points[k], c.sum(axis=1))
+        np.testing.assert_array_equal(sc.predicted_points[k], c.sum(axis=0))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            np.testing.assert_allclose(sc.precision[k], np.diag(c) / c.sum(axis=0))
+            np.testing.assert_allclose(sc.recall[k], np.diag(c) / c.sum(axis=1))
+    assert sc.truth_points[0, 1] > 0 and sc.truth_points[1, 1] == 0
+    write_report(small)
+    rows = (small / "hw_point_class_scores_per_day.csv").read_text().splitlines()
+    head = rows[0].split(",")
+    assert head[:2] == ["day", "week"] and len(rows) == 3
+    day1 = dict(zip(head, rows[1].split(","), strict=True))
+    assert int(day1["semistatic_truth_points"]) == sc.truth_points[0, 1]

@@ -150,10 +150,47 @@ def load(db: Any) -> HWData:
     )
 
 
+#: The scored classes of :func:`class_scores_per_day`, in column order (point-class codes 1-3).
+SCORED_CLASSES = ("dynamic", "semistatic", "static")
+
+
+@dataclass
+class DayClassScores:
+    """The subject's classes against the seen-before truth, per day: ``days`` and ``(D, 3)``
+    arrays over :data:`SCORED_CLASSES`: ``precision``, ``recall`` (NaN where undefined),
+    ``truth_points`` (the truth's own count of person, new-or-moved-object and known beams)
+    and ``predicted_points`` (the beams the subject gave that class), unknown excluded."""
+
+    days: NDArray[np.int64]
+    precision: NDArray[np.float64]
+    recall: NDArray[np.float64]
+    truth_points: NDArray[np.int64]
+    predicted_points: NDArray[np.int64]
+
+
+def class_scores_per_day(shares: PointShares) -> DayClassScores:
+    """Precision and recall of each class on each day (:class:`DayClassScores`)."""
+    n = len(shares.days)
+    prec, rec = np.full((n, 3), np.nan), np.full((n, 3), np.nan)
+    truth, pred = np.zeros((n, 3), np.int64), np.zeros((n, 3), np.int64)
+    for k, t in enumerate(shares.tallies):
+        sc = class_scores(t.confusion)
+        prec[k], rec[k] = sc.precision, sc.recall
+        truth[k] = sc.support
+        pred[k] = np.asarray(t.confusion)[1:, 1:].sum(axis=0)
+    return DayClassScores(shares.days.copy(), prec, rec, truth, pred)
+
+
 def dynamic_scores(shares: PointShares, days: list[int]) -> tuple[float, float, int]:
     """Dynamic precision, recall and support pooled over ``days``."""
     sc = class_scores(shares.pooled(days).confusion)
     return sc.precision[0], sc.recall[0], sc.support[0]
+
+
+def semistatic_scores(shares: PointShares, days: list[int]) -> tuple[float, float, int]:
+    """Semistatic precision, recall and support pooled over ``days``."""
+    sc = class_scores(shares.pooled(days).confusion)
+    return sc.precision[1], sc.recall[1], sc.support[1]
 
 
 def lost_threshold_m() -> float:

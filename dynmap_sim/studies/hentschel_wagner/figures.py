@@ -11,7 +11,13 @@ from typing import Any
 
 import numpy as np
 
-from dynmap_sim.studies.hentschel_wagner.data import HWData, LTMGrid, week_of
+from dynmap_sim.studies.hentschel_wagner.data import (
+    SCORED_CLASSES,
+    HWData,
+    LTMGrid,
+    class_scores_per_day,
+    week_of,
+)
 
 #: Week boundaries drawn on the per-day figures (after days 7, 14, 21).
 _WEEK_EDGES = (7.5, 14.5, 21.5)
@@ -47,6 +53,46 @@ def plot_point_shares(data: HWData, path: Path) -> Path | None:
         fontsize="small",
     )
     ax.legend(fontsize="small", ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.18))
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def plot_class_scores(data: HWData, path: Path) -> Path | None:
+    """Fig. 6's shares (top: the subject's, solid; the truth's, dashed) beside how right they
+    are: per class and day, precision and recall against the seen-before truth and, as grey
+    bars on the right axis, the truth's own count of that class's beams (person beams,
+    beams on objects new or moved since an earlier run, known beams)."""
+    import matplotlib.pyplot as plt
+
+    s = data.shares
+    if s is None or data.subject is None:
+        return None
+    sc = class_scores_per_day(s)
+    fig, axes = plt.subplots(4, 1, figsize=(7, 9), sharex=True)
+    colors = ("tab:red", "tab:blue", "tab:gray")
+    for k, (name, color) in enumerate(zip(SCORED_CLASSES[:2], colors, strict=False)):
+        axes[0].plot(s.days, 100 * s.fractions[:, k + 1], "o-", color=color, ms=3, label=name)
+        axes[0].plot(s.days, 100 * s.truth[:, k + 1], "--", color=color, lw=1,
+                     label=f"{name} (truth)")  # fmt: skip
+    axes[0].set_ylabel("share [%]")
+    axes[0].set_title(f"{data.subject[1]}: point classes per day (cf. H&W Fig. 6) and their "
+                      "precision / recall against the truth", fontsize="small")  # fmt: skip
+    axes[0].legend(fontsize="x-small", ncol=4)
+    for k, (name, color) in enumerate(zip(SCORED_CLASSES, colors, strict=True)):
+        ax = axes[k + 1]
+        bars = ax.twinx()
+        bars.bar(sc.days, sc.truth_points[:, k], color="0.85", width=0.8, zorder=0)
+        bars.set_ylabel(f"true {name} beams", fontsize="small")
+        ax.set_zorder(bars.get_zorder() + 1)
+        ax.patch.set_visible(False)
+        ax.plot(sc.days, sc.precision[:, k], "o-", color=color, ms=3, label="precision")
+        ax.plot(sc.days, sc.recall[:, k], "s--", color=color, ms=3, lw=1, label="recall")
+        ax.set_ylim(-0.02, 1.02)
+        ax.set_ylabel(name)
+        ax.legend(fontsize="x-small", loc="lower left")
+    _weeks(axes[-1], s.days.tolist())
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

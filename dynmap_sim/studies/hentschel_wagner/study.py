@@ -14,6 +14,7 @@ from dynmap_sim.experiments.scenario import Scenario
 from dynmap_sim.studies.biber_duckett.findings import findings_table
 from dynmap_sim.studies.hentschel_wagner.data import find_subject, load, ltm_day, ltm_grid
 from dynmap_sim.studies.hentschel_wagner.figures import (
+    plot_class_scores,
     plot_error_per_day,
     plot_ltm,
     plot_point_shares,
@@ -23,6 +24,7 @@ from dynmap_sim.studies.hentschel_wagner.figures import (
 from dynmap_sim.studies.hentschel_wagner.findings import (
     FINDING_KEYS,
     evaluate,
+    write_class_scores,
     write_findings,
 )
 from dynmap_sim.studies.study import FindingCheck, Study, StudyReport, register_study
@@ -52,6 +54,7 @@ class HentschelWagner(Study):
         for fig in (
             plot_point_shares(data, out / "hw_point_shares_per_day.png"),
             plot_error_per_day(data, out / "hw_error_per_day.png"),
+            plot_class_scores(data, out / "hw_point_class_scores_per_day.png"),
         ):
             if fig is not None:
                 rep.figures.append(fig)
@@ -79,6 +82,9 @@ class HentschelWagner(Study):
                     )
                 )
         findings = evaluate(data)
+        scores = write_class_scores(data, out / "hw_point_class_scores_per_day.csv")
+        if scores is not None:
+            rep.files.append(scores)
         rep.files += write_findings(findings, out, data.subject[1] if data.subject else None)
         rep.summary_lines = [
             "## Hentschel & Wagner §7.3 findings (also in hw_findings.md / hw_findings.json)",

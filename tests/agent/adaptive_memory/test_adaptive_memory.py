@@ -3,6 +3,7 @@ test and the localizer, on closed-form and synthetic scans, and a short apartmen
 
 from __future__ import annotations
 
+import dataclasses
 import pickle
 import textwrap
 
@@ -40,7 +41,6 @@ from dynmap_sim.agent.localization.particle_filter import (
     regularized_covariance,
 )
 from dynmap_sim.agent.localizer import LOCALIZERS, make_localizer
-from dynmap_sim.jit import numba_available
 from dynmap_sim.types import Prior
 
 WALLS = np.concatenate(
@@ -429,44 +429,6 @@ def test_the_mcl_grid_is_rebuilt_only_when_the_map_cells_change():
     np.testing.assert_array_equal(f.table.logp, AMCLFilter(fresh, LASER, loc.mcl).table.logp)
 
 
-@pytest.mark.skipif(not numba_available(), reason="numba (extra 'fast') not installed")
-def test_the_kernels_and_numpy_give_the_same_run_bit_for_bit(monkeypatch):
-    """The whole localizer with adaptive-memory's numba kernels and with its numpy code
-    (segmentation, tracker, long-term map, point classes, MCL's beams), two days, a person
-    walking: the same estimates, extras and long-term grids; the free cells listed lazily
-    give the random poses of the grid at hand, and a pickled localizer goes on the same."""
-    from dynmap_sim.agent.localization.adaptive_memory import localizer, ltm_map, object_tracker
-
-    corners = np.array([[1.0, 1.0], [4.2, 1.0], [6.5, 1.5], [4.2, 1.2], [4.0, 3.8]])
-    truth = polyline_path(corners, step_m=0.05, turn_step_rad=0.15)
-    segs = room_segments(cupboard=True)
-
-    def person(k: int) -> np.ndarray:
-        x = 0.5 + (0.1 * k) % 4.0
-        return box(x, 4.0, x + 0.3, 4.3)
-
-    runs = []
-    for numpy_only in (False, True):
-        if numpy_only:
-            for mod in (localizer, ltm_map, object_tracker):
-                monkeypatch.setattr(mod, "kernel_backend", lambda backend: None)
-        loc = make_localizer("adaptive-memory", laser=LASER, rng=np.random.default_rng(1))
-        out = _run(loc, truth, segs, np.random.default_rng(0), day=1, person=person)[0]
-        loc = pickle.loads(pickle.dumps(loc))
-        out += _run(loc, truth, segs, np.random.default_rng(5), day=2, person=person)[0]
-        f = loc.filter
-        assert f.free_xy.tobytes() == f.grid.free_points().tobytes()
-        runs.append((out, loc.ltm.map().logodds.tobytes(), f.random_poses(50, loc.rng)))
-    (a, grid_a, poses_a), (b, grid_b, poses_b) = runs
-    assert grid_a == grid_b and poses_a.tobytes() == poses_b.tobytes()
-    assert sum(e.extras["n_dynamic"] for e in a) > 0
-    for ea, eb in zip(a, b, strict=True):
-        assert ea.mean.tobytes() == eb.mean.tobytes() and ea.cov.tobytes() == eb.cov.tobytes()
-        for k in ea.extras:
-            va, vb = np.asarray(ea.extras[k]), np.asarray(eb.extras[k])
-            assert va.tobytes() == vb.tobytes(), k
-
-
 def test_the_odometry_increment_is_se2s_bit_for_bit():
     """The single-pose ``compose(a, between(b, c))`` on floats the localizer applies
     (:func:`dynmap_sim.se2.apply_increment`) gives the array code's numbers exactly (angles
@@ -480,3 +442,66 @@ def test_the_odometry_increment_is_se2s_bit_for_bit():
             b[2], c[2] = np.pi, -np.pi + rng.normal(0, 1e-12)
         ref = se2.compose(a, se2.between(b, c))
         assert se2.apply_increment(a, b, c).tobytes() == ref.tobytes()
+
+
+def test_a_pickled_localizer_goes_on_the_same_bit_for_bit():
+    """Two days with a person walking: the localizer pickled after day 1 gives day 2's
+    estimates, extras and long-term grid byte for byte as the one it was copied from; the
+    free cells listed lazily are the grid's."""
+    corners = np.array([[1.0, 1.0], [4.2, 1.0], [6.5, 1.5], [4.2, 1.2], [4.0, 3.8]])
+    truth = polyline_path(corners, step_m=0.05, turn_step_rad=0.15)
+    segs = room_segments(cupboard=True)
+
+    def person(k: int) -> np.ndarray:
+        x = 0.5 + (0.1 * k) % 4.0
+        return box(x, 4.0, x + 0.3, 4.3)
+
+    loc = make_localizer("adaptive-memory", laser=LASER, rng=np.random.default_rng(1))
+    _run(loc, truth, segs, np.random.default_rng(0), day=1, person=person)
+    twin = pickle.loads(pickle.dumps(loc))
+    runs = [_run(x, truth, segs, np.random.default_rng(5), day=2, person=person)[0]
+            for x in (loc, twin)]  # fmt: skip
+    assert loc.ltm.map().logodds.tobytes() == twin.ltm.map().logodds.tobytes()
+    assert twin.filter.free_xy.tobytes() == twin.filter.grid.free_points().tobytes()
+    assert sum(e.extras["n_dynamic"] for e in runs[0]) > 0
+    for ea, eb in zip(*runs, strict=True):
+        assert ea.mean.tobytes() == eb.mean.tobytes() and ea.cov.tobytes() == eb.cov.tobytes()
+        for k in ea.extras:
+            assert np.asarray(ea.extras[k]).tobytes() == np.asarray(eb.extras[k]).tobytes(), k
+
+
+@pytest.mark.parametrize("masked", [False, True])
+def test_mcl_uses_the_valid_readings_among_the_masked_beams(masked):
+    loc = make_localizer("adaptive-memory", laser=LASER, rng=np.random.default_rng(0))
+    loc.begin_run(Prior(initial_pose=np.array([1.0, 1.0, 0.0]), walls=WALLS, day=1, run=1))
+    f = loc.filter
+    f.config = dataclasses.replace(f.config, max_beams=0)  # 0: every masked beam
+    rng = np.random.default_rng(3)
+    r = rng.uniform(0.0, 7.0, LASER.n_beams)
+    r[rng.random(len(r)) < 0.2] = np.nan
+    f.point_mask = rng.random(len(r)) < 0.5 if masked else None
+    got, ang = f._beams_of(r)
+    keep = [i for i in range(len(r)) if np.isfinite(r[i]) and f.range_min <= r[i] < f.range_max
+            and r[i] > 0 and (not masked or f.point_mask[i])]  # fmt: skip
+    np.testing.assert_array_equal(got, r[keep])
+    np.testing.assert_array_equal(ang, LASER.angles()[keep])
+
+
+@pytest.mark.parametrize("semistatic_map", ["run_start", "current"])
+def test_a_new_object_is_semistatic_all_day_against_the_run_start_map(semistatic_map):
+    """§4.4 against the long-term memory as the run began (``run_start``): the furniture the
+    walls prior lacks stays semistatic through day 1 and is static on day 2; against the
+    slot being written (``current``) it leaves the class within the first run."""
+    corners = np.array([[1.0, 1.0], [4.2, 1.0], [6.5, 1.5], [4.2, 1.2], [4.0, 3.8], [1.0, 3.6]])
+    truth = polyline_path(corners, step_m=0.05, turn_step_rad=0.15)
+    segs = room_segments(cupboard=True)
+    loc = make_localizer("adaptive-memory", laser=LASER, rng=np.random.default_rng(1),
+                         semistatic_map=semistatic_map)  # fmt: skip
+    rng = np.random.default_rng(0)
+    day1 = np.array([e.extras["n_semistatic"] for e in _run(loc, truth, segs, rng, day=1)[0]])
+    day2 = np.array([e.extras["n_semistatic"] for e in _run(loc, truth, segs, rng, day=2)[0]])
+    late = day1[len(day1) // 2 :].mean()
+    if semistatic_map == "run_start":
+        assert late > 20 and day2.mean() < 0.1 * late
+    else:
+        assert late < 0.2 * day1[:20].mean()

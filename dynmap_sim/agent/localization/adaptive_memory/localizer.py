@@ -10,11 +10,11 @@ Per scan (the data flow of H&W Fig. 2):
 3. ``u`` of the tracker's static points update the current long-term slot's grid (eq. 1 picks
    the slot; :mod:`.ltm_map`, §4.3, eqs. 12-15), at the predicted pose (``ltm_update_pose``);
    a point the walls prior already explains adds free space only (``ltm_learn_prior_walls``).
-4. The semistatic test (§4.4), on the map as it was before this scan's points: a non-dynamic
-   point with no obstacle of that map within its uncertainty is semistatic; a fast box the
-   map mostly explains is not dynamic (``ltm_veto_dynamic``). Final classes: dynamic;
-   semistatic; static (tracked, slow, explained by the map); unknown (not associated,
-   explained by the map).
+4. The semistatic test (§4.4), on the long-term map as it was when the run began
+   (``semistatic_map``): a non-dynamic point with no obstacle of that map within its
+   uncertainty is semistatic; a fast box the current map mostly explains is not dynamic
+   (``ltm_veto_dynamic``). Final classes: dynamic; semistatic; static (tracked, slow,
+   explained by that map); unknown (not associated, explained by that map).
 5. MCL (§6.1) with the project's AMCL core (:class:`~dynmap_sim.agent.localization.
    particle_filter.AMCLFilter`, ``mcl_config``) on the static points only; with fewer than
    ``min_static_points`` the explained unknown points are added (the first scan of a run has
@@ -26,6 +26,7 @@ Odometry, scans and the prior only: the agent never sees the truth.
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
@@ -34,11 +35,11 @@ from numpy.typing import NDArray
 
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import FREE
-from dynmap_sim.agent.localization.adaptive_memory import classes_numba
 from dynmap_sim.agent.localization.adaptive_memory.ltm_map import (
     LTMMap,
     LTMParams,
     point_covariances,
+    semistatic_classes,
 )
 from dynmap_sim.agent.localization.adaptive_memory.memory_stores import (
     SLOT_INITS,
@@ -54,7 +55,7 @@ from dynmap_sim.agent.localization.adaptive_memory.object_tracker import (
     ObjectTracker,
     TrackerParams,
     beam_trig,
-    point_classes_of,
+    scan_points,
     segment_scan,
 )
 from dynmap_sim.agent.localization.likelihood_field import LikelihoodTable, select_beams
@@ -65,7 +66,7 @@ from dynmap_sim.agent.localization.particle_filter import (
 )
 from dynmap_sim.agent.localizer import Localizer, register_localizer
 from dynmap_sim.agent.params import check_fields, coerce_fields
-from dynmap_sim.jit import kernel_backend
+from dynmap_sim.jit import compiled
 from dynmap_sim.types import Diagnostic, LaserSpec, Odometry, PoseEstimate, Prior, Scan
 
 FloatArray = NDArray[np.float64]
@@ -74,6 +75,8 @@ NAME = "adaptive-memory"
 DAY_S = 86400.0
 #: Values of ``AdaptiveMemoryConfig.ltm_update_pose``.
 LTM_UPDATE_POSES = ("estimate", "predicted")
+#: Values of ``AdaptiveMemoryConfig.semistatic_map``.
+SEMISTATIC_MAPS = ("run_start", "current")
 
 
 @dataclass(frozen=True)
@@ -110,48 +113,26 @@ class AdaptiveMemoryConfig:
     #: The pose the long-term update uses (ours; Fig. 2 draws the LTM update before MCL):
     #: ``predicted`` (default): the odometry-predicted pose, before MCL as in Fig. 2;
     #: ``estimate``: after this scan's MCL step, with its covariance. Either way the §4.4
-    #: test sees the map before this scan's points (one scan's points alone never make an
-    #: obstacle: ``l_occupied`` is above a single hit's log-odds).
-    #: Measured on the apartment days 1-7 (tour, same stream): mean error 0.037 m with
-    #: ``predicted`` against 0.063 m with ``estimate`` (every day worse): learning the map at
-    #: the pose just fitted to it reinforces that pose's errors.
+    #: test sees the map before this scan's points. ``predicted`` because learning the map at
+    #: the pose just fitted to it reinforces that pose's errors (docs/tuning/adaptive-memory.md).
     ltm_update_pose: str = "predicted"
     #: The long-term map learns from a scan only when it already explains at least this
     #: share of the scan's static points (ours; 0: from every scan, as the paper). Meant
-    #: against learning at a wrong pose, which writes the scan where it is not and, with
-    #: free-space evidence, erases what is there (apartment days 1-14, free space on, no
-    #: gate, one localizer seed: lost on 34 % of the scans from day 1 on). But it also keeps
-    #: furniture out of the map on day 1 and leaves MCL with too few static points: days 1-4,
-    #: mean error 0.033 m without the gate, 0.135 m at 0.5, 0.228 m at 0.3. Off by default.
+    #: against learning at a wrong pose; off by default because it also keeps new furniture
+    #: out of the map on day 1 and leaves MCL with too few static points.
     ltm_min_explained: float = 0.0
     #: Whether a sampled static point that the walls prior (H&W Fig. 4) already explains
-    #: within its uncertainty (the §4.4 test on the prior's map) adds occupied evidence to
-    #: the long-term map: ``True`` is §4.3's transfer rule taken literally (every sampled
-    #: static point is fused); ``False`` (default, ours; the paper is silent) keeps only the
-    #: free space along its beam. The prior's wall cells are pinned at ``l_max``, so such a
-    #: point has nothing to add at the wall; what it does add is its stencil around where
-    #: the current pose puts it: the wall again, shifted by the pose error (at the
-    #: navigation stack's turns in place: rotated about the robot by the heading error),
-    #: and thickened towards the room, where free space stops short of the point. MCL (§6.1)
-    #: then finds the wrong pose as likely as the right one and the map and the pose drift
-    #: together; the walls stay what Fig. 4 calls them, "the landmarks for localization".
-    #: The free space is kept: beams that end on a wall clear the furniture that left the
-    #: space in front of it (week 2). Measured on apartment-28d-hw, seed 0, each variant
-    #: steering, days 1-14: mean error 0.054 m (days 1-7 0.038-0.040 m), never lost;
-    #: ``True`` 0.240 m, lost on 7.5 % of the scans (riding along); dropping the points
-    #: altogether (free space too) 0.082 m (days 8-14 0.08-0.18 m, the moved furniture
-    #: stays). A certainty gate instead (learn only while the filter's heading std is below
-    #: a bound) was worse: 0.060 m on days 1-3 at 0.05 rad, and at 0.01 rad (0.044 m) it
-    #: learns almost nothing (234 occupied cells after day 3 against 2,715).
+    #: within its uncertainty adds occupied evidence: ``True`` is §4.3's transfer rule taken
+    #: literally; ``False`` (default, ours) keeps only the free space along its beam. The
+    #: prior's wall cells are pinned, so such a point adds nothing at the wall but a copy of
+    #: it shifted by the pose error, which MCL then finds as likely as the wall itself; the
+    #: walls stay what Fig. 4 calls them, "the landmarks for localization".
     ltm_learn_prior_walls: bool = False
     #: Inverse sensor model peak (ours; Elfes [15] style): P(occ) at the point's mean.
     p_hit: float = 0.7
     #: Free-space evidence along the sampled points' beams (ours; the paper has occupied
     #: evidence only, so moved furniture would never leave the map). On by default: week 2
     #: moves furniture every day and a map that keeps every old place attracts MCL to them.
-    #: Measured (apartment days 1-14, tour, seed 0): on: mean error 0.043-0.053 m on days
-    #: 8-10, 0.09-0.13 m on days 11-14; off: 0.10-0.19 m on days 8-10, 0.05-0.09 m on days
-    #: 11-14; 0 % lost either way (ATE 0.077 m on, 0.091 m off). Both are worth a study.
     free_space: bool = True
     #: Log-odds added to a cell a sampled beam passed (ours: P = 0.4).
     l_free: float = -0.4
@@ -162,11 +143,7 @@ class AdaptiveMemoryConfig:
     l_min: float = -2.0
     l_max: float = 3.5
     #: A cell is an obstacle (§4.4's test, §6.1's map) from this log-odds (ours: P = 0.92,
-    #: three hits at a point's mean). At 1.4 (two hits) the furniture entered the map within
-    #: a second of its first sighting, at whatever pose error the first scans had, and on
-    #: some localizer seeds the map and the pose then drifted together (apartment days 1-2:
-    #: lost on 46-63 % of the scans, the scan log-likelihood staying high); at 2.5 the same
-    #: seed tracked (0.044 m), and days 1-7 on two seeds gave 0.048 / 0.053 m, 0 % lost.
+    #: three hits at a point's mean, so one scan's stray points never make an obstacle).
     l_occupied: float = 2.5
     #: Half-width of the Gaussian stencil of a point [cells] (ours: 3 cells = 15 cm, > 3σ of a
     #: well-localized point).
@@ -180,6 +157,14 @@ class AdaptiveMemoryConfig:
     #: Bearing noise [rad] (ours: the 0.36° step's quantization, 0.36°/sqrt(12)).
     sigma_alpha_rad: float = float(np.deg2rad(0.36) / np.sqrt(12.0))
     # -- semistatic test (§4.4) ------------------------------------------------------------
+    #: The long-term map a point is checked against (§4.4 names ``M_τ^LTM``; which state of
+    #: it the paper leaves open, docs/replicas/hentschel-wagner.md):
+    #: ``run_start`` (default): the current slot as it was when this run began, what earlier
+    #: runs put in long-term memory, so an object new today stays semistatic all day (Fig. 6:
+    #: 23 % on day 1, when only the walls are known); ``current``: the slot being written,
+    #: before this scan's points, where ``u`` of a new object's points make it static within
+    #: seconds. MCL's map and the dynamic veto use the current slot either way.
+    semistatic_map: str = "run_start"
     #: "Within the uncertainty of the scan point" (ours: Mahalanobis <= 2, at least 1.5
     #: cells), searched at most this many cells away.
     semistatic_sigma: float = 2.0
@@ -200,8 +185,7 @@ class AdaptiveMemoryConfig:
     #: A fast box at least this share of whose points the long-term map explains is not
     #: dynamic (ours; 1 keeps only boxes the map explains entirely): a new face of a known
     #: cupboard makes its box's centre jump and look fast for a few scans, while a person
-    #: stands where the map has free space. Week 1 of the apartment (no people) had 0.4-0.9 %
-    #: of its points dynamic without it.
+    #: stands where the map has free space.
     ltm_veto_dynamic: float = 0.5
     #: Kalman filter (ours; "a common Kalman filter as in [7]"): white acceleration [m/s^2],
     #: centre measurement noise [m], initial speed std [m/s], association gate [m]; a box is
@@ -211,9 +195,6 @@ class AdaptiveMemoryConfig:
     track_sigma_meas_m: float = 0.05
     track_sigma_v0: float = 1.0
     track_gate_m: float = 0.5
-    #: (``confirm_steps`` 2 against 3 on apartment days 15-16: dynamic recall 0.38/0.51
-    #: against 0.34/0.47, precision 0.996 both; ``occlusion_never_dynamic`` off: recall
-    #: 0.46/0.64 but precision 0.94 on day 15.)
     confirm_steps: int = 2
     max_misses: int = 2
     # -- localization (§6.1) -----------------------------------------------------------------
@@ -267,6 +248,8 @@ class AdaptiveMemoryConfig:
             raise ValueError(f"{NAME}: l_free and l_min must be <= 0")
         if self.l_occupied > self.l_max:
             raise ValueError(f"{NAME}: l_occupied must be <= l_max")
+        if self.semistatic_map not in SEMISTATIC_MAPS:
+            raise ValueError(f"{NAME}: semistatic_map must be one of {SEMISTATIC_MAPS}")
         if self.ltm_update_pose not in LTM_UPDATE_POSES:
             raise ValueError(f"{NAME}: ltm_update_pose must be one of {LTM_UPDATE_POSES}")
         if self.mcl_points not in ("static", "non-dynamic"):
@@ -311,9 +294,6 @@ class StaticPointFilter(AMCLFilter):
     change)."""
 
     point_mask: NDArray[np.bool_] | None = None
-    #: How the masked beams are picked (:data:`dynmap_sim.jit.KERNEL_BACKENDS`:
-    #: :func:`.classes_numba.masked_beams` or numpy, the same beams).
-    backend: str = "auto"
     _held: tuple[Any, NDArray[np.bool_] | None, FloatArray, FloatArray] | None = None
     #: ``select_beams(n, max_beams)`` by ``n`` (dropped when pickled).
     _spreads: dict[int, NDArray[np.intp]] | None = None
@@ -351,15 +331,9 @@ class StaticPointFilter(AMCLFilter):
         if held is not None and held[0] is ranges_m and held[1] is self.point_mask:
             return held[2], held[3]
         r = np.asarray(ranges_m, dtype=np.float64)
-        kernel = kernel_backend(self.backend)
-        if kernel:
-            idx = classes_numba.masked_beams(r, self.range_max, self.range_min, self.point_mask,
-                                             python=kernel == "python")  # fmt: skip
-        else:
-            ok = np.isfinite(r) & (r > 0) & (r < self.range_max) & (r >= self.range_min)
-            if self.point_mask is not None:
-                ok &= self.point_mask
-            idx = np.nonzero(ok)[0]
+        mask = self.point_mask
+        idx = _masked_beams(r, float(self.range_max), float(self.range_min),
+                            np.ones(len(r), bool) if mask is None else mask)  # fmt: skip
         n, max_beams = len(idx), self.config.max_beams
         if n > max_beams > 0:
             if self._spreads is None:
@@ -387,6 +361,20 @@ class StaticPointFilter(AMCLFilter):
         self.table = LikelihoodTable(grid, self.lf, previous=self.table)
         if np.any(grid.occupancy == FREE):  # grid.free_points() is not empty
             self._free_grid = grid
+
+
+@compiled
+def _masked_beams(r, range_max_m, range_min_m, mask):  # type: ignore[no-untyped-def]
+    """The beams MCL may use (finite, ``0 < r < range_max_m``, ``r >= range_min_m``) among
+    those of ``mask``, in order."""
+    idx = np.empty(r.shape[0], dtype=np.intp)
+    n = 0
+    for i in range(r.shape[0]):
+        v = r[i]
+        if mask[i] and math.isfinite(v) and 0.0 < v < range_max_m and v >= range_min_m:
+            idx[n] = i
+            n += 1
+    return idx[:n]
 
 
 @register_localizer(NAME)
@@ -439,7 +427,7 @@ class AdaptiveMemoryLocalizer(Localizer):
         self._n_scans = 0
         self._day = 0
         #: The beams' cosines and sines for the segmentation (lazy; not pickled).
-        self._beam_trig: tuple[FloatArray, FloatArray] | None = None
+        self._beam_trig: FloatArray | None = None
 
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
@@ -465,6 +453,8 @@ class AdaptiveMemoryLocalizer(Localizer):
         )
         self._stamp0 = None
         self.ltm.activate(self._t0)
+        #: §4.4's map with ``semistatic_map = "run_start"``: the long-term memory before this run
+        self._run_start_map = self.ltm.map().copy() if c.semistatic_map == "run_start" else None
         self.tracker.reset()
         self.sm.clear()
         self.stm.clear()
@@ -511,7 +501,7 @@ class AdaptiveMemoryLocalizer(Localizer):
         if self._beam_trig is None:
             self._beam_trig = beam_trig(self.angles, self.mount)
         boxes = segment_scan(ranges, self.angles, self.mount, self.range_max,
-                             self.tracker.params, beam_trig=self._beam_trig)  # fmt: skip
+                             self.tracker.params, self._beam_trig)  # fmt: skip
         box_cls, _ = self.tracker.update(boxes, pose_odom, t)
         # 3. long-term map update (§4.3) with u of the tracker's static points
         vi, rv, sig_r, cls_v, lab, stat = self._scan_points(ranges, boxes, box_cls)
@@ -519,6 +509,8 @@ class AdaptiveMemoryLocalizer(Localizer):
                                       c.sigma_alpha_rad, sig_r)  # fmt: skip
         cur = ltm.map()
         explained = cur.explained(pts, covs, self.lp)  # for step 4, before this scan's points
+        ref = self._run_start_map
+        known = explained if ref is None else ref.explained(pts, covs, self.lp)
         n_take = int(round(c.u * len(stat)))
         if c.ltm_min_explained > 0 and len(stat) and np.mean(explained[stat]) < c.ltm_min_explained:
             n_take = 0  # the map disagrees with most of the scan: the pose is not trusted
@@ -528,7 +520,7 @@ class AdaptiveMemoryLocalizer(Localizer):
             p_take, c_take = pts[take], covs[take]
             cur.update(laser_xy, p_take, c_take, self.lp, self._hits(p_take, c_take))
         # 4. the semistatic test (§4.4)
-        classes, n_class = self._final_classes(cls_v, lab, explained, len(boxes.length), vi,
+        classes, n_class = self._final_classes(cls_v, lab, explained, known, len(boxes.length), vi,
                                                len(ranges))  # fmt: skip
         self.stm.put(t, classes)  # short-term memory: the classified scan
         # 5. map selection and MCL (§6.1) on the static points
@@ -570,59 +562,29 @@ class AdaptiveMemoryLocalizer(Localizer):
         return PoseEstimate(mean=mean, cov=cov, extras=extras)
 
     def _scan_points(
-        self, ranges: FloatArray, boxes: Boxes, box_cls: NDArray[np.int8], backend: str = "auto"
+        self, ranges: FloatArray, boxes: Boxes, box_cls: NDArray[np.int8]
     ) -> tuple[NDArray[np.intp], FloatArray, FloatArray, NDArray[np.int8], NDArray[np.intp],
                NDArray[np.intp]]:  # fmt: skip
-        """The valid returns of the scan (finite, ``0 < r < range_max``): beam indices
-        ``vi``, ranges, range noise (§4.1), tracker classes (eq. 11) and boxes, and the
-        positions among them of the static ones. ``backend``: :data:`dynmap_sim.jit.
-        KERNEL_BACKENDS` (:func:`.classes_numba.scan_points` or numpy, the same numbers)."""
+        """The valid returns of the scan (:func:`.object_tracker.scan_points`)."""
         c = self.config
-        kernel = kernel_backend(backend)
-        if kernel:
-            return classes_numba.scan_points(ranges, self.range_max, boxes.labels, box_cls,
-                                             c.sigma_r_min_m, c.sigma_r_rel,
-                                             python=kernel == "python")  # fmt: skip
-        valid = np.isfinite(ranges) & (ranges > 0) & (ranges < self.range_max)
-        tracked = point_classes_of(boxes, box_cls)
-        vi = np.nonzero(valid)[0]
-        rv = ranges[vi]
-        sig_r = np.maximum(c.sigma_r_min_m, c.sigma_r_rel * rv)
-        tracked_v = tracked[vi]
-        stat = np.nonzero(tracked_v == STATIC)[0]
-        return vi, rv, sig_r, tracked_v, boxes.labels[vi], stat
+        return scan_points(ranges, self.range_max, boxes, box_cls, c.sigma_r_min_m,
+                           c.sigma_r_rel)  # fmt: skip
 
     def _final_classes(
         self,
         cls_v: NDArray[np.int8],
         lab: NDArray[np.intp],
         explained: NDArray[np.bool_],
+        known: NDArray[np.bool_],
         n_boxes: int,
         vi: NDArray[np.intp],
         n_beams: int,
-        backend: str = "auto",
     ) -> tuple[NDArray[np.int8], NDArray[np.int64]]:
-        """§4.4 on the valid returns' tracker classes ``cls_v`` (boxes ``lab``, in place):
-        the long-term map's veto of the dynamic boxes it explains (``ltm_veto_dynamic``),
-        then the unexplained non-dynamic points semistatic; the classes of all
-        ``n_beams`` beams (unknown where not valid) and the count of each class.
-        ``backend``: as :meth:`_scan_points`' (:func:`.classes_numba.final_classes`)."""
-        c = self.config
-        kernel = kernel_backend(backend)
-        if kernel:
-            return classes_numba.final_classes(cls_v, lab, explained, n_boxes,
-                                               c.ltm_veto_dynamic, vi, n_beams,
-                                               python=kernel == "python")  # fmt: skip
-        dyn = (cls_v == DYNAMIC) & (lab >= 0)
-        if dyn.any():  # the long-term map vetoes boxes it explains (ltm_veto_dynamic)
-            n_pts = np.bincount(lab[lab >= 0], minlength=n_boxes)
-            n_expl = np.bincount(lab[(lab >= 0) & explained], minlength=n_boxes)
-            veto = n_expl >= c.ltm_veto_dynamic * np.maximum(n_pts, 1)
-            cls_v[dyn & veto[np.maximum(lab, 0)]] = STATIC
-        cls_v[(cls_v != DYNAMIC) & ~explained] = SEMISTATIC
-        classes = np.full(n_beams, UNKNOWN, dtype=np.int8)
-        classes[vi] = cls_v
-        return classes, np.bincount(cls_v, minlength=4)
+        """§4.4 (:func:`.ltm_map.semistatic_classes`): the veto (``ltm_veto_dynamic``) on the
+        current map's verdicts ``explained``, semistatic what ``semistatic_map`` does not
+        ``known``."""
+        return semistatic_classes(cls_v, lab, explained, known, n_boxes,
+                                  self.config.ltm_veto_dynamic, vi, n_beams)  # fmt: skip
 
     def _reported_cov(self) -> tuple[FloatArray, float]:
         """The reported covariance (regularized) and its information's smallest eigenvalue,
@@ -689,7 +651,7 @@ class AdaptiveMemoryLocalizer(Localizer):
     def _use_map(self, slot: int) -> None:
         """MCL on long-term slot ``slot``'s map from now on. The grid and its likelihood field
         are rebuilt only when the map's cells differ from the filter's grid (the same cells
-        make the same grid; apartment-28d-hw days 1-3: a third of the rebuilds)."""
+        make the same grid)."""
         f, ltm = self.filter, self.ltm
         assert f is not None and ltm is not None
         m = ltm.map(slot)

@@ -20,47 +20,32 @@ given, and no evidence removes them.
 
 §4.4's semistatic test: a point with no occupied cell (log-odds >= ``l_occupied``) of the map
 within its uncertainty (Mahalanobis distance ``semistatic_sigma``, at least one cell) is
-semistatic, "not yet in long-term memory".
+semistatic, "not yet in long-term memory". The test, the update and the covariances are
+compiled kernels (:func:`_explained`, :func:`_update`, :func:`_point_covariances`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from functools import lru_cache
+import math
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
 from dynmap_sim.agent.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
-from dynmap_sim.agent.localization.adaptive_memory import ltm_numba
 from dynmap_sim.agent.localization.distance_filter import cast_rays
-from dynmap_sim.jit import KERNEL_BACKENDS, kernel_backend
+from dynmap_sim.jit import compiled, jitable
 
 FloatArray = NDArray[np.float64]
-#: Values of the ``backend`` arguments (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): ``numba``
-#: runs :mod:`.ltm_numba`'s kernels, identical in result to ``numpy``; ``python`` the same
-#: kernels uncompiled (slow: for the tests).
-BACKENDS = KERNEL_BACKENDS
-
-
-@lru_cache(maxsize=16)
-def _stencil(k: int) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-    """Offsets ``(ox, oy)`` of the ``(2k+1)^2`` cells around a cell, raveled row by row
-    (read-only: cached)."""
-    off = np.arange(-k, k + 1)
-    ox, oy = (g.ravel() for g in np.meshgrid(off, off))
-    ox.setflags(write=False)
-    oy.setflags(write=False)
-    return ox, oy
 
 
 def logit(p: float) -> float:
     return float(np.log(p / (1.0 - p)))
 
 
-@dataclass(frozen=True)
-class LTMParams:
-    """Grid update parameters (set from ``AdaptiveMemoryConfig``; see its field docs)."""
+class LTMParams(NamedTuple):
+    """Grid update parameters (set from ``AdaptiveMemoryConfig``; see its field docs); a
+    NamedTuple, so the kernels take it as one argument."""
 
     p_hit: float = 0.7
     free_space: bool = True
@@ -73,6 +58,23 @@ class LTMParams:
     semistatic_sigma: float = 2.0
     semistatic_max_cells: int = 4
     cov_floor_m: float = 0.025
+
+    def typed(self) -> LTMParams:
+        """The same values with the field types the kernels are compiled for."""
+        return LTMParams(
+            float(self.p_hit), bool(self.free_space), float(self.l_free),
+            float(self.free_stop_sigma), float(self.l_min), float(self.l_max),
+            float(self.l_occupied), int(self.stencil_cells), float(self.semistatic_sigma),
+            int(self.semistatic_max_cells), float(self.cov_floor_m),
+        )  # fmt: skip
+
+
+class GridGeom(NamedTuple):
+    """Where a grid lies: lower-left corner [m] and cell size [m]."""
+
+    origin_x: float
+    origin_y: float
+    res: float
 
 
 class LTMMap:
@@ -111,15 +113,18 @@ class LTMMap:
     def shape(self) -> tuple[int, int]:
         return self.logodds.shape  # type: ignore[return-value]
 
+    @property
+    def geom(self) -> GridGeom:
+        return GridGeom(float(self.origin[0]), float(self.origin[1]), self.resolution)
+
     def cells(self, xy: FloatArray) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
         ix = np.floor((xy[..., 0] - self.origin[0]) / self.resolution).astype(np.intp)
         iy = np.floor((xy[..., 1] - self.origin[1]) / self.resolution).astype(np.intp)
         return ix, iy
 
     def occupied(self, params: LTMParams) -> NDArray[np.bool_]:
-        return self.logodds >= params.l_occupied
+        return self.logodds >= np.float32(params.l_occupied)
 
-    # -- eq. 15: Elfes' Bayesian update ------------------------------------------------
     def update(
         self,
         laser_xy: FloatArray,
@@ -127,120 +132,33 @@ class LTMMap:
         covs: FloatArray,
         params: LTMParams,
         occupied: NDArray[np.bool_] | None = None,
-        backend: str = "auto",
     ) -> None:
-        """Fuse points ``(n, 2)`` with covariances ``(n, 2, 2)`` seen from ``laser_xy``;
-        ``occupied`` (default all): the points that add occupied evidence (the others add
-        only the free space along their beams). The cells it changes are clamped to
-        ``[l_min, l_max]`` and the pinned ones among them reset to ``l_max``; the grid's
-        other cells must already be (every map starts so). ``backend``: :data:`BACKENDS`."""
-        kernel = kernel_backend(backend)
+        """Eq. 15: fuse points ``(n, 2)`` [m] with covariances ``(n, 2, 2)`` [m²] seen from
+        ``laser_xy``; ``occupied`` (default all): the points that add occupied evidence (the
+        others add only the free space along their beams). The cells it changes are clamped
+        to ``[l_min, l_max]`` and the pinned ones reset to ``l_max``; the grid's other cells
+        must already be (every map starts so)."""
         if len(points) == 0:
             return
         hit = np.ones(len(points), bool) if occupied is None else np.asarray(occupied, bool)
-        if kernel:
-            ltm_numba.update(self.logodds, self.pinned, laser_xy, points, covs, hit,
-                             self.origin, self.resolution, params,
-                             python=kernel == "python")  # fmt: skip
-            return
-        h, w = self.shape
-        res = self.resolution
-        flat_all = []
-        add_all = []
-        # Occupied: peak-normalized Gaussian on a (2k+1)^2 stencil around each point.
-        i_xx, i_xy, i_yy, c_xx, c_xy, c_yy = floored_inverse(covs, params.cov_floor_m**2)
-        ox, oy = _stencil(params.stencil_cells)
-        ix, iy = self.cells(points)
-        cx = ix[:, None] + ox[None, :]
-        cy = iy[:, None] + oy[None, :]
-        dx = self.origin[0] + (cx + 0.5) * res - points[:, 0:1]
-        dy = self.origin[1] + (cy + 0.5) * res - points[:, 1:2]
-        m2 = i_xx[:, None] * dx * dx + 2 * i_xy[:, None] * dx * dy
-        m2 += i_yy[:, None] * dy * dy
-        ok = (cx >= 0) & (cx < w) & (cy >= 0) & (cy < h) & (m2 < 9.0) & hit[:, None]
-        flat, m2 = (cy * w + cx)[ok], m2[ok]
-        p = 0.5 + (params.p_hit - 0.5) * np.exp(-0.5 * m2)
-        flat_all.append(flat)
-        add_all.append(np.log(p / (1.0 - p)))
-        if params.free_space:
-            d = points - laser_xy[None, :]
-            r = np.hypot(d[:, 0], d[:, 1])
-            d0, d1 = d[:, 0], d[:, 1]
-            dd = (c_xx * d0 * d0 + 2.0 * c_xy * d0 * d1) + c_yy * d1 * d1  # dᵀ Σ d
-            sig = np.sqrt(np.maximum(dd / np.maximum(r, 1e-9) ** 2, 0))
-            stop = r - np.maximum(params.free_stop_sigma * sig, res)
-            step = 0.5 * res
-            t = np.arange(0.0, float(stop.max(initial=0.0)), step)
-            if len(t):
-                u = d / np.maximum(r, 1e-9)[:, None]
-                fx = laser_xy[0] + u[:, 0:1] * t[None, :]
-                fy = laser_xy[1] + u[:, 1:2] * t[None, :]
-                fix, fiy = self.cells(np.stack([fx, fy], axis=-1))
-                okf = (t[None, :] < stop[:, None]) & (fix >= 0) & (fix < w) & (fiy >= 0) & (fiy < h)
-                ray = np.broadcast_to(np.arange(len(points))[:, None], fix.shape)
-                key = np.unique(ray[okf] * (h * w) + (fiy * w + fix)[okf])  # once per beam
-                flat_all.append(key % (h * w))
-                add_all.append(np.full(len(key), params.l_free))
-        lo = self.logodds.ravel()
-        flat = np.concatenate(flat_all)
-        add = np.concatenate(add_all)
-        np.add.at(lo, flat, add.astype(np.float32))
-        # Clamp and re-pin the cells this update can have changed: those between the laser
-        # and the points' stencils (the others already are, as every map starts so).
-        lc = self.cells(np.asarray(laser_xy, dtype=np.float64))
-        k = params.stencil_cells
-        x0, x1 = max(min(int(ix.min()) - k, int(lc[0])), 0), max(int(ix.max()) + k, int(lc[0])) + 1
-        y0, y1 = max(min(int(iy.min()) - k, int(lc[1])), 0), max(int(iy.max()) + k, int(lc[1])) + 1
-        sub = self.logodds[y0:y1, x0:x1]
-        np.clip(sub, params.l_min, params.l_max, out=sub)
-        sub[self.pinned[y0:y1, x0:x1]] = params.l_max
+        _update(self.logodds, self.pinned, np.asarray(laser_xy, dtype=np.float64)[:2],
+                np.ascontiguousarray(points, dtype=np.float64),
+                np.ascontiguousarray(covs, dtype=np.float64), hit, self.geom,
+                params.typed())  # fmt: skip
 
-    # -- §4.4 ---------------------------------------------------------------------------
     def explained(
-        self, points: FloatArray, covs: FloatArray, params: LTMParams, backend: str = "auto"
+        self, points: FloatArray, covs: FloatArray, params: LTMParams
     ) -> NDArray[np.bool_]:
         """Points with an occupied cell within their uncertainty (the complement of §4.4's
         semistatic test): a cell centre within ``semistatic_sigma`` standard deviations
-        along the point's widest axis (largest eigenvalue of ``Σ''``, a circle that holds
-        the Mahalanobis ellipse), at least 1.5 cells, at most ``semistatic_max_cells``.
-        Two stages: the 3 x 3 cells around each point decide most points (a return on a
-        known wall); the rest search their whole circle. ``backend``: :data:`BACKENDS`."""
-        kernel = kernel_backend(backend)
-        n = len(points)
-        if n == 0:
+        along the point's widest axis (largest eigenvalue of ``Σ''`` plus the floor, a
+        circle that holds the Mahalanobis ellipse), at least 1.5 cells, at most
+        ``semistatic_max_cells``. Cells outside the grid hold no obstacle."""
+        if len(points) == 0:
             return np.zeros(0, bool)
-        h, w = self.shape
-        res = self.resolution
-        if kernel:
-            return ltm_numba.explained(self.logodds, params.l_occupied, points, covs,
-                                       self.origin, res, params.cov_floor_m**2,
-                                       params.semistatic_sigma,
-                                       params.semistatic_max_cells * res,
-                                       python=kernel == "python")  # fmt: skip
-        a = covs[:, 0, 0] + params.cov_floor_m**2
-        c = covs[:, 1, 1] + params.cov_floor_m**2
-        b = covs[:, 0, 1]
-        lam = 0.5 * (a + c) + np.sqrt(0.25 * (a - c) ** 2 + b * b)
-        rho = np.clip(params.semistatic_sigma * np.sqrt(lam), 1.5 * res,
-                      params.semistatic_max_cells * res)  # fmt: skip
-        ix, iy = self.cells(points)
-        fx = (points[:, 0] - self.origin[0]) / res - ix - 0.5  # offset from the cell centre
-        fy = (points[:, 1] - self.origin[1]) / res - iy - 0.5
-        k_max = int(np.ceil(rho.max() / res))
-        occ = (self.logodds >= params.l_occupied).ravel()
-        out = np.zeros(n, bool)
-        todo = np.arange(n)
-        for k in (1, k_max) if k_max > 1 else (1,):
-            if len(todo) == 0:
-                break
-            ox, oy = _stencil(k)
-            cx = np.clip(ix[todo, None] + ox[None, :], 0, w - 1)
-            cy = np.clip(iy[todo, None] + oy[None, :], 0, h - 1)
-            d2 = (ox[None, :] - fx[todo, None]) ** 2 + (oy[None, :] - fy[todo, None]) ** 2
-            hit = occ[cy * w + cx] & (d2 * res * res <= rho[todo, None] ** 2)
-            out[todo] = hit.any(axis=1)
-            todo = todo[~out[todo]]
-        return out
+        return _explained(self.logodds, np.ascontiguousarray(points, dtype=np.float64),
+                          np.ascontiguousarray(covs, dtype=np.float64), self.geom,
+                          params.typed())  # fmt: skip
 
     # -- for MCL and map selection (§6.1) ------------------------------------------------
     def ternary(self, params: LTMParams) -> NDArray[np.int8]:
@@ -272,21 +190,6 @@ class LTMMap:
         return np.where(first >= 0, t[first], range_max)
 
 
-def floored_inverse(
-    covs: FloatArray, floor2_m2: float
-) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray, FloatArray, FloatArray]:
-    """The inverses of ``covs + floor2_m2·I`` (``(n, 2, 2)``, symmetric) in closed form:
-    ``(inv_xx, inv_xy, inv_yy)`` and the floored entries ``(xx, xy, yy)``. The floor bounds
-    the smallest eigenvalue from below, so the determinant ``xx·yy - xy²`` is at least
-    ``floor2_m2²`` and its relative rounding error stays below eps times the condition
-    number (at most ``(σ_max / cov_floor_m)²``)."""
-    a = covs[:, 0, 0] + floor2_m2
-    c = covs[:, 1, 1] + floor2_m2
-    b = covs[:, 0, 1]
-    det = a * c - b * b
-    return c / det, -b / det, a / det, a, b, c
-
-
 def point_covariances(
     pose: FloatArray,
     cov_pose: FloatArray,
@@ -295,65 +198,200 @@ def point_covariances(
     angles: FloatArray,
     sigma_alpha: float,
     sigma_r: FloatArray,
-    backend: str = "auto",
 ) -> tuple[FloatArray, FloatArray]:
-    """Eqs. 12-14: world points ``(n, 2)`` of readings ``(r, α)`` taken at robot ``pose``
-    (laser ``mount`` in the robot frame) and their covariances ``(n, 2, 2)``
-    ``Σ'' = ∇F blockdiag(Σ_p, Σ_s) ∇Fᵀ``. The pose part's ∂/∂φ is the lever arm from the
-    robot's centre to the point (the paper's ``-r sin(φ+α), r cos(φ+α)`` with the mount).
-
-    The products are written out element by element (:func:`point_covariance_terms`), each
-    an IEEE operation on arrays of points (no BLAS), so a compiled kernel can repeat them
-    exactly; the result is symmetric by construction. ``backend``: :data:`BACKENDS` (the
-    kernel, :func:`.ltm_numba.point_covariances`, after the cosines and sines)."""
-    kernel = kernel_backend(backend)
-    x, y, phi = pose
-    c, s = np.cos(phi), np.sin(phi)
-    lx = x + c * mount[0] - s * mount[1]
-    ly = y + s * mount[0] + c * mount[1]
-    b = phi + mount[2] + angles
-    cb, sb = np.cos(b), np.sin(b)
-    if kernel:
-        return ltm_numba.point_covariances(x, y, lx, ly, cov_pose, ranges, cb, sb,
-                                           sigma_alpha * sigma_alpha, sigma_r,
-                                           python=kernel == "python")  # fmt: skip
-    px, py = lx + ranges * cb, ly + ranges * sb
-    cov = np.empty((len(ranges), 2, 2))
-    cxx, cxy, cyy = point_covariance_terms(
-        np.asarray(cov_pose, dtype=np.float64), -(py - y), px - x, ranges, cb, sb,
-        sigma_alpha * sigma_alpha, np.square(np.asarray(sigma_r, dtype=np.float64)),
+    """Eqs. 12-14: world points ``(n, 2)`` [m] of readings ``(r, α)`` taken at robot ``pose``
+    (laser ``mount`` in the robot frame) and their covariances ``(n, 2, 2)`` [m²]
+    ``Σ'' = ∇F blockdiag(Σ_p, Σ_s) ∇Fᵀ``, ``Σ_s = diag(σ_α², σ_r²)``. The pose part's ∂/∂φ
+    is the lever arm from the robot's centre to the point (the paper's
+    ``-r sin(φ+α), r cos(φ+α)`` with the mount)."""
+    f64 = np.float64
+    return _point_covariances(
+        np.asarray(pose, dtype=f64), np.ascontiguousarray(cov_pose, dtype=f64),
+        np.asarray(mount, dtype=f64), np.ascontiguousarray(ranges, dtype=f64),
+        np.ascontiguousarray(angles, dtype=f64), float(sigma_alpha) ** 2,
+        np.ascontiguousarray(sigma_r, dtype=f64),
     )  # fmt: skip
-    cov[:, 0, 0] = cxx
-    cov[:, 0, 1] = cov[:, 1, 0] = cxy
-    cov[:, 1, 1] = cyy
-    return np.column_stack([px, py]), cov
 
 
-def point_covariance_terms(
-    cov_pose: FloatArray,
-    ax: FloatArray,
-    ay: FloatArray,
-    ranges: FloatArray,
-    cb: FloatArray,
-    sb: FloatArray,
-    var_alpha: float,
-    var_r: FloatArray,
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """The entries ``(xx, xy, yy)`` of eq. 14's ``Σ''`` with the pose Jacobian
-    ``J_p = [[1, 0, ax], [0, 1, ay]]`` (``ax = -(p_y - y)``, ``ay = p_x - x``: the lever
-    arm) and the reading Jacobian ``J_s = [[-r sin β, cos β], [r cos β, sin β]]`` (columns
-    α, r), ``Σ_s = diag(var_alpha, var_r)``:
-    ``J_p Σ_p J_pᵀ + J_s Σ_s J_sᵀ`` written out (row ``i`` of ``J_p Σ_p`` is
-    ``Σ_p[i] + a_i Σ_p[2]``; the off-diagonal entry is computed once)."""
+def semistatic_classes(
+    cls_v: NDArray[np.int8], lab_v: NDArray[np.intp], explained: NDArray[np.bool_],
+    known: NDArray[np.bool_], n_boxes: int, veto_share: float, vi: NDArray[np.intp], n_beams: int,
+) -> tuple[NDArray[np.int8], NDArray[np.int64]]:  # fmt: skip
+    """§4.4 on the valid returns' tracker classes ``cls_v`` (boxes ``lab_v``, -1 none; in
+    place): a dynamic point of a box at least ``veto_share`` of whose points a map
+    ``explained`` becomes static (``ltm_veto_dynamic``), then every non-dynamic point that
+    is not ``known`` (explained by §4.4's map) semistatic. Returns the classes of all
+    ``n_beams`` beams (unknown where not valid; ``vi``: the valid returns' beams) and the
+    count of each class."""
+    return _semistatic_classes(cls_v, lab_v, np.asarray(explained, dtype=np.bool_),
+                               np.asarray(known, dtype=np.bool_), int(n_boxes),
+                               float(veto_share), vi, int(n_beams))  # fmt: skip
+
+
+# -- kernels ------------------------------------------------------------------------------
+@jitable
+def _floored(covs, j, floor2):  # type: ignore[no-untyped-def]
+    """Entries ``(xx, xy, yy)`` of ``covs[j] + floor2·I``: the floor bounds the smallest
+    eigenvalue, so the inverse stays well conditioned."""
+    return covs[j, 0, 0] + floor2, covs[j, 0, 1], covs[j, 1, 1] + floor2
+
+
+@compiled
+def _explained(logodds, points, covs, geom, params):  # type: ignore[no-untyped-def]
+    """:meth:`LTMMap.explained`: per point its search radius ``rho`` [m], then the 3 x 3
+    cells around it (a return on a mapped wall), then the rest of its square, stopping at
+    the first occupied cell whose centre lies within ``rho``."""
+    h, w = logodds.shape
+    l_occ = np.float32(params.l_occupied)
+    res = geom.res
+    floor2 = params.cov_floor_m * params.cov_floor_m
+    rho_max = params.semistatic_max_cells * res
+    n = points.shape[0]
+    out = np.zeros(n, dtype=np.bool_)
+    for j in range(n):
+        a, b, c = _floored(covs, j, floor2)
+        d = a - c
+        lam = 0.5 * (a + c) + math.sqrt(0.25 * d * d + b * b)
+        rho = min(max(params.semistatic_sigma * math.sqrt(lam), 1.5 * res), rho_max) / res
+        gx = (points[j, 0] - geom.origin_x) / res
+        gy = (points[j, 1] - geom.origin_y) / res
+        ix, iy = int(math.floor(gx)), int(math.floor(gy))
+        fx, fy = gx - ix - 0.5, gy - iy - 0.5  # offset from the cell's centre [cells]
+        k_all = int(math.ceil(rho))
+        for ring in range(2):
+            k = 1 if ring == 0 else k_all
+            for oy in range(-k, k + 1):
+                cy = iy + oy
+                if cy < 0 or cy >= h:
+                    continue
+                for ox in range(-k, k + 1):
+                    if ring == 1 and -1 <= ox <= 1 and -1 <= oy <= 1:
+                        continue
+                    cx = ix + ox
+                    if 0 <= cx < w and logodds[cy, cx] >= l_occ:
+                        if (ox - fx) ** 2 + (oy - fy) ** 2 <= rho * rho:
+                            out[j] = True
+                            break
+                if out[j]:
+                    break
+            if out[j] or k_all <= 1:
+                break
+    return out
+
+
+@compiled
+def _update(logodds, pinned, laser_xy, points, covs, hit, geom, params):  # type: ignore[no-untyped-def]
+    """:meth:`LTMMap.update` in place on ``logodds`` (C-contiguous): the stencils' occupied
+    log-odds (cells within Mahalanobis distance 3 on a ``(2k+1)²`` square), then
+    ``l_free`` once per cell along each beam (samples every half cell up to where the free
+    space stops), then the clamp and re-pin of the rectangle between the laser and the
+    stencils (every other cell is within the clamps already)."""
+    h, w = logodds.shape
+    res, ox0, oy0 = geom.res, geom.origin_x, geom.origin_y
+    k = params.stencil_cells
+    floor2 = params.cov_floor_m * params.cov_floor_m
+    lx, ly = laser_xy[0], laser_xy[1]
+    x0 = x1 = int(math.floor((lx - ox0) / res))
+    y0 = y1 = int(math.floor((ly - oy0) / res))
+    for j in range(points.shape[0]):
+        px, py = points[j, 0], points[j, 1]
+        ix = int(math.floor((px - ox0) / res))
+        iy = int(math.floor((py - oy0) / res))
+        x0, x1, y0, y1 = min(x0, ix - k), max(x1, ix + k), min(y0, iy - k), max(y1, iy + k)
+        if not hit[j]:
+            continue
+        a, b, c = _floored(covs, j, floor2)
+        det = a * c - b * b
+        i_xx, i_xy, i_yy = c / det, -b / det, a / det
+        for cy in range(max(iy - k, 0), min(iy + k + 1, h)):
+            dy = oy0 + (cy + 0.5) * res - py
+            for cx in range(max(ix - k, 0), min(ix + k + 1, w)):
+                dx = ox0 + (cx + 0.5) * res - px
+                m2 = i_xx * dx * dx + 2.0 * i_xy * dx * dy + i_yy * dy * dy
+                if m2 < 9.0:
+                    p = 0.5 + (params.p_hit - 0.5) * math.exp(-0.5 * m2)
+                    logodds[cy, cx] += np.float32(math.log(p / (1.0 - p)))
+    if params.free_space:
+        l_free = np.float32(params.l_free)
+        step = 0.5 * res
+        for j in range(points.shape[0]):
+            a, b, c = _floored(covs, j, floor2)
+            d0, d1 = points[j, 0] - lx, points[j, 1] - ly
+            r = max(math.hypot(d0, d1), 1e-9)
+            sig = math.sqrt(max((a * d0 * d0 + 2.0 * b * d0 * d1 + c * d1 * d1) / (r * r), 0.0))
+            stop = r - max(params.free_stop_sigma * sig, res)
+            ux, uy = d0 / r, d1 / r
+            prev_x = prev_y = -1
+            i = 0
+            while i * step < stop:
+                t = i * step
+                cx = int(math.floor((lx + ux * t - ox0) / res))
+                cy = int(math.floor((ly + uy * t - oy0) / res))
+                i += 1
+                if (cx != prev_x or cy != prev_y) and 0 <= cx < w and 0 <= cy < h:
+                    logodds[cy, cx] += l_free  # a ray's cells are monotone: once per beam
+                prev_x, prev_y = cx, cy
+    l_min, l_max = np.float32(params.l_min), np.float32(params.l_max)
+    for cy in range(max(y0, 0), min(y1 + 1, h)):
+        for cx in range(max(x0, 0), min(x1 + 1, w)):
+            if pinned[cy, cx]:
+                logodds[cy, cx] = l_max
+            else:
+                logodds[cy, cx] = min(max(logodds[cy, cx], l_min), l_max)
+
+
+@compiled
+def _point_covariances(pose, cov_pose, mount, ranges, angles, var_alpha, sigma_r):  # type: ignore[no-untyped-def]
+    """:func:`point_covariances`: ``J_p Σ_p J_pᵀ + J_s Σ_s J_sᵀ`` written out, with
+    ``J_p = [[1, 0, ax], [0, 1, ay]]`` (the lever arm ``ax = -(p_y - y)``, ``ay = p_x - x``)
+    and ``J_s = [[-r sin β, cos β], [r cos β, sin β]]`` (columns α, r)."""
+    x, y, phi = pose[0], pose[1], pose[2]
+    c0, s0 = math.cos(phi), math.sin(phi)
+    lx = x + c0 * mount[0] - s0 * mount[1]
+    ly = y + s0 * mount[0] + c0 * mount[1]
     p = cov_pose
-    r0x = p[0, 0] + ax * p[2, 0]  # row x of J_p Σ_p, columns 0 and 2
-    r2x = p[0, 2] + ax * p[2, 2]
-    r1y = p[1, 1] + ay * p[2, 1]  # row y, columns 1 and 2
-    r2y = p[1, 2] + ay * p[2, 2]
-    r1x = p[0, 1] + ax * p[2, 1]  # row x, column 1
-    rs, rc = ranges * sb, ranges * cb
-    ta, tr = rs * var_alpha, cb * var_r  # row x of J_s Σ_s: (-r sin β σ_α², cos β σ_r²)
-    xx = (r0x + ax * r2x) + (rs * ta + cb * tr)
-    xy = (r1x + ay * r2x) + (sb * tr - rc * ta)
-    yy = (r1y + ay * r2y) + (rc * (rc * var_alpha) + sb * (sb * var_r))
-    return xx, xy, yy
+    n = ranges.shape[0]
+    points = np.empty((n, 2))
+    covs = np.empty((n, 2, 2))
+    for j in range(n):
+        r = ranges[j]
+        beta = phi + mount[2] + angles[j]
+        cb, sb = math.cos(beta), math.sin(beta)
+        px, py = lx + r * cb, ly + r * sb
+        points[j, 0], points[j, 1] = px, py
+        ax, ay = -(py - y), px - x
+        var_r = sigma_r[j] * sigma_r[j]
+        pxx = p[0, 0] + ax * (p[2, 0] + p[0, 2]) + ax * ax * p[2, 2]
+        pxy = p[0, 1] + ax * p[2, 1] + ay * p[0, 2] + ax * ay * p[2, 2]
+        pyy = p[1, 1] + ay * (p[2, 1] + p[1, 2]) + ay * ay * p[2, 2]
+        rs, rc = r * sb, r * cb
+        covs[j, 0, 0] = pxx + rs * rs * var_alpha + cb * cb * var_r
+        cxy = pxy - rc * rs * var_alpha + cb * sb * var_r
+        covs[j, 0, 1] = cxy
+        covs[j, 1, 0] = cxy
+        covs[j, 1, 1] = pyy + rc * rc * var_alpha + sb * sb * var_r
+    return points, covs
+
+
+@compiled
+def _semistatic_classes(cls_v, lab_v, explained, known, n_boxes, veto_share, vi, n_beams):  # type: ignore[no-untyped-def]
+    """:func:`semistatic_classes` (class codes as :mod:`.object_tracker`'s: 0 unknown,
+    1 dynamic, 2 semistatic, 3 static)."""
+    n_pts = np.zeros(n_boxes, dtype=np.int64)
+    n_expl = np.zeros(n_boxes, dtype=np.int64)
+    for j in range(cls_v.shape[0]):
+        b = lab_v[j]
+        if b >= 0:
+            n_pts[b] += 1
+            n_expl[b] += explained[j]
+    classes = np.zeros(n_beams, dtype=np.int8)
+    counts = np.zeros(4, dtype=np.int64)
+    for j in range(cls_v.shape[0]):
+        b = lab_v[j]
+        if cls_v[j] == 1 and b >= 0 and n_expl[b] >= veto_share * max(n_pts[b], 1):
+            cls_v[j] = 3
+        if cls_v[j] != 1 and not known[j]:
+            cls_v[j] = 2
+        classes[vi[j]] = cls_v[j]
+        counts[cls_v[j]] += 1
+    return classes, counts

@@ -19,29 +19,34 @@ than ``max_dynamic_length_m`` (a person or a moving robot is well under 1.2 m), 
 touch the first or last return of the scan (cut by the field of view) and, with
 ``occlusion_never_dynamic``, boxes whose end is hidden behind a nearer return (cut by
 occlusion). Their points are still static when associated.
+
+The segmentation, the tracking and the per-point bookkeeping are compiled kernels
+(:func:`_segment`, :func:`_track`, :func:`_scan_points`).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
-from dynmap_sim import se2
-from dynmap_sim.agent.localization.adaptive_memory import tracker_numba
-from dynmap_sim.jit import kernel_backend
+from dynmap_sim.jit import compiled, jitable
 
 FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
+Int8Array = NDArray[np.int8]
 
 #: Point-class codes (``dynmap_sim.metrics.point_classes.POINT_CLASSES``; the agent may not
 #: import metrics, so they are repeated here).
 UNKNOWN, DYNAMIC, SEMISTATIC, STATIC = 0, 1, 2, 3
 
 
-@dataclass(frozen=True)
-class TrackerParams:
-    """Tracker parameters (set from ``AdaptiveMemoryConfig``; see its field docs)."""
+class TrackerParams(NamedTuple):
+    """Tracker parameters (set from ``AdaptiveMemoryConfig``; see its field docs); a
+    NamedTuple, so the kernels take it as one argument."""
 
     v_thres: float = 0.3
     breakpoint_lambda_deg: float = 10.0
@@ -57,6 +62,16 @@ class TrackerParams:
     confirm_steps: int = 2
     max_misses: int = 2
 
+    def typed(self) -> TrackerParams:
+        """The same values with the field types the kernels are compiled for."""
+        return TrackerParams(
+            float(self.v_thres), float(self.breakpoint_lambda_deg), float(self.sigma_r_m),
+            int(self.min_points), int(self.max_gap_beams), float(self.max_dynamic_length_m),
+            bool(self.occlusion_never_dynamic), float(self.sigma_accel),
+            float(self.sigma_meas_m), float(self.sigma_v0), float(self.gate_m),
+            int(self.confirm_steps), int(self.max_misses),
+        )  # fmt: skip
+
 
 @dataclass
 class Boxes:
@@ -67,7 +82,14 @@ class Boxes:
     length: FloatArray  # (n,) along phi
     width: FloatArray  # (n,)
     never_dynamic: NDArray[np.bool_]  # (n,) the sliding-wall trap (module doc)
-    labels: NDArray[np.intp]  # (n_beams,) box index of each beam, -1 none
+    labels: IntArray  # (n_beams,) box index of each beam, -1 none
+
+
+def beam_trig(angles_rad: FloatArray, mount: FloatArray) -> FloatArray:
+    """The cosines and sines ``(2, n_beams)`` of every beam's angle in the robot frame
+    (``angles_rad`` plus the mount's yaw), for :func:`segment_scan`."""
+    a = np.asarray(angles_rad, dtype=np.float64) + mount[2]
+    return np.stack([np.cos(a), np.sin(a)])
 
 
 def segment_scan(
@@ -76,90 +98,35 @@ def segment_scan(
     mount: FloatArray,
     range_max_m: float,
     params: TrackerParams,
-    backend: str = "auto",
-    beam_trig: tuple[FloatArray, FloatArray] | None = None,
+    beam_trig_: FloatArray | None = None,
 ) -> Boxes:
-    """Segment one scan into oriented boxes (eqs. 8-9), vectorized (no per-point loop).
-    ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): the arithmetic in
-    :func:`.tracker_numba.segment`'s kernels (the same numbers) or in numpy.
-    ``beam_trig``: :func:`beam_trig` of ``angles_rad`` and ``mount``, if at hand (the
-    kernels take it instead of computing the returns' cosines and sines)."""
-    kernel = kernel_backend(backend)
-    r_all = np.asarray(ranges_m, dtype=np.float64)
-    n_beams = len(r_all)
-    empty = np.zeros(0)
-    if kernel:
-        got = tracker_numba.segment(
-            r_all, np.asarray(angles_rad, dtype=np.float64), mount, range_max_m,
-            float(np.deg2rad(params.breakpoint_lambda_deg)), params.sigma_r_m, params.min_points,
-            params.max_gap_beams, params.max_dynamic_length_m, params.occlusion_never_dynamic,
-            beam_trig, python=kernel == "python",
-        )  # fmt: skip
-        if got is None:
-            labels = np.full(n_beams, -1, dtype=np.intp)
-            return Boxes(np.zeros((0, 2)), empty, empty, empty, np.zeros(0, bool), labels)
-        return Boxes(*got)
-    labels = np.full(n_beams, -1, dtype=np.intp)
-    valid = np.isfinite(r_all) & (r_all > 0) & (r_all < range_max_m)
-    idx = np.nonzero(valid)[0]
-    if len(idx) < params.min_points:
-        return Boxes(np.zeros((0, 2)), empty, empty, empty, np.zeros(0, bool), labels)
-    r = r_all[idx]
-    a = angles_rad[idx] + mount[2]
-    xy = np.column_stack([mount[0] + r * np.cos(a), mount[1] + r * np.sin(a)])
-    step = np.diff(xy, axis=0)
-    dist = np.hypot(step[:, 0], step[:, 1])
-    dalpha = np.abs(np.diff(angles_rad[idx]))
-    lam = np.deg2rad(params.breakpoint_lambda_deg)
-    d_max = r[:-1] * np.sin(dalpha) / np.maximum(np.sin(lam - dalpha), 1e-6)
-    d_max += 3.0 * np.maximum(params.sigma_r_m, 0.01 * r[:-1])
-    brk = (dist > d_max) | (np.diff(idx) > 1 + params.max_gap_beams)
-    seg = np.concatenate([[0], np.cumsum(brk)])
-    starts = np.concatenate([[0], np.nonzero(brk)[0] + 1])
-    counts = np.diff(np.concatenate([starts, [len(idx)]]))
-    keep = counts >= params.min_points
-    # Per-segment PCA (sums by reduceat over the contiguous segments).
-    sx = np.add.reduceat(xy[:, 0], starts)
-    sy = np.add.reduceat(xy[:, 1], starts)
-    mx, my = sx / counts, sy / counts
-    dx, dy = xy[:, 0] - mx[seg], xy[:, 1] - my[seg]
-    cxx = np.add.reduceat(dx * dx, starts)
-    cxy = np.add.reduceat(dx * dy, starts)
-    cyy = np.add.reduceat(dy * dy, starts)
-    phi = 0.5 * np.arctan2(2.0 * cxy, cxx - cyy)
-    c, s = np.cos(phi)[seg], np.sin(phi)[seg]
-    u = dx * c + dy * s
-    v = -dx * s + dy * c
-    umin, umax = np.minimum.reduceat(u, starts), np.maximum.reduceat(u, starts)
-    vmin, vmax = np.minimum.reduceat(v, starts), np.maximum.reduceat(v, starts)
-    uc, vc = 0.5 * (umin + umax), 0.5 * (vmin + vmax)
-    cphi, sphi = np.cos(phi), np.sin(phi)
-    center = np.column_stack([mx + uc * cphi - vc * sphi, my + uc * sphi + vc * cphi])
-    length, width = umax - umin, vmax - vmin
-    # The sliding-wall trap: long, cut by the field of view, or cut by occlusion.
-    ends = np.concatenate([starts[1:] - 1, [len(idx) - 1]])
-    never = length > params.max_dynamic_length_m
-    never[0] = True  # touches the first return of the scan
-    never[-1] = True  # touches the last one
-    if params.occlusion_never_dynamic and len(starts) > 1:
-        # A segment's end is hidden when the neighbouring segment's adjacent return is nearer.
-        r_first, r_last = r[starts], r[ends]
-        occl_left = np.zeros(len(starts), bool)
-        occl_right = np.zeros(len(starts), bool)
-        occl_left[1:] = r_last[:-1] < r_first[1:]
-        occl_right[:-1] = r_first[1:] < r_last[:-1]
-        never |= occl_left | occl_right
-    box_of_seg = np.full(len(starts), -1, dtype=np.intp)
-    box_of_seg[keep] = np.arange(int(keep.sum()))
-    labels[idx] = box_of_seg[seg]
-    return Boxes(center[keep], phi[keep], length[keep], width[keep], never[keep], labels)
+    """Segment one scan into oriented boxes (eqs. 8-9). ``beam_trig_``: :func:`beam_trig`
+    of ``angles_rad`` and ``mount``, if at hand."""
+    angles = np.ascontiguousarray(angles_rad, dtype=np.float64)
+    trig = beam_trig(angles, mount) if beam_trig_ is None else beam_trig_
+    mount = np.asarray(mount, dtype=np.float64)
+    return Boxes(*_segment(np.asarray(ranges_m, dtype=np.float64), angles, trig, mount,
+                           float(range_max_m), params.typed()))  # fmt: skip
 
 
-def beam_trig(angles_rad: FloatArray, mount: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """The cosines and sines of every beam's angle in the robot frame (``angles_rad`` plus
-    the mount's yaw), for :func:`segment_scan`."""
-    a = np.asarray(angles_rad, dtype=np.float64) + mount[2]
-    return np.cos(a), np.sin(a)
+def point_classes_of(boxes: Boxes, box_class: Int8Array) -> Int8Array:
+    """Eq. 11: each beam takes its box's class; beams in no box are unknown."""
+    out = np.full(len(boxes.labels), UNKNOWN, dtype=np.int8)
+    inside = boxes.labels >= 0
+    out[inside] = box_class[boxes.labels[inside]]
+    return out
+
+
+def scan_points(
+    ranges: FloatArray, range_max_m: float, boxes: Boxes, box_cls: Int8Array,
+    sigma_r_min_m: float, sigma_r_rel: float,
+) -> tuple[IntArray, FloatArray, FloatArray, Int8Array, IntArray, IntArray]:  # fmt: skip
+    """The valid returns of a scan (finite, ``0 < r < range_max_m``): beam indices ``vi``,
+    ranges, range noise ``max(sigma_r_min_m, sigma_r_rel·r)`` (§4.1), classes (eq. 11) and
+    boxes, and the positions among them of the static ones (§4.3's candidates)."""
+    r = np.asarray(ranges, dtype=np.float64)
+    return _scan_points(r, float(range_max_m), boxes.labels, box_cls, float(sigma_r_min_m),
+                        float(sigma_r_rel))  # fmt: skip
 
 
 class ObjectTracker:
@@ -170,23 +137,17 @@ class ObjectTracker:
     acceleration, measurement noise and initial covariance (and ``H = [I 0]``), so the two
     axes never correlate and share one covariance ``[[p, c], [c, v]]`` (position, velocity)
     per track: ``P`` ``(N, 3)`` holds ``(p, c, v)``, the 4 x 4 covariance being
-    ``blockdiag`` of it per axis. Prediction and update are written out in closed form, IEEE
-    operations on the arrays of tracks (no BLAS), so a compiled kernel can repeat them."""
+    ``blockdiag`` of it per axis. ``counts`` ``(N, 4)``: each track's hits, misses and
+    consecutive fast and slow updates."""
 
     def __init__(self, params: TrackerParams) -> None:
-        self.params = params
+        self.params = params.typed()
         self.reset()
 
     def reset(self) -> None:
-        params = self.params
-        #: A new track's covariance ``(p, c, v)`` (each axis).
-        self.P0 = np.array([params.sigma_meas_m**2, 0.0, params.sigma_v0**2])
         self.x = np.zeros((0, 4))
         self.P = np.zeros((0, 3))
-        self.hits = np.zeros(0, np.int32)
-        self.misses = np.zeros(0, np.int32)
-        self.fast = np.zeros(0, np.int32)
-        self.slow = np.zeros(0, np.int32)
+        self.counts = np.zeros((0, 4), np.int32)
         self.dynamic = np.zeros(0, bool)
         self.t_last: float | None = None
 
@@ -194,115 +155,236 @@ class ObjectTracker:
     def n_tracks(self) -> int:
         return len(self.x)
 
-    def _predict(self, dt: float) -> None:
-        """``x' = F x``, ``P' = F P Fᵀ + Q`` with ``F = [[1, dt], [0, 1]]`` and
-        ``Q = σ_a² g gᵀ``, ``g = (dt²/2, dt)`` per axis (white acceleration)."""
-        if self.n_tracks == 0 or dt <= 0:
-            return
-        q = self.params.sigma_accel**2
-        g0, g1 = 0.5 * dt * dt, dt
-        x, P = self.x, self.P
-        x[:, 0] += dt * x[:, 2]
-        x[:, 1] += dt * x[:, 3]
-        p, c, v = P[:, 0], P[:, 1], P[:, 2]
-        cv = c + dt * v  # (F P)[0, 1] = (F P Fᵀ)[0, 1] before Q
-        P[:, 0] = ((p + dt * c) + dt * cv) + q * (g0 * g0)
-        P[:, 1] = cv + q * (g0 * g1)
-        P[:, 2] = v + q * (g1 * g1)
-
     def update(
-        self, boxes: Boxes, odom_pose: FloatArray, t_s: float, backend: str = "auto"
-    ) -> tuple[NDArray[np.int8], NDArray[np.float64]]:
-        """Track one scan's boxes; returns each box's class (eq. 10) and speed [m/s].
-        ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): the prediction, association,
-        update, classification and the tracks' renewal in :func:`.tracker_numba.track`
-        (the same numbers) or in numpy."""
-        kernel = kernel_backend(backend)
-        p = self.params
+        self, boxes: Boxes, odom_pose: FloatArray, t_s: float
+    ) -> tuple[Int8Array, FloatArray]:
+        """Track one scan's boxes (their centres taken to the odometry frame by
+        ``odom_pose``) at time ``t_s`` [s]; returns each box's class (eq. 10) and speed
+        [m/s]."""
         dt = 0.0 if self.t_last is None or t_s < self.t_last else t_s - self.t_last
         self.t_last = t_s
-        if kernel:
-            counters = (self.hits, self.misses, self.fast, self.slow)
-            cls, speed, state = tracker_numba.track(
-                self.x, self.P, counters, self.dynamic, odom_pose, boxes.center_robot,
-                boxes.never_dynamic, dt, p.sigma_accel**2, p.sigma_meas_m**2, p.gate_m,
-                p.v_thres, p.confirm_steps, p.max_misses, self.P0, python=kernel == "python",
-            )  # fmt: skip
-            self.x, self.P, self.hits, self.misses, self.fast, self.slow, self.dynamic = state
-            return cls, speed
-        nb = len(boxes.center_robot)
-        z = se2.transform_points(odom_pose, boxes.center_robot) if nb else np.zeros((0, 2))
-        matched, cls, speed = self._update_numpy(boxes, z, dt)
-        # Drop lost tracks, start new ones for unmatched boxes (unknown until associated).
-        alive = self.misses <= p.max_misses
-        new = ~matched
-        n_new = int(new.sum())
-        self.x = np.concatenate([self.x[alive], np.column_stack([z[new], np.zeros((n_new, 2))])])
-        self.P = np.concatenate([self.P[alive], np.broadcast_to(self.P0, (n_new, 3))])
-        for name in ("hits", "misses", "fast", "slow"):
-            start = 1 if name == "hits" else 0  # a new track has been seen once
-            old = getattr(self, name)[alive]
-            setattr(self, name, np.concatenate([old, np.full(n_new, start, np.int32)]))
-        self.dynamic = np.concatenate([self.dynamic[alive], np.zeros(n_new, bool)])
+        cls, speed, self.x, self.P, self.counts, self.dynamic = _track(
+            self.x, self.P, self.counts, self.dynamic,
+            np.ascontiguousarray(boxes.center_robot, dtype=np.float64), boxes.never_dynamic,
+            np.asarray(odom_pose, dtype=np.float64), float(dt), self.params,
+        )  # fmt: skip
         return cls, speed
 
-    def _update_numpy(
-        self, boxes: Boxes, z: FloatArray, dt: float
-    ) -> tuple[NDArray[np.bool_], NDArray[np.int8], FloatArray]:
-        """:meth:`update`'s filter steps in numpy: which boxes matched a track, their
-        classes and speeds."""
-        p = self.params
-        self._predict(dt)
-        nb = len(z)
-        match_box = np.full(nb, -1, dtype=np.intp)  # track index of each box
-        nt = self.n_tracks
-        if nt and nb:
-            d = np.hypot(self.x[:, None, 0] - z[None, :, 0], self.x[:, None, 1] - z[None, :, 1])
-            nn_box = np.argmin(d, axis=1)
-            nn_trk = np.argmin(d, axis=0)
-            ti = np.arange(nt)
-            mutual = (nn_trk[nn_box] == ti) & (d[ti, nn_box] < p.gate_m)
-            match_box[nn_box[mutual]] = ti[mutual]
-        matched = match_box >= 0
-        tr = match_box[matched]
-        if len(tr):  # Kalman update, H = [1 0] per axis: gain (p, c) / (p + σ_m²)
-            P = self.P[tr]
-            s = P[:, 0] + p.sigma_meas_m**2
-            kp, kv = P[:, 0] / s, P[:, 1] / s
-            ix = z[matched, 0] - self.x[tr, 0]
-            iy = z[matched, 1] - self.x[tr, 1]
-            self.x[tr, 0] += kp * ix
-            self.x[tr, 1] += kp * iy
-            self.x[tr, 2] += kv * ix
-            self.x[tr, 3] += kv * iy
-            self.P[tr] = np.column_stack(
-                [P[:, 0] - kp * P[:, 0], P[:, 1] - kp * P[:, 1], P[:, 2] - kv * P[:, 1]]
-            )
-            self.hits[tr] += 1
-            self.misses[tr] = 0
-        unmatched_tracks = np.ones(nt, bool)
-        unmatched_tracks[tr] = False
-        self.misses[unmatched_tracks] += 1
-        speed = np.zeros(nb)
-        cls = np.full(nb, UNKNOWN, dtype=np.int8)
-        if len(tr):
-            v = np.hypot(self.x[tr, 2], self.x[tr, 3])
-            fast = (v >= p.v_thres) & ~boxes.never_dynamic[matched] & (self.hits[tr] >= 2)
-            self.fast[tr] = np.where(fast, self.fast[tr] + 1, 0)
-            self.slow[tr] = np.where(fast, 0, self.slow[tr] + 1)
-            dyn = self.dynamic[tr]
-            dyn = np.where(self.fast[tr] >= p.confirm_steps, True, dyn)
-            dyn = np.where(self.slow[tr] >= p.confirm_steps, False, dyn)
-            dyn &= ~boxes.never_dynamic[matched]
-            self.dynamic[tr] = dyn
-            speed[matched] = v
-            cls[matched] = np.where(dyn, DYNAMIC, STATIC)
-        return matched, cls, speed
+
+# -- kernels ------------------------------------------------------------------------------
+@jitable
+def _breakpoints(r, idx, angles, xy, p):  # type: ignore[no-untyped-def]
+    """Each valid return's segment (Borges & Aldon's breakpoints, or more than
+    ``max_gap_beams`` beams missing) and the segments' first returns: ``(seg, starts)``."""
+    n = r.shape[0]
+    lam = math.radians(p.breakpoint_lambda_deg)
+    seg = np.zeros(n, dtype=np.intp)
+    starts = np.zeros(n, dtype=np.intp)
+    m = 1
+    for j in range(n - 1):
+        da = abs(angles[idx[j + 1]] - angles[idx[j]])
+        d_max = r[j] * math.sin(da) / max(math.sin(lam - da), 1e-6)
+        d_max += 3.0 * max(p.sigma_r_m, 0.01 * r[j])
+        dist = math.hypot(xy[j + 1, 0] - xy[j, 0], xy[j + 1, 1] - xy[j, 1])
+        if dist > d_max or idx[j + 1] - idx[j] > 1 + p.max_gap_beams:
+            starts[m] = j + 1
+            m += 1
+        seg[j + 1] = m - 1
+    return seg, starts[:m]
 
 
-def point_classes_of(boxes: Boxes, box_class: NDArray[np.int8]) -> NDArray[np.int8]:
-    """Eq. 11: each beam takes its box's class; beams in no box are unknown."""
-    out = np.full(len(boxes.labels), UNKNOWN, dtype=np.int8)
-    inside = boxes.labels >= 0
-    out[inside] = box_class[boxes.labels[inside]]
-    return out
+@jitable
+def _box(xy, lo, hi):  # type: ignore[no-untyped-def]
+    """The oriented box of points ``xy[lo:hi]``: its axis by PCA, centre ``(x, y)``,
+    orientation, length along it and width."""
+    n = hi - lo
+    mx = my = 0.0
+    for j in range(lo, hi):
+        mx += xy[j, 0]
+        my += xy[j, 1]
+    mx, my = mx / n, my / n
+    cxx = cxy = cyy = 0.0
+    for j in range(lo, hi):
+        dx, dy = xy[j, 0] - mx, xy[j, 1] - my
+        cxx += dx * dx
+        cxy += dx * dy
+        cyy += dy * dy
+    phi = 0.5 * math.atan2(2.0 * cxy, cxx - cyy)
+    c, s = math.cos(phi), math.sin(phi)
+    umin = vmin = math.inf
+    umax = vmax = -math.inf
+    for j in range(lo, hi):
+        dx, dy = xy[j, 0] - mx, xy[j, 1] - my
+        u, v = dx * c + dy * s, -dx * s + dy * c
+        umin, umax, vmin, vmax = min(umin, u), max(umax, u), min(vmin, v), max(vmax, v)
+    uc, vc = 0.5 * (umin + umax), 0.5 * (vmin + vmax)
+    return mx + uc * c - vc * s, my + uc * s + vc * c, phi, umax - umin, vmax - vmin
+
+
+@compiled
+def _segment(r_all, angles, trig, mount, range_max_m, p):  # type: ignore[no-untyped-def]
+    """:func:`segment_scan`: the valid returns' points, their segments, the boxes of those
+    of at least ``min_points`` returns and the sliding-wall trap; ``(center, phi, length,
+    width, never, labels)``."""
+    n_beams = r_all.shape[0]
+    labels = np.full(n_beams, -1, dtype=np.intp)
+    idx = np.empty(n_beams, dtype=np.intp)
+    n = 0
+    for i in range(n_beams):
+        v = r_all[i]
+        if math.isfinite(v) and 0.0 < v < range_max_m:
+            idx[n] = i
+            n += 1
+    if n < p.min_points:
+        return (np.zeros((0, 2)), np.zeros(0), np.zeros(0), np.zeros(0),
+                np.zeros(0, dtype=np.bool_), labels)  # fmt: skip
+    idx = idx[:n]
+    r = np.empty(n)
+    xy = np.empty((n, 2))
+    for j in range(n):
+        r[j] = r_all[idx[j]]
+        xy[j, 0] = mount[0] + r[j] * trig[0, idx[j]]
+        xy[j, 1] = mount[1] + r[j] * trig[1, idx[j]]
+    seg, starts = _breakpoints(r, idx, angles, xy, p)
+    m = starts.shape[0]
+    n_box = 0
+    for k in range(m):
+        if (starts[k + 1] if k + 1 < m else n) - starts[k] >= p.min_points:
+            n_box += 1
+    center = np.empty((n_box, 2))
+    phi, length, width = np.empty(n_box), np.empty(n_box), np.empty(n_box)
+    never = np.empty(n_box, dtype=np.bool_)
+    b = 0
+    for k in range(m):
+        lo, hi = starts[k], (starts[k + 1] if k + 1 < m else n)
+        if hi - lo < p.min_points:
+            continue
+        center[b, 0], center[b, 1], phi[b], length[b], width[b] = _box(xy, lo, hi)
+        nv = length[b] > p.max_dynamic_length_m or k == 0 or k == m - 1
+        if p.occlusion_never_dynamic:  # an end hidden behind the neighbour's nearer return
+            nv = nv or (k > 0 and r[lo - 1] < r[lo]) or (k + 1 < m and r[hi] < r[hi - 1])
+        never[b] = nv
+        for j in range(lo, hi):
+            labels[idx[j]] = b
+        b += 1
+    return center, phi, length, width, never, labels
+
+
+@jitable
+def _associate(x, z, gate_m):  # type: ignore[no-untyped-def]
+    """Each box's track (-1: none): the mutual nearest neighbours closer than ``gate_m``
+    (the first of equal distances)."""
+    nt, nb = x.shape[0], z.shape[0]
+    match_box = np.full(nb, -1, dtype=np.intp)
+    if nt == 0 or nb == 0:
+        return match_box
+    dist = np.empty((nt, nb))
+    for t in range(nt):
+        for b in range(nb):
+            dist[t, b] = math.hypot(x[t, 0] - z[b, 0], x[t, 1] - z[b, 1])
+    for t in range(nt):
+        nn = np.argmin(dist[t])
+        if np.argmin(dist[:, nn]) == t and dist[t, nn] < gate_m:
+            match_box[nn] = t
+    return match_box
+
+
+@compiled
+def _track(x, P, counts, dynamic, centers, never, odom, dt, p):  # type: ignore[no-untyped-def]
+    """One scan of :meth:`ObjectTracker.update`: the boxes into the odometry frame, the
+    prediction by ``dt`` (white acceleration ``sigma_accel``), the association, the update
+    (measurement std ``sigma_meas_m``), each matched box's class with ``confirm_steps``
+    hysteresis and its speed; then the lost tracks (``misses > max_misses``) dropped and a
+    new one at rest started at each unmatched box. Returns ``(cls, speed, x, P, counts,
+    dynamic)`` (the tracks as new arrays)."""
+    nt, nb = x.shape[0], centers.shape[0]
+    c0, s0 = math.cos(odom[2]), math.sin(odom[2])
+    z = np.empty((nb, 2))
+    for b in range(nb):
+        z[b, 0] = odom[0] + c0 * centers[b, 0] - s0 * centers[b, 1]
+        z[b, 1] = odom[1] + s0 * centers[b, 0] + c0 * centers[b, 1]
+    if dt > 0:
+        q = p.sigma_accel * p.sigma_accel
+        g0, g1 = 0.5 * dt * dt, dt
+        for t in range(nt):
+            x[t, 0] += dt * x[t, 2]
+            x[t, 1] += dt * x[t, 3]
+            pp, pc, pv = P[t, 0], P[t, 1], P[t, 2]
+            P[t, 0] = pp + 2.0 * dt * pc + dt * dt * pv + q * g0 * g0
+            P[t, 1] = pc + dt * pv + q * g0 * g1
+            P[t, 2] = pv + q * g1 * g1
+    match_box = _associate(x, z, p.gate_m)
+    cls = np.zeros(nb, dtype=np.int8)  # UNKNOWN
+    speed = np.zeros(nb)
+    for t in range(nt):
+        counts[t, 1] += 1  # misses, undone for the matched ones below
+    r2 = p.sigma_meas_m * p.sigma_meas_m
+    for b in range(nb):
+        t = match_box[b]
+        if t < 0:
+            continue
+        pp, pc, pv = P[t, 0], P[t, 1], P[t, 2]
+        kp, kv = pp / (pp + r2), pc / (pp + r2)
+        ix, iy = z[b, 0] - x[t, 0], z[b, 1] - x[t, 1]
+        x[t, 0] += kp * ix
+        x[t, 1] += kp * iy
+        x[t, 2] += kv * ix
+        x[t, 3] += kv * iy
+        P[t, 0], P[t, 1], P[t, 2] = pp - kp * pp, pc - kp * pc, pv - kv * pc
+        counts[t, 0] += 1
+        counts[t, 1] = 0
+        sp = math.hypot(x[t, 2], x[t, 3])
+        if sp >= p.v_thres and not never[b] and counts[t, 0] >= 2:
+            counts[t, 2] += 1
+            counts[t, 3] = 0
+        else:
+            counts[t, 2] = 0
+            counts[t, 3] += 1
+        if counts[t, 2] >= p.confirm_steps:
+            dynamic[t] = True
+        if counts[t, 3] >= p.confirm_steps or never[b]:
+            dynamic[t] = False
+        speed[b] = sp
+        cls[b] = DYNAMIC if dynamic[t] else STATIC
+    keep = np.nonzero(counts[:, 1] <= p.max_misses)[0]
+    new = np.nonzero(match_box < 0)[0]
+    n_keep, n = keep.shape[0], keep.shape[0] + new.shape[0]
+    x2, P2 = np.zeros((n, 4)), np.empty((n, 3))
+    counts2 = np.zeros((n, 4), dtype=np.int32)
+    dyn2 = np.zeros(n, dtype=np.bool_)
+    for i in range(n_keep):
+        x2[i] = x[keep[i]]
+        P2[i] = P[keep[i]]
+        counts2[i] = counts[keep[i]]
+        dyn2[i] = dynamic[keep[i]]
+    for i in range(new.shape[0]):
+        k = n_keep + i
+        x2[k, 0], x2[k, 1] = z[new[i], 0], z[new[i], 1]
+        P2[k, 0], P2[k, 1], P2[k, 2] = r2, 0.0, p.sigma_v0 * p.sigma_v0
+        counts2[k, 0] = 1  # seen once
+    return cls, speed, x2, P2, counts2, dyn2
+
+
+@compiled
+def _scan_points(ranges, range_max_m, labels, box_cls, sigma_r_min_m, sigma_r_rel):  # type: ignore[no-untyped-def]
+    """:func:`scan_points`: ``(vi, rv, sig_r, cls_v, lab_v, stat)``."""
+    n_beams = ranges.shape[0]
+    vi = np.empty(n_beams, dtype=np.intp)
+    lab_v = np.empty(n_beams, dtype=np.intp)
+    stat = np.empty(n_beams, dtype=np.intp)
+    rv, sig_r = np.empty(n_beams), np.empty(n_beams)
+    cls_v = np.empty(n_beams, dtype=np.int8)
+    n = n_stat = 0
+    for i in range(n_beams):
+        r = ranges[i]
+        if not (math.isfinite(r) and 0.0 < r < range_max_m):
+            continue
+        vi[n], rv[n], sig_r[n] = i, r, max(sigma_r_min_m, sigma_r_rel * r)
+        b = labels[i]
+        lab_v[n] = b
+        cls_v[n] = box_cls[b] if b >= 0 else UNKNOWN
+        if cls_v[n] == STATIC:
+            stat[n_stat] = n
+            n_stat += 1
+        n += 1
+    return vi[:n], rv[:n], sig_r[:n], cls_v[:n], lab_v[:n], stat[:n_stat]
