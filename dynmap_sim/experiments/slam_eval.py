@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from dynmap_sim.agent.mapping.first_run import FirstRunConfig, FirstRunMapper
 from dynmap_sim.errors import InputError
-from dynmap_sim.io.carmen import read_carmen
+from dynmap_sim.io.logs import BagOptions, read_log
 from dynmap_sim.metrics.relation_error import RelationError, read_relations, relation_error
 
 FloatArray = NDArray[np.float64]
@@ -111,13 +111,15 @@ def slam_eval(
     note: Callable[[str], None] | None = None,
     odometry: str = "auto",
     reversals: str = "repair",
+    bag: BagOptions | None = None,
 ) -> SlamEval:
     """Map ``log`` with the first-run mapper and score it against ``relations``; ``odometry``
     which of the log's odometry records to use, ``reversals`` what to do with its unsigned
-    reversing (:func:`~dynmap_sim.io.carmen.read_carmen`)."""
+    reversing (:func:`~dynmap_sim.io.carmen.read_carmen`); a ROS bag ``log`` is read as
+    ``bag`` says (:func:`~dynmap_sim.io.logs.read_log`)."""
     from tqdm.auto import tqdm
 
-    data = read_carmen(log, odometry=odometry, reversals=reversals)
+    data = read_log(log, odometry=odometry, reversals=reversals, bag=bag)
     if len(data) < 2:
         raise InputError(f"{log}: the log has fewer than 2 scans")
     try:
