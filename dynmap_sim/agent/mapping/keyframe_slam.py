@@ -128,9 +128,9 @@ class KeyframeSLAMConfig:
     #: angular steps (:func:`.correlative_matcher.angular_step`) of the prediction; 0: the
     #: prediction's own score. The search's grid is its resolution (Olson 2009 §IV-A): a
     #: pose one cell or one step off a correct prediction can score higher by aliasing alone
-    #: (points crossing cell borders), and then the seed moves ICP off a right answer. With 1, the seed is taken only when it finds a distinctly different
-    #: pose; not the default: it also drops the small real corrections, which
-    #: ``seed_verify`` sorts out instead.
+    #: (points crossing cell borders), and then the seed moves ICP off a right answer.
+    #: With 1, the seed is taken only when it finds a distinctly different pose; not the
+    #: default: it also drops the small real corrections, which ``seed_verify`` sorts out.
     seed_compare_steps: int = 0
     #: When the seed replaces the prediction, the odometry prior centred on it gets the
     #: seed's own quantization variance added (uniform over a cell and an angular step:

@@ -27,7 +27,11 @@ from dynmap_sim import se2
 from dynmap_sim.agent.mapping.correlative_matcher import LikelihoodTable, correlative_match
 from dynmap_sim.agent.mapping.incremental_loops import incremental_closures
 from dynmap_sim.agent.mapping.keyframe_slam import KeyframeSLAM
-from dynmap_sim.agent.mapping.pose_graph import Edge, optimize_pose_graph
+from dynmap_sim.agent.mapping.pose_graph import (
+    Edge,
+    optimize_pose_graph,
+    optimize_pose_graph_dcs,
+)
 from dynmap_sim.agent.mapping.scan_matcher import MatchResult, PointMap, match_scan
 from dynmap_sim.agent.mapping.scan_points import voxel_downsample
 from dynmap_sim.agent.params import coerce_fields
@@ -95,9 +99,20 @@ class LoopClosureConfig:
     #: ICP round optimizes the sequential edges and its own pairwise edges only, so where
     #: those find no loop edge the graph relaxes back to the front end's shape.
     keep_closures: bool = False
+    #: The robust treatment of loop-closure and pairwise ICP edges in the pose graph:
+    #: ``"dcs"`` dynamic covariance scaling (Agarwal et al. 2013: an edge whose error is far
+    #: beyond its covariance loses its weight, so one wrong closure cannot bend the graph),
+    #: ``"huber"`` the Huber loss at ``3`` standard deviations on the ICP rounds and plain
+    #: least squares on the correlative closures.
+    robust_kernel: str = "huber"
+    #: DCS's ``phi`` [squared standard deviations]: an edge with ``chi2 <= phi`` keeps its
+    #: full weight; Agarwal et al. 2013 (§V) find results insensitive over 0.1-10 and use 1.
+    dcs_phi: float = 1.0
 
     def __post_init__(self) -> None:
         coerce_fields(self)
+        if self.robust_kernel not in ("dcs", "huber"):
+            raise ValueError(f"robust_kernel must be dcs or huber, got {self.robust_kernel!r}")
         object.__setattr__(self, "loop_stride", max(1, self.loop_stride))
 
 
@@ -128,16 +143,24 @@ class LoopClosure:
                 kept = []
         elif c.global_loops:
             loops = self.global_loop_edges(poses, slam)
-            if loops:  # verified and mutually consistent: least squares without robust loss
-                poses = optimize_pose_graph(poses, seq + loops, anchor=0, loss="linear")
+            if loops:  # verified and mutually consistent
+                poses = self._optimize(poses, seq, loops, "linear")
                 kept = loops if c.keep_closures else []
         for _ in range(c.graph_rounds):
             matches = self.match_edges(poses, slam)
             n_loops = sum(1 for e in matches if e.j - e.i > c.loop_min_gap)
             if not matches:
                 break
-            poses = optimize_pose_graph(poses, seq + kept + matches, anchor=0)
+            poses = self._optimize(poses, seq, kept + matches, "huber")
         return poses, n_loops
+
+    def _optimize(self, poses: FloatArray, seq: list[Edge], loops: list[Edge], loss: str):
+        """The graph of sequential edges ``seq`` and loop/ICP edges ``loops`` optimized, the
+        latter robust as ``robust_kernel`` says (``loss``: the Huber variant's loss)."""
+        if self.config.robust_kernel == "dcs":
+            robust = np.r_[np.zeros(len(seq), bool), np.ones(len(loops), bool)]
+            return optimize_pose_graph_dcs(poses, seq + loops, robust, self.config.dcs_phi)
+        return optimize_pose_graph(poses, seq + loops, anchor=0, loss=loss)
 
     # -- edges ---------------------------------------------------------------------------
     def sequential_edges(self, poses: FloatArray) -> list[Edge]:
