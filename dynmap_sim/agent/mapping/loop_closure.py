@@ -104,10 +104,17 @@ class LoopClosureConfig:
     #: beyond its covariance loses its weight, so one wrong closure cannot bend the graph),
     #: ``"huber"`` the Huber loss at ``3`` standard deviations on the ICP rounds and plain
     #: least squares on the correlative closures.
-    robust_kernel: str = "huber"
+    robust_kernel: str = "dcs"
     #: DCS's ``phi`` [squared standard deviations]: an edge with ``chi2 <= phi`` keeps its
     #: full weight; Agarwal et al. 2013 (§V) find results insensitive over 0.1-10 and use 1.
     dcs_phi: float = 1.0
+    #: Closures are compared for consistency when both their ends lie within this many
+    #: keyframes (~12 m of path at the default spacing): the legs between them are short
+    #: enough for the front end's drift to be small.
+    consistency_window: int = 40
+    #: The consistency test's bound in standard deviations of the legs' drift
+    #: (``seq_sigma``); 3: a true pair passes with ~99 % probability per direction.
+    consistency_gate: float = 3.0
 
     def __post_init__(self) -> None:
         coerce_fields(self)
@@ -354,38 +361,44 @@ class LoopClosure:
             return Edge(j, i, res.pose, EDGE_INFO)
         return None
 
-    def _consistent_loops(
-        self,
-        poses: FloatArray,
-        edges: list[Edge],
-        window: int = 40,
-        tol_m: float = 0.25,
-        tol_rad: float = 0.05,
-    ) -> list[Edge]:
-        """Keep loop edges whose implied drift correction is confirmed by another.
+    def _consistent_loops(self, poses: FloatArray, edges: list[Edge]) -> list[Edge]:
+        """Keep loop edges that are pairwise consistent with others nearby.
 
-        An edge ``(j, i, z)`` says keyframe ``i`` is at ``x_j ⊕ z``; its correction
-        ``x_j ⊕ z ⊖ x_i`` (map frame) is the drift gathered between ``j`` and ``i``. Drift
-        is smooth, so true closures whose ``i`` and ``j`` both lie within ``window`` of each
-        other agree (within ``tol_m`` / ``tol_rad``), while a false match (perceptual
-        aliasing) stands alone: an edge is kept if at least one other edge and a majority
-        of those nearby agree with it (a simple form of Olson's single-cluster test).
+        Two closures ``a = (j_a, i_a, z_a)`` and ``b`` close one cycle with the front end's
+        legs ``j_a -> j_b`` and ``i_b -> i_a``: if both are true, ``x_ja ⊕ z_a`` and ``x_jb ⊕
+        z_b ⊕ (x_ib^-1 ⊕ x_ia)`` are the same pose up to the drift along the two legs (the
+        pairwise consistency test of Olson 2009 and Mangelson et al. 2018, PCM), whatever
+        drift lies between the closures and the map frame. The test's bound grows with the
+        legs' path ``s`` as the sequential edges' deviation does (``seq_sigma``):
+        ``consistency_gate * (2 s_xy0 + k_xy_d s)`` [m] and ``consistency_gate * (2 s_th0 +
+        k_th_d s)`` [rad]. Closures whose ends both lie within ``consistency_window``
+        keyframes are compared; a false match (perceptual aliasing) stands alone: an edge is
+        kept if at least one other edge and a majority of those compared agree with it.
         """
+        c = self.config
         if len(edges) < 2:
             return []
-        jj = np.array([e.i for e in edges])
+        jj = np.array([e.i for e in edges])  # the earlier keyframe (the edge's i)
         ii = np.array([e.j for e in edges])
-        implied = se2.compose(poses[jj], np.array([e.z for e in edges]))
-        corr = implied - poses[ii]
-        corr[:, 2] = se2.wrap_angle(corr[:, 2])
-        near = (np.abs(ii[:, None] - ii[None, :]) <= window) & (
-            np.abs(jj[:, None] - jj[None, :]) <= window
+        step = np.hypot(*np.diff(poses[:, :2], axis=0).T)
+        path = np.concatenate([[0.0], np.cumsum(step)])
+        z = np.array([e.z for e in edges])
+        via_a = se2.compose(poses[jj], z)  # pose of i_a by closure a
+        n = len(edges)
+        a_idx, b_idx = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+        a_idx, b_idx = a_idx.ravel(), b_idx.ravel()
+        leg = se2.between(poses[ii[b_idx]], poses[ii[a_idx]])  # i_b -> i_a, front end
+        via_b = se2.compose(via_a[b_idx], leg)
+        err = se2.between(via_a[a_idx], via_b)
+        s = np.abs(path[jj[a_idx]] - path[jj[b_idx]]) + np.abs(path[ii[a_idx]] - path[ii[b_idx]])
+        s_xy0, k_xy_d, s_th0, k_th_d, _ = c.seq_sigma
+        g = c.consistency_gate
+        ok = (np.hypot(err[:, 0], err[:, 1]) <= g * (2 * s_xy0 + k_xy_d * s)) & (
+            np.abs(se2.wrap_angle(err[:, 2])) <= g * (2 * s_th0 + k_th_d * s)
         )
-        agree = (
-            near
-            & (np.hypot(*(corr[:, None, :2] - corr[None, :, :2]).transpose(2, 0, 1)) < tol_m)
-            & (np.abs(se2.wrap_angle(corr[:, None, 2] - corr[None, :, 2])) < tol_rad)
-        )
+        w = c.consistency_window
+        near = (np.abs(ii[a_idx] - ii[b_idx]) <= w) & (np.abs(jj[a_idx] - jj[b_idx]) <= w)
+        agree = (near & ok).reshape(n, n)  # includes the edge itself
         n_agree = agree.sum(axis=1)
-        keep = (n_agree >= 2) & (2 * n_agree > near.sum(axis=1))
+        keep = (n_agree >= 2) & (2 * n_agree > near.reshape(n, n).sum(axis=1))
         return [e for e, k in zip(edges, keep, strict=True) if k]

@@ -69,6 +69,26 @@ def edge_jacobians(poses: FloatArray, ii: NDArray[np.intp], jj: NDArray[np.intp]
     return a, b
 
 
+def _sparsity(k: int, ii: NDArray[np.intp], jj: NDArray[np.intp], anchor: int) -> tuple:
+    """The free nodes and the structure of the whitened residuals' Jacobian: rows 3m..3m+2
+    of edge m touch the columns of its free nodes. ``(free, rows, cols, use_i, use_j,
+    shape)``; ``use_*`` ``(E, 3, 3)`` mask the blocks of the edges' free ends."""
+    free = np.array([n for n in range(k) if n != anchor])
+    col_of = -np.ones(k, dtype=np.intp)
+    col_of[free] = np.arange(len(free))
+    n_e = len(ii)
+    rows = np.broadcast_to(
+        3 * np.arange(n_e)[:, None, None] + np.arange(3)[None, :, None], (n_e, 3, 3)
+    )
+    cols_i = np.broadcast_to(3 * col_of[ii][:, None, None] + np.arange(3), (n_e, 3, 3))
+    cols_j = np.broadcast_to(3 * col_of[jj][:, None, None] + np.arange(3), (n_e, 3, 3))
+    use_i = np.broadcast_to((col_of[ii] >= 0)[:, None, None], (n_e, 3, 3))
+    use_j = np.broadcast_to((col_of[jj] >= 0)[:, None, None], (n_e, 3, 3))
+    jac_rows = np.concatenate([rows[use_i], rows[use_j]])
+    jac_cols = np.concatenate([cols_i[use_i], cols_j[use_j]])
+    return free, jac_rows, jac_cols, use_i, use_j, (3 * n_e, 3 * len(free))
+
+
 def optimize_pose_graph(
     poses: ArrayLike,
     edges: list[Edge],
@@ -95,25 +115,7 @@ def optimize_pose_graph(
     z = np.array([e.z for e in edges], dtype=np.float64)
     chol = np.array([np.linalg.cholesky(np.asarray(e.info, dtype=np.float64)) for e in edges])
     chol_t = np.ascontiguousarray(chol.transpose(0, 2, 1))  # L^T per edge
-    free = np.array([n for n in range(k) if n != anchor])
-    col_of = -np.ones(k, dtype=np.intp)
-    col_of[free] = np.arange(len(free))
-    n_e = len(edges)
-    # Sparsity structure: residual rows 3m..3m+2 of edge m touch the columns of its free nodes.
-    rows = np.broadcast_to(
-        3 * np.arange(n_e)[:, None, None] + np.arange(3)[None, :, None], (n_e, 3, 3)
-    )
-    cols_i = np.broadcast_to(
-        3 * col_of[ii][:, None, None] + np.arange(3)[None, None, :], (n_e, 3, 3)
-    )
-    cols_j = np.broadcast_to(
-        3 * col_of[jj][:, None, None] + np.arange(3)[None, None, :], (n_e, 3, 3)
-    )
-    use_i = np.broadcast_to((col_of[ii] >= 0)[:, None, None], (n_e, 3, 3))
-    use_j = np.broadcast_to((col_of[jj] >= 0)[:, None, None], (n_e, 3, 3))
-    jac_rows = np.concatenate([rows[use_i], rows[use_j]])
-    jac_cols = np.concatenate([cols_i[use_i], cols_j[use_j]])
-    shape = (3 * n_e, 3 * len(free))
+    free, jac_rows, jac_cols, use_i, use_j, shape = _sparsity(k, ii, jj, anchor)
 
     def unpack(v: FloatArray) -> FloatArray:
         x = x0.copy()
@@ -189,20 +191,7 @@ def optimize_pose_graph_dcs(
     z = np.array([e.z for e in edges], dtype=np.float64)
     chol_t = np.array([np.linalg.cholesky(np.asarray(e.info, dtype=np.float64)).T for e in edges])
     robust = np.asarray(robust, dtype=bool)
-    col_of = -np.ones(k, dtype=np.intp)
-    free = np.array([n for n in range(k) if n != anchor])
-    col_of[free] = np.arange(len(free))
-    n_e = len(edges)
-    rows = np.broadcast_to(
-        3 * np.arange(n_e)[:, None, None] + np.arange(3)[None, :, None], (n_e, 3, 3)
-    )
-    cols_i = np.broadcast_to(3 * col_of[ii][:, None, None] + np.arange(3), (n_e, 3, 3))
-    cols_j = np.broadcast_to(3 * col_of[jj][:, None, None] + np.arange(3), (n_e, 3, 3))
-    use_i = np.broadcast_to((col_of[ii] >= 0)[:, None, None], (n_e, 3, 3))
-    use_j = np.broadcast_to((col_of[jj] >= 0)[:, None, None], (n_e, 3, 3))
-    jac_rows = np.concatenate([rows[use_i], rows[use_j]])
-    jac_cols = np.concatenate([cols_i[use_i], cols_j[use_j]])
-    shape = (3 * n_e, 3 * len(free))
+    free, jac_rows, jac_cols, use_i, use_j, shape = _sparsity(k, ii, jj, anchor)
     damping = 1e-9  # keeps the normal equations regular where the graph is weakly tied
     phi_k = math.inf
     for _ in range(max_iterations):
