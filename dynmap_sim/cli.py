@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -658,12 +659,54 @@ def _odometry_option(s: argparse.ArgumentParser) -> None:
     )
 
 
+def _bag_option(s: argparse.ArgumentParser) -> None:
+    """``--scan-topic``, ``--odom-topic`` and ``--laser-mount`` for a ROS bag log."""
+    s.add_argument("--scan-topic", help="a bag's sensor_msgs/LaserScan topic (default: the one)")
+    s.add_argument(
+        "--odom-topic",
+        help="a bag's nav_msgs/Odometry topic, or /tf for odom -> base_link (default: the one "
+        "Odometry topic, else /tf)",
+    )
+    s.add_argument(
+        "--laser-mount",
+        type=_laser_mount,
+        metavar="X,Y,THETA",
+        help="a bag's laser pose on the robot [m, m, rad] (default: from /tf_static)",
+    )
+
+
+def _laser_mount(text: str) -> tuple[float, float, float]:
+    try:
+        v = tuple(float(t) for t in text.split(","))
+    except ValueError:
+        v = ()
+    if len(v) != 3 or not all(math.isfinite(x) for x in v):
+        raise argparse.ArgumentTypeError(f"expected three finite numbers X,Y,THETA, got {text!r}")
+    return v
+
+
+def _bag(args: argparse.Namespace):  # -> BagOptions
+    from dynmap_sim.io.logs import BagOptions
+
+    return BagOptions(args.scan_topic, args.odom_topic, args.laser_mount)
+
+
+def _log_file(path: str) -> None:
+    """A log must be a regular file (a FIFO or a device would hang the reader) or a ROS 2
+    bag's folder."""
+    from dynmap_sim.errors import FileError, regular_file_size
+
+    p = Path(path)
+    if not (p.is_dir() and (p / "metadata.yaml").is_file()):
+        regular_file_size(p, FileError)
+
+
 def _cmd_replay(args: argparse.Namespace) -> int:
     from dynmap_sim.errors import FileError, InputError, regular_file_size
     from dynmap_sim.experiments.reference import REFERENCE_TOLERANCE_S
     from dynmap_sim.experiments.replay import replay_log
 
-    regular_file_size(args.log, FileError)  # a FIFO or a device would hang the reader
+    _log_file(args.log)
     if args.reference is not None:
         regular_file_size(args.reference, FileError)
     elif args.reference_offset is not None or args.reference_tolerance is not None:
@@ -681,6 +724,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
         odometry=args.odometry,
         reversals=args.odometry_reversals,
         seed=args.seed,
+        bag=_bag(args),
+        keep_scans=args.keep_scans,
     )
     print(f"results in {out}")
     for line in _headline(out, timing=True):
@@ -693,7 +738,7 @@ def _cmd_slam_eval(args: argparse.Namespace) -> int:
     from dynmap_sim.errors import FileError, InputError, regular_file_size
     from dynmap_sim.experiments.slam_eval import slam_eval
 
-    regular_file_size(args.log, FileError)
+    _log_file(args.log)
     regular_file_size(args.relations, FileError)
     outs = [(opt, _output_file(p)) for opt, p in (("--tum", args.tum), ("--json", args.json)) if p]
     for opt, p in outs:
@@ -720,6 +765,7 @@ def _cmd_slam_eval(args: argparse.Namespace) -> int:
         note=lambda text: print(text, file=sys.stderr),
         odometry=args.odometry,
         reversals=args.odometry_reversals,
+        bag=_bag(args),
     )
     for line in res.table():
         print(line)
@@ -1098,8 +1144,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_cmd_check)
 
-    s = sub.add_parser("replay", help="run mapping and localizers on a CARMEN log")
-    s.add_argument("log", help="CARMEN log file")
+    s = sub.add_parser("replay", help="run mapping and localizers on a CARMEN log or ROS bag")
+    s.add_argument("log", help="CARMEN log file, or a ROS 1 .bag / ROS 2 bag (.db3, .mcap)")
     s.add_argument(
         "--localizer",
         action="append",
@@ -1143,6 +1189,12 @@ def build_parser() -> argparse.ArgumentParser:
         "(default: REFERENCE_TOLERANCE_S, 0.1 s)",
     )
     _odometry_option(s)
+    _bag_option(s)
+    s.add_argument(
+        "--keep-scans",
+        action="store_true",
+        help="store every scan's ranges (export --mcap then writes /scan)",
+    )
     s.add_argument(
         "--seed",
         type=_seed,
@@ -1159,7 +1211,7 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser(
         "slam-eval", help="map a CARMEN log and score it by Kümmerle's relation error"
     )
-    s.add_argument("log", help="CARMEN log file (raw odometry)")
+    s.add_argument("log", help="CARMEN log file or ROS bag (raw odometry)")
     s.add_argument("--relations", required=True, help="relations file (t1 t2 x y z r p yaw)")
     s.add_argument("--tum", help="write the loop-closed trajectory here (TUM, the log's stamps)")
     s.add_argument("--json", help="write the relation error and timings here (JSON)")
@@ -1170,6 +1222,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="a first-run mapper parameter (mapper_params), e.g. seed_window=[0,0]; repeat",
     )
     _odometry_option(s)
+    _bag_option(s)
     s.add_argument("--force", action="store_true", help="replace existing --tum/--json files")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_cmd_slam_eval)

@@ -1,4 +1,4 @@
-"""``dynmap-sim replay``: run the mapper and localizers on a recorded CARMEN log.
+"""``dynmap-sim replay``: run the mapper and localizers on a recorded log (CARMEN or ROS bag).
 
 The log is replayed twice, as two runs of a small experiment written to the same results
 store as simulated experiments (:mod:`dynmap_sim.experiments.results`):
@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import dataclasses
 import datetime as dt
-import hashlib
 import json
 import time
 from collections.abc import Callable, Sequence
@@ -58,7 +57,9 @@ from dynmap_sim.experiments.reference import (
 )
 from dynmap_sim.experiments.results import ResultsDB, RunRecord
 from dynmap_sim.experiments.runner import ExperimentRunner, localizer_seeds
-from dynmap_sim.io.carmen import CarmenLog, read_carmen
+from dynmap_sim.io.carmen import CarmenLog
+from dynmap_sim.io.logs import BagOptions, log_digest, read_log
+from dynmap_sim.io.rosbag import is_bag
 from dynmap_sim.types import Prior
 
 
@@ -227,6 +228,8 @@ def replay_log(
     odometry: str = "auto",
     reversals: str = "repair",
     seed: int = 0,
+    bag: BagOptions | None = None,
+    keep_scans: bool = False,
 ) -> Path:
     """Replay CARMEN ``log`` through ``localizers`` into a results store in ``out_dir``;
     ``note`` gets what the user should know (which localizers took the log's map, how the
@@ -237,10 +240,12 @@ def replay_log(
     odometry records the localizers get and ``reversals`` what to do with its unsigned
     reversing (:func:`~dynmap_sim.io.carmen.read_carmen`). ``seed``: the root of the
     localizers' random generators (:func:`~dynmap_sim.experiments.runner.localizer_seeds`),
-    as ``run --seed`` (another seed: another draw of every particle filter)."""
+    as ``run --seed`` (another seed: another draw of every particle filter). A ROS bag
+    ``log`` is read as ``bag`` says (:func:`~dynmap_sim.io.logs.read_log`); ``keep_scans``
+    stores every scan's ranges, as ``run --keep-scans`` (for ``export --mcap``'s ``/scan``)."""
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise InputError(f"seed must be an integer >= 0, got {seed!r}")
-    data = read_carmen(log, odometry=odometry, reversals=reversals)
+    data = read_log(log, odometry=odometry, reversals=reversals, bag=bag)
     if len(data) < 2:
         raise InputError(f"{log}: the log has fewer than 2 scans")
     ref: ReferenceMatch | None = None
@@ -266,20 +271,22 @@ def replay_log(
     else:  # the frame the laser-line poses (and a map from them) are in
         start = data.reference[0] if data.reference is not None else np.zeros(3)
     date, start_s = _log_date_and_start(data)
-    ident = hashlib.sha256(Path(log).read_bytes())
+    ident = log_digest(log)
     ident.update(json.dumps([localizers, bool(map_from_log_poses)]).encode())
+    if bag is not None and bag.given():
+        ident.update(json.dumps(dataclasses.asdict(bag)).encode())
     ident.update(json.dumps([data.odometry_source, data.reversals]).encode())
     if seed:  # seed 0 keeps the hash of the replays before the option
         ident.update(json.dumps({"seed": seed}).encode())
     if ref is not None:
-        ident.update(Path(ref.path).read_bytes())
+        ident.update(log_digest(ref.path).digest())
         ident.update(json.dumps([ref.offset_s, ref.tolerance_s]).encode())
     db = ResultsDB.create(out_dir, overwrite=True)
     try:
         db.set_meta(
             scenario=None,
             scenario_name=f"replay:{Path(log).name}",
-            world=f"CARMEN log {Path(log).name}",
+            world=f"{'ROS bag' if is_bag(log) else 'CARMEN log'} {Path(log).name}",
             log_path=str(log),
             log_message=data.message,
             log_start_s=float(data.stamps_s[0]),
@@ -300,6 +307,7 @@ def replay_log(
             odometry_source=data.odometry_source,
             odometry_reversals=data.reversals,
             odometry_reversals_found=data.n_reversals,
+            keep_scans=bool(keep_scans),
             complete=False,
         )
         db.set_localizers(
@@ -311,6 +319,8 @@ def replay_log(
                 for g in given_map
             ]
             rec = _run_pass(data, locs, priors, day, truth, labels=list(localizers))
+            if keep_scans:
+                rec = dataclasses.replace(rec, ranges=data.ranges_m)
             summaries = [ExperimentRunner._run_summary(k, rec) for k in range(len(locs))]
             db.write_run(rec, summaries, True, None, "replay", seed)
         db.set_meta(complete=True)

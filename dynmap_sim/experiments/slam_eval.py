@@ -11,6 +11,7 @@ with the log's own time stamps.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -22,7 +23,7 @@ from numpy.typing import NDArray
 
 from dynmap_sim.agent.mapping.first_run import FirstRunConfig, FirstRunMapper
 from dynmap_sim.errors import InputError
-from dynmap_sim.io.carmen import read_carmen
+from dynmap_sim.io.logs import BagOptions, read_log
 from dynmap_sim.metrics.relation_error import RelationError, read_relations, relation_error
 
 FloatArray = NDArray[np.float64]
@@ -50,6 +51,20 @@ class SlamEval:
     odometry_source: str = "odom-lines"
     n_reversals: int = 0
     reversals: str = "repair"
+    #: CPU seconds of the front end and the back end (one core: the mapper is sequential)
+    front_end_cpu_s: float = math.nan
+    back_end_cpu_s: float = math.nan
+
+    @property
+    def duration_s(self) -> float:
+        """The log's span [s], first to last scan."""
+        return float(self.stamps_s[-1] - self.stamps_s[0]) if len(self.stamps_s) else 0.0
+
+    @property
+    def realtime_factor(self) -> float:
+        """The log's span over the mapper's CPU time: how many times faster than real time
+        the mapping runs on one core."""
+        return self.duration_s / max(self.front_end_cpu_s + self.back_end_cpu_s, 1e-9)
 
     @property
     def scans_per_s(self) -> float:
@@ -74,6 +89,10 @@ class SlamEval:
             "front_end_s": self.front_end_s,
             "back_end_s": self.back_end_s,
             "scans_per_s": self.scans_per_s,
+            "front_end_cpu_s": self.front_end_cpu_s,
+            "back_end_cpu_s": self.back_end_cpu_s,
+            "duration_s": self.duration_s,
+            "realtime_factor": self.realtime_factor,
             "odometry_source": self.odometry_source,
             "odometry_reversals": self.reversals,
             "odometry_reversals_found": self.n_reversals,
@@ -98,7 +117,8 @@ class SlamEval:
         rows.append(
             f"{self.n_scans} scans, {self.n_loop_closures} loop closures; front end "
             f"{self.front_end_s:.1f} s, back end {self.back_end_s:.1f} s, "
-            f"{self.scans_per_s:.0f} scans/s"
+            f"{self.scans_per_s:.0f} scans/s; CPU {self.front_end_cpu_s:.1f} + "
+            f"{self.back_end_cpu_s:.1f} s, {self.realtime_factor:.1f}x real time"
         )
         return rows
 
@@ -111,13 +131,15 @@ def slam_eval(
     note: Callable[[str], None] | None = None,
     odometry: str = "auto",
     reversals: str = "repair",
+    bag: BagOptions | None = None,
 ) -> SlamEval:
     """Map ``log`` with the first-run mapper and score it against ``relations``; ``odometry``
     which of the log's odometry records to use, ``reversals`` what to do with its unsigned
-    reversing (:func:`~dynmap_sim.io.carmen.read_carmen`)."""
+    reversing (:func:`~dynmap_sim.io.carmen.read_carmen`); a ROS bag ``log`` is read as
+    ``bag`` says (:func:`~dynmap_sim.io.logs.read_log`)."""
     from tqdm.auto import tqdm
 
-    data = read_carmen(log, odometry=odometry, reversals=reversals)
+    data = read_log(log, odometry=odometry, reversals=reversals, bag=bag)
     if len(data) < 2:
         raise InputError(f"{log}: the log has fewer than 2 scans")
     try:
@@ -130,16 +152,16 @@ def slam_eval(
         raise InputError(f"--relations {relations}: no relations in the file")
     mapper = FirstRunMapper(data.laser, data.odometry[0], config)
     front = np.zeros((len(data), 3))
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     for k, (odom, scan) in enumerate(
         tqdm(data.stream(), disable=not progress, desc=Path(log).name, unit="scan")
     ):
         front[k] = mapper.update(odom, scan).mean
-    t1 = time.perf_counter()
+    t1, c1 = time.perf_counter(), time.process_time()
     if note is not None and progress:
         note("closing loops and optimizing the pose graph ...")
     static = mapper.finish()
-    t2 = time.perf_counter()
+    t2, c2 = time.perf_counter(), time.process_time()
     traj = np.asarray(static.trajectory, dtype=np.float64)
     stamps = data.stamps_s
     lc = relation_error(stamps, traj, rel)
@@ -168,4 +190,6 @@ def slam_eval(
         odometry_source=data.odometry_source,
         n_reversals=data.n_reversals,
         reversals=data.reversals,
+        front_end_cpu_s=c1 - c0,
+        back_end_cpu_s=c2 - c1,
     )

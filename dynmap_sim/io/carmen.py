@@ -58,8 +58,11 @@ the translation of those increments in the robot frame and integrates the poses 
 from __future__ import annotations
 
 import gzip
+import io
 import math
+import re
 import warnings
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -68,6 +71,7 @@ from numpy.typing import NDArray
 
 from dynmap_sim import se2
 from dynmap_sim.errors import FileError
+from dynmap_sim.io.beam_grid import beam_grid
 from dynmap_sim.types import LaserSpec, Odometry, Scan
 
 FloatArray = NDArray[np.float64]
@@ -111,6 +115,13 @@ REVERSAL_MIN_SPEED_MPS = 0.01
 #: Largest spread [m, rad] of the laser pose seen from the laser line's odometry for the
 #: two fields to be one trajectory (a fixed mount, zero in FR079 and CSAIL).
 ONE_TRAJECTORY_TOL = 1e-3
+
+#: Longest line read [characters]: a laser line of 10,000 beams with remissions is ~150 kB.
+MAX_LINE_CHARS = 1 << 20
+#: A file none of whose first this many non-comment lines is a CARMEN message is refused.
+SNIFF_LINES = 20
+#: What the first field of a CARMEN message looks like (``ODOM``, ``ROBOTLASER1``, ``PARAM``).
+_MESSAGE_NAME = re.compile(r"[A-Z][A-Z0-9_]*\Z")
 
 
 class CarmenLogError(FileError):
@@ -162,23 +173,63 @@ def guess_fov_rad(n: int) -> float:
     return table.get(n, math.pi)
 
 
-def _open_text(path: Path) -> list[str]:
+def _lines(path: Path) -> Iterator[tuple[int, str]]:
+    """``(line number, line)`` of a plain or gzip text file, read one line at a time; a line
+    over :data:`MAX_LINE_CHARS` or a file whose first :data:`SNIFF_LINES` non-comment lines
+    hold no CARMEN message is refused."""
     try:
         with open(path, "rb") as fh:
             magic = fh.read(2)
-        opener = gzip.open if magic == b"\x1f\x8b" else open
-        with opener(path, "rt", encoding="utf-8", errors="replace") as fh:
-            return fh.read().splitlines()
+        raw = gzip.open(path, "rb") if magic == b"\x1f\x8b" else open(path, "rb")  # noqa: SIM115
     except FileNotFoundError:
         raise CarmenLogError(path, [("", "file not found")]) from None
-    except (OSError, EOFError) as exc:
+    except OSError as exc:
         raise CarmenLogError(path, [("", f"cannot read file: {exc}")]) from None
+    seen = carmen_like = 0
+    ln = 0
+    with io.TextIOWrapper(raw, encoding="utf-8", errors="replace") as fh:
+        while True:
+            try:
+                line = fh.readline(MAX_LINE_CHARS)
+            except (OSError, EOFError) as exc:
+                raise CarmenLogError(
+                    path, [("", f"cannot read file at line {ln + 1}: {exc}")]
+                ) from None
+            if not line:
+                break
+            ln += 1
+            if len(line) >= MAX_LINE_CHARS and not line.endswith("\n"):
+                raise CarmenLogError(
+                    path,
+                    [(f"line {ln}", f"longer than {MAX_LINE_CHARS} characters: not a CARMEN log")],
+                )
+            tok = line.split(maxsplit=1)
+            if tok and not tok[0].startswith("#") and seen < SNIFF_LINES:
+                seen += 1
+                carmen_like += bool(_MESSAGE_NAME.match(tok[0]))
+                if seen == SNIFF_LINES and not carmen_like:
+                    raise CarmenLogError(path, [(f"lines 1-{ln}", _not_carmen(line))])
+            yield ln, line
+    if seen and not carmen_like:
+        raise CarmenLogError(
+            path, [(f"lines 1-{ln}", "no line is a CARMEN message: not a CARMEN log")]
+        )
+
+
+def _not_carmen(line: str) -> str:
+    """The message for a file whose first lines are no CARMEN messages."""
+    head = line.strip()[:40]
+    return (
+        f"none of the first {SNIFF_LINES} lines is a CARMEN message (the last begins "
+        f"{head!r}): not a CARMEN log"
+    )
 
 
 @dataclass
 class _LaserMsg:
+    line: int
     stamp: float
-    ranges: FloatArray
+    ranges: NDArray[np.float32]
     start: float
     fov: float
     res: float
@@ -189,15 +240,30 @@ class _LaserMsg:
 
 
 def _floats(tok: list[str], a: int, b: int, where: str, errs: list[tuple[str, str]]) -> FloatArray:
+    """Fields ``a..b-1`` as numbers; a missing, non-numeric or non-finite field is an error."""
     try:
-        return np.array([float(t) for t in tok[a:b]], dtype=np.float64)
+        v = np.array([float(t) for t in tok[a:b]], dtype=np.float64)
     except ValueError:
         errs.append((where, f"expected numbers in fields {a}..{b - 1}"))
         return np.zeros(max(b - a, 0))
+    if len(v) < b - a:
+        errs.append((where, f"expected {b - a} numbers in fields {a}..{b - 1}, found {len(v)}"))
+        return np.zeros(b - a)
+    bad = np.flatnonzero(~np.isfinite(v))
+    if len(bad):
+        errs.append((where, f"field {a + int(bad[0])} is {tok[a + int(bad[0])]!r}, not finite"))
+    return v
 
 
-def _parse_laser(tok: list[str], where: str, errs: list[tuple[str, str]]) -> _LaserMsg | None:
+def _number(tok: list[str], i: int, where: str, errs: list[tuple[str, str]]) -> float:
+    """Field ``i`` as a finite number (an error otherwise)."""
+    return float(_floats(tok, i, i + 1, where, errs)[0])
+
+
+def _parse_laser(tok: list[str], ln: int, errs: list[tuple[str, str]]) -> _LaserMsg | None:
+    """The laser message of a ``FLASER``/``RLASER``/``ROBOTLASERk``/``RAWLASERk`` line."""
     kind = tok[0]
+    where = f"line {ln}"
     n_err = len(errs)
     try:
         if kind in ("FLASER", "RLASER"):
@@ -207,13 +273,14 @@ def _parse_laser(tok: list[str], where: str, errs: list[tuple[str, str]]) -> _La
                 return None
             r = _floats(tok, 2, 2 + n, f"{where}.ranges", errs)
             p = _floats(tok, 2 + n, 2 + n + 6, f"{where}.pose", errs)
-            stamp = float(tok[2 + n + 6])
+            stamp = _number(tok, 2 + n + 6, f"{where}.timestamp", errs)
             fov = guess_fov_rad(n)
             if len(errs) > n_err:
                 return None
             return _LaserMsg(
-                stamp, r, -fov / 2, fov, fov / max(n - 1, 1), 80.0, p[:3], None, p[3:6]
-            )
+                ln, stamp, r.astype(np.float32), -fov / 2, fov, fov / max(n - 1, 1), 0.0,
+                p[:3], None, p[3:6],
+            )  # fmt: skip
         # ROBOTLASERk / RAWLASERk
         hdr = _floats(tok, 1, 7, f"{where}.header", errs)
         n = int(tok[8])
@@ -225,12 +292,15 @@ def _parse_laser(tok: list[str], where: str, errs: list[tuple[str, str]]) -> _La
             poses = _floats(tok, i, i + 6, f"{where}.pose", errs)
             laser_pose, robot_pose = poses[:3], poses[3:6]
             i += 11
-        stamp = float(tok[i])
+        stamp = _number(tok, i, f"{where}.timestamp", errs)
         if len(errs) > n_err:
             return None
+        max_range = hdr[4] if hdr[4] > 0 else 80.0
+        r = np.where(r >= max_range, np.inf, r)  # no return (the line states the maximum)
         return _LaserMsg(
-            stamp, r, hdr[1], hdr[2], hdr[3], hdr[4], laser_pose, robot_pose, robot_pose
-        )
+            ln, stamp, r.astype(np.float32), hdr[1], hdr[2], hdr[3], max_range, laser_pose,
+            robot_pose, robot_pose,
+        )  # fmt: skip
     except (ValueError, IndexError):
         errs.append((where, f"malformed {kind} line"))
         return None
@@ -424,70 +494,20 @@ def read_carmen(
         raise CarmenLogError(
             p, [("reversals", f"must be one of {', '.join(REVERSAL_MODES)}, not {reversals!r}")]
         )
-    lines = _open_text(p)
-    errs: list[tuple[str, str]] = []
-    odom_t: list[float] = []
-    odom_p: list[FloatArray] = []
-    odom_tv: list[float] = []
-    by_kind: dict[str, list[_LaserMsg]] = {k: [] for k in LASER_TYPES[laser_id]}
-    for ln, line in enumerate(lines, start=1):
-        tok = line.split()
-        if not tok or tok[0].startswith("#"):
-            continue
-        where = f"line {ln}"
-        if tok[0] == "ODOM":
-            v = _floats(tok, 1, 8, where, errs)
-            if len(tok) < 8:
-                errs.append((where, "ODOM needs x y theta tv rv accel timestamp"))
-                continue
-            odom_p.append(v[:3])
-            odom_tv.append(float(v[3]))
-            odom_t.append(float(v[6]))
-        elif tok[0] in by_kind:
-            msg = _parse_laser(tok, where, errs)
-            if msg is not None:
-                by_kind[tok[0]].append(msg)
-        if len(errs) >= max_errors:
-            break
-    if errs:
-        raise CarmenLogError(p, errs)
-    kind = next((k for k in LASER_TYPES[laser_id] if by_kind[k]), None)
-    if kind is None:
-        raise CarmenLogError(
-            p, [("", f"no laser lines of types {', '.join(LASER_TYPES[laser_id])}")]
-        )
-    msgs = by_kind[kind]
-    n = len(msgs[0].ranges)
-    bad = [i for i, m in enumerate(msgs) if len(m.ranges) != n]
-    if bad:
-        raise CarmenLogError(p, [(kind, f"{len(bad)} lines have a beam count other than {n}")])
-    m0 = msgs[0]
-    mount = (0.0, 0.0, 0.0)
-    if m0.laser_pose is not None and m0.robot_pose is not None:
-        off = se2.between(m0.robot_pose, m0.laser_pose)
-        mount = (float(off[0]), float(off[1]), float(off[2]))
-    max_range = float(m0.max_range) if m0.max_range > 0 else 80.0
-    if kind in ("FLASER", "RLASER"):  # no maximum range on the line: find the saturation
-        sat = saturation_range(np.array([m.ranges for m in msgs], dtype=np.float64))
-        max_range = sat if sat is not None else max_range
-    laser = LaserSpec(
-        name=f"carmen-{kind.lower()}",
-        n_beams=n,
-        angle_min_rad=float(m0.start),
-        angle_increment_rad=float(m0.res if m0.res > 0 else m0.fov / max(n - 1, 1)),
-        range_min_m=0.0,
-        range_max_m=max_range,
-        scan_period_s=0.0,
-        time_increment_s=0.0,
-        mount_pose=mount,
-    )
+    msgs, kind, odom_t, odom_arr, odom_tv = _scan_file(p, laser_id, max_errors)
+    laser, ranges = _laser_and_ranges(p, kind, msgs)
     stamps = np.array([m.stamp for m in msgs])
     steps = np.diff(stamps)
     if np.any(steps < 0):
         k = int(np.argmax(steps < 0)) + 1
         raise CarmenLogError(
             p,
-            [(kind, f"time stamps go back at scan {k} ({stamps[k - 1]:.6f} -> {stamps[k]:.6f})")],
+            [
+                (
+                    f"line {msgs[k].line}",
+                    f"time stamps go back at scan {k} ({stamps[k - 1]:.6f} -> {stamps[k]:.6f})",
+                )
+            ],
         )
     if np.any(steps == 0):
         warnings.warn(
@@ -495,17 +515,14 @@ def read_carmen(
             "scan before (too few digits?): they cannot be told apart by time",
             stacklevel=2,
         )
-    ranges = np.array([m.ranges for m in msgs], dtype=np.float64)
-    ranges = np.where(ranges >= max_range, np.inf, ranges)
-    ranges = np.where(ranges <= 0.0, np.nan, ranges).astype(np.float32)
+    mount = np.asarray(laser.mount_pose, dtype=np.float64)
     laser_odo = np.array([m.odom_pose for m in msgs]) if msgs[0].odom_pose is not None else None
     lp = np.array([m.laser_pose for m in msgs]) if msgs[0].laser_pose is not None else None
-    odom_arr = np.array(odom_p).reshape(-1, 3)
-    flagged = unsigned_reversals(odom_arr, np.array(odom_tv))
+    flagged = unsigned_reversals(odom_arr, odom_tv)
     repair = reversals == "repair" and bool(flagged.any())
     odom_out = repair_reversals(odom_arr, flagged) if repair else odom_arr
     odo, source, note = choose_odometry(
-        p, kind, odometry, np.array(odom_t), odom_arr, stamps, laser_odo, lp, odom_out
+        p, kind, odometry, odom_t, odom_arr, stamps, laser_odo, lp, odom_out
     )
     if note is not None:
         warnings.warn(note, CarmenOdometryWarning, stacklevel=2)
@@ -528,7 +545,89 @@ def read_carmen(
         warnings.warn(text, CarmenOdometryWarning, stacklevel=2)
     reference = None
     if lp is not None:
-        reference = se2.compose(lp, np.broadcast_to(se2.inverse(np.array(mount)), lp.shape))
+        reference = se2.compose(lp, np.broadcast_to(se2.inverse(mount), lp.shape))
     return CarmenLog(
         p, laser, stamps, ranges, odo, reference, kind, source, int(flagged.sum()), reversals
     )
+
+
+def _scan_file(p: Path, laser_id: int, max_errors: int) -> tuple:
+    """One pass over the log's lines: ``(laser messages, their type, ODOM stamps, poses
+    (N, 3), velocities)``, the laser messages of the first of :data:`LASER_TYPES` present."""
+    errs: list[tuple[str, str]] = []
+    odom_t: list[float] = []
+    odom_p: list[FloatArray] = []
+    odom_tv: list[float] = []
+    by_kind: dict[str, list[_LaserMsg]] = {k: [] for k in LASER_TYPES[laser_id]}
+    for ln, line in _lines(p):
+        tok = line.split()
+        if not tok or tok[0].startswith("#"):
+            continue
+        if tok[0] == "ODOM":
+            if len(tok) < 8:
+                errs.append((f"line {ln}", "ODOM needs x y theta tv rv accel timestamp"))
+                continue
+            v = _floats(tok, 1, 8, f"line {ln}", errs)
+            odom_p.append(v[:3])
+            odom_tv.append(float(v[3]))
+            odom_t.append(float(v[6]))
+        elif tok[0] in by_kind:
+            msg = _parse_laser(tok, ln, errs)
+            if msg is not None:
+                by_kind[tok[0]].append(msg)
+        if len(errs) >= max_errors:
+            break
+    if errs:
+        raise CarmenLogError(p, errs)
+    kind = next((k for k in LASER_TYPES[laser_id] if by_kind[k]), None)
+    if kind is None:
+        raise CarmenLogError(
+            p, [("", f"no laser lines of types {', '.join(LASER_TYPES[laser_id])}")]
+        )
+    odom = np.array(odom_p).reshape(-1, 3)
+    return by_kind[kind], kind, np.array(odom_t), odom, np.array(odom_tv)
+
+
+def _laser_and_ranges(
+    p: Path, kind: str, msgs: list[_LaserMsg]
+) -> tuple[LaserSpec, NDArray[np.float32]]:
+    """The laser of the messages and their ranges ``(T, n_beams)`` (REP-117). Scans with
+    their own start angle or beam count (an interlaced scanner) are placed on one common
+    beam grid (:mod:`.beam_grid`)."""
+    m0 = msgs[0]
+    mount = (0.0, 0.0, 0.0)
+    if m0.laser_pose is not None and m0.robot_pose is not None:
+        off = se2.between(m0.robot_pose, m0.laser_pose)
+        mount = (float(off[0]), float(off[1]), float(off[2]))
+    if kind in ("FLASER", "RLASER"):  # no maximum range on the line: find the saturation
+        n = len(m0.ranges)
+        bad = [m.line for m in msgs if len(m.ranges) != n]
+        if bad:
+            raise CarmenLogError(
+                p, [(f"line {bad[0]}", f"{len(bad)} lines have a beam count other than {n}")]
+            )
+        ranges = np.array([m.ranges for m in msgs], dtype=np.float32)
+        sat = saturation_range(ranges)
+        max_range = sat if sat is not None else 80.0
+        ranges[ranges >= max_range] = np.inf
+    else:
+        max_range = float(m0.max_range)
+        counts = np.array([len(m.ranges) for m in msgs])
+        incs = np.array([m.res if m.res > 0 else m.fov / max(len(m.ranges) - 1, 1) for m in msgs])
+        grid = beam_grid(np.array([m.start for m in msgs]), incs, counts)
+        if isinstance(grid, str):
+            raise CarmenLogError(p, [(kind, f"the scans share no beam layout: {grid}")])
+        ranges = grid.place([m.ranges for m in msgs])
+    ranges[ranges <= 0.0] = np.nan
+    laser = LaserSpec(
+        name=f"carmen-{kind.lower()}",
+        n_beams=ranges.shape[1],
+        angle_min_rad=float(msgs[0].start) if kind in ("FLASER", "RLASER") else grid.angle_min_rad,
+        angle_increment_rad=float(m0.res) if kind in ("FLASER", "RLASER") else grid.increment_rad,
+        range_min_m=0.0,
+        range_max_m=max_range,
+        scan_period_s=0.0,
+        time_increment_s=0.0,
+        mount_pose=mount,
+    )
+    return laser, ranges

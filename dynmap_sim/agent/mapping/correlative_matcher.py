@@ -19,14 +19,16 @@ the fine grid.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import ndimage
 
-from dynmap_sim.agent.mapping import correlative_numba
+from dynmap_sim.jit import compiled
 
 FloatArray = NDArray[np.float64]
+IntArray = NDArray[np.intp]
 
 
 @dataclass(frozen=True)
@@ -85,9 +87,80 @@ class LikelihoodTable:
         )
 
 
-def _lookup(table: FloatArray, ix: NDArray[np.intp], iy: NDArray[np.intp]) -> FloatArray:
-    h, w = table.shape
-    return table[np.clip(iy, 0, h - 1), np.clip(ix, 0, w - 1)]
+@compiled
+def _bounds(coarse: FloatArray, ix0: IntArray, iy0: IntArray, boff: IntArray) -> FloatArray:
+    """``out[t, by, bx]``: the sum over points ``i`` of ``coarse`` at ``(iy0[t, i] +
+    boff[by], ix0[t, i] + boff[bx])``, clipped to the table (whose border is zero)."""
+    h, w = coarse.shape
+    n_t, n_p = ix0.shape
+    nb = boff.shape[0]
+    out = np.zeros((n_t, nb, nb))
+    for t in range(n_t):
+        for i in range(n_p):
+            for by in range(nb):
+                y = min(max(iy0[t, i] + boff[by], 0), h - 1)
+                for bx in range(nb):
+                    x = min(max(ix0[t, i] + boff[bx], 0), w - 1)
+                    out[t, by, bx] += coarse[y, x]
+    return out
+
+
+class _Window(NamedTuple):
+    """The fine search of :func:`_search`: ``fine`` table, each rotation's point cells
+    ``ix0``/``iy0`` ``(T, N)`` at the window's start, block offsets ``boff`` [cells], the
+    block size, the last translation offset, the most blocks refined."""
+
+    fine: FloatArray
+    ix0: IntArray
+    iy0: IntArray
+    boff: IntArray
+    block: int
+    last: int
+    max_blocks: int
+
+
+@compiled
+def _search(order: IntArray, bounds: FloatArray, win: _Window) -> tuple:
+    """The blocks in ``order`` (flat indices of ``bounds``), at most ``max_blocks``, until a
+    bound is no better than the best fine score: ``(best score, rotation, y offset, x
+    offset, fine translations scored)``; translation offsets beyond ``last`` are left out
+    (the block's bound, over all its cells, stays an upper bound)."""
+    fine, ix0, iy0, boff, block = win.fine, win.ix0, win.iy0, win.boff, win.block
+    h, w = fine.shape
+    n_p = ix0.shape[1]
+    nb = bounds.shape[1]
+    vals = np.empty((block, block))
+    best_score = -1.0
+    best_t = best_y = best_x = 0
+    n_eval = 0
+    for j in range(min(win.max_blocks, order.shape[0])):
+        flat = order[j]
+        t = flat // (nb * nb)
+        by = (flat // nb) % nb
+        bx = flat % nb
+        if bounds[t, by, bx] <= best_score:
+            break
+        oy0 = boff[by]
+        ox0 = boff[bx]
+        ny = min(block, win.last - oy0 + 1)
+        nx = min(block, win.last - ox0 + 1)
+        vals[:ny, :nx] = 0.0
+        for i in range(n_p):
+            for a in range(ny):
+                y = min(max(iy0[t, i] + oy0 + a, 0), h - 1)
+                for b in range(nx):
+                    x = min(max(ix0[t, i] + ox0 + b, 0), w - 1)
+                    vals[a, b] += fine[y, x]
+        n_eval += ny * nx
+        ka = kb = 0
+        for a in range(ny):  # the first maximum in row-major order
+            for b in range(nx):
+                if vals[a, b] > vals[ka, kb]:
+                    ka, kb = a, b
+        if vals[ka, kb] > best_score:
+            best_score = vals[ka, kb]
+            best_t, best_y, best_x = t, oy0 + ka, ox0 + kb
+    return best_score, best_t, best_y, best_x, n_eval
 
 
 def angular_step(points_base: ArrayLike, resolution_m: float) -> float:
@@ -107,7 +180,6 @@ def correlative_match(
     theta_step_rad: float | None = None,
     block: int = 8,
     max_blocks: int = 400,
-    backend: str = "auto",
 ) -> CorrelativeResult:
     """Best pose of ``points_base`` ``(N, 2)`` (scan frame) in ``target``'s frame.
 
@@ -115,11 +187,7 @@ def correlative_match(
     the table's grid, rotations every ``theta_step_rad`` (default: the angle that moves the
     farthest point by one cell, Olson 2009 §IV-A). ``block`` is the branch-and-bound block
     size in cells; at most ``max_blocks`` blocks are refined (the search is then approximate).
-    ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): ``"numba"`` (``"auto"`` when
-    installed) sums the bounds and the blocks' scores in compiled loops
-    (:mod:`.correlative_numba`, the same result bit for bit).
     """
-    kernels = correlative_numba.kernels(backend)
     pts = np.asarray(points_base, dtype=np.float64).reshape(-1, 2)
     init = np.asarray(init_pose, dtype=np.float64).reshape(3)
     if len(pts) == 0:
@@ -143,42 +211,11 @@ def correlative_match(
     iy0 = np.floor((wy - target.origin[1]) / res).astype(np.intp) + start
     # Upper bounds of every (rotation, block_y, block_x): sum over points of M.
     boff = np.arange(n_blocks) * block
-    if kernels is not None:
-        bounds_of, search = kernels
-        bounds = bounds_of(coarse, ix0, iy0, boff)
-        order = np.ascontiguousarray(np.argsort(bounds, axis=None)[::-1])
-        score, t, oy_c, ox_c, n_eval = search(
-            order, bounds, fine, ix0, iy0, boff, block, 2 * n_xy, max_blocks
-        )
-        return _result(init, thetas, start, res, (t, oy_c, ox_c), score, n_eval, len(pts))
-    bounds = _lookup(
-        coarse,
-        ix0[:, :, None, None] + boff[None, None, None, :],
-        iy0[:, :, None, None] + boff[None, None, :, None],
-    ).sum(axis=1)  # (T, block_y, block_x): all rotations in one lookup
-    order = np.argsort(bounds, axis=None)[::-1]
-    best_score, best = -1.0, (0, 0, 0)
-    n_eval = 0
-    foff = np.arange(block)
-    for flat in order[:max_blocks]:
-        t, by, bx = np.unravel_index(flat, bounds.shape)
-        if bounds[t, by, bx] <= best_score:
-            break
-        # The last block of a row may reach past the window: its cells beyond are left out
-        # (the block's bound, over all its cells, stays an upper bound).
-        ox = boff[bx] + foff[boff[bx] + foff <= 2 * n_xy]
-        oy = boff[by] + foff[boff[by] + foff <= 2 * n_xy]
-        vals = _lookup(
-            fine,
-            ix0[t][:, None, None] + ox[None, None, :],
-            iy0[t][:, None, None] + oy[None, :, None],
-        ).sum(axis=0)  # (block_y, block_x)
-        n_eval += vals.size
-        k = int(np.argmax(vals))
-        if vals.flat[k] > best_score:
-            best_score = float(vals.flat[k])
-            best = (int(t), int(oy[k // len(ox)]), int(ox[k % len(ox)]))
-    return _result(init, thetas, start, res, best, best_score, n_eval, len(pts))
+    bounds = _bounds(coarse, ix0, iy0, boff)
+    order = np.ascontiguousarray(np.argsort(bounds, axis=None)[::-1])
+    win = _Window(fine, ix0, iy0, boff, block, 2 * n_xy, int(max_blocks))
+    score, t, oy_c, ox_c, n_eval = _search(order, bounds, win)
+    return _result(init, thetas, start, res, (t, oy_c, ox_c), score, n_eval, len(pts))
 
 
 def _result(

@@ -2,14 +2,10 @@
 Konolige et al. 2010 "Efficient sparse pose adjustment for 2D mapping"; Cartographer, Hess
 et al. 2016 §V), replayed over the first run's keyframes when the run ends.
 
-Why: searching closures only once, at the end, against the front end's whole drift fails on
-real logs. On FR079 the front end gathers 12 m of drift between revisits (relations more
-than 30 s apart: 12.1 m mean error) while the drift-tolerant search window is capped at
-3 m: the true closures are never candidates, and the graph ends where the front end did
-(relation error 4.95 m before, 4.96 m front end). An online mapper closes each loop as
-soon as it comes back, so the drift it must bridge is only the drift **since its last
-closure** -- a few percent of a short path -- and every closure shrinks the drift of what
-follows.
+Why: searching closures only once, at the end, against the front end's whole drift fails
+when the drift between revisits exceeds the search window. An online mapper closes each
+loop as soon as it comes back, so the drift it must bridge is only the drift **since its
+last closure**, and every closure shrinks the drift of what follows.
 
 Here keyframes are visited in order. The search window of keyframe ``i`` grows with the path
 driven since the last accepted closure (``drift_window``), candidates are the nearest
@@ -23,12 +19,7 @@ graph, optimized with a Huber loss (Cartographer's robust back end) when its cor
 worth it; the keyframes not yet visited follow rigidly, so the next searches start from the
 corrected estimate.
 
-Status (issue 16, measured): off by default (``LoopClosureConfig.incremental_loops``). On
-CSAIL with the real-odometry prior it accepts 49 closures but leaves the relation error
-where the front end had it (1.458 m vs 1.473 m): 214 of 580 searches have no candidate
-within the window, i.e. the front end's error there is not a smooth drift but a few gross
-failures that no drift window bridges; the search must become global (branch-and-bound
-over a submap, Hess 2016) before this pays.
+Off by default (``LoopClosureConfig.incremental_loops``; measurements: docs/tuning/slam.md).
 """
 
 from __future__ import annotations

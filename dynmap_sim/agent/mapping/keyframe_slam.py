@@ -73,8 +73,7 @@ class KeyframeSLAMConfig:
     k_normal: int = 6
     #: ICP correspondence gate [m]: the odometry prediction is within a few cm of the truth.
     max_correspondence_m: float = 0.3
-    #: Huber threshold of the ICP residuals [m] (2 cm, twice the range noise; 5 cm gave the
-    #: lab an ATE of 0.18 m, 2 cm 0.09 m).
+    #: Huber threshold of the ICP residuals [m]: twice the range noise (1 cm).
     huber_m: float = 0.02
     #: The scan's information in ICP is divided by this (>= 1): neighbouring residuals are
     #: not independent (Censi 2007: ICP's covariance is optimistic), so that the odometry
@@ -90,18 +89,9 @@ class KeyframeSLAMConfig:
     #: deviations ``(s_xy0, k_xy_d, k_xy_a, s_th0, k_th_a, k_th_d)``:
     #: ``sigma_xy = s_xy0 + k_xy_d d + k_xy_a a`` [m], ``sigma_th = s_th0 + k_th_a a + k_th_d d``
     #: [rad]. Tight (5 % of the distance): the wheel odometry drifts 1-2 %. The constant
-    #: ``s_xy0`` is paid on every scan, so it sets how loose the prior is per metre at a
-    #: given scan rate: at 10 Hz and 0.35 m/s the former 5 mm was 14 % of every 3.5 cm
-    #: step, the scan term ruled along blank corridors, and the scan-to-map ICP's forward
-    #: bias (a few mm per keyframe from the range-proportional lidar noise, the map's
-    #: surfaces ahead seen from farther than the scan sees them) stretched the map: +0.60 %
-    #: along the `corridor` world's corridor, first-run ATE 0.167 m. With 1 mm (2026-11-27,
-    #: ``benchmarks/slam_quality.py``, seeds 0 / 1, ATE of the optimized first run, before
-    #: -> after): corridor 0.167 -> 0.061 / 0.059 -> 0.043 m, lab 0.087 -> 0.063 / 0.160 ->
-    #: 0.057, office 0.035 -> 0.036 / 0.087 -> 0.029, hall 0.023 -> 0.015 / 0.024 -> 0.023,
-    #: apartment 0.024 -> 0.021 / 0.023 -> 0.022 m; real logs (relation error) FR079 0.042 ->
-    #: 0.045 m, CSAIL 0.029 -> 0.030 m (their large odometry errors are the correlative
-    #: seed's to catch). 0.5 mm or 2 mm, or ``s_th0`` 0.5 mrad, were worse on some worlds.
+    #: ``s_xy0`` is paid on every scan and sets how loose the prior is per metre at a given
+    #: scan rate: 1 mm keeps the scan-to-map ICP's small forward bias from stretching long
+    #: corridors (measurements: docs/tuning/slam.md).
     odom_sigma: tuple[float, float, float, float, float, float] = (
         0.001,
         0.05,
@@ -112,8 +102,8 @@ class KeyframeSLAMConfig:
     )
     #: Leave beams at range discontinuities (mixed pixels) out of matching:
     #: ``"none"``, ``"isolated"`` (beams that jump from both neighbours) or ``"all"``
-    #: (:func:`.scan_points.range_discontinuities`). Off: it helps the apartment but hurts
-    #: the lab.
+    #: (:func:`.scan_points.range_discontinuities`). Off: it helped one simulated world and
+    #: hurt another (docs/tuning/slam.md).
     drop_edges: str = "none"
     #: Leave out readings in space that the scans this many steps earlier saw free (walking
     #: people; :func:`.scan_points.free_space_violations`); ``()`` off. 0.3 s and 0.8 s at
@@ -123,11 +113,9 @@ class KeyframeSLAMConfig:
     #: real-time correlative matcher of Hess et al. 2016 §IV, whose result is then the prior
     #: of the fine matcher): half-windows ``(xy [m], theta [rad])``, each widened by the
     #: odometry step itself (a step odometry reports late, in one jump, is not trusted);
-    #: ``(0, 0)`` off. For real wheel odometry, which errs by up to 20 degrees in a step
-    #: (CSAIL): ICP's 0.3 m basin cannot undo that and the estimate stayed on odometry
-    #: (relation error without the seed: FR079 4.95 m, CSAIL 0.73 m). On by default with
-    #: ``seed_verify``, which keeps the simulated worlds' near-exact odometry from being
-    #: overruled by the seed's grid (without it the lab's ATE went 0.087 -> 0.356 m).
+    #: ``(0, 0)`` off. Real wheel odometry errs by up to 20 degrees in a step, beyond ICP's
+    #: 0.3 m basin; ``seed_verify`` keeps near-exact odometry from being overruled by the
+    #: seed's grid (docs/tuning/slam.md).
     seed_window: tuple[float, float] = (0.3, 0.4)
     #: The seed's likelihood grid: cell side and Gaussian width [m], and the range [m]
     #: within which map and scan points take part.
@@ -140,21 +128,17 @@ class KeyframeSLAMConfig:
     #: angular steps (:func:`.correlative_matcher.angular_step`) of the prediction; 0: the
     #: prediction's own score. The search's grid is its resolution (Olson 2009 §IV-A): a
     #: pose one cell or one step off a correct prediction can score higher by aliasing alone
-    #: (points crossing cell borders), and then the seed moves ICP off a right answer (on
-    #: the lab, all 7 seeds taken with 0 were one cell or one step off an odometry
-    #: prediction that was within 2 mm of the truth). With 1, the seed is taken only when it
-    #: finds a distinctly different pose, which ICP from the prediction could not reach.
-    #: Not the default: it also drops the small real corrections (CSAIL with 1: 0.117 ±
-    #: 0.327 m against 0.032 with 0; 128 of its 1120 seeds are within one step, at 15 m
-    #: range one step is 0.4 degrees); ``seed_verify`` sorts these out instead.
+    #: (points crossing cell borders), and then the seed moves ICP off a right answer.
+    #: With 1, the seed is taken only when it finds a distinctly different pose; not the
+    #: default: it also drops the small real corrections, which ``seed_verify`` sorts out.
     seed_compare_steps: int = 0
     #: When the seed replaces the prediction, the odometry prior centred on it gets the
     #: seed's own quantization variance added (uniform over a cell and an angular step:
     #: ``res**2 / 12``, ``step**2 / 12``), so that ICP may refine within the seed's
     #: resolution. Off: the prior keeps odometry's covariance (mm over a 10 cm grid), as
     #: if the seed were exact, and holds ICP on the grid (Hess et al. 2016 §IV weigh the
-    #: fine matcher's prior against the scan instead). Alone it halves the lab's harm
-    #: (ATE 0.356 -> 0.172 m, seed-less 0.087), so not the default.
+    #: fine matcher's prior against the scan instead). Not the default: ``seed_verify``
+    #: decides better between the seed and the prediction.
     seed_prior_quantization: bool = False
     #: When the seed replaces the prediction, also run ICP from the prediction (with the
     #: odometry prior) and keep the seed's result only if its point-to-line RMS residual is
@@ -163,11 +147,7 @@ class KeyframeSLAMConfig:
     #: Censi 2007): two local optima of ICP compared under one score, as Karto/slam_toolbox
     #: check a correlative match's response before trusting it. The seed's score is its
     #: 10 cm grid's (aliasing, see ``seed_compare_steps``), ICP's is the continuous
-    #: point-to-line fit. On the lab ICP from the prediction fit better on 6 of 7 seeds
-    #: taken (one tie); along the lab's corridor a seed one cell ahead fit 4 % better
-    #: (within the standard error of 1/sqrt(2 n) with independent residuals, 8 % with
-    #: n / 5); on CSAIL the seed's ICP fit better by the margin on 84 % of the scans where
-    #: the two results differed by more than 0.5 degrees, 99 % beyond 2 degrees.
+    #: point-to-line fit, which tells the right optimum from a grid alias.
     seed_verify: bool = True
 
     def __post_init__(self) -> None:

@@ -27,7 +27,11 @@ from dynmap_sim import se2
 from dynmap_sim.agent.mapping.correlative_matcher import LikelihoodTable, correlative_match
 from dynmap_sim.agent.mapping.incremental_loops import incremental_closures
 from dynmap_sim.agent.mapping.keyframe_slam import KeyframeSLAM
-from dynmap_sim.agent.mapping.pose_graph import Edge, optimize_pose_graph
+from dynmap_sim.agent.mapping.pose_graph import (
+    Edge,
+    optimize_pose_graph,
+    optimize_pose_graph_dcs,
+)
 from dynmap_sim.agent.mapping.scan_matcher import MatchResult, PointMap, match_scan
 from dynmap_sim.agent.mapping.scan_points import voxel_downsample
 from dynmap_sim.agent.params import coerce_fields
@@ -39,8 +43,8 @@ FloatArray = NDArray[np.float64]
 class LoopClosureConfig:
     """Parameters of loop closure and the pose graph (lengths in m, angles in rad)."""
 
-    #: Search drift-tolerant closures by correlative matching before the ICP rounds (the lab's
-    #: 106 m loop drifts too far for ICP alone: ATE 0.60 m without, 0.15 m with).
+    #: Search drift-tolerant closures by correlative matching before the ICP rounds: a long
+    #: loop drifts beyond ICP's basin.
     global_loops: bool = True
     #: Keyframes more than this many apart in sequence may close a loop (nearer ones are
     #: sequential neighbours, matched anyway).
@@ -95,9 +99,27 @@ class LoopClosureConfig:
     #: ICP round optimizes the sequential edges and its own pairwise edges only, so where
     #: those find no loop edge the graph relaxes back to the front end's shape.
     keep_closures: bool = False
+    #: The robust treatment of loop-closure and pairwise ICP edges in the pose graph:
+    #: ``"dcs"`` dynamic covariance scaling (Agarwal et al. 2013: an edge whose error is far
+    #: beyond its covariance loses its weight, so one wrong closure cannot bend the graph),
+    #: ``"huber"`` the Huber loss at ``3`` standard deviations on the ICP rounds and plain
+    #: least squares on the correlative closures.
+    robust_kernel: str = "dcs"
+    #: DCS's ``phi`` [squared standard deviations]: an edge with ``chi2 <= phi`` keeps its
+    #: full weight; Agarwal et al. 2013 (§V) find results insensitive over 0.1-10 and use 1.
+    dcs_phi: float = 1.0
+    #: Closures are compared for consistency when both their ends lie within this many
+    #: keyframes (~12 m of path at the default spacing): the legs between them are short
+    #: enough for the front end's drift to be small.
+    consistency_window: int = 40
+    #: The consistency test's bound in standard deviations of the legs' drift
+    #: (``seq_sigma``); 3: a true pair passes with ~99 % probability per direction.
+    consistency_gate: float = 3.0
 
     def __post_init__(self) -> None:
         coerce_fields(self)
+        if self.robust_kernel not in ("dcs", "huber"):
+            raise ValueError(f"robust_kernel must be dcs or huber, got {self.robust_kernel!r}")
         object.__setattr__(self, "loop_stride", max(1, self.loop_stride))
 
 
@@ -128,16 +150,24 @@ class LoopClosure:
                 kept = []
         elif c.global_loops:
             loops = self.global_loop_edges(poses, slam)
-            if loops:  # verified and mutually consistent: least squares without robust loss
-                poses = optimize_pose_graph(poses, seq + loops, anchor=0, loss="linear")
+            if loops:  # verified and mutually consistent
+                poses = self._optimize(poses, seq, loops, "linear")
                 kept = loops if c.keep_closures else []
         for _ in range(c.graph_rounds):
             matches = self.match_edges(poses, slam)
             n_loops = sum(1 for e in matches if e.j - e.i > c.loop_min_gap)
             if not matches:
                 break
-            poses = optimize_pose_graph(poses, seq + kept + matches, anchor=0)
+            poses = self._optimize(poses, seq, kept + matches, "huber")
         return poses, n_loops
+
+    def _optimize(self, poses: FloatArray, seq: list[Edge], loops: list[Edge], loss: str):
+        """The graph of sequential edges ``seq`` and loop/ICP edges ``loops`` optimized, the
+        latter robust as ``robust_kernel`` says (``loss``: the Huber variant's loss)."""
+        if self.config.robust_kernel == "dcs":
+            robust = np.r_[np.zeros(len(seq), bool), np.ones(len(loops), bool)]
+            return optimize_pose_graph_dcs(poses, seq + loops, robust, self.config.dcs_phi)
+        return optimize_pose_graph(poses, seq + loops, anchor=0, loss=loss)
 
     # -- edges ---------------------------------------------------------------------------
     def sequential_edges(self, poses: FloatArray) -> list[Edge]:
@@ -331,38 +361,44 @@ class LoopClosure:
             return Edge(j, i, res.pose, EDGE_INFO)
         return None
 
-    def _consistent_loops(
-        self,
-        poses: FloatArray,
-        edges: list[Edge],
-        window: int = 40,
-        tol_m: float = 0.25,
-        tol_rad: float = 0.05,
-    ) -> list[Edge]:
-        """Keep loop edges whose implied drift correction is confirmed by another.
+    def _consistent_loops(self, poses: FloatArray, edges: list[Edge]) -> list[Edge]:
+        """Keep loop edges that are pairwise consistent with others nearby.
 
-        An edge ``(j, i, z)`` says keyframe ``i`` is at ``x_j ⊕ z``; its correction
-        ``x_j ⊕ z ⊖ x_i`` (map frame) is the drift gathered between ``j`` and ``i``. Drift
-        is smooth, so true closures whose ``i`` and ``j`` both lie within ``window`` of each
-        other agree (within ``tol_m`` / ``tol_rad``), while a false match (perceptual
-        aliasing) stands alone: an edge is kept if at least one other edge and a majority
-        of those nearby agree with it (a simple form of Olson's single-cluster test).
+        Two closures ``a = (j_a, i_a, z_a)`` and ``b`` close one cycle with the front end's
+        legs ``j_a -> j_b`` and ``i_b -> i_a``: if both are true, ``x_ja ⊕ z_a`` and ``x_jb ⊕
+        z_b ⊕ (x_ib^-1 ⊕ x_ia)`` are the same pose up to the drift along the two legs (the
+        pairwise consistency test of Olson 2009 and Mangelson et al. 2018, PCM), whatever
+        drift lies between the closures and the map frame. The test's bound grows with the
+        legs' path ``s`` as the sequential edges' deviation does (``seq_sigma``):
+        ``consistency_gate * (2 s_xy0 + k_xy_d s)`` [m] and ``consistency_gate * (2 s_th0 +
+        k_th_d s)`` [rad]. Closures whose ends both lie within ``consistency_window``
+        keyframes are compared; a false match (perceptual aliasing) stands alone: an edge is
+        kept if at least one other edge and a majority of those compared agree with it.
         """
+        c = self.config
         if len(edges) < 2:
             return []
-        jj = np.array([e.i for e in edges])
+        jj = np.array([e.i for e in edges])  # the earlier keyframe (the edge's i)
         ii = np.array([e.j for e in edges])
-        implied = se2.compose(poses[jj], np.array([e.z for e in edges]))
-        corr = implied - poses[ii]
-        corr[:, 2] = se2.wrap_angle(corr[:, 2])
-        near = (np.abs(ii[:, None] - ii[None, :]) <= window) & (
-            np.abs(jj[:, None] - jj[None, :]) <= window
+        step = np.hypot(*np.diff(poses[:, :2], axis=0).T)
+        path = np.concatenate([[0.0], np.cumsum(step)])
+        z = np.array([e.z for e in edges])
+        via_a = se2.compose(poses[jj], z)  # pose of i_a by closure a
+        n = len(edges)
+        a_idx, b_idx = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+        a_idx, b_idx = a_idx.ravel(), b_idx.ravel()
+        leg = se2.between(poses[ii[b_idx]], poses[ii[a_idx]])  # i_b -> i_a, front end
+        via_b = se2.compose(via_a[b_idx], leg)
+        err = se2.between(via_a[a_idx], via_b)
+        s = np.abs(path[jj[a_idx]] - path[jj[b_idx]]) + np.abs(path[ii[a_idx]] - path[ii[b_idx]])
+        s_xy0, k_xy_d, s_th0, k_th_d, _ = c.seq_sigma
+        g = c.consistency_gate
+        ok = (np.hypot(err[:, 0], err[:, 1]) <= g * (2 * s_xy0 + k_xy_d * s)) & (
+            np.abs(se2.wrap_angle(err[:, 2])) <= g * (2 * s_th0 + k_th_d * s)
         )
-        agree = (
-            near
-            & (np.hypot(*(corr[:, None, :2] - corr[None, :, :2]).transpose(2, 0, 1)) < tol_m)
-            & (np.abs(se2.wrap_angle(corr[:, None, 2] - corr[None, :, 2])) < tol_rad)
-        )
+        w = c.consistency_window
+        near = (np.abs(ii[a_idx] - ii[b_idx]) <= w) & (np.abs(jj[a_idx] - jj[b_idx]) <= w)
+        agree = (near & ok).reshape(n, n)  # includes the edge itself
         n_agree = agree.sum(axis=1)
-        keep = (n_agree >= 2) & (2 * n_agree > near.sum(axis=1))
+        keep = (n_agree >= 2) & (2 * n_agree > near.reshape(n, n).sum(axis=1))
         return [e for e, k in zip(edges, keep, strict=True) if k]

@@ -12,12 +12,13 @@ anchored, so the optimized map frame is the frame of the first pose.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
-from scipy.sparse import csr_matrix
+from scipy.sparse import csr_matrix, identity
 
 from dynmap_sim import se2
 
@@ -68,6 +69,26 @@ def edge_jacobians(poses: FloatArray, ii: NDArray[np.intp], jj: NDArray[np.intp]
     return a, b
 
 
+def _sparsity(k: int, ii: NDArray[np.intp], jj: NDArray[np.intp], anchor: int) -> tuple:
+    """The free nodes and the structure of the whitened residuals' Jacobian: rows 3m..3m+2
+    of edge m touch the columns of its free nodes. ``(free, rows, cols, use_i, use_j,
+    shape)``; ``use_*`` ``(E, 3, 3)`` mask the blocks of the edges' free ends."""
+    free = np.array([n for n in range(k) if n != anchor])
+    col_of = -np.ones(k, dtype=np.intp)
+    col_of[free] = np.arange(len(free))
+    n_e = len(ii)
+    rows = np.broadcast_to(
+        3 * np.arange(n_e)[:, None, None] + np.arange(3)[None, :, None], (n_e, 3, 3)
+    )
+    cols_i = np.broadcast_to(3 * col_of[ii][:, None, None] + np.arange(3), (n_e, 3, 3))
+    cols_j = np.broadcast_to(3 * col_of[jj][:, None, None] + np.arange(3), (n_e, 3, 3))
+    use_i = np.broadcast_to((col_of[ii] >= 0)[:, None, None], (n_e, 3, 3))
+    use_j = np.broadcast_to((col_of[jj] >= 0)[:, None, None], (n_e, 3, 3))
+    jac_rows = np.concatenate([rows[use_i], rows[use_j]])
+    jac_cols = np.concatenate([cols_i[use_i], cols_j[use_j]])
+    return free, jac_rows, jac_cols, use_i, use_j, (3 * n_e, 3 * len(free))
+
+
 def optimize_pose_graph(
     poses: ArrayLike,
     edges: list[Edge],
@@ -94,25 +115,7 @@ def optimize_pose_graph(
     z = np.array([e.z for e in edges], dtype=np.float64)
     chol = np.array([np.linalg.cholesky(np.asarray(e.info, dtype=np.float64)) for e in edges])
     chol_t = np.ascontiguousarray(chol.transpose(0, 2, 1))  # L^T per edge
-    free = np.array([n for n in range(k) if n != anchor])
-    col_of = -np.ones(k, dtype=np.intp)
-    col_of[free] = np.arange(len(free))
-    n_e = len(edges)
-    # Sparsity structure: residual rows 3m..3m+2 of edge m touch the columns of its free nodes.
-    rows = np.broadcast_to(
-        3 * np.arange(n_e)[:, None, None] + np.arange(3)[None, :, None], (n_e, 3, 3)
-    )
-    cols_i = np.broadcast_to(
-        3 * col_of[ii][:, None, None] + np.arange(3)[None, None, :], (n_e, 3, 3)
-    )
-    cols_j = np.broadcast_to(
-        3 * col_of[jj][:, None, None] + np.arange(3)[None, None, :], (n_e, 3, 3)
-    )
-    use_i = np.broadcast_to((col_of[ii] >= 0)[:, None, None], (n_e, 3, 3))
-    use_j = np.broadcast_to((col_of[jj] >= 0)[:, None, None], (n_e, 3, 3))
-    jac_rows = np.concatenate([rows[use_i], rows[use_j]])
-    jac_cols = np.concatenate([cols_i[use_i], cols_j[use_j]])
-    shape = (3 * n_e, 3 * len(free))
+    free, jac_rows, jac_cols, use_i, use_j, shape = _sparsity(k, ii, jj, anchor)
 
     def unpack(v: FloatArray) -> FloatArray:
         x = x0.copy()
@@ -145,3 +148,74 @@ def optimize_pose_graph(
     out = unpack(sol.x)
     out[:, 2] = se2.wrap_angle(out[:, 2])
     return out
+
+
+def dcs_scale(chi2: FloatArray, phi: float) -> FloatArray:
+    """Dynamic covariance scaling (Agarwal, Tipaldi, Spinello, Stachniss & Burgard 2013,
+    "Robust map optimization using dynamic covariance scaling", eq. 15): the factor
+    ``s = min(1, 2 phi / (phi + chi2))`` by which an edge's whitened residual is scaled,
+    from its squared Mahalanobis error ``chi2``: 1 for an edge that fits, ~``sqrt(phi /
+    chi2)`` shrinking towards 0 for one that does not, so that a false loop closure stops
+    pulling on the graph instead of bending it. ``phi`` is in units of ``chi2``."""
+    return np.minimum(1.0, 2.0 * phi / (phi + chi2))
+
+
+def optimize_pose_graph_dcs(
+    poses: ArrayLike,
+    edges: list[Edge],
+    robust: NDArray[np.bool_],
+    phi: float = 1.0,
+    anchor: int = 0,
+    max_iterations: int = 60,
+    tol: float = 1e-6,
+) -> FloatArray:
+    """Optimize node ``poses`` ``(K, 3)`` by Gauss-Newton with dynamic covariance scaling
+    (:func:`dcs_scale`, re-evaluated at every iteration as in Agarwal et al. 2013 §IV) on the
+    ``robust`` edges ``(E,)`` (loop closures; the others, e.g. odometry, stay Gaussian); node
+    ``anchor`` stays fixed.
+
+    ``phi`` is reached by graduated non-convexity (Yang, Antonante, Tzoumas & Carlone 2020):
+    it starts at the largest ``chi2`` of the robust edges -- every closure counts, whatever
+    drift the initial guess carries -- and halves each iteration down to ``phi``, so the
+    closures that disagree with the majority lose their weight as the graph settles, while a
+    true closure far from a drifted initial guess is not dropped at the first step. Stops
+    when ``phi`` is reached and the largest step is below ``tol`` [m, rad]."""
+    from scipy.sparse.linalg import spsolve
+
+    x = np.asarray(poses, dtype=np.float64).reshape(-1, 3).copy()
+    k = len(x)
+    if k < 2 or not edges:
+        return x
+    ii = np.array([e.i for e in edges])
+    jj = np.array([e.j for e in edges])
+    z = np.array([e.z for e in edges], dtype=np.float64)
+    chol_t = np.array([np.linalg.cholesky(np.asarray(e.info, dtype=np.float64)).T for e in edges])
+    robust = np.asarray(robust, dtype=bool)
+    free, jac_rows, jac_cols, use_i, use_j, shape = _sparsity(k, ii, jj, anchor)
+    damping = 1e-9  # keeps the normal equations regular where the graph is weakly tied
+    phi_k = math.inf
+    for _ in range(max_iterations):
+        err = se2.between(x[ii], x[jj]) - z
+        err[:, 2] = se2.wrap_angle(err[:, 2])
+        r = np.einsum("eab,eb->ea", chol_t, err)
+        chi2 = np.einsum("ea,ea->e", r, r)
+        if math.isinf(phi_k):
+            phi_k = max(float(chi2[robust].max()) if robust.any() else phi, phi)
+        else:
+            phi_k = max(0.5 * phi_k, phi)
+        s = np.where(robust, dcs_scale(chi2, phi_k), 1.0)
+        a, b = edge_jacobians(x, ii, jj)
+        wa = s[:, None, None] * (chol_t @ a)
+        wb = s[:, None, None] * (chol_t @ b)
+        jac = csr_matrix(
+            (np.concatenate([wa[use_i], wb[use_j]]), (jac_rows, jac_cols)), shape=shape
+        )
+        rw = (s[:, None] * r).ravel()
+        h = (jac.T @ jac).tocsc()
+        h = h + damping * (abs(h).max() if h.nnz else 1.0) * identity(shape[1], format="csc")
+        dx = spsolve(h, -(jac.T @ rw)).reshape(-1, 3)
+        x[free] += dx
+        x[:, 2] = se2.wrap_angle(x[:, 2])
+        if phi_k <= phi and np.abs(dx).max() < tol:
+            break
+    return x

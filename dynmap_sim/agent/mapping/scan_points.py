@@ -10,12 +10,13 @@ noise (:func:`range_weights`) and thin them to one per cell (:func:`voxel_downsa
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from dynmap_sim import se2
-from dynmap_sim.agent.mapping.scan_points_numba import first_per_cell_mask, scan_points_kernel
-from dynmap_sim.jit import kernel_backend
+from dynmap_sim.jit import compiled
 from dynmap_sim.types import LaserSpec
 
 FloatArray = NDArray[np.float64]
@@ -40,36 +41,47 @@ class BeamDirections:
         return m
 
 
+@compiled
+def _scan_points(
+    ranges_m: FloatArray,
+    cos: FloatArray,
+    sin: FloatArray,
+    range_min_m: float,
+    range_max_m: float,
+    mount: FloatArray,
+    out: FloatArray,
+) -> int:
+    """Points ``out[:k]`` (robot frame) of the ``k`` valid readings (finite, in
+    ``[range_min_m, range_max_m)``), in beam order; ``mount`` is ``(x, y, cos, sin)`` of
+    the laser's mount pose. Returns ``k``."""
+    mx, my, mc, ms = mount[0], mount[1], mount[2], mount[3]
+    k = 0
+    for i in range(ranges_m.shape[0]):
+        r = ranges_m[i]
+        if math.isfinite(r) and r >= range_min_m and r < range_max_m:
+            x = r * cos[i]
+            y = r * sin[i]
+            out[k, 0] = mx + mc * x - ms * y
+            out[k, 1] = my + ms * x + mc * y
+            k += 1
+    return k
+
+
 def scan_points_base(
-    laser: LaserSpec,
-    ranges_m: ArrayLike,
-    beams: BeamDirections | None = None,
-    backend: str = "auto",
+    laser: LaserSpec, ranges_m: ArrayLike, beams: BeamDirections | None = None
 ) -> FloatArray:
     """Valid readings of a scan as points ``(N, 2)`` in the robot (``base_link``) frame.
 
     ``beams`` (the laser's :class:`BeamDirections`, optional) saves recomputing the beam
-    directions for every scan; the points are the same. With ``beams``, ``backend``
-    (:data:`dynmap_sim.jit.KERNEL_BACKENDS`) ``"numba"`` (``"auto"`` when installed) or
-    ``"python"`` computes them in one loop (:func:`.scan_points_numba.scan_points_kernel`),
-    the same values.
+    directions for every scan; the points are the same.
     """
-    r = np.asarray(ranges_m, dtype=np.float64)
-    kernel = scan_points_kernel(backend) if beams is not None else None
-    if kernel is not None and (beams.laser is laser or beams.laser == laser):
-        out = np.empty((len(r), 2))
-        k = kernel(r, beams.cos, beams.sin, float(laser.range_min_m), float(laser.range_max_m),
-                   beams.mount(), out)  # fmt: skip
-        return out[:k]
-    ok = np.isfinite(r) & (r >= laser.range_min_m) & (r < laser.range_max_m)
-    if beams is None:
-        pts = se2.scan_to_points(np.where(ok, r, np.nan), laser.angles())
-    else:
-        rr = r[ok]
-        pts = np.empty((len(rr), 2))
-        np.multiply(rr, beams.cos[ok], out=pts[:, 0])
-        np.multiply(rr, beams.sin[ok], out=pts[:, 1])
-    return se2.transform_points(np.asarray(laser.mount_pose, dtype=np.float64), pts)
+    r = np.ascontiguousarray(ranges_m, dtype=np.float64)
+    if beams is None or not (beams.laser is laser or beams.laser == laser):
+        beams = BeamDirections(laser)
+    out = np.empty((len(r), 2))
+    k = _scan_points(r, beams.cos, beams.sin, float(laser.range_min_m), float(laser.range_max_m),
+                     beams.mount(), out)  # fmt: skip
+    return out[:k]
 
 
 def range_discontinuities(
@@ -145,29 +157,68 @@ def range_weights(points_base: FloatArray, rel_noise: float = 0.01, min_sigma_m:
     return (min_sigma_m / np.maximum(min_sigma_m, rel_noise * r)) ** 2
 
 
-def first_per_cell(points: FloatArray, cell_m: float, backend: str = "auto") -> NDArray[np.intp]:
+#: Most cells of the bounding box for which :func:`_first_per_cell` marks the seen cells in
+#: a dense table (beyond: ``4 * N`` more), instead of sorting the keys.
+_DENSE_CELLS = 1 << 18
+#: Cell indices up to this size keep ``kx * 1,000,003 + ky`` clear of int64 overflow.
+_SAFE_INDEX = 1 << 40
+#: The key's multiplier: cells whose y indices differ by less than this have distinct keys.
+_KEY_STRIDE = 1_000_003
+
+
+@compiled
+def _first_per_cell(px: FloatArray, py: FloatArray, cell_m: float, keep: NDArray[np.bool_]):
+    """``keep[i]``: point ``i`` is the first (lowest index) of its cell key ``kx * 1,000,003
+    + ky`` (``keep`` all False on entry). A small bounding box of cells is marked in a dense
+    table, a large one by a stable sort of the keys."""
+    m = px.shape[0]
+    kxs = np.empty(m, dtype=np.int64)
+    kys = np.empty(m, dtype=np.int64)
+    for i in range(m):
+        kxs[i] = np.int64(math.floor(px[i] / cell_m))
+        kys[i] = np.int64(math.floor(py[i] / cell_m))
+    x0, x1, y0, y1 = kxs.min(), kxs.max(), kys.min(), kys.max()
+    small = max(-x0, x1, -y0, y1) < _SAFE_INDEX
+    if small and y1 - y0 < _KEY_STRIDE and (x1 - x0 + 1) * (y1 - y0 + 1) <= 4 * m + _DENSE_CELLS:
+        ny = y1 - y0 + 1
+        seen = np.zeros((x1 - x0 + 1) * ny, dtype=np.bool_)
+        for i in range(m):
+            c = (kxs[i] - x0) * ny + (kys[i] - y0)
+            if not seen[c]:
+                seen[c] = True
+                keep[i] = True
+        return
+    key = kxs * _KEY_STRIDE + kys
+    order = np.argsort(key, kind="mergesort")
+    for j in range(m):
+        if j == 0 or key[order[j]] != key[order[j - 1]]:
+            keep[order[j]] = True
+
+
+def first_per_cell(points: FloatArray, cell_m: float) -> NDArray[np.intp]:
     """Increasing indices of the first point of each ``cell_m`` square cell of ``points``
-    ``(N, 2)`` (finite). ``backend`` (:data:`dynmap_sim.jit.KERNEL_BACKENDS`): ``"numba"``
-    (``"auto"`` when installed) or ``"python"`` finds them in one loop and a sort
-    (:mod:`.scan_points_numba`), the same indices."""
-    kind = kernel_backend(backend)
-    if kind is not None and len(points):
-        return np.flatnonzero(first_per_cell_mask(points, cell_m, kind == "python"))
-    key = np.floor(points / cell_m).astype(np.int64)
-    _, idx = np.unique(key[:, 0] * 1_000_003 + key[:, 1], return_index=True)
-    return np.sort(idx)
+    ``(N, 2)`` (finite)."""
+    keep = np.zeros(len(points), dtype=bool)
+    if len(points):
+        _first_per_cell(
+            np.ascontiguousarray(points[:, 0], dtype=np.float64),
+            np.ascontiguousarray(points[:, 1], dtype=np.float64),
+            float(cell_m),
+            keep,
+        )
+    return np.flatnonzero(keep)
 
 
 def voxel_downsample(points: FloatArray, voxel_m: float, mean: bool = False) -> FloatArray:
-    """One point per ``voxel_m`` square cell: the first one, or (``mean``) the centroid."""
+    """One point per ``voxel_m`` square cell: the first one (:func:`first_per_cell`), or
+    (``mean``) the centroid."""
     if len(points) == 0:
         return points
-    key = np.floor(points / voxel_m).astype(np.int64)
-    _, idx, inv = np.unique(
-        key[:, 0] * 1_000_003 + key[:, 1], return_index=True, return_inverse=True
-    )
     if not mean:
-        return points[np.sort(idx)]
+        return points[first_per_cell(points, voxel_m)]
+    key = np.floor(points / voxel_m).astype(np.int64)
+    _, inv = np.unique(key[:, 0] * _KEY_STRIDE + key[:, 1], return_inverse=True)
+    inv = inv.reshape(-1)
     cnt = np.bincount(inv)
     cx = np.bincount(inv, weights=points[:, 0]) / cnt
     cy = np.bincount(inv, weights=points[:, 1]) / cnt

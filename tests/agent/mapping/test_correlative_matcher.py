@@ -79,3 +79,30 @@ def test_search_stays_inside_its_window_on_both_sides():
         pts - np.array([0.3, -0.2]), table, np.zeros(3), window_xy_m=0.4, window_theta_rad=0.0
     )
     assert np.allclose(inside.pose, [0.3, -0.2, 0.0]) and inside.score > 0.99
+
+
+@settings(max_examples=10, deadline=None)
+@given(seed=st.integers(0, 10_000), block=st.integers(2, 6))
+def test_best_score_is_the_brute_force_maximum(seed: int, block: int) -> None:
+    """The branch and bound's score is the maximum of the fine score over every pose of the
+    window, each computed plainly as the sum of table lookups of the moved points."""
+    rng = np.random.default_rng(seed)
+    target = rng.uniform(0, 3, (60, 2))
+    table = LikelihoodTable(target, resolution_m=0.1, sigma_m=0.1, margin_m=0.5)
+    pts = target[:40] + rng.normal(0, 0.03, (40, 2))
+    init = np.array([*rng.uniform(-0.2, 0.2, 2), rng.uniform(-0.1, 0.1)])
+    step = 0.02
+    res = correlative_match(pts, table, init, 0.3, 0.06, theta_step_rad=step, block=block,
+                            max_blocks=10**9)  # fmt: skip
+    best = -1.0
+    h, w = table.table.shape
+    for th in init[2] + step * np.arange(-3, 4):
+        c, s = np.cos(th), np.sin(th)
+        moved = pts @ np.array([[c, s], [-s, c]]) + init[:2]
+        ix0, iy0 = table.cell_of(moved)
+        for oy in range(-3, 4):
+            for ox in range(-3, 4):
+                ix = np.clip(ix0 + ox, 0, w - 1)
+                iy = np.clip(iy0 + oy, 0, h - 1)
+                best = max(best, float(table.table[iy, ix].sum()))
+    assert res.score == pytest.approx(best / len(pts), rel=1e-12)

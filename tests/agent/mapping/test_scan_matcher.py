@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -12,17 +13,17 @@ from synthetic_scans import LASER, raycast, room_segments
 from dynmap_sim import se2
 from dynmap_sim.agent.mapping.scan_matcher import (
     PointMap,
-    _newton_step,
-    _sym3_condition,
+    bucket_grid,
+    knn_indices,
     match_scan,
     worst_position_sigma,
 )
-from dynmap_sim.agent.mapping.scan_matcher_numba import (
-    BucketGrid,
-    _icp_terms_py,
-    knn_indices,
-    numba_available,
-    point_normals,
+from dynmap_sim.agent.mapping.scan_matcher_kernels import (
+    IcpParams,
+    ScanArrays,
+    _condition3,
+    icp_terms,
+    solve3,
 )
 
 
@@ -158,14 +159,16 @@ def _reference_match(
     huber_m=0.05,
     min_planarity=0.6,
 ):
-    """The Gauss-Newton loop of the module docstring written plainly: matched points only,
-    LU solves and ``matrix_rank`` -- the reference the vectorized matcher must reproduce."""
+    """The Gauss-Newton loop of the module docstring written plainly with a KD-tree: matched
+    points only, LU solves and ``matrix_rank`` -- the reference the compiled matcher must
+    reproduce."""
+    tree = cKDTree(target.points)
     pose = np.asarray(init, dtype=np.float64).copy()
     for _ in range(max_iterations):
         c, s = np.cos(pose[2]), np.sin(pose[2])
         rp = np.column_stack([c * pts[:, 0] - s * pts[:, 1], s * pts[:, 0] + c * pts[:, 1]])
         world = rp + pose[:2]
-        dist, idx = target.tree.query(world, k=1, distance_upper_bound=max_correspondence_m)
+        dist, idx = tree.query(world, k=1, distance_upper_bound=max_correspondence_m)
         ok = np.isfinite(dist)
         ok[ok] &= target.planarity[idx[ok]] >= min_planarity
         h, g, rmse = np.zeros((3, 3)), np.zeros(3), np.inf
@@ -191,21 +194,9 @@ def _reference_match(
     return pose
 
 
-BACKENDS = [
-    "numpy",
-    pytest.param(
-        "numba",
-        marks=pytest.mark.skipif(
-            not numba_available(), reason="numba (extra 'fast') not installed"
-        ),
-    ),
-]
-
-
-@pytest.mark.parametrize("backend", BACKENDS)
 @settings(max_examples=20, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1), with_prior=st.booleans())
-def test_matcher_reproduces_the_plain_reference(backend, seed, with_prior):
+def test_matcher_reproduces_the_plain_reference(seed, with_prior):
     """Same algorithm as the plain loop (up to round-off): points without a usable
     correspondence add nothing, the closed-form 3x3 solve equals LU."""
     rng = np.random.default_rng(seed)
@@ -219,9 +210,14 @@ def test_matcher_reproduces_the_plain_reference(backend, seed, with_prior):
     kw = {}
     if with_prior:
         kw = {"prior_mean": init, "prior_info": np.diag([400.0, 400.0, 2500.0])}
-    res = match_scan(pts, target, init, backend=backend, **kw)
+    res = match_scan(pts, target, init, **kw)
     ref = _reference_match(pts, target, init, **kw)
     assert np.allclose(res.pose, ref, atol=1e-9)
+
+
+@numba.njit
+def _solve3_compiled(h, g):
+    return solve3(h, g), _condition3(h)
 
 
 def test_gauss_newton_step_closed_form_and_rank_test():
@@ -230,15 +226,18 @@ def test_gauss_newton_step_closed_form_and_rank_test():
         a = rng.normal(size=(3, 3)) * rng.uniform(0.01, 1e4, 3)
         h = a @ a.T
         g = rng.normal(size=3)
-        assert np.allclose(_newton_step(h, g), -np.linalg.solve(h, g), rtol=1e-7, atol=0)
+        step = g.copy()
+        ok, cond = _solve3_compiled(h, step)
+        assert ok
+        assert np.allclose(step, -np.linalg.solve(h, g), rtol=1e-7, atol=0)
         ev = np.linalg.eigvalsh(h)
-        assert _sym3_condition(h) == pytest.approx(ev[0] / ev[-1], rel=1e-6, abs=1e-12)
+        assert cond == pytest.approx(ev[0] / ev[-1], rel=1e-6, abs=1e-12)
     # Rank deficient (all normals alike, no prior): no step, as matrix_rank says.
     j = np.column_stack([np.full(9, 0.6), np.full(9, 0.8), rng.normal(size=9)])
     assert np.linalg.matrix_rank(j.T @ j) < 3
-    assert _newton_step(j.T @ j, np.ones(3)) is None
-    assert _newton_step(np.zeros((3, 3)), np.ones(3)) is None
-    assert _sym3_condition(np.diag([4.0, 2.0, 1.0])) == 0.25
+    assert not _solve3_compiled(j.T @ j, np.ones(3))[0]
+    assert not _solve3_compiled(np.zeros((3, 3)), np.ones(3))[0]
+    assert _solve3_compiled(np.diag([4.0, 2.0, 1.0]), np.ones(3))[1] == 0.25
 
 
 def test_packed_rows_are_zero_for_unusable_points():
@@ -255,26 +254,24 @@ def test_packed_rows_are_zero_for_unusable_points():
 
 @settings(max_examples=30, deadline=None)
 @given(seed=st.integers(0, 2**31 - 1), radius=st.sampled_from([0.05, 0.15, 0.3, 0.5]))
-def test_bucket_grid_kernel_finds_the_kd_tree_neighbour_and_sums(seed, radius):
-    """The compiled loop's correspondences (run here as plain Python) are the KD-tree's, and
-    its sums are the normal equations of the numpy path."""
+def test_icp_terms_find_the_kd_tree_neighbour_and_sums(seed, radius):
+    """The compiled loop's correspondences are a KD-tree's, and its sums the normal
+    equations written with numpy."""
     rng = np.random.default_rng(seed)
     target = PointMap(
         np.concatenate([_dense_points(room_segments(), 0.03), rng.uniform(0, 5, (40, 2))])
     )
     pts = rng.uniform(-1.0, 6.0, (60, 2))
     pw = rng.uniform(0.5, 1.0, 60)
-    packed, usable = target.packed(0.6)
-    grid = BucketGrid.build(target.points, radius)
+    rows = target.packed(0.6)
+    packed, usable = rows
     out = np.empty(10)
     c, s, tx, ty = np.cos(0.3), np.sin(0.3), 0.2, -0.1
-    n = _icp_terms_py(
-        pts[:, 0].copy(), pts[:, 1].copy(), pw, c, s, tx, ty, radius, grid.cell_m, grid.x0,
-        grid.y0, grid.nx, grid.ny, grid.start, grid.order, grid.xs, grid.ys, packed, usable,
-        0.02, out,
-    )  # fmt: skip
+    scan = ScanArrays(pts[:, 0].copy(), pts[:, 1].copy(), pw)
+    params = IcpParams(radius, 0.02, 1e-4, 1.0, 1e-4, 1e-5, 30)
+    n = icp_terms(scan, c, s, tx, ty, target.bucket_grid(radius), rows, params, out)
     world = pts @ np.array([[c, s], [-s, c]]) + [tx, ty]
-    _, idx = target.tree.query(world, k=1, distance_upper_bound=radius)
+    _, idx = cKDTree(target.points).query(world, k=1, distance_upper_bound=radius)
     ok = usable[idx]
     assert n == ok.sum()
     t = packed[idx[ok]]
@@ -288,99 +285,82 @@ def test_bucket_grid_kernel_finds_the_kd_tree_neighbour_and_sums(seed, radius):
     assert out[9] == pytest.approx(float(r @ r), rel=1e-9, abs=1e-15)
 
 
-def test_spread_out_target_falls_back_to_the_kd_tree():
+def test_spread_out_target_gets_coarser_cells():
+    """Points 140 km apart would need billions of 0.3 m cells: the grid's cells grow, and
+    the search stays exact."""
     pts = np.array([[0.0, 0.0], [0.01, 0.0], [0.02, 0.0], [1e5, 1e5], [1e5, 1e5 + 0.01]])
     target = PointMap(pts, k_normal=2)
-    assert target.bucket_grid(0.3) is None
+    grid = target.bucket_grid(0.3)
+    assert grid.cell_m > 0.3 and grid.nx * grid.ny <= 4 * len(pts) + 250_000
     res = match_scan(pts[:3] + [0.001, 0.0], target, np.zeros(3), max_iterations=2)
     assert res.n_matched == 3
 
 
-def test_unknown_backend_is_refused(segments):
-    with pytest.raises(ValueError, match="backend"):
-        match_scan(np.zeros((3, 2)), PointMap(_dense_points(segments)), np.zeros(3), backend="x")
-
-
-@pytest.mark.skipif(not numba_available(), reason="numba (extra 'fast') not installed")
 @settings(max_examples=25, deadline=None)
-@given(seed=st.integers(0, 2**31 - 1), cell=st.sampled_from([0.02, 0.1, 0.5]))
-def test_grid_knn_finds_the_kd_tree_neighbours(seed, cell):
+@given(seed=st.integers(0, 2**31 - 1), n=st.sampled_from([3, 7, 60, 400]))
+def test_grid_knn_finds_the_brute_force_neighbours(seed, n):
     rng = np.random.default_rng(seed)
-    pts = np.concatenate([_dense_points(room_segments(), 0.037), rng.uniform(-3, 8, (30, 2))])
-    pts += rng.normal(0, 1e-4, pts.shape)  # no exactly equal distances
-    idx = knn_indices(BucketGrid.build(pts, cell), 6)
-    d_ref, ref = cKDTree(pts).query(pts, k=6)
+    pts = rng.uniform(-3, 8, (n, 2)) * 10.0 ** rng.integers(-2, 2)
+    k = min(6, n)
+    idx = knn_indices(pts, k)
+    d2 = np.sum((pts[:, None, :] - pts[None, :, :]) ** 2, axis=2)
+    ref = np.argsort(d2, axis=1, kind="stable")[:, :k]  # ties: lower index first
     assert np.array_equal(idx, ref)
-    assert np.all(np.diff(np.hypot(*(pts[idx] - pts[:, None, :]).transpose(2, 0, 1)), axis=1) >= 0)
-    # The normals do not depend on the backend; the KD-tree is built on demand.
-    a, b = PointMap(pts, backend="numba"), PointMap(pts, backend="numpy")
-    assert np.allclose(a.normals, b.normals, atol=1e-12)
-    assert np.allclose(a.planarity, b.planarity, atol=1e-12)
-    assert a.__dict__["_tree"] is None and a.tree.n == len(pts)
 
 
-@pytest.mark.parametrize("backend", BACKENDS)
-def test_rank_deficient_problem_stops_like_the_reference(backend):
+def test_rank_deficient_problem_stops_like_the_reference():
     """One straight wall, no prior: x is unconstrained, ``matrix_rank`` < 3 at once; the
-    compiled loop hands that iteration back to the rank test and stops the same way."""
+    compiled loop stops without a step as the reference does."""
     wall = np.column_stack([np.linspace(-3, 3, 301), np.full(301, 1.0)])
     target = PointMap(wall)
     pts = np.column_stack([np.linspace(-1, 1, 41), np.full(41, 0.97)])
-    res = match_scan(pts, target, np.zeros(3), backend=backend)
+    res = match_scan(pts, target, np.zeros(3))
     ref = _reference_match(pts, target, np.zeros(3))
     assert np.allclose(res.pose, ref, atol=1e-12)
     assert not res.converged and res.n_matched == 41
 
 
-@pytest.mark.parametrize(
-    "backend",
-    [
-        "python",
-        pytest.param(
-            "numba", marks=pytest.mark.skipif(not numba_available(), reason="numba not installed")
-        ),
-    ],
-)
 @pytest.mark.parametrize("seed", range(12))
-def test_bucket_grid_kernel_builds_the_numpy_grid(backend, seed):
-    """BucketGrid.build in one compiled loop (a counting sort) gives the numpy build's arrays
-    (the stable argsort of the cell keys): negative coordinates, points on cell borders,
-    duplicates, a single point."""
+def test_bucket_grid_holds_each_point_in_its_cell(seed):
+    """Each cell's slice holds exactly the points whose ``floor(p / cell)`` is that cell, in
+    index order: negative coordinates, points on cell borders, duplicates, a single point."""
     rng = np.random.default_rng(seed)
     m = 1 if seed == 0 else int(rng.integers(2, 3000))
     cell = float(rng.choice([0.03, 0.05, 0.3, 1.0]))
     pts = rng.uniform(-7.0, 9.0, (m, 2))
     pts[: m // 5] = np.round(pts[: m // 5] / cell) * cell  # on the borders
     pts[m // 5 : m // 4] = pts[: m // 4 - m // 5]  # duplicates
-    ref = BucketGrid.build(pts, cell, backend="numpy")
-    got = BucketGrid.build(pts, cell, backend=backend)
-    for f in ("cell_m", "x0", "y0", "nx", "ny"):
-        assert getattr(ref, f) == getattr(got, f)
-    for f in ("start", "order", "xs", "ys"):
-        a, b = getattr(ref, f), getattr(got, f)
-        assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
+    g = bucket_grid(pts, cell)
+    assert g.cell_m >= cell  # coarser only to bound the number of cells
+    cell = g.cell_m
+    keys = np.floor(pts / cell).astype(np.int64) - [g.x0, g.y0]
+    flat = keys[:, 0] * g.ny + keys[:, 1]
+    assert keys.min() == 0 and keys[:, 0].max() == g.nx - 1 and keys[:, 1].max() == g.ny - 1
+    for k in np.unique(flat):
+        sl = slice(g.start[k], g.start[k + 1])
+        assert np.array_equal(g.order[sl], np.flatnonzero(flat == k))
+        assert np.array_equal(g.xs[sl], pts[g.order[sl], 0])
+        assert np.array_equal(g.ys[sl], pts[g.order[sl], 1])
+    assert g.start[-1] == m
 
 
-@pytest.mark.parametrize(
-    "backend",
-    [
-        "python",
-        pytest.param(
-            "numba", marks=pytest.mark.skipif(not numba_available(), reason="numba not installed")
-        ),
-    ],
-)
 @pytest.mark.parametrize("seed", range(16))
-def test_normals_kernel_gives_the_numpy_normals(backend, seed):
-    """point_normals (one compiled loop) gives PointMap's numpy normals and planarity bit for
-    bit from the same neighbours: 3 to 6 neighbours, lines, duplicates, scattered points."""
+def test_normals_are_the_neighbours_least_principal_axis(seed):
+    """PointMap's normals and planarity against numpy's eigen-decomposition of each point's
+    neighbour covariance: 3 to 6 neighbours, lines, duplicates, scattered points."""
     rng = np.random.default_rng(seed)
-    m = int(rng.choice([3, 4, 5, 6, 7, 50, 400, 2000]))
-    pts = rng.uniform(-7.0, 9.0, (m, 2)) * 10.0 ** rng.integers(-3, 2)
-    pts[: m // 3, 1] = 1.5  # a line
-    pts[m // 3 : m // 2] = pts[: m // 2 - m // 3]  # duplicates
-    ref = PointMap(pts, backend="numpy")
+    m = int(rng.choice([3, 4, 5, 6, 7, 50, 400]))
+    scale = 10.0 ** rng.integers(-2, 2)
+    pts = rng.uniform(-7.0, 9.0, (m, 2)) * scale
+    pts[: m // 3, 1] = 1.5 * scale  # a line
+    pm = PointMap(pts)
     _, idx = cKDTree(pts).query(pts, k=min(6, m))
-    normals, planarity = point_normals(pts, idx, python=backend == "python")
-    assert normals.tobytes() == ref.normals.tobytes()
-    assert planarity.tobytes() == ref.planarity.tobytes()
+    for i in range(m):
+        q = pts[idx[i]] - pts[idx[i]].mean(axis=0)
+        lam, vec = np.linalg.eigh(q.T @ q)
+        tol = 1e-9 * max(lam[1], 1e-300)
+        assert pm.planarity[i] == pytest.approx(
+            1.0 - lam[0] / lam[1] if lam[1] > 1e-12 else 0.0, abs=1e-6
+        )
+        if lam[1] - lam[0] > 1e-6 * lam[1] and lam[1] > tol:  # a defined normal
+            assert abs(abs(pm.normals[i] @ vec[:, 0]) - 1.0) < 1e-6
