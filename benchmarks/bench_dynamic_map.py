@@ -48,7 +48,6 @@ from dynmap_sim.agent.maps.dynamic_map import DynamicMap
 from dynmap_sim.agent.maps.local_map import LocalMap
 from dynmap_sim.agent.maps.sample_set import SampleSets, robust_estimates
 from dynmap_sim.cli import day_range
-from dynmap_sim.jit import numba_available
 from dynmap_sim.types import LaserSpec, Prior
 
 # the synthetic geometry the agent tests use (one exact ray caster, one drifting stream)

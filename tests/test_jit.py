@@ -1,28 +1,24 @@
-"""The kernel choice every ``*_numba`` wrapper makes (:func:`dynmap_sim.jit.pick_kernel`)."""
+"""The project's one kernel decorator: numba's compiled function, with plain Python's result."""
 
-import pytest
+import numpy as np
 
-from dynmap_sim import jit
-from dynmap_sim.jit import pick_kernel
-
-
-def plain() -> str:
-    return "plain"
+from dynmap_sim.jit import compiled, jitable
 
 
-def jitted() -> str:
-    return "jitted"
+@jitable
+def _twice(x: float) -> float:
+    return 2.0 * x
 
 
-def test_the_plain_kernel_when_asked_for_else_the_compiled_one() -> None:
-    assert pick_kernel(plain, jitted, True, "x") is plain
-    assert pick_kernel(plain, None, True, "x") is plain  # no numba needed for the plain one
-    assert pick_kernel(plain, jitted, False, "x") is jitted
+def _sum_twice(a: np.ndarray) -> float:
+    s = 0.0
+    for v in a:
+        s += _twice(v)
+    return s
 
 
-def test_no_compiled_kernel_is_a_clear_error(monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(jit, "numba", None)  # as without the `fast` extra
-    with pytest.raises(
-        RuntimeError, match=r'the numba ray casting needs numba: pip install "dynmap-sim\[fast\]"'
-    ):
-        pick_kernel(plain, None, False, "ray casting")
+def test_a_compiled_kernel_gives_the_plain_functions_result() -> None:
+    kernel = compiled(_sum_twice)
+    a = np.arange(10, dtype=np.float64)
+    assert kernel(a) == _sum_twice(a) == 90.0
+    assert hasattr(kernel, "py_func") and kernel.py_func is _sum_twice  # numba's dispatcher
