@@ -1,11 +1,7 @@
 """The numbers the testbed produces are pinned: a CI scenario's per-day table is byte-identical
-to the one recorded in tests/data/golden/ (first before round 2's reshaping of the engine;
-re-pinned only where a default changed on purpose: 2026-11-27, the first-run front end's
-odometry prior, ``KeyframeSLAMConfig.odom_sigma``; then ``static-mcl`` tuned's see-through
-term, distance filter in the weights and one-bin rule, which move day 2's ``mcl-tuned`` row
-only: mean 0.0085 -> 0.0182 m; then its translation noise ``alpha3`` 0.05 -> 0.02, the same
-row: 0.0182 -> 0.0163 m), and results written by the earlier version are refused by
---resume with a clear message but still report."""
+to the one recorded in tests/data/golden/ (re-pinned only where a change means to move it;
+CHANGELOG.md says when and by how much), and results written by an earlier version are
+refused by --resume with a clear message but still report."""
 
 import shutil
 from pathlib import Path
@@ -23,7 +19,6 @@ DATA = ROOT / "tests" / "data"
 
 
 def test_ci_apartment_mcl_per_day_table_is_pinned(tmp_path):
-    pytest.importorskip("numba", reason="pinned with the `fast` extra (the CI install)")
     scn = load_scenario(ROOT / "worlds" / "scenarios" / "ci-apartment-mcl.toml")
     out = run_experiment(scn, out_dir=tmp_path / "r", progress=False, workers=1)
     with ResultsDB.open(out) as db:
