@@ -3,12 +3,19 @@
 Every subcommand parses its arguments and calls one library function; all logic lives in the
 package. The commands come in groups, one module each: :mod:`.worlds`, :mod:`.experiments`,
 :mod:`.exports` and :mod:`.logs`; :mod:`.arguments` holds the option types they share. Bad
-input files are reported (file, field, message) with exit status 1, never with a traceback.
+input files are reported (file, field, message), never with a traceback.
+
+Exit status (:data:`EXIT_FAILED`, :data:`EXIT_MISUSE`): 0 done; 1 the command ran and the answer
+is no: a ``check`` whose expectations fail, a file ``validate`` refuses, a localizer's own error,
+failed sweep cells or benchmark worlds; 2 misuse or bad input: a bad option (argparse), a file,
+folder or value the command refuses, a path the file system refuses (not found, permissions) or
+a full disk; 130 interrupted.
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
 import sys
 from collections.abc import Sequence
 
@@ -27,6 +34,16 @@ __all__ = [
     "main",
     "seed_list",
 ]
+
+#: Exit status of a command that ran and failed: a check, a localizer, a cell of a sweep.
+EXIT_FAILED = 1
+#: Exit status of misuse or bad input (argparse's too): nothing was run, or it stopped at once.
+EXIT_MISUSE = 2
+#: ``OSError`` numbers that say the user's path is wrong (exit 2), not that the run failed.
+USER_PATH_ERRNOS = frozenset(
+    (errno.ENOENT, errno.ENOTDIR, errno.EISDIR, errno.EACCES, errno.EPERM, errno.EROFS,
+     errno.EEXIST, errno.ENAMETOOLONG, errno.ELOOP)
+)  # fmt: skip
 
 #: The commands in the order ``dynmap-sim --help`` and the CLI reference list them.
 COMMANDS = (
@@ -97,14 +114,14 @@ def main(argv: Sequence[str] | None = None) -> int:
             raise InputError(_disk_full_message(args, exc)) from None
     except InputError as exc:
         print(f"error: {exc}", file=sys.stderr)
-        return 1
+        return EXIT_MISUSE
     except LocalizerError as exc:  # a localizer's own bug: name it, show its traceback
         import traceback
 
         if exc.__cause__ is not None:  # in-process; a worker's traceback is in the message
             traceback.print_exception(exc.__cause__, file=sys.stderr)
         print(f"error: {exc}", file=sys.stderr)
-        return 1
+        return EXIT_FAILED
     except KeyboardInterrupt:
         if args.command == "run":
             print(
@@ -120,7 +137,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
-    except OSError as exc:  # the file system said no (permissions, disk full, ...)
+    except OSError as exc:  # the file system said no (not found, permissions, ...)
         where = f"{exc.filename}: " if exc.filename else ""
         print(f"error: {where}{exc.strerror or exc}", file=sys.stderr)
-        return 1
+        return EXIT_MISUSE if exc.errno in USER_PATH_ERRNOS else EXIT_FAILED

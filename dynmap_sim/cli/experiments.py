@@ -168,7 +168,6 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
         write_leaderboard,
     )
     from dynmap_sim.env_factory import generated_world_toml, generator_kinds
-    from dynmap_sim.errors import InputError
     from dynmap_sim.experiments.benchmark import load_suite, run_benchmark
 
     try:
@@ -194,11 +193,13 @@ def _cmd_benchmark(args: argparse.Namespace) -> int:
         print(f"wrote {path}")
     for line in leaderboard_headline(leaderboard(out)):
         print(line)
-    if not outcome.complete:
-        raise InputError(
-            f"{len(outcome.failed)} of {outcome.n_cells} worlds failed (see "
-            f"{out / 'leaderboard.md'}); the same command retries them"
+    if not outcome.complete:  # a run-time failure, not bad input: exit status 1
+        print(
+            f"error: {len(outcome.failed)} of {outcome.n_cells} worlds failed (see "
+            f"{out / 'leaderboard.md'}); the same command retries them",
+            file=sys.stderr,
         )
+        return 1
     return 0
 
 
