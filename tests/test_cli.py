@@ -29,7 +29,7 @@ def test_validate_scenarios_and_worlds(capsys):
     assert f"{CI}: OK" in out and "apartment.toml: OK" in out
 
 
-def test_bad_scenario_exits_1_with_file_and_field_and_no_traceback(capsys, tmp_path):
+def test_bad_scenario_exits_2_with_file_and_field_and_no_traceback(capsys, tmp_path):
     bad = tmp_path / "scenarios" / "bad.toml"
     bad.parent.mkdir()
     bad.write_text(
@@ -40,7 +40,7 @@ def test_bad_scenario_exits_1_with_file_and_field_and_no_traceback(capsys, tmp_p
         code, out, err = run_cli(
             capsys, cmd, bad, *(["--out", tmp_path / "o"] if cmd != "validate" else [])
         )
-        assert code == 1, (cmd, out, err)
+        assert code == (1 if cmd == "validate" else 2), (cmd, out, err)  # validate: a no
         assert str(bad) in err
         assert "driver.speed_mps" in err and "localizers.0.name" in err
         assert "Traceback" not in err + out
@@ -50,9 +50,9 @@ def test_syntax_error_and_missing_file(capsys, tmp_path):
     bad = tmp_path / "broken.toml"
     bad.write_text('name = "x"\nlocalizers = [\n')
     code, _, err = run_cli(capsys, "run", bad)
-    assert code == 1 and "TOML syntax error" in err and str(bad) in err
+    assert code == 2 and "TOML syntax error" in err and str(bad) in err
     code, _, err = run_cli(capsys, "run", tmp_path / "missing.toml")
-    assert code == 1 and "file not found" in err and "Traceback" not in err
+    assert code == 2 and "file not found" in err and "Traceback" not in err
 
 
 def test_schema_scenario(capsys, tmp_path):
@@ -75,14 +75,14 @@ def test_run_report_export_and_resume(capsys, tmp_path):
     assert float(rows[0]["mean_error_m"]) > 0.0
     # running again into the same folder is refused cleanly; --resume has nothing left to do
     code, _, err = run_cli(capsys, "run", CI, "--days", "1-2", "--out", out, "-q")
-    assert code == 1 and "already holds results" in err and "Traceback" not in err
+    assert code == 2 and "already holds results" in err and "Traceback" not in err
     code, _, err = run_cli(capsys, "run", CI, "--days", "1-2", "--out", out, "-q", "--resume")
     assert code == 0, err
     # resuming with another seed is refused with a clear message
     code, _, err = run_cli(
         capsys, "run", CI, "--days", "1-2", "--seed", "5", "--out", out, "-q", "--resume"
     )
-    assert code == 1 and "seed" in err
+    assert code == 2 and "seed" in err
     # report and export as their own commands
     code, stdout, _ = run_cli(capsys, "report", out)
     assert code == 0 and "summary.md" in stdout
@@ -91,7 +91,7 @@ def test_run_report_export_and_resume(capsys, tmp_path):
     assert (tmp_path / "tum" / "odometry.tum").is_file()
     before = (tmp_path / "tum" / "truth.tum").read_bytes()
     code, _, err = run_cli(capsys, "export", out, "--tum", tmp_path / "tum")  # never silently
-    assert code == 1 and "truth.tum" in err and "--force" in err
+    assert code == 2 and "truth.tum" in err and "--force" in err
     assert (tmp_path / "tum" / "truth.tum").read_bytes() == before
     code, stdout, _ = run_cli(capsys, "export", out, "--tum", tmp_path / "tum", "--force")
     assert (
@@ -102,7 +102,7 @@ def test_run_report_export_and_resume(capsys, tmp_path):
 
 def test_report_on_a_folder_without_results(capsys, tmp_path):
     code, _, err = run_cli(capsys, "report", tmp_path)
-    assert code == 1 and "no results database" in err
+    assert code == 2 and "no results database" in err
 
 
 def test_corrupt_checkpoint_is_refused(capsys, tmp_path):
@@ -115,7 +115,7 @@ def test_corrupt_checkpoint_is_refused(capsys, tmp_path):
         con.execute("UPDATE checkpoint SET blob = x'00112233'")
     con.close()
     code, _, err = run_cli(capsys, "run", CI, "--days", "1-2", "--out", out, "-q", "--resume")
-    assert code == 1 and "corrupt" in err and "Traceback" not in err
+    assert code == 2 and "corrupt" in err and "Traceback" not in err
 
 
 def test_check_passes_and_fails_with_exit_codes(capsys, tmp_path):
@@ -185,13 +185,14 @@ WORLD = ROOT / "worlds" / "apartment.toml"
 
 
 def _one_line_error(capsys, *args):
-    """Run the CLI; assert exit 1 or 2 and no traceback; the last line of stderr."""
+    """Run the CLI; assert exit 2 (validate: 1, its answer) and no traceback; the last line
+    of stderr."""
     try:
         code = main([str(a) for a in args])
     except SystemExit as exc:  # argparse
         code = exc.code
     out, err = capsys.readouterr()
-    assert code in (1, 2), (args, code, out, err)
+    assert code == (1 if args[0] == "validate" else 2), (args, code, out, err)
     assert "Traceback" not in out + err, (args, err)
     return err.strip().splitlines()[-1]
 
@@ -434,3 +435,43 @@ def test_run_ends_with_the_headline_numbers(tmp_path, capsys):
         f"navigation: goal reached in {reached} of {len(nav)} runs{limit}; "
         f"{sum(n.collisions for _, _, n in nav)} collisions"
     )
+
+
+def _strict_check(tmp_path):
+    """A scenario whose expectation no run meets (max error 1 µm over one day)."""
+    text = CI.read_text().replace('world = "apartment"', f'world = "{WORLD}"')
+    path = tmp_path / "strict.toml"
+    path.write_text(
+        text.replace("days = [1, 3]", "days = [1, 1]").replace(
+            "max_error_m = 0.5", "max_error_m = 0.000001"
+        )
+    )
+    return path
+
+
+@pytest.mark.parametrize(
+    "args,status",
+    [
+        (["run", "{tmp}/missing.toml"], 2),  # a file that is not there
+        (["run", CI, "--seed", "x"], 2),  # argparse
+        (["run", CI, "--days", "1-99"], 2),  # outside the world's calendar
+        (["run", CI, "--out", "/dev/null/x", "-q"], 2),  # the file system refuses the path
+        (["check", WORLD], 2),  # a world, not a scenario
+        (["check", "{strict}", "-q", "--out", "{tmp}/o"], 1),  # ran; the expectation fails
+        (["check", "{strict}", "-q", "--out", "{tmp}/o", "--force", "--bogus"], 2),
+        (["report", "{tmp}/nope"], 2),  # no results there
+        (["export", "{tmp}"], 2),  # nothing asked for
+        (["validate", "{tmp}/missing.toml"], 1),  # validate's answer: the file is not valid
+    ],
+)
+def test_exit_status_2_for_misuse_and_1_for_a_failed_check(capsys, tmp_path, args, status):
+    strict = _strict_check(tmp_path)
+    argv = [str(a).replace("{tmp}", str(tmp_path)).replace("{strict}", str(strict)) for a in args]
+    try:
+        code = main(argv)
+    except SystemExit as exc:  # argparse
+        code = exc.code
+    out, err = capsys.readouterr()
+    assert code == status, (argv, out, err)
+    assert "Traceback" not in out + err
+    assert "FAILED" in out if status == 1 and args[0] == "check" else err.strip()

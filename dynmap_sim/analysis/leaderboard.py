@@ -271,6 +271,12 @@ def leaderboard_md(board: Leaderboard) -> str:
     return "\n".join(lines) + "\n"
 
 
+def leaderboard_headline(board: Leaderboard) -> list[str]:
+    """The lines ``dynmap-sim benchmark`` prints when done: ``leaderboard.md`` up to its
+    first section (the title, the bar and the scores table)."""
+    return leaderboard_md(board).split("\n## ")[0].rstrip().split("\n")
+
+
 CSV_COLUMNS = (
     "world", "kind", "localizer", "ate_rmse_m", "max_error_m", "lost_fraction", "jumps",
     "goals_reached", "collisions", "near_misses", "stuck_s", "passes", "wall_s",

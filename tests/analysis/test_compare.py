@@ -92,7 +92,7 @@ def test_cli_prints_the_table_writes_the_csv_and_refuses_bad_folders(
     assert "| mcl | mean_error_m [m] |" in text and f"wrote {out}" in text
     rows = out.read_text().splitlines()
     assert rows[0] == "localizer,measure,day,difference,verdict" and len(rows) > 8
-    assert main(["compare", str(folders["a"]), str(folders["worse"]), "--csv", str(out)]) != 0
+    assert main(["compare", str(folders["a"]), str(folders["worse"]), "--csv", str(out)]) == 2
     assert "already exists" in capsys.readouterr().err  # never overwritten silently
-    assert main(["compare", str(folders["a"]), str(tmp_path / "nothing")]) != 0
+    assert main(["compare", str(folders["a"]), str(tmp_path / "nothing")]) == 2
     assert "not a results folder" in capsys.readouterr().err

@@ -239,13 +239,13 @@ def test_cli_refuses_to_overwrite_and_names_the_extra(
     out = tmp_path / "bag"
     assert main(["export", str(results), "--mcap", str(out), "--day", "1"]) == 0
     assert "/truth/pose 201" in capsys.readouterr().out
-    assert main(["export", str(results), "--mcap", str(out)]) == 1
+    assert main(["export", str(results), "--mcap", str(out)]) == 2
     assert "--force" in capsys.readouterr().err
     assert main(["export", str(results), "--mcap", str(out), "--force"]) == 0
     assert "/truth/pose 402" in capsys.readouterr().out
-    assert main(["export", str(results), "--day", "1"]) == 1
+    assert main(["export", str(results), "--day", "1"]) == 2
     monkeypatch.setitem(sys.modules, "rosbags.rosbag2", None)  # the extra is not installed
-    assert main(["export", str(results), "--mcap", str(tmp_path / "other")]) == 1
+    assert main(["export", str(results), "--mcap", str(tmp_path / "other")]) == 2
     assert 'pip install "dynmap-sim[ros]"' in capsys.readouterr().err
     assert not (tmp_path / "other").exists()
 

@@ -222,13 +222,13 @@ def test_refuses_to_overwrite_without_force(results: Path, tmp_path: Path, capsy
     assert main(["export", str(results), "--parquet", str(out)]) == 0
     assert "scans.parquet: " in capsys.readouterr().out
     before = (out / "scans.parquet").stat().st_mtime_ns
-    assert main(["export", str(results), "--parquet", str(out)]) == 1
+    assert main(["export", str(results), "--parquet", str(out)]) == 2
     err = capsys.readouterr().err
     assert "already exists" in err and "--force" in err
     assert (out / "scans.parquet").stat().st_mtime_ns == before
     assert main(["export", str(results), "--parquet", str(out), "--force"]) == 0
     assert "replaced the earlier file" in capsys.readouterr().out
-    assert main(["export", str(results), "--parquet", str(results)]) == 1
+    assert main(["export", str(results), "--parquet", str(results)]) == 2
     assert "is a results folder" in capsys.readouterr().err
 
 
@@ -239,7 +239,7 @@ def test_missing_extra_is_one_clear_line(
     monkeypatch.delitem(sys.modules, "dynmap_sim.analysis.export_parquet")
     with pytest.raises(ImportError, match=r'pip install "dynmap-sim\[analysis\]"'):
         importlib.import_module("dynmap_sim.analysis.export_parquet")
-    assert main(["export", str(results), "--parquet", str(tmp_path / "x")]) == 1
+    assert main(["export", str(results), "--parquet", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("error: ") and 'pip install "dynmap-sim[analysis]"' in err
     assert "Traceback" not in err and not (tmp_path / "x").exists()

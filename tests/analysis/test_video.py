@@ -111,7 +111,7 @@ def test_an_existing_file_is_replaced_only_with_force(results, tmp_path, capsys)
     out = tmp_path / "run.gif"
     out.write_bytes(b"keep me")
     code, _, err = _cli(capsys, "video", results, "--day", 1, "--run", 1, "-o", out, "-q")
-    assert code == 1 and "exists; pass --force" in err and out.read_bytes() == b"keep me"
+    assert code == 2 and "exists; pass --force" in err and out.read_bytes() == b"keep me"
     args = ("video", results, "--day", 1, "--run", 1, "-o", out, "-q", "--size", 64, "--force")
     code, stdout, err = _cli(capsys, *args)
     assert code == 0, err
@@ -134,7 +134,7 @@ def test_an_existing_file_is_replaced_only_with_force(results, tmp_path, capsys)
 def test_bad_arguments_are_one_line_errors(results, tmp_path, capsys, args, message):
     filled = [str(a).format(tmp=tmp_path) for a in args]
     code, stdout, err = _cli(capsys, "video", results, *filled, "-q")
-    assert code == 1 and stdout == ""
+    assert code == 2 and stdout == ""
     assert err.count("\n") == 1 and err.startswith("error: "), err
     assert message.format(tmp=tmp_path, res=results) in err
     assert list(tmp_path.iterdir()) == []  # nothing written
@@ -142,7 +142,7 @@ def test_bad_arguments_are_one_line_errors(results, tmp_path, capsys, args, mess
 
 def test_a_folder_without_results_is_refused(tmp_path, capsys):
     code, _, err = _cli(capsys, "video", tmp_path, "--day", 1, "--run", 1, "-o", tmp_path / "a.mp4")
-    assert code == 1 and err.count("\n") == 1 and "no results database here" in err
+    assert code == 2 and err.count("\n") == 1 and "no results database here" in err
 
 
 @pytest.mark.parametrize(

@@ -11,6 +11,7 @@ from dynmap_sim.analysis.leaderboard import (
     BAR_ATE_M,
     CSV_COLUMNS,
     leaderboard,
+    leaderboard_headline,
     leaderboard_md,
     write_leaderboard,
 )
@@ -95,6 +96,9 @@ def test_the_leaderboard_ranks_the_localizers_over_the_worlds(bench: Path) -> No
     )  # fmt: skip
     md = leaderboard_md(board)
     assert f"ATE ≤ {BAR_ATE_M} m" in md and "dynmap-sim run " in md and "apartment.toml" in md
+    head = leaderboard_headline(board)  # what the command prints: up to the worst worlds
+    assert head[0] == f"# Leaderboard: {board.name}" and head[-1].startswith("| mcl |")
+    assert md.startswith("\n".join(head))
 
 
 def test_files_are_written_and_a_second_run_resumes_without_running(bench: Path) -> None:

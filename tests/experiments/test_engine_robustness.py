@@ -72,7 +72,7 @@ def test_a_writer_in_another_process_is_refused_and_the_results_stay_intact(tmp_
         assert ready.wait(60)
         path = ROOT / "worlds" / "scenarios" / "ci-apartment.toml"
         for extra in ([], ["--resume"]):
-            assert main(["run", str(path), "--out", str(out), "-q", *extra]) == 1
+            assert main(["run", str(path), "--out", str(out), "-q", *extra]) == 2
             err = capsys.readouterr().err.strip()
             assert len(err.splitlines()) == 1 and "Traceback" not in err
             assert f"{out}: another dynmap-sim process (pid {proc.pid}) is writing" in err
@@ -198,7 +198,7 @@ def test_the_cli_says_the_disk_is_full_in_one_line(tmp_path, monkeypatch, capsys
     path = ROOT / "worlds" / "scenarios" / "ci-apartment.toml"
     out = tmp_path / "o"
     monkeypatch.setattr(CheckpointStore, "write_localizer_files", _full)
-    assert main(["run", str(path), "--out", str(out), "-q"]) == 1
+    assert main(["run", str(path), "--out", str(out), "-q"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "Traceback" not in err
     assert err.startswith("error: the disk is full")
@@ -211,7 +211,7 @@ def test_the_cli_says_the_disk_is_full_in_one_line(tmp_path, monkeypatch, capsys
     assert main(["run", str(path), "--out", str(tmp_path / "r"), "-q"]) == 0
     capsys.readouterr()
     monkeypatch.setattr(Path, "write_text", _full)
-    assert main(["report", str(tmp_path / "r")]) == 1
+    assert main(["report", str(tmp_path / "r")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "the disk is full" in err
     assert "the results are kept" in err and "dynmap-sim report" in err
@@ -263,7 +263,7 @@ def test_the_cli_shows_a_broken_contract_without_a_traceback(tmp_path, capsys):
         f'name = "c"\nworld = "{ROOT / "worlds" / "apartment.toml"}"\ndays = [1, 1]\n'
         '[driver]\nmax_run_s = 2.0\n[[localizers]]\nname = "mine:Bad"\n'
     )
-    assert main(["run", str(s), "--out", str(tmp_path / "o"), "-q", "--workers", "1"]) == 1
+    assert main(["run", str(s), "--out", str(tmp_path / "o"), "-q", "--workers", "1"]) == 2
     err = capsys.readouterr().err.strip()
     assert "Traceback" not in err and len(err.splitlines()) == 1, err
     assert "localizer 'mine:Bad' (mine.Bad) broke the Localizer contract on day 1 run 1" in err

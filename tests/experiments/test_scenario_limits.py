@@ -93,7 +93,7 @@ def test_values_that_crashed_or_hung_run_are_refused_with_file_and_field(
 
 def test_the_cli_refuses_them_in_one_line_before_running(tmp_path, capsys):
     p = scenario(tmp_path, name="../../escape", kidnap=kidnap(time_s="inf"))
-    assert main(["run", str(p), "--out", str(tmp_path / "out"), "-q"]) == 1
+    assert main(["run", str(p), "--out", str(tmp_path / "out"), "-q"]) == 2
     err = capsys.readouterr().err
     assert "Traceback" not in err and "name" in err and "kidnappings.0.time_s" in err
     assert not (tmp_path / "out").exists()

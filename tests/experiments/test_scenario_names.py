@@ -54,7 +54,7 @@ def test_run_with_report_refuses_a_folder_holding_the_users_own_summary(
     out.mkdir()
     (out / "summary.md").write_text("my notes\n")
     scn = str(root / "worlds/scenarios/ci-apartment.toml")
-    assert main(["run", scn, "--days", "1", "--out", str(out), "--report", "-q"]) != 0
+    assert main(["run", scn, "--days", "1", "--out", str(out), "--report", "-q"]) == 2
     assert "summary.md" in capsys.readouterr().err
     assert (out / "summary.md").read_text() == "my notes\n"
     assert not (out / "results.db").exists()  # refused before anything ran

@@ -113,7 +113,7 @@ def test_bad_values_are_one_line_errors_before_anything_runs(tmp_path, capsys, a
             main(argv)
         assert exit_.value.code == 2
     else:
-        assert main(argv) == 1
+        assert main(argv) == 2
     err = capsys.readouterr().err
     assert says in err
     if not says.startswith("argument"):
@@ -257,12 +257,12 @@ def test_a_cell_killed_halfway_resumes_to_the_same_numbers(tiny, tmp_path, capsy
 def test_another_sweep_in_the_same_folder_is_refused(tiny, tmp_path, capsys):
     out, _, _ = tiny
     args = [a if a != "0-1" else "0-2" for a in TINY]
-    assert main([*args, "--out", str(out)]) == 1
+    assert main([*args, "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert "holds another sweep" in err and "choose another --out" in err
     (tmp_path / "x").mkdir()
     (tmp_path / "x" / "notes.txt").write_text("mine")
-    assert main([*TINY, "--out", str(tmp_path / "x")]) == 1
+    assert main([*TINY, "--out", str(tmp_path / "x")]) == 2
     assert "not empty and holds no sweep" in capsys.readouterr().err
 
 

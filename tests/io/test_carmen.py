@@ -210,7 +210,7 @@ def test_replay_seed_draws_the_filters_anew_and_repeats_itself(tmp_path, capsys)
 def test_replay_bad_log_is_a_clean_error(tmp_path, capsys):
     p = tmp_path / "bad.log"
     p.write_text("FLASER nope\n")
-    assert main(["replay", str(p), "--localizer", "static-mcl", "--out", str(tmp_path)]) == 1
+    assert main(["replay", str(p), "--localizer", "static-mcl", "--out", str(tmp_path)]) == 2
     assert "bad.log" in capsys.readouterr().err
 
 
@@ -249,7 +249,7 @@ def test_a_replay_folder_reports_and_exports_like_an_experiment(tmp_path, capsys
     capsys.readouterr()
     # the map from the log's poses: refused when no localizer takes one, else said who does
     only = ["replay", str(p), "--localizer", "odometry", "--map-from-log-poses"]
-    assert main([*only, "--out", str(tmp_path / "m0")]) == 1
+    assert main([*only, "--out", str(tmp_path / "m0")]) == 2
     err = capsys.readouterr().err.strip()
     assert err.count("\n") == 0 and "none of the localizers takes a map (odometry)" in err
     assert not (tmp_path / "m0" / "results.db").exists()
@@ -264,7 +264,7 @@ def test_a_localizer_breaking_its_contract_in_a_replay_is_named(tmp_path, capsys
     p = tmp_path / "loop.log"
     write_log(p)
     monkeypatch.setattr(DeadReckoning, "update", lambda self, odom, scan: None)
-    assert main(["replay", str(p), "--localizer", "odometry", "--out", str(tmp_path / "r")]) == 1
+    assert main(["replay", str(p), "--localizer", "odometry", "--out", str(tmp_path / "r")]) == 2
     err = capsys.readouterr().err.strip()
     assert "Traceback" not in err and err.count("\n") == 0
     assert "localizer 'odometry' (dynmap_sim.agent.dead_reckoning.DeadReckoning) broke" in err

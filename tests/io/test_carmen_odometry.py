@@ -142,7 +142,7 @@ def test_cli_takes_odometry(tmp_path, capsys):
     t, odo = _odometry(10)
     p = _write(tmp_path / "flaser.log", t, odo, odo, [], [])
     args = ["replay", str(p), "--localizer", "odometry", "--out", str(tmp_path / "r")]
-    assert main([*args, "--odometry", "odom-lines"]) == 1
+    assert main([*args, "--odometry", "odom-lines"]) == 2
     assert "odometry: odom-lines: the log has no ODOM lines" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main([*args, "--odometry", "wheels"])

@@ -235,7 +235,7 @@ def test_bad_reference_is_one_line_naming_the_file(tmp_path, capsys, case, messa
         args = ["--reference", str(tmp_path / "far.log")]
     else:
         args = ["--reference-offset", "3"]
-    assert _replay(tmp_path, *args) == 1
+    assert _replay(tmp_path, *args) == 2
     err = capsys.readouterr().err.strip()
     assert "Traceback" not in err and err.count("\n") == 0 and err.startswith("error: ")
     assert message in err

@@ -89,8 +89,8 @@ def test_a_sheet_of_a_1000_day_calendar_samples_the_runs(tmp_path):
 
 
 def _err_line(res):
-    """The one line a failing command prints: no traceback, exit status 1 or 2."""
-    assert res.returncode in (1, 2), (res.returncode, res.stdout, res.stderr)
+    """The one line a refused command prints: no traceback, exit status 2 (bad input)."""
+    assert res.returncode == 2, (res.returncode, res.stdout, res.stderr)
     assert "Traceback" not in res.stderr + res.stdout
     return res.stderr.strip().splitlines()[-1]
 
