@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import operator
 from collections.abc import Iterator, Sequence
+from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
@@ -76,7 +77,14 @@ def _check_args(
 
 
 def _check_parts(lidar_noise: Any, robot: Any, encoder: Any) -> None:
-    """Check the types of :class:`DynMapEnv`'s parts (None: the defaults)."""
+    """Check the types of :class:`DynMapEnv`'s parts (None: the defaults; the lidar noise may
+    also be a dict of :class:`LidarNoise` fields that change the preset's, as ``make_lidar``
+    takes it)."""
+    if isinstance(lidar_noise, dict):
+        unknown = sorted(set(lidar_noise) - {f.name for f in fields(LidarNoise)})
+        if unknown:
+            raise InputError(f"lidar_noise: no LidarNoise field {', '.join(map(repr, unknown))}")
+        lidar_noise = None
     for name, value, cls in (
         ("lidar_noise", lidar_noise, LidarNoise),
         ("robot", robot, RobotParams),
@@ -169,7 +177,8 @@ class DynMapEnv(gymnasium.Env):
     ``world``: ``"lab"``, ``"apartment"``, a path to a world TOML file, or a ``WorldSpec``.
     ``sensor``: ``"urg-04lx"`` or ``"lms200"``; ``sensor_options``: preset overrides passed to
     ``make_lidar`` (e.g. ``{"beams": 181, "mode": "cm", "mount_pose": (0.1, 0, 0)}``);
-    ``lidar_noise``: a ``LidarNoise``. ``people``: False removes all people. ``robot``:
+    ``lidar_noise``: a ``LidarNoise``, or a dict of its fields changing the preset's.
+    ``people``: False removes all people. ``robot``:
     ``RobotParams`` (limits, wheel geometry with UMBmark errors ``E_d``/``E_b``, slip);
     ``encoder``: ``EncoderNoise``. ``dt_s``: step period [s], at most ``MAX_DT_S`` (1 s;
     default the scan period).

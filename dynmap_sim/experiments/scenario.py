@@ -38,7 +38,6 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import re
 import sys
 import tomllib
 from collections.abc import Callable, Sequence
@@ -303,8 +302,8 @@ class Scenario(_Strict):
     name: str = Field(
         min_length=1,
         description="the scenario's name, also its default results folder results/<name>: "
-        "letters, digits and . _ + - (no path separators), at most 100 characters so that "
-        "every file name under it stays within the file system's limits",
+        "no path separators, at most 100 characters so that every file name under it stays "
+        "within the file system's limits",
     )
     description: str = ""
     world: str = Field(description="shipped world name ('lab', 'apartment') or a path")
@@ -322,20 +321,6 @@ class Scenario(_Strict):
     _source: Path | None = PrivateAttr(default=None)
     _world_path: Path | None = PrivateAttr(default=None)
 
-    @field_validator("name")
-    @classmethod
-    def _name_is_a_folder_name(cls, v: str) -> str:
-        if len(v) > MAX_NAME_CHARS:
-            raise ValueError(
-                f"at most {MAX_NAME_CHARS} characters (it names the results folder), not {len(v)}"
-            )
-        if not re.fullmatch(r"[A-Za-z0-9][A-Za-z0-9._+-]*", v):
-            raise ValueError(
-                f"{v!r}: letters, digits and . _ + - only, starting with a letter or digit (it "
-                "names the results folder results/<name>)"
-            )
-        return v
-
     @field_validator("days", mode="before")
     @classmethod
     def _days_before(cls, v: Any) -> Any:
@@ -352,6 +337,11 @@ class Scenario(_Strict):
     @classmethod
     def _name_is_a_file_name(cls, v: str) -> str:
         """The name is the default results folder's name (``results/<name>``)."""
+        if len(v) > MAX_NAME_CHARS:
+            raise ValueError(
+                f"the name is a file name (results go to results/<name>): at most "
+                f"{MAX_NAME_CHARS} characters, not {len(v)}"
+            )
         bad = [c for c in ("/", "\\", "\0") if c in v]
         if bad or v.strip() in (".", "..") or v != v.strip() or any(ord(c) < 32 for c in v):
             raise ValueError(

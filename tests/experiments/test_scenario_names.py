@@ -21,11 +21,9 @@ BASE = {
 @pytest.mark.parametrize(
     ("name", "message"),
     [
-        ("x" * 300, f"name: at most {MAX_NAME_CHARS} characters"),
-        ("../up", "name: '../up': letters, digits"),
-        ("a/b", "name: 'a/b': letters, digits"),
-        ("a b", "name: 'a b': letters, digits"),
-        (".hidden", "name: '.hidden': letters, digits"),
+        ("x" * 300, f"name: the name is a file name .*at most {MAX_NAME_CHARS} characters"),
+        ("../up", "name: the name is a file name .*no path separators"),
+        ("a/b", "name: the name is a file name"),
     ],
 )
 def test_a_name_that_cannot_name_a_folder_is_refused(name: str, message: str) -> None:
