@@ -54,8 +54,16 @@ class ClearanceGrid:
         return self.clearance_m[ij[..., 0], ij[..., 1]]
 
     def segment_clear(self, a: FloatArray, b: FloatArray, min_clearance_m: float) -> bool:
-        """True when every grid cell on the straight line a->b has at least the clearance."""
-        n = max(2, int(np.ceil(np.hypot(*(b - a)) / (0.5 * self.resolution_m))) + 1)
+        """True when every grid cell on the straight line a->b has at least the clearance. A
+        non-finite end is never clear; the samples are capped at four per grid row and column
+        (a segment inside the grid needs at most half that), so an end far off the grid costs
+        no more than the grid itself."""
+        a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+        length = float(np.hypot(*(b - a)))
+        if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b)) and np.isfinite(length)):
+            return False
+        cap = 4 * (self.shape[0] + self.shape[1])
+        n = max(2, int(min(np.ceil(length / (0.5 * self.resolution_m)) + 1.0, cap)))
         pts = a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
         return bool(np.all(self.clearance_at(pts) >= min_clearance_m))
 

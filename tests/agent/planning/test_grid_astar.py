@@ -190,3 +190,18 @@ def test_plan_around_from_behind_a_wall_reaches_the_path_on_the_grid() -> None:
     assert min_clearance_along(out[1:], grid) >= MIN_C - 0.5 * np.sqrt(2) * RES
     crossing = out[np.abs(out[:, 1] - 3.0) < 0.6]  # through the door
     assert crossing.size and np.all((crossing[:, 0] > 4.0) & (crossing[:, 0] < 5.0))
+
+
+@pytest.mark.parametrize(
+    ("far", "clear"),
+    [([np.inf, 0.0], False), ([np.nan, 1.0], False), ([1e308, 1e308], None), ([-1e200, 3.0], None)],
+    ids=str,
+)
+def test_a_segment_to_a_non_finite_or_far_point_never_blows_up(far, clear) -> None:
+    """A non-finite end is never clear; a finite end far off the grid is judged like any
+    point off it (by the edge cells, as :meth:`cell_of` clips), in bounded time."""
+    grid = build_clearance_grid(box(0.0, 0.0, 4.0, 3.0), np.zeros((0, 3)), resolution_m=0.05)
+    inside = np.array([2.0, 1.5])
+    assert grid.segment_clear(inside, inside + [0.5, 0.2], 0.2)
+    got = grid.segment_clear(inside, np.array(far, dtype=float), 0.2)
+    assert isinstance(got, bool) and (clear is None or got is clear)
