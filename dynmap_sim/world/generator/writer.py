@@ -3,13 +3,11 @@ for the same input: fixed key order, floats as Python's shortest round-trip repr
 
 from __future__ import annotations
 
-import datetime as dt
-import json
 import os
 from pathlib import Path
 from typing import Any
 
-import numpy as np
+from dynmap_sim import toml_writer
 
 _TOP = ("name", "description", "bounds")
 _TABLES = ("calendar", "robot")
@@ -19,24 +17,16 @@ _WRAP = 4
 
 
 def _value(v: Any) -> str:
-    if isinstance(v, np.generic):
-        v = v.item()
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, int):
-        return str(v)
-    if isinstance(v, float):
-        return repr(float(v))
-    if isinstance(v, str):
-        return json.dumps(v, ensure_ascii=False)
-    if isinstance(v, dt.date):
-        return v.isoformat()
-    if isinstance(v, list | tuple):
-        if len(v) > _WRAP and all(isinstance(x, list | tuple) for x in v):
-            inner = "".join(f"    {_value(x)},\n" for x in v)
-            return f"[\n{inner}]"
-        return "[" + ", ".join(_value(x) for x in v) + "]"
-    raise TypeError(f"cannot write {type(v).__name__} to TOML")
+    """A TOML value (:func:`dynmap_sim.toml_writer.value`), lists of more than :data:`_WRAP`
+    points one point to a line."""
+    if (
+        isinstance(v, list | tuple)
+        and len(v) > _WRAP
+        and all(isinstance(x, list | tuple) for x in v)
+    ):
+        inner = "".join(f"    {toml_writer.value(x)},\n" for x in v)
+        return f"[\n{inner}]"
+    return toml_writer.value(v)
 
 
 def _lines(d: dict[str, Any]) -> list[str]:
