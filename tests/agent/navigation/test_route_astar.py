@@ -77,6 +77,10 @@ def test_the_start_is_projected_onto_the_nearest_segment():
     assert path.travel_time_s == pytest.approx((3.0 + 4.0) / 0.2)
 
 
+#: Reverse edges are off by default; these tests switch them on at the cost a user would.
+REVERSE = RouteMemoryParams(reverse_cost_factor=1.5)
+
+
 def test_empty_and_unreachable():
     assert plan_route(RouteMemory().graph(), [0, 0], [1, 1]) is None
     directed = RouteMemoryParams(reverse_cost_factor=math.inf)
@@ -101,7 +105,7 @@ def test_a_route_is_driven_backwards_at_its_reverse_cost(factor):
 def test_a_robot_mid_segment_goes_back_along_it_when_that_is_shorter():
     """On the tracked segment the plan may enter the graph backwards at the reverse cost; a
     closer entry (the start waypoint straight ahead of it, at ``v_h``) is cheaper still."""
-    mem = RouteMemory.from_prior([(0.0, 0.0), (10.0, 0.0)], 0.2, 0.35, 0.0, densify=False)
+    mem = RouteMemory.from_prior([(0.0, 0.0), (10.0, 0.0)], 0.2, 0.35, 0.0, REVERSE, densify=False)
     mem.add_route([(0.0, 0.0), (0.0, 5.0)], 0.2, 0.35, 0.0)  # from the start, away
     for start_on, back_s in (((0, 1), 1.5 * 1.0 / 0.2), (None, 1.0 / 0.2)):
         plan = plan_route(mem.graph(), [1.0, 0.0], [0.0, 5.0], start_on=start_on)
@@ -110,7 +114,7 @@ def test_a_robot_mid_segment_goes_back_along_it_when_that_is_shorter():
 
 
 def test_a_block_holds_both_ways():
-    mem = RouteMemory.from_prior(SHORT, 0.2, 0.35, 0.0, densify=False)
+    mem = RouteMemory.from_prior(SHORT, 0.2, 0.35, 0.0, REVERSE, densify=False)
     mem.block((0, 1))
     g = mem.graph()
     costs = {(e.u, e.v): e.travel_time_s for e in g.edges}

@@ -9,6 +9,7 @@ import pytest
 from synthetic_scans import box, raycast
 
 from dynmap_sim import se2
+from dynmap_sim.agent.navigation.routes import RouteMemoryParams
 from dynmap_sim.agent.navigation.stack import LOST, NO_WAY, NavigationStack, StackParams
 from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Prior, Scan
 
@@ -83,7 +84,8 @@ def test_a_route_back_through_a_doorway_it_passed_is_driven_backwards():
         [box(0.0, 0.0, 8.0, 3.0), np.array([[4.0, 0.0, 4.0, 1.0], [4.0, 2.0, 4.0, 3.0]])]
     )
     out = np.array([[1.0, 1.5], [7.0, 1.5]])
-    stack = NavigationStack(LASER, 0.17)
+    reverse = StackParams(route_memory=RouteMemoryParams(reverse_cost_factor=1.5))
+    stack = NavigationStack(LASER, 0.17, reverse)
     stack.begin_run(Prior(np.array([1.0, 1.5, 0.0]), walls=walls, route=out, day=1, run=1))
     pose = drive(stack, walls, [1.0, 1.5, 0.0])
     assert stack.done
