@@ -53,6 +53,7 @@ from dynmap_sim.experiments.sweep import (
     _days_of,
     parse_seeds,
     run_sweep,
+    seeds_text,
 )
 
 #: The benchmark's own record in its folder: the suite it runs and its worlds.
@@ -154,10 +155,6 @@ class Suite:
         return hashlib.sha256(blob.encode()).hexdigest()
 
 
-def _seeds_text(v: str | int | list[int]) -> str:
-    return ",".join(map(str, v)) if isinstance(v, list) else str(v)
-
-
 def load_suite(path: str | Path, kinds: tuple[str, ...] = ()) -> Suite:
     """A suite file (:class:`SuiteFileError` listing every problem with its field).
     ``kinds``: the generator kinds there are (an unknown one is an error of its field)."""
@@ -177,7 +174,7 @@ def load_suite(path: str | Path, kinds: tuple[str, ...] = ()) -> Suite:
         errors.append(("worlds.seeds", "generator kinds need seeds, e.g. '0-5'"))
     elif m.worlds.seeds is not None:
         try:
-            gen_seeds = parse_seeds(_seeds_text(m.worlds.seeds), "worlds.seeds")
+            gen_seeds = parse_seeds(seeds_text(m.worlds.seeds), "worlds.seeds")
         except InputError as exc:
             errors.append(("worlds.seeds", str(exc).removeprefix("worlds.seeds: ")))
     params = tuple(sorted(m.worlds.params.items()))
@@ -197,7 +194,7 @@ def load_suite(path: str | Path, kinds: tuple[str, ...] = ()) -> Suite:
     if len(worlds) > MAX_WORLDS:
         errors.append(("worlds", f"{len(worlds)} worlds; at most {MAX_WORLDS} in one suite"))
     try:
-        run_seeds = parse_seeds(_seeds_text(m.seeds), "seeds")
+        run_seeds = parse_seeds(seeds_text(m.seeds), "seeds")
     except InputError as exc:
         errors.append(("seeds", str(exc).removeprefix("seeds: ")))
         run_seeds = ()

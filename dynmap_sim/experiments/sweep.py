@@ -347,7 +347,7 @@ class _SweepFileModel(BaseModel):
     @field_validator("seeds")
     @classmethod
     def _seeds(cls, v: Any) -> Any:
-        text = ",".join(map(str, v)) if isinstance(v, list) else str(v)
+        text = seeds_text(v)
         try:
             parse_seeds(text, "seeds")
         except InputError as exc:
@@ -360,6 +360,11 @@ class _SweepFileModel(BaseModel):
         if v is not None:
             _days_of(v)
         return v
+
+
+def seeds_text(v: str | int | list[int]) -> str:
+    """A file's ``seeds`` (``'0-3'``, ``7`` or ``[0, 1]``) as :func:`parse_seeds` reads them."""
+    return ",".join(map(str, v)) if isinstance(v, list) else str(v)
 
 
 def _days_of(v: Any) -> tuple[int, int]:
@@ -412,10 +417,9 @@ def load_sweep_file(path: str | Path, load: Any = load_scenario) -> SweepSpec:
         files.append(f)
     if errors:
         raise SweepFileError(p, errors)
-    seeds_text = ",".join(map(str, m.seeds)) if isinstance(m.seeds, list) else str(m.seeds)
     return SweepSpec(
         scenarios=tuple(load(f) for f in files),
-        seeds=parse_seeds(seeds_text, f"{p}: seeds"),
+        seeds=parse_seeds(seeds_text(m.seeds), f"{p}: seeds"),
         days=None if m.days is None else _days_of(m.days),
         settings=tuple(settings),
         only=None if m.localizers is None else tuple(m.localizers),
