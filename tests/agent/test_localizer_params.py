@@ -4,17 +4,27 @@ when it is loaded): a bad value is an error naming the parameter and the value."
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import replace
+from typing import Annotated
 
 import numpy as np
 import pytest
+from pydantic import TypeAdapter
 from synthetic_scans import LASER
 
 from dynmap_sim.agent.localization.dynamic_map_localizer import DynamicMapConfig
 from dynmap_sim.agent.localization.particle_filter import TUNED, MCLConfig, StaticMCL
 from dynmap_sim.agent.localizer import make_localizer
 from dynmap_sim.agent.mapping.first_run import FirstRunConfig
-from dynmap_sim.agent.params import check_fields, coerce_fields
+from dynmap_sim.agent.params import (
+    Fraction,
+    NonNegative,
+    NotNaN,
+    Tuple,
+    int_range,
+    params_dataclass,
+)
+from dynmap_sim.agent.params import build as build_params
 
 
 def build(name, **params):
@@ -100,27 +110,18 @@ def test_the_shipped_configs_and_defaults_pass_and_keep_their_types():
 
 
 def test_one_helper_checks_every_config():
-    @dataclass(frozen=True)
+    @params_dataclass("mine")
     class Cfg:
-        n: int = 3
-        x: float = 1.0
-        share: float = 0.5
-        floor: float = -1.0
-        flags: tuple[bool, ...] = (True,)
+        n: int_range(1, 10) = 3
+        x: NonNegative = 1.0
+        share: Fraction = 0.5
+        floor: NotNaN = -1.0
+        flags: Annotated[tuple[bool, ...], Tuple] = (True,)
+        pair: Annotated[tuple[float, float], Tuple] = (1.0, 2.0)
 
-        def __post_init__(self):
-            coerce_fields(self, "mine")
-            check_fields(
-                self,
-                "mine",
-                positive=("n",),
-                non_negative=("x",),
-                fraction=("share",),
-                not_nan=("floor",),
-                at_most={"n": 10},
-            )
-
-    assert Cfg(n=np.int64(4), x=np.float32(2), floor=-math.inf, flags=[1, 0]).flags == (True, False)
+    cfg = Cfg(n=np.int64(4), x=np.float32(2), floor=-math.inf, flags=[True, False], pair=[1, 2])
+    assert cfg.flags == (True, False) and cfg.pair == (1.0, 2.0) and type(cfg.pair[0]) is float
+    assert type(cfg.n) is int and type(cfg.x) is float and replace(cfg, n=5.0).n == 5
     for kwargs, message in (
         ({"n": 0}, "mine: n must be an integer >= 1, got 0"),
         ({"n": 11}, "mine: n must be an integer >= 1 and <= 10, got 11"),
@@ -131,7 +132,16 @@ def test_one_helper_checks_every_config():
         ({"floor": math.nan}, "mine: floor must be a number (not NaN), got nan"),
         ({"flags": "yes"}, "mine: flags must be a list, got 'yes'"),
         ({"flags": [2]}, "mine: flags must be true or false, got 2"),
-    ):
+        ({"nn": 1, "m": 2}, "mine: unknown parameters ['m', 'nn']; known: flags, floor, n, pair, "
+         "share, x"),
+    ):  # fmt: skip
         with pytest.raises((TypeError, ValueError)) as ei:
             Cfg(**kwargs)
         assert str(ei.value) == message
+    with pytest.raises(ValueError, match="^theirs: n must be an integer >= 1"):
+        build_params(Cfg, {"n": 0}, "theirs")
+    schema = TypeAdapter(Cfg).json_schema()
+    assert schema["additionalProperties"] is False
+    assert schema["properties"]["n"] == {
+        "default": 3, "maximum": 10, "minimum": 1, "title": "N", "type": "integer"
+    }  # fmt: skip

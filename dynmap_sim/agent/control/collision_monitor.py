@@ -36,12 +36,12 @@ which decides separately whether backing up is safe (:mod:`.recovery`).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from dynmap_sim.agent.params import Int, params_dataclass
 from dynmap_sim.jit import compiled
 from dynmap_sim.types import LaserSpec, Scan
 
@@ -51,7 +51,7 @@ FloatArray = NDArray[np.float64]
 PASS, SLOWDOWN, STOP, FOOTPRINT_STOP = "pass", "slowdown", "stop", "footprint_stop"
 
 
-@dataclass(frozen=True)
+@params_dataclass("collision-monitor")
 class CollisionMonitorParams:
     """Tunables (SI units) of :class:`CollisionMonitor`."""
 
@@ -77,7 +77,7 @@ class CollisionMonitorParams:
     slowdown_ratio: float = 0.5
     #: points a zone needs to trigger (nav2: 4 on 360-beam scans; the URG has 683 beams, a
     #: 2 cm table leg at 0.3 m gives ~10, and a lone spurious short return gives 1)
-    min_points: int = 3
+    min_points: Int = 3
 
 
 def scan_points(laser: LaserSpec, ranges_m: ArrayLike) -> FloatArray:

@@ -37,7 +37,6 @@ robot count as obstacles: the scan tells, not the truth).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -49,97 +48,68 @@ from dynmap_sim.agent.control.pure_pursuit import (
     carrot_on_segment,
     pursuit_turn_rate,
 )
-from dynmap_sim.agent.params import check_fields, coerce_fields
+from dynmap_sim.agent.params import Int, NonNegative, Positive, params_dataclass
 from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
 from dynmap_sim.jit import compiled
 
 FloatArray = NDArray[np.float64]
 
 
-@dataclass(frozen=True)
+@params_dataclass("corridor-follower")
 class CorridorFollowerParams:
     """Tunables (SI units) of :class:`CorridorFollower` (H&W §6.3 leave all of them open)."""
 
     #: cruise speed v_max [m/s]
-    speed_mps: float = 0.35
+    speed_mps: Positive = 0.35
     #: the hard clearance (robot radius + safety margin) [m]: no offset may go below it
-    min_clearance_m: float = 0.25
-    max_omega_radps: float = 0.8
+    min_clearance_m: NonNegative = 0.25
+    max_omega_radps: Positive = 0.8
     #: pure-pursuit lookahead [m] (the tour's value: tight tracking of short indoor segments)
-    lookahead_m: float = 0.35
+    lookahead_m: Positive = 0.35
     #: rotate to heading above this heading error to the carrot [rad] (RPP uses 0.785)
-    turn_in_place_rad: float = 0.6
+    turn_in_place_rad: Positive = 0.6
     #: a vertex within this distance is reached [m]
-    goal_tolerance_m: float = 0.12
+    goal_tolerance_m: Positive = 0.12
     #: corridor half-width l where ``set_path`` gets none [m] (H&W's routes in a
     #: doorway-sized apartment)
-    default_half_width_m: float = 0.35
+    default_half_width_m: NonNegative = 0.35
     #: candidate offsets across ``[-l, l]`` (odd, so the base path itself is one)
-    n_offsets: int = 15
+    n_offsets: Int = 15
     #: how far ahead of the robot the offsets are probed [m]: about 3 s at 0.35 m/s, enough to
     #: start moving sideways before a box on the path is reached
-    probe_ahead_m: float = 1.0
+    probe_ahead_m: Positive = 1.0
     #: spacing of the probe points [m] (the grid's usual 5 cm cells)
-    probe_step_m: float = 0.05
+    probe_step_m: Positive = 0.05
     #: clearance beyond which an offset is not better for more room [m] (= the full-speed
     #: clearance of the speed law: more room would not make the robot faster)
-    clearance_enough_m: float = 0.8
+    clearance_enough_m: Positive = 0.8
     #: cost of an offset [m of clearance per m of offset]: back to the path when free
-    offset_cost_per_m: float = 0.3
+    offset_cost_per_m: NonNegative = 0.3
     #: cost of changing the offset [m of clearance per m]: hysteresis (< offset cost, so the
     #: robot still returns to the path)
-    switch_cost_per_m: float = 0.1
+    switch_cost_per_m: NonNegative = 0.1
     #: clearance law: zero speed at ``min_clearance_m``, full speed from this on [m]
-    full_speed_clearance_m: float = 0.8
+    full_speed_clearance_m: Positive = 0.8
     #: the clearance law looks this far ahead along the chosen offset [m]
-    speed_probe_m: float = 0.5
+    speed_probe_m: NonNegative = 0.5
     #: speed floor while a free offset is driven [m/s] (RPP's regulated minimum speed, scaled
     #: to this slower robot): the robot creeps past a box rather than stalling beside it
-    min_speed_mps: float = 0.05
+    min_speed_mps: NonNegative = 0.05
     #: RPP curvature regulation: slower on turns tighter than this radius [m] (RPP's 0.9;
     #: 0: none, as H&W §6.3, whose controller slows for obstacles only)
-    regulated_min_radius_m: float = 0.9
+    regulated_min_radius_m: NonNegative = 0.9
     #: RPP approach regulation: slower within this distance of the path's end [m] ...
-    approach_dist_m: float = 0.6
+    approach_dist_m: Positive = 0.6
     #: ... but at least this [m/s] (RPP's ``min_approach_linear_velocity`` 0.05)
-    approach_min_speed_mps: float = 0.05
+    approach_min_speed_mps: NonNegative = 0.05
     #: the turn rate is ``max(v, this) * curvature`` [m/s], so slow driving still steers
-    min_steering_speed_mps: float = 0.1
+    min_steering_speed_mps: NonNegative = 0.1
 
     def __post_init__(self) -> None:
-        owner = "corridor-follower"
-        coerce_fields(self, owner)
-        check_fields(
-            self,
-            owner,
-            positive=(
-                "speed_mps",
-                "max_omega_radps",
-                "lookahead_m",
-                "turn_in_place_rad",
-                "goal_tolerance_m",
-                "probe_ahead_m",
-                "probe_step_m",
-                "clearance_enough_m",
-                "full_speed_clearance_m",
-                "approach_dist_m",
-            ),
-            non_negative=(
-                "min_clearance_m",
-                "default_half_width_m",
-                "offset_cost_per_m",
-                "switch_cost_per_m",
-                "speed_probe_m",
-                "min_speed_mps",
-                "regulated_min_radius_m",
-                "approach_min_speed_mps",
-                "min_steering_speed_mps",
-            ),
-        )
         if self.n_offsets < 1 or self.n_offsets % 2 == 0:
-            raise ValueError(f"{owner}: n_offsets must be odd and >= 1, got {self.n_offsets}")
+            raise ValueError(f"n_offsets must be odd and >= 1, got {self.n_offsets}")
         if self.full_speed_clearance_m <= self.min_clearance_m:
-            raise ValueError(f"{owner}: full_speed_clearance_m must exceed min_clearance_m")
+            raise ValueError("full_speed_clearance_m must exceed min_clearance_m")
 
 
 def speed_for_clearance(clearance_m: float, p: CorridorFollowerParams) -> float:

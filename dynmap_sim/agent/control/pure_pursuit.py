@@ -11,18 +11,18 @@ speed limit; the turn rate follows the pure-pursuit curvature ``2 sin(alpha) / L
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
 from dynmap_sim.agent.control.controller import Controller, SpeedLimit, register_controller
+from dynmap_sim.agent.params import params_dataclass
 from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
 
 FloatArray = NDArray[np.float64]
 
 
-@dataclass(frozen=True)
+@params_dataclass("pure-pursuit")
 class PurePursuitParams:
     """Tunables (SI units). The speed floors keep the robot moving where a pure product of
     the regulation factors would stall it."""

@@ -53,6 +53,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from dynmap_sim.agent.control.collision_monitor import count_in_box, scan_points
+from dynmap_sim.agent.params import Int, Positive, params_dataclass
 from dynmap_sim.types import LaserSpec, Scan
 
 FloatArray = NDArray[np.float64]
@@ -61,7 +62,7 @@ FloatArray = NDArray[np.float64]
 CYCLE = ("wait", "backup", "replan")
 
 
-@dataclass(frozen=True)
+@params_dataclass("recovery")
 class RecoveryParams:
     """Tunables (SI units) of :class:`Recovery`."""
 
@@ -89,14 +90,14 @@ class RecoveryParams:
     #: the wait behaviour [s] (nav2's ``Wait 5 s``)
     wait_s: float = 5.0
     #: the back-up distance [m] and speed [m/s] (nav2's default tree: 0.3 m at 0.05 m/s)
-    backup_m: float = 0.3
-    backup_mps: float = 0.05
+    backup_m: Positive = 0.3
+    backup_mps: Positive = 0.05
     #: the back-up ends unfinished after ``backup_m / backup_mps`` times this [-]
     backup_time_factor: float = 2.0
     #: the back-up box's half-width beyond the radius [m]
     backup_lateral_margin_m: float = 0.05
     #: returns in the box behind that forbid backing up (one spurious return is tolerated)
-    min_points: int = 2
+    min_points: Int = 2
     #: the blind part of the box behind: "trail" (vouched by the robot's own trail),
     #: "allow" (trusted), "refuse" (never back up into it)
     unknown_behind: str = "trail"
@@ -106,15 +107,13 @@ class RecoveryParams:
     #: a trail point within this of the box's centre line covers it [m]
     trail_lateral_m: float = 0.1
     #: recoveries tried before giving up (nav2's ``number_of_retries`` 6: the cycle twice)
-    max_attempts: int = 6
+    max_attempts: Int = 6
 
     def __post_init__(self) -> None:
         if self.unknown_behind not in ("trail", "allow", "refuse"):
             raise ValueError(
                 f"unknown_behind must be 'trail', 'allow' or 'refuse', got {self.unknown_behind!r}"
             )
-        if self.backup_mps <= 0.0 or self.backup_m <= 0.0:
-            raise ValueError("backup_m and backup_mps must be > 0")
 
 
 @dataclass(frozen=True)

@@ -58,11 +58,12 @@ the short-term memory λ1 learning online.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import replace
+from typing import Annotated, Any
 
 import numpy as np
 from numpy.typing import ArrayLike
+from pydantic import Field
 
 from dynmap_sim import se2
 from dynmap_sim.agent.localization.odometry_calibration import (
@@ -87,7 +88,13 @@ from dynmap_sim.agent.maps.current_map import CurrentMap, SynthesisParams, synth
 from dynmap_sim.agent.maps.dynamic_map import DynamicMap, MapSnapshot
 from dynmap_sim.agent.maps.local_map import TABLE1
 from dynmap_sim.agent.maps.sample_set import to_mm
-from dynmap_sim.agent.params import check_fields, coerce_fields, config_from_params
+from dynmap_sim.agent.params import (
+    NonNegative,
+    NonNegativeInt,
+    Positive,
+    PositiveInt,
+    params_dataclass,
+)
 from dynmap_sim.types import (
     Diagnostic,
     FloatArray,
@@ -163,7 +170,7 @@ def remap_degenerate(
     return out
 
 
-@dataclass(frozen=True)
+@params_dataclass("dynamic-map")
 class DynamicMapConfig:
     """Parameters of the dynamic-map localizer and its static variants (lengths in m,
     angles in rad). A scenario's ``params`` table gives them by name. The measurements behind
@@ -171,46 +178,46 @@ class DynamicMapConfig:
 
     #: Static variants (§5.3): the map freezes after the end of this day ("a snapshot of the
     #: dynamic map after the first day").
-    freeze_after_day: int = 1
+    freeze_after_day: PositiveInt = 1
     #: Local maps within this distance of the pose are the "nearby local maps" of the
     #: current-map synthesis (§4.3 step 1: "4 meters in our experiments").
-    select_radius_m: float = 4.0
+    select_radius_m: Positive = 4.0
     #: Local maps within this distance learn a scan online and offline (§4.4: "< 2.5 m");
     #: with no local map that near, a new one is made.
-    update_radius_m: float = 2.5
+    update_radius_m: Positive = 2.5
     #: The first run's keyframes become the initial local maps (§4), thinned to one per this
     #: distance (the paper's lab: 76 local maps on ~9.6 km / 75 runs of a few-room lab).
-    local_map_spacing_m: float = 2.0
+    local_map_spacing_m: Positive = 2.0
     #: The synthesis selects timescales until fewer readings than this are unexplained
     #: (§4.3 step 5: "20 in our experiments").
-    min_readings: int = 20
+    min_readings: NonNegativeInt = 20
     #: At most this many readings (evenly subsampled) enter the synthesis (0: all): the
     #: selection needs far fewer than a scan's 682 to tell timescales apart, and it is the
     #: most expensive step.
-    max_select_readings: int = 240
+    max_select_readings: NonNegativeInt = 240
     #: Only rays whose estimated standard deviation is at most this become current-map points
     #: (§4.3 step 6: "5 cm in our experiments").
-    sigma_max_m: float = 0.05
+    sigma_max_m: Positive = 0.05
     #: A reading counts as explained when its density ``p(d)`` (eq. 6) is at least this
     #: [1/m] (§4.3 step 4: "a threshold is used here"; 0.5/m: about 3 sigma of a 5 cm ray).
-    explained_density: float = 0.5
+    explained_density: NonNegative = 0.5
     #: Floor of the perceptual model's sigma [m] (eq. 7) (1 cm, the URG-04LX's noise at 1 m;
     #: a ray learned from a few equal samples is not infinitely sharp).
-    sigma_min_m: float = 0.01
+    sigma_min_m: Positive = 0.01
     #: ``C_O`` (§4.3: "a covariance matrix that was acquired experimentally"): standard
     #: deviation in x and y ``odom_sigma_xy0_m + odom_k_xy (d + a/2)`` [m] for a step of ``d``
     #: [m] and turn ``a`` [rad] between two scans; 1 mm: a robot that stands still does not
     #: move ...
-    odom_sigma_xy0_m: float = 0.001
+    odom_sigma_xy0_m: Positive = 0.001
     #: ... with the rate [m per m (+ rad/2)] acquired experimentally for the simulated robots
     #: (§4.3): their odometry's error rate against the truth (:func:`.odometry_error_rates`),
     #: rounded. Eq. 9 takes the match whenever it lies within two standard deviations of the
     #: prediction, so ``C_O`` bounds how far a match may slide a scan along a blank corridor.
-    odom_k_xy: float = 0.008
+    odom_k_xy: NonNegative = 0.008
     #: ... and in theta ``odom_sigma_th0_rad + odom_k_th (a + d/2)`` [rad] ...
-    odom_sigma_th0_rad: float = 0.01
+    odom_sigma_th0_rad: Positive = 0.01
     #: ... (the simulated robots' rate [rad per rad (+ m/2)], as in x and y).
-    odom_k_th: float = 0.055
+    odom_k_th: NonNegative = 0.055
     #: ``C_O`` "acquired experimentally" (§4.3; :mod:`.odometry_calibration`) for a given
     #: map: when the map comes with the poses and odometry of every scan of its run
     #: (:meth:`DynamicMapLocalizer.set_map_from_scans`, e.g. replay's ``--map-from-log-poses``),
@@ -220,23 +227,23 @@ class DynamicMapConfig:
     #: error. False: the rates above, always.
     odom_calibration: bool = True
     #: ... over windows of this many scans (1 s at 10 Hz) ...
-    odom_calibration_window: int = 10
+    odom_calibration_window: PositiveInt = 10
     #: ... taking this quantile of the windows' error rates.
-    odom_calibration_quantile: float = 0.9
+    odom_calibration_quantile: Annotated[Positive, Field(le=1.0)] = 0.9
     #: First non-zero κ of eq. 9 (§4.3 step 4 doubles it from here).
-    kappa0: float = 0.25
+    kappa0: Positive = 0.25
     #: κ of the first match. B&D §4.3: 0, the default (the scan alone; "in most cases the
     #: result from scan matching is so much more exact than odometry that incorporation of
     #: the prior E_O would only worsen the result"). > 0 is not B&D: the odometry prior from
     #: the first match on, doubled from there while the result leaves the two-sigma region,
     #: against the scan's bias along a blank corridor.
-    kappa_first: float = 0.0
+    kappa_first: NonNegative = 0.0
     #: Degenerate directions (not B&D; 0 = off, the paper): where the scan term of the
     #: accepted match constrains the position along a direction only to a standard deviation
     #: over this [m] (the heading marginalized out, :func:`worst_position_sigma`; e.g. along a
     #: corridor whose walls are blank), the match's move along that direction is dropped and
     #: the odometry prediction kept there (Zhang, Kaess & Singh 2016's solution remapping).
-    degenerate_sigma_m: float = 0.0
+    degenerate_sigma_m: NonNegative = 0.0
     #: Odometry whose heading slipped (not B&D; 0 = off, the paper's scheme): when the first
     #: match lies outside the two-sigma region of ``C_O`` and fits the current map this many
     #: times better (:func:`fit_cost`) than the last match eq. 9's doubling κ forced toward
@@ -244,31 +251,31 @@ class DynamicMapConfig:
     #: run again from it. A pose forced toward a heading that slipped (one wheel on a door
     #: sill) fits visibly worse, while the heading is what scan matching gets right even where
     #: its position is weak; 1.25 held the real log it was measured on.
-    slip_fit_ratio: float = 1.25
+    slip_fit_ratio: NonNegative = 1.25
     #: At most this many doublings of κ; if none brings the result within two standard
     #: deviations of the odometry prediction, the prediction is used (0.25 * 2^12 = 1024).
-    max_kappa_doublings: int = 12
+    max_kappa_doublings: NonNegativeInt = 12
     #: At most this many scan points (evenly subsampled) enter ICP.
-    max_match_points: int = 200
+    max_match_points: PositiveInt = 200
     #: ICP correspondence gate [m].
-    max_correspondence_m: float = 0.3
+    max_correspondence_m: Positive = 0.3
     #: ICP iterations per κ.
-    max_iterations: int = 20
+    max_iterations: PositiveInt = 20
     #: Fewer matched points (or current-map points) than this: the prediction is used.
-    min_matched: int = 20
+    min_matched: NonNegativeInt = 20
     #: The current map is thinned to one point per square cell of this side [m] (0: off):
     #: the long-term maps hold several nearly equal points per surface.
-    map_voxel_m: float = 0.05
+    map_voxel_m: NonNegative = 0.05
     #: λ2 learns a uniformly random subset of this many of a run's scans (0: all; §4.4 picks
     #: random measurements anyway, and 1500 scans still hold far more than ``u n`` per ray).
-    ltm_scans_per_run: int = 1500
+    ltm_scans_per_run: NonNegativeInt = 1500
     #: Scans taken before the robot moved this far [m] ...
-    min_update_dist_m: float = 0.0
+    min_update_dist_m: NonNegative = 0.0
     #: ... and turned this much [rad] since the last processed scan get the odometry
     #: prediction only (0: every scan, as in the paper; like AMCL's ``update_min_*``).
-    min_update_angle_rad: float = 0.0
+    min_update_angle_rad: NonNegative = 0.0
     #: λ3-λ5 learn this many random scans of each of the day's runs (0: all).
-    ltm_day_scans_per_run: int = 1500
+    ltm_day_scans_per_run: NonNegativeInt = 1500
     #: Keep a snapshot of λ2-λ5 after each day's learning (for figures like B&D Fig. 9; the
     #: uint16 medians of 3,960 rays: about 8 kB per local map and day).
     day_snapshots: bool = True
@@ -277,34 +284,13 @@ class DynamicMapConfig:
     #: sigma of its scan term at most ``ltm_anchor_max_sigma_m``) and lies more than this [m]
     #: from the match with λ1, its pose is taken: λ1 learns the robot's own scans at its own
     #: estimates, so along a blank corridor nothing else holds the estimate from sliding.
-    ltm_anchor_tol_m: float = 0.0
+    ltm_anchor_tol_m: NonNegative = 0.0
     #: ... (the long-term match must be this good [m] to override; see above).
-    ltm_anchor_max_sigma_m: float = 0.05
+    ltm_anchor_max_sigma_m: NonNegative = 0.05
     #: A ray's first time step takes up to ``n`` measurements (the toy example of §3.5);
     #: False: ``u n`` per step until full, as §3.1 states (λ5 then fills in ~20 days, one
     #: of §5.4's reasons why λ5 is used more and more).
     first_step_fills: bool = False
-
-    def __post_init__(self) -> None:
-        coerce_fields(self, "dynamic-map")
-        check_fields(
-            self,
-            "dynamic-map",
-            positive=(
-                "freeze_after_day", "select_radius_m", "update_radius_m", "local_map_spacing_m",
-                "sigma_max_m", "sigma_min_m", "odom_sigma_xy0_m", "odom_sigma_th0_rad", "kappa0",
-                "max_match_points", "max_correspondence_m", "max_iterations",
-                "odom_calibration_window", "odom_calibration_quantile",
-            ),
-            non_negative=(
-                "min_readings", "max_select_readings", "explained_density", "odom_k_xy",
-                "kappa_first", "degenerate_sigma_m", "slip_fit_ratio", "odom_k_th",
-                "max_kappa_doublings", "min_matched", "map_voxel_m",
-                "ltm_scans_per_run", "min_update_dist_m", "min_update_angle_rad",
-                "ltm_day_scans_per_run", "ltm_anchor_tol_m", "ltm_anchor_max_sigma_m",
-            ),
-            at_most={"odom_calibration_quantile": 1.0},
-        )  # fmt: skip
 
     @property
     def synthesis(self) -> SynthesisParams:
@@ -376,9 +362,7 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
     ) -> None:
         if config is not None and not isinstance(config, DynamicMapConfig):
             raise TypeError(f"{type(self).__name__}: config must be a DynamicMapConfig")
-        cfg = config_from_params(
-            DynamicMapConfig, type(self).__name__, params, config or DynamicMapConfig()
-        )
+        cfg = replace(config or DynamicMapConfig(), **params)
         super().__init__(laser, rng)
         if mode not in _MODES:
             raise ValueError(f"mode must be one of {_MODES}, got {mode!r}")

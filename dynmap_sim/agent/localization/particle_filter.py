@@ -48,11 +48,12 @@ changes afterwards.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, replace
-from typing import Any
+from dataclasses import asdict, replace
+from typing import Annotated, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from pydantic import Field
 
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import OCCUPIED, OccupancyGrid
@@ -80,7 +81,17 @@ from dynmap_sim.agent.localization.see_through import see_through_logp, wall_dep
 from dynmap_sim.agent.localization.verified_recovery import VerifiedRecovery
 from dynmap_sim.agent.localizer import Localizer, MapUser, register_localizer
 from dynmap_sim.agent.maps.map_source import MapSource, PriorWallsMap, make_map_source
-from dynmap_sim.agent.params import check_fields, coerce_fields
+from dynmap_sim.agent.params import (
+    Finite,
+    Fraction,
+    NonNegative,
+    NonNegativeInt,
+    NotNaN,
+    Positive,
+    PositiveInt,
+    int_range,
+    params_dataclass,
+)
 from dynmap_sim.types import Diagnostic, LaserSpec, Odometry, PoseEstimate, Prior, Scan
 
 FloatArray = NDArray[np.float64]
@@ -98,7 +109,7 @@ OCCLUDED_MODES = ("all-beams", "hold")
 MAX_PARTICLES = 1_000_000
 
 
-@dataclass(frozen=True)
+@params_dataclass("static-mcl")
 class MCLConfig:
     """AMCL's parameters with nav2's names, units and defaults (``nav2_params.yaml``,
     ``amcl_node.cpp``), and the rules the ``tuned`` configs add (``recovery_*`` beyond nav2's
@@ -108,62 +119,62 @@ class MCLConfig:
 
     #: Odometry model (:mod:`.motion_model`): rotation noise from rotation (squared
     #: [rad/rad]); nav2's 0.2.
-    alpha1: float = 0.2
+    alpha1: NonNegative = 0.2
     #: ... rotation noise from translation (squared [rad/m]); nav2's 0.2.
-    alpha2: float = 0.2
+    alpha2: NonNegative = 0.2
     #: ... translation noise from translation (squared [m/m]); nav2's 0.2.
-    alpha3: float = 0.2
+    alpha3: NonNegative = 0.2
     #: ... translation noise from rotation (squared [m/rad]); nav2's 0.2.
-    alpha4: float = 0.2
+    alpha4: NonNegative = 0.2
     #: ``likelihood_field`` (AMCL's ``1 + sum p^3``) or ``likelihood_field_prob`` (the product
     #: of the beams, with beam skipping); nav2's default is the first.
     laser_model_type: str = "likelihood_field"
     #: Beams per update, evenly spaced over the scan (:func:`.select_beams`); nav2's 60.
-    max_beams: int = 60
+    max_beams: NonNegativeInt = 60
     #: Distance [m] at which the likelihood field is clipped (the map's ``max_dist_m``); nav2's.
-    laser_likelihood_max_dist: float = 2.0
+    laser_likelihood_max_dist: Positive = 2.0
     #: Readings at or beyond this [m] are ignored (<= 0: the sensor's range); nav2's 100.
-    laser_max_range: float = 100.0
+    laser_max_range: Finite = 100.0
     #: Readings below this [m] are ignored (<= 0: the sensor's minimum); nav2's -1.
-    laser_min_range: float = -1.0
+    laser_min_range: Finite = -1.0
     #: Weight of the Gaussian ("hit") part of the beam model; nav2's 0.5.
-    z_hit: float = 0.5
+    z_hit: NonNegative = 0.5
     #: Weight of the uniform ("random") part, a density of ``z_rand / range_max``; nav2's 0.5.
-    z_rand: float = 0.5
+    z_rand: NonNegative = 0.5
     #: Standard deviation [m] of the hit part; nav2's 0.2.
-    sigma_hit: float = 0.2
+    sigma_hit: Positive = 0.2
     #: Beam skipping (``likelihood_field_prob``): ignore the beams that few particles see near
     #: an obstacle (an unmapped object); off in nav2.
     do_beamskip: bool = False
     #: A particle sees a beam near an obstacle within this distance [m]; nav2's 0.5.
-    beam_skip_distance: float = 0.5
+    beam_skip_distance: Positive = 0.5
     #: A beam is skipped when at most this share of the particles sees it near one; nav2's 0.3.
-    beam_skip_threshold: float = 0.3
+    beam_skip_threshold: Fraction = 0.3
     #: ... unless this share of the beams would be skipped (the filter has likely diverged:
     #: all beams count); nav2's 0.9.
-    beam_skip_error_threshold: float = 0.9
+    beam_skip_error_threshold: Fraction = 0.9
     #: Fewest particles KLD-sampling keeps; nav2's 500.
-    min_particles: int = 500
+    min_particles: PositiveInt = 500
     #: Most particles KLD-sampling keeps (at most :data:`MAX_PARTICLES`); nav2's 2000.
-    max_particles: int = 2000
+    max_particles: int_range(1, MAX_PARTICLES) = 2000
     #: KLD-sampling's bound on the K-L divergence (:mod:`.kld_sampling`); nav2's 0.05.
-    pf_err: float = 0.05
+    pf_err: Annotated[Positive, Field(le=1.0)] = 0.05
     #: KLD-sampling's normal quantile ``z``; nav2's 0.99, which nav2 passes as the quantile
     #: itself (not a probability: :mod:`.kld_sampling`).
-    pf_z: float = 0.99
+    pf_z: Positive = 0.99
     #: Side [m] of the KLD histogram's (and the clusters') bins; AMCL's 0.5 m.
-    kld_cell_m: float = 0.5
+    kld_cell_m: Positive = 0.5
     #: Heading width [rad] of those bins; AMCL's 10 degrees.
-    kld_angle_rad: float = float(np.deg2rad(10.0))
+    kld_angle_rad: Positive = float(np.deg2rad(10.0))
     #: Particles when every draw falls into one KLD bin: ``max`` (nav2's ``pf_resample_limit``)
     #: or ``min`` (Fox 2003, *Probabilistic Robotics* Table 8.4: the bound counts from two
     #: bins on); :mod:`.kld_sampling`.
     kld_one_bin: str = "max"
     #: Smoothing of the slow average ``w_slow`` of the mean weight (Table 8.3 line 10); 0 with
     #: ``recovery_alpha_fast`` 0 is no recovery, nav2's default.
-    recovery_alpha_slow: float = 0.0
+    recovery_alpha_slow: Fraction = 0.0
     #: Smoothing of the fast average ``w_fast`` (Table 8.3 line 11); nav2's 0.
-    recovery_alpha_fast: float = 0.0
+    recovery_alpha_fast: Fraction = 0.0
     #: Reset ``w_slow`` and ``w_fast`` to 0 after injecting random poses, as nav2's ``pf.c``
     #: does (Table 8.3 does not).
     recovery_reset: bool = True
@@ -176,22 +187,22 @@ class MCLConfig:
     recovery_w_avg_per_beam: bool = False
     #: Inject only while ``w_fast / w_ref`` is below this ratio; the probability stays
     #: ``1 - w_fast / w_ref`` (Table 8.3 line 13); nav2's 1 (whenever it is below 1).
-    recovery_ratio_threshold: float = 1.0
+    recovery_ratio_threshold: NonNegative = 1.0
     #: ``w_ref = max(w_slow, exp(recovery_floor_loglik))`` [log per beam] (per-beam mode): lets
     #: a filter that converged wrongly right after global initialization, whose ``w_slow``
     #: starts at the wrong place's low level, inject; nav2: -inf, no floor.
-    recovery_floor_loglik: float = float("-inf")
+    recovery_floor_loglik: NotNaN = float("-inf")
     #: ... and only after this many consecutive filter updates below it; nav2's 1.
-    recovery_min_updates: int = 1
+    recovery_min_updates: PositiveInt = 1
     #: Cap on the injection probability, so that a large unmapped obstacle cannot replace the
     #: correct cluster at once; nav2's 1 (no cap).
-    recovery_max_fraction: float = 1.0
+    recovery_max_fraction: Fraction = 1.0
     #: Readings more than this [m] shorter than the map predicts at the mean particle are left
     #: out of the recovery average (Fox et al. 1999's distance filter, :mod:`.distance_filter`),
     #: so that people and moved furniture do not look like a kidnapping; 0 off (nav2).
-    recovery_distance_filter_m: float = 0.0
+    recovery_distance_filter_m: NonNegative = 0.0
     #: The distance filter applies only when it leaves at least this share of the valid beams.
-    recovery_min_beam_share: float = 0.5
+    recovery_min_beam_share: Fraction = 0.5
     #: A scan the distance filter leaves fewer beams of: ``all-beams`` averages all valid
     #: beams; ``hold`` leaves the averages as they are while the gate is not counting
     #: (``n_low_updates == 0``: such a scan says nothing about the pose) and averages all beams
@@ -201,25 +212,25 @@ class MCLConfig:
     #: ``recovery_through_margin_m`` beyond the map's first occupied cell along the beam (only
     #: a wrong pose or a removed object explains them, Fox et al. 1999 §4.2) is not injected;
     #: 0 off (nav2).
-    recovery_through_max_share: float = 0.0
+    recovery_through_max_share: Fraction = 0.0
     #: How far [m] beyond the map's first occupied cell a reading must end to pass through a
     #: wall: the distance filter's 0.3 m, above a few cells of map error and the half-cell
     #: ray steps.
-    recovery_through_margin_m: float = 0.3
+    recovery_through_margin_m: NonNegative = 0.3
     #: Local resetting (Lenser & Veloso 2000's sensor resetting, drawn around the estimate;
     #: per-beam mode): a share ``1 - w_last / (ratio * w_ref)`` of the draws are poses near the
     #: estimate (``w_last``: this update's per-beam average), to repair an odometry glitch
     #: before the global gate opens; stopped while the gate counts. 0 off (nav2).
-    recovery_local_ratio: float = 0.0
+    recovery_local_ratio: Fraction = 0.0
     #: Cap on the share of local draws per update.
-    recovery_local_max_fraction: float = 0.0
+    recovery_local_max_fraction: Fraction = 0.0
     #: Standard deviation [m] of the local draws around the estimate in x and y.
-    recovery_local_sigma_xy: float = 0.5
+    recovery_local_sigma_xy: NonNegative = 0.5
     #: Standard deviation [rad] of the local draws around the estimate's heading.
-    recovery_local_sigma_theta: float = 0.3
+    recovery_local_sigma_theta: NonNegative = 0.3
     #: Local resets allowed before the fit is back at ``w_ref`` (then global recovery only):
     #: after a kidnapping, local poses only fit the wrong place a little better.
-    recovery_local_max_updates: int = 10
+    recovery_local_max_updates: NonNegativeInt = 10
     #: Where the global recovery's random poses go: ``inject`` (Table 8.3 line 13, nav2's
     #: ``pf.c``) into the one particle set; ``verify`` into a challenger set, a global
     #: localization filter of its own that replaces the tracked set only once its fit is
@@ -227,102 +238,73 @@ class MCLConfig:
     #: verification). Needs ``recovery_w_avg_per_beam``.
     recovery_global: str = "inject"
     #: ``verify``: the challenger's per-beam fit must reach this share of ``w_ref`` ...
-    recovery_accept_ratio: float = 0.7
+    recovery_accept_ratio: Fraction = 0.7
     #: ``verify``: ... for this many consecutive filter updates.
-    recovery_accept_updates: int = 3
+    recovery_accept_updates: NonNegativeInt = 3
     #: Negative information in the sensor update (``likelihood_field_prob``): a particle's
     #: reading that ends ``delta`` more than this [m] beyond the map's first occupied cell along
     #: its beam scores at most the beam model's ``z_hit exp(-(delta - margin)^2 / 2
     #: sigma_hit^2) + z_rand / range_max`` (:mod:`.see_through`), against a cloud sliding
     #: through walls; 0 off (nav2).
-    see_through_margin_m: float = 0.0
+    see_through_margin_m: NonNegative = 0.0
     #: ... except for a reading more than this share of the particles sees through (a removed
     #: object, not a wrong pose): only readings that some particles see through and others do
     #: not tell particles apart.
-    see_through_max_share: float = 0.5
+    see_through_max_share: Fraction = 0.5
     #: Fox et al. 1999's distance filter in the weights too (``likelihood_field_prob``): readings
     #: more than ``recovery_distance_filter_m`` shorter than the map predicts at the mean particle
     #: (a person, a parked bed) are left out of the weights while the gate is not counting (a
     #: short reading can fit a wrong particle well); False: every valid beam (nav2).
     distance_filter_weights: bool = False
     #: Resample every this many filter updates; nav2's 1.
-    resample_interval: int = 1
+    resample_interval: PositiveInt = 1
     #: The filter updates after the odometry moved this far [m] in x or y; nav2's 0.25.
-    update_min_d: float = 0.25
+    update_min_d: NonNegative = 0.25
     #: ... or turned this much [rad]; nav2's 0.2.
-    update_min_a: float = 0.2
+    update_min_a: NonNegative = 0.2
     #: Standard deviation [m] of the initial particles around a given pose in x and y
     #: (without the prior's covariance); nav2's 0.5.
-    init_sigma_xy: float = 0.5
+    init_sigma_xy: NonNegative = 0.5
     #: ... and in heading [rad]; nav2's pi/12.
-    init_sigma_theta: float = float(np.pi / 12.0)
+    init_sigma_theta: NonNegative = float(np.pi / 12.0)
 
     def __post_init__(self) -> None:
-        coerce_fields(self, "static-mcl")
-        check_fields(
-            self,
-            "static-mcl",
-            positive=(
-                "min_particles", "max_particles", "sigma_hit", "beam_skip_distance",
-                "laser_likelihood_max_dist", "pf_err", "pf_z", "kld_cell_m", "kld_angle_rad",
-                "recovery_min_updates", "resample_interval",
-            ),
-            non_negative=(
-                "max_beams", "alpha1", "alpha2", "alpha3", "alpha4", "z_hit", "z_rand",
-                "recovery_ratio_threshold", "recovery_distance_filter_m", "update_min_d",
-                "recovery_local_sigma_xy", "recovery_local_sigma_theta",
-                "recovery_local_max_updates", "recovery_accept_updates",
-                "recovery_through_margin_m", "update_min_a", "init_sigma_xy", "init_sigma_theta",
-                "see_through_margin_m",
-            ),
-            fraction=(
-                "beam_skip_threshold", "beam_skip_error_threshold", "recovery_alpha_slow",
-                "recovery_alpha_fast", "recovery_max_fraction", "recovery_local_ratio",
-                "recovery_local_max_fraction", "recovery_accept_ratio",
-                "recovery_min_beam_share", "recovery_through_max_share", "see_through_max_share",
-            ),
-            finite=("laser_max_range", "laser_min_range"),
-            not_nan=("recovery_floor_loglik",),
-            at_most={"max_particles": MAX_PARTICLES, "pf_err": 1.0},
-        )  # fmt: skip
         if self.min_particles > self.max_particles:
             raise ValueError(
-                f"static-mcl: min_particles ({self.min_particles}) must be <= max_particles "
+                f"min_particles ({self.min_particles}) must be <= max_particles "
                 f"({self.max_particles})"
             )
         if self.kld_one_bin not in ONE_BIN_RULES:
             raise ValueError(
-                f"static-mcl: kld_one_bin must be one of {ONE_BIN_RULES}, got {self.kld_one_bin!r}"
+                f"kld_one_bin must be one of {ONE_BIN_RULES}, got {self.kld_one_bin!r}"
             )
         if self.recovery_global not in GLOBAL_RECOVERY_MODES:
             raise ValueError(
-                f"static-mcl: recovery_global must be one of {GLOBAL_RECOVERY_MODES}, "
+                f"recovery_global must be one of {GLOBAL_RECOVERY_MODES}, "
                 f"got {self.recovery_global!r}"
             )
         if self.recovery_global == "verify" and not self.recovery_w_avg_per_beam:
             raise ValueError(
-                "static-mcl: recovery_global 'verify' compares per-beam fits; it needs "
+                "recovery_global 'verify' compares per-beam fits; it needs "
                 "recovery_w_avg_per_beam = true"
             )
         if self.recovery_occluded not in OCCLUDED_MODES:
             raise ValueError(
-                f"static-mcl: recovery_occluded must be one of {OCCLUDED_MODES}, "
-                f"got {self.recovery_occluded!r}"
+                f"recovery_occluded must be one of {OCCLUDED_MODES}, got {self.recovery_occluded!r}"
             )
         if self.laser_model_type not in LASER_MODELS:
             raise ValueError(
-                f"static-mcl: laser_model_type must be one of {LASER_MODELS}, "
-                f"got {self.laser_model_type!r}"
+                f"laser_model_type must be one of {LASER_MODELS}, got {self.laser_model_type!r}"
             )
         prob = self.laser_model_type == "likelihood_field_prob"
         if (self.see_through_margin_m > 0 or self.distance_filter_weights) and not prob:
             raise ValueError(
-                "static-mcl: see_through_margin_m > 0 and distance_filter_weights rescore "
+                "see_through_margin_m > 0 and distance_filter_weights rescore "
                 "single readings; they need laser_model_type = 'likelihood_field_prob'"
             )
         if self.distance_filter_weights and self.recovery_distance_filter_m <= 0:
             raise ValueError(
-                "static-mcl: distance_filter_weights uses the distance filter's margin; "
+                "distance_filter_weights uses the distance filter's margin; "
                 "it needs recovery_distance_filter_m > 0"
             )
 

@@ -26,13 +26,13 @@ from numpy.typing import ArrayLike, NDArray
 from dynmap_sim.agent.grid import OccupancyGrid
 from dynmap_sim.agent.mapping.keyframe_slam import Keyframe, KeyframeSLAM, KeyframeSLAMConfig
 from dynmap_sim.agent.mapping.loop_closure import LoopClosure, LoopClosureConfig
-from dynmap_sim.agent.params import check_fields, coerce_fields
+from dynmap_sim.agent.params import Positive, build, params_dataclass
 from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Scan
 
 FloatArray = NDArray[np.float64]
 
 
-@dataclass(frozen=True)
+@params_dataclass("mapper_params")
 class FirstRunConfig:
     """Parameters of the first run's SLAM: its two parts and the rendered grid."""
 
@@ -41,31 +41,28 @@ class FirstRunConfig:
     #: Loop closure and pose graph (:class:`~.loop_closure.LoopClosureConfig`).
     loops: LoopClosureConfig = field(default_factory=LoopClosureConfig)
     #: Cell side of the rendered grid [m] (5 cm: the URG-04LX's noise is 1 cm at 1 m).
-    resolution_m: float = 0.05
+    resolution_m: Positive = 0.05
     #: Readings farther than this [m] only clear free space in the grid (the range noise is
     #: 1 % of the range: far hits blur the walls). ``static-mcl`` raises it to the sensor's
     #: range (:func:`~dynmap_sim.agent.maps.map_source.make_map_source`).
-    map_max_hit_range_m: float = 3.0
-
-    def __post_init__(self) -> None:
-        coerce_fields(self, "mapper_params")
-        check_fields(self, "mapper_params", positive=("resolution_m", "map_max_hit_range_m"))
+    map_max_hit_range_m: Positive = 3.0
 
     @classmethod
     def from_params(cls, **params: Any) -> FirstRunConfig:
         """The config of a flat table of field names of this class and its two parts (a
         scenario's ``mapper_params``, e.g. ``{"global_loops": False, "voxel_m": 0.05}``);
         an unknown name is a :class:`TypeError` that lists them."""
+        who = "mapper_params"
         slam = {f.name for f in fields(KeyframeSLAMConfig)}
         loops = {f.name for f in fields(LoopClosureConfig)}
         own = {f.name for f in fields(cls)} - {"slam", "loops"}
         unknown = sorted(set(params) - own - slam - loops)
         if unknown:
             known = ", ".join(sorted(own | slam | loops))
-            raise TypeError(f"mapper_params: unknown parameters {unknown}; known: {known}")
+            raise TypeError(f"{who}: unknown parameters {unknown}; known: {known}")
         return cls(
-            slam=KeyframeSLAMConfig(**{k: v for k, v in params.items() if k in slam}),
-            loops=LoopClosureConfig(**{k: v for k, v in params.items() if k in loops}),
+            slam=build(KeyframeSLAMConfig, {k: params[k] for k in slam & set(params)}, who),
+            loops=build(LoopClosureConfig, {k: params[k] for k in loops & set(params)}, who),
             **{k: v for k, v in params.items() if k in own},
         )
 

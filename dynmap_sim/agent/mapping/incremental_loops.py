@@ -24,19 +24,19 @@ Off by default (``LoopClosureConfig.incremental_loops``; measurements: docs/tuni
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
 from numpy.typing import NDArray
 
 from dynmap_sim import se2
 from dynmap_sim.agent.mapping.pose_graph import Edge, optimize_pose_graph
-from dynmap_sim.agent.params import coerce_fields
+from dynmap_sim.agent.params import Int, Tuple, params_dataclass
 
 FloatArray = NDArray[np.float64]
 
 
-@dataclass(frozen=True)
+@params_dataclass()
 class IncrementalLoopConfig:
     """Parameters of the incremental closure search (lengths in m, angles in rad).
 
@@ -45,24 +45,21 @@ class IncrementalLoopConfig:
 
     #: Search half-window in x and y after driving ``s`` m since the last closure:
     #: ``min(a + b s, cap)`` as ``(a, b, cap)``.
-    drift_window_m: tuple[float, float, float] = (0.3, 0.05, 4.0)
+    drift_window_m: Annotated[tuple[float, float, float], Tuple] = (0.3, 0.05, 4.0)
     #: ... and in theta [rad, rad/m, rad].
-    drift_window_rad: tuple[float, float, float] = (0.1, 0.01, 0.6)
+    drift_window_rad: Annotated[tuple[float, float, float], Tuple] = (0.1, 0.01, 0.6)
     #: A verified closure whose implied correction is within this [m] / [rad] of the
     #: current estimate is accepted at once (it agrees with what is already known).
     accept_m: float = 0.15
     accept_rad: float = 0.05
     #: Otherwise it waits for another verified closure within this many keyframes that
     #: implies the same correction (within ``agree_m`` / ``agree_rad``).
-    confirm_keyframes: int = 20
+    confirm_keyframes: Int = 20
     agree_m: float = 0.25
     agree_rad: float = 0.05
     #: Re-optimize the graph after an accepted closure whose correction exceeds this [m]
     #: (smaller ones are added and optimized with the next).
     reoptimize_m: float = 0.05
-
-    def __post_init__(self) -> None:
-        coerce_fields(self)
 
 
 def incremental_closures(

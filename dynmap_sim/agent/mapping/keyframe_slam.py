@@ -18,6 +18,7 @@ two.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -37,7 +38,7 @@ from dynmap_sim.agent.mapping.scan_points import (
     scan_points_base,
     voxel_downsample,
 )
-from dynmap_sim.agent.params import coerce_fields
+from dynmap_sim.agent.params import Int, Tuple, params_dataclass
 from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Scan
 
 FloatArray = NDArray[np.float64]
@@ -46,7 +47,7 @@ FloatArray = NDArray[np.float64]
 DROP_EDGES = ("none", "isolated", "all")
 
 
-@dataclass(frozen=True)
+@params_dataclass()
 class KeyframeSLAMConfig:
     """Parameters of the scan-to-map front end (lengths in m, angles in rad)."""
 
@@ -57,7 +58,7 @@ class KeyframeSLAMConfig:
     keyframe_angle_rad: float = 0.3
     #: The local map a scan is matched against: the points of the last this many keyframes
     #: (~3.6 m of path at the default spacing): recent, so hardly drifted.
-    local_map_keyframes: int = 12
+    local_map_keyframes: Int = 12
     #: ... plus every keyframe within this distance [m] of the newest one (0: none). Off:
     #: older keyframes nearby carry the drift gathered since, and ICP would follow it.
     local_map_radius_m: float = 0.0
@@ -70,7 +71,7 @@ class KeyframeSLAMConfig:
     #: Keyframe points farther than this from the robot [m] are left out (100: all).
     map_max_range_m: float = 100.0
     #: Neighbours that fit a point's line in point-to-line ICP (:class:`.scan_matcher.PointMap`).
-    k_normal: int = 6
+    k_normal: Int = 6
     #: ICP correspondence gate [m]: the odometry prediction is within a few cm of the truth.
     max_correspondence_m: float = 0.3
     #: Huber threshold of the ICP residuals [m]: twice the range noise (1 cm).
@@ -92,7 +93,7 @@ class KeyframeSLAMConfig:
     #: ``s_xy0`` is paid on every scan and sets how loose the prior is per metre at a given
     #: scan rate: 1 mm keeps the scan-to-map ICP's small forward bias from stretching long
     #: corridors (measurements: docs/tuning/slam.md).
-    odom_sigma: tuple[float, float, float, float, float, float] = (
+    odom_sigma: Annotated[tuple[float, float, float, float, float, float], Tuple] = (
         0.001,
         0.05,
         0.01,
@@ -108,7 +109,7 @@ class KeyframeSLAMConfig:
     #: Leave out readings in space that the scans this many steps earlier saw free (walking
     #: people; :func:`.scan_points.free_space_violations`); ``()`` off. 0.3 s and 0.8 s at
     #: 10 Hz: a walking leg has moved on, the robot has hardly moved.
-    dynamic_filter_lags: tuple[int, ...] = (3, 8)
+    dynamic_filter_lags: Annotated[tuple[Int, ...], Tuple] = (3, 8)
     #: Seed ICP by a correlative search around the odometry prediction (Olson 2009; the
     #: real-time correlative matcher of Hess et al. 2016 §IV, whose result is then the prior
     #: of the fine matcher): half-windows ``(xy [m], theta [rad])``, each widened by the
@@ -116,7 +117,7 @@ class KeyframeSLAMConfig:
     #: ``(0, 0)`` off. Real wheel odometry errs by up to 20 degrees in a step, beyond ICP's
     #: 0.3 m basin; ``seed_verify`` keeps near-exact odometry from being overruled by the
     #: seed's grid (docs/tuning/slam.md).
-    seed_window: tuple[float, float] = (0.3, 0.4)
+    seed_window: Annotated[tuple[float, float], Tuple] = (0.3, 0.4)
     #: The seed's likelihood grid: cell side and Gaussian width [m], and the range [m]
     #: within which map and scan points take part.
     seed_resolution_m: float = 0.1
@@ -131,7 +132,7 @@ class KeyframeSLAMConfig:
     #: (points crossing cell borders), and then the seed moves ICP off a right answer.
     #: With 1, the seed is taken only when it finds a distinctly different pose; not the
     #: default: it also drops the small real corrections, which ``seed_verify`` sorts out.
-    seed_compare_steps: int = 0
+    seed_compare_steps: Int = 0
     #: When the seed replaces the prediction, the odometry prior centred on it gets the
     #: seed's own quantization variance added (uniform over a cell and an angular step:
     #: ``res**2 / 12``, ``step**2 / 12``), so that ICP may refine within the seed's
@@ -151,7 +152,6 @@ class KeyframeSLAMConfig:
     seed_verify: bool = True
 
     def __post_init__(self) -> None:
-        coerce_fields(self)
         if self.drop_edges not in DROP_EDGES:
             raise ValueError(f"drop_edges must be none, isolated or all, got {self.drop_edges!r}")
 

@@ -18,7 +18,7 @@ between them" -- the keyframes of :mod:`.keyframe_slam` and the pose-graph edges
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import Annotated
 
 import numpy as np
 from numpy.typing import NDArray
@@ -34,12 +34,12 @@ from dynmap_sim.agent.mapping.pose_graph import (
 )
 from dynmap_sim.agent.mapping.scan_matcher import MatchResult, PointMap, match_scan
 from dynmap_sim.agent.mapping.scan_points import voxel_downsample
-from dynmap_sim.agent.params import coerce_fields
+from dynmap_sim.agent.params import Int, Tuple, params_dataclass
 
 FloatArray = NDArray[np.float64]
 
 
-@dataclass(frozen=True)
+@params_dataclass()
 class LoopClosureConfig:
     """Parameters of loop closure and the pose graph (lengths in m, angles in rad)."""
 
@@ -48,21 +48,21 @@ class LoopClosureConfig:
     global_loops: bool = True
     #: Keyframes more than this many apart in sequence may close a loop (nearer ones are
     #: sequential neighbours, matched anyway).
-    loop_min_gap: int = 15
+    loop_min_gap: Int = 15
     #: Closures are searched for every this-many-th keyframe (at least 1): neighbouring
     #: keyframes see the same, half of them suffice.
-    loop_stride: int = 2
+    loop_stride: Int = 2
     #: At most this many closure candidates per keyframe, nearest first, from distinct
     #: stretches of the sequence (more than ``2 loop_min_gap`` keyframes apart).
-    loop_candidates: int = 3
+    loop_candidates: Int = 3
     #: Correlative search half-window in x and y: ``min(a + b s, cap)`` [m] for a path length
     #: ``s`` [m] between the two keyframes, as ``(a, b, cap)``: 2.5 % of the path, the drift
     #: the front end may gather, at most 3 m.
-    loop_window_m: tuple[float, float, float] = (0.3, 0.025, 3.0)
+    loop_window_m: Annotated[tuple[float, float, float], Tuple] = (0.3, 0.025, 3.0)
     #: ... and in theta, ``(a, b, cap)`` [rad, rad/m, rad].
-    loop_window_rad: tuple[float, float, float] = (0.05, 0.004, 0.5)
+    loop_window_rad: Annotated[tuple[float, float, float], Tuple] = (0.05, 0.004, 0.5)
     #: A closure's target is the submap of keyframes ``j +- loop_submap_half``.
-    loop_submap_half: int = 4
+    loop_submap_half: Int = 4
     #: Least correlative score (share of points on the submap) of a closure candidate.
     loop_min_score: float = 0.45
     #: Largest position standard deviation [m] of a verified closure's ICP pose: rejects
@@ -77,7 +77,7 @@ class LoopClosureConfig:
     loop_min_overlap: float = 0.35
     #: At most this many earlier keyframes per keyframe get a pairwise ICP edge (spread over
     #: the sequence).
-    max_neighbours: int = 8
+    max_neighbours: Int = 8
     #: Huber threshold [m] of the edges' ICP (2 cm, as the front end).
     edge_huber_m: float = 0.02
     #: > 0: a pairwise edge's information is the ICP's own divided by this factor (weakly
@@ -88,10 +88,16 @@ class LoopClosureConfig:
     #: ``(s_xy0, k_xy_d, s_th0, k_th_d, k_th_a)``: ``sigma_xy = s_xy0 + k_xy_d d`` [m],
     #: ``sigma_th = s_th0 + k_th_d d + k_th_a |a|`` [rad] (the front end drifts ~3 % of the
     #: distance).
-    seq_sigma: tuple[float, float, float, float, float] = (0.01, 0.03, 0.005, 0.02, 0.02)
+    seq_sigma: Annotated[tuple[float, float, float, float, float], Tuple] = (
+        0.01,
+        0.03,
+        0.005,
+        0.02,
+        0.02,
+    )
     #: Rounds of pairwise ICP edges + robust optimization after the global closures (one:
     #: the same quality as two in half the back-end time).
-    graph_rounds: int = 1
+    graph_rounds: Int = 1
     #: Close loops keyframe by keyframe with a window that grows with the path since the
     #: last closure (:mod:`.incremental_loops`) instead of once over the whole drift.
     incremental_loops: bool = False
@@ -111,13 +117,12 @@ class LoopClosureConfig:
     #: Closures are compared for consistency when both their ends lie within this many
     #: keyframes (~12 m of path at the default spacing): the legs between them are short
     #: enough for the front end's drift to be small.
-    consistency_window: int = 40
+    consistency_window: Int = 40
     #: The consistency test's bound in standard deviations of the legs' drift
     #: (``seq_sigma``); 3: a true pair passes with ~99 % probability per direction.
     consistency_gate: float = 3.0
 
     def __post_init__(self) -> None:
-        coerce_fields(self)
         if self.robust_kernel not in ("dcs", "huber"):
             raise ValueError(f"robust_kernel must be dcs or huber, got {self.robust_kernel!r}")
         object.__setattr__(self, "loop_stride", max(1, self.loop_stride))

@@ -19,6 +19,7 @@ from typing import Any, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from dynmap_sim.agent.params import params_dataclass
 from dynmap_sim.agent.planning.route_graph import (
     JOIN,
     Edge,
@@ -43,7 +44,7 @@ WAYPOINT_FIELDS: tuple[str, ...] = (
 )
 
 
-@dataclass(frozen=True)
+@params_dataclass("route-memory")
 class RouteMemoryParams:
     """Everything H&W §5 leaves open, with a default and the reason for it.
 

@@ -2,29 +2,39 @@
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, field
 from typing import Any
+
+from pydantic import ValidationInfo, field_validator
 
 from dynmap_sim.agent.control.collision_monitor import CollisionMonitorParams
 from dynmap_sim.agent.control.corridor_follower import CorridorFollowerParams
 from dynmap_sim.agent.control.recovery import RecoveryParams
 from dynmap_sim.agent.navigation.routes import RouteMemoryParams
-from dynmap_sim.agent.params import config_from_params
+from dynmap_sim.agent.params import Int, NonNegative, ParamError, Positive, build, params_dataclass
 from dynmap_sim.agent.planning.costmap import CostmapParams
 
+#: The parts' parameter classes by :class:`StackParams` field.
+PART_PARAMS: dict[str, type] = {
+    "route_memory": RouteMemoryParams,
+    "costmap": CostmapParams,
+    "follower": CorridorFollowerParams,
+    "monitor": CollisionMonitorParams,
+    "recovery": RecoveryParams,
+}
 
-@dataclass(frozen=True)
+
+@params_dataclass("StackParams")
 class StackParams:
     """Every choice of :class:`NavigationStack`, with the reason for its default (SI units)."""
 
     #: Cruise speed [m/s]: the corridor follower's and the prior route's ``v_max``. 0.35 m/s is
     #: the follower's (and the tour operator's) pace; H&W's Roomba drove ≈ 0.2-0.3 m/s.
-    speed_mps: float = 0.35
+    speed_mps: Positive = 0.35
     #: Corridor half-width ``l`` of the prior's route [m]: the route memory's width for
     #: recorded routes (a ≈ 1.2 m doorway minus a 0.4 m robot leaves ± 0.35 m).
-    route_half_width_m: float = 0.35
+    route_half_width_m: Positive = 0.35
     #: Hard clearance = robot radius + this [m], for the follower and grid A*: 5 cm covers
     #: the costmap's cell size, so no plan or offset touches an inflated obstacle cell.
     safety_margin_m: float = 0.05
@@ -33,11 +43,11 @@ class StackParams:
     preferred_margin_m: float = 0.15
     #: Planning period [s] (nav2's behaviour tree replans at 1 Hz): route A*, the cut check,
     #: the unblock check. Also the least time between two global replans on ``blocked``.
-    replan_period_s: float = 1.0
+    replan_period_s: Positive = 1.0
     #: The goal is reached when the estimate is this close [m]: above the follower's vertex
     #: tolerance (0.12 m) so its stop at the path's end counts, below the env's 0.3 m so the
     #: true pose is within the env's tolerance with a 0.1 m localization error.
-    goal_tolerance_m: float = 0.2
+    goal_tolerance_m: Positive = 0.2
     #: A loop route ends at its start: the goal counts only after the robot has been this far
     #: from it [m] (also while it is nearer, planning leaves the goal: no zero-length plan).
     goal_arm_m: float = 1.0
@@ -50,7 +60,7 @@ class StackParams:
     #: recorded route could cut off with profit, and longer than a block the robot must go
     #: round (a via point there is passed by the rule below). The paper's routes had a start
     #: and an end (§7.1).
-    loop_via_spacing_m: float = 5.0
+    loop_via_spacing_m: NonNegative = 5.0
     #: A via point is passed when the estimate comes this close [m] (wider than the goal's
     #: tolerance: a via point only fixes the way round, a detour may pass it aside), when the
     #: robot is tracked on the prior route beyond it (a detour round a block rejoined after
@@ -72,7 +82,7 @@ class StackParams:
     #: are not looked at): the follower's speed law and offset choice saturate at 0.8 m.
     local_margin_m: float = 0.8
     #: Lateral samples across the corridor of the cut check (odd: the centre line is one).
-    cut_offsets: int = 9
+    cut_offsets: Int = 9
     #: Corridor half-width of a grid detour's own vertices [m]: grid A* already keeps the
     #: hard clearance, so a little room suffices for reactive avoidance (a person) while the
     #: robot stays on the planned way through a gap.
@@ -98,7 +108,7 @@ class StackParams:
     #: by more than a doorway's width (≈ 1 m) cannot tell which doorway it stands in, so a
     #: goal it fails to reach then is put down to the localizer (the ``lost`` and
     #: ``unreachable`` events).
-    lost_std_m: float = 1.0
+    lost_std_m: Positive = 1.0
     #: Tunables of the parts; the stack sets the robot radius, speed and hard clearance. A
     #: scenario gives them as tables (``[driver.params.follower]``): a mapping becomes the
     #: part's dataclass, an unknown key is an error that lists the known ones.
@@ -108,48 +118,25 @@ class StackParams:
     monitor: CollisionMonitorParams = field(default_factory=CollisionMonitorParams)
     recovery: RecoveryParams = field(default_factory=RecoveryParams)
 
+    @field_validator(*PART_PARAMS, mode="before")
+    @classmethod
+    def _part(cls, value: Any, info: ValidationInfo) -> Any:
+        """A part's table (a mapping) as the part's dataclass; its errors name the table."""
+        if not isinstance(value, Mapping):
+            return value
+        owner = f"StackParams.{info.field_name}"
+        fixed = sorted(set(value) & set(SET_BY_STACK.get(str(info.field_name), ())))
+        if fixed:
+            raise ParamError(
+                f"{owner}: {', '.join(fixed)} set by the stack (the cruise speed, robot "
+                "radius and safety_margin_m), not by the part's table"
+            )
+        return build(PART_PARAMS[str(info.field_name)], value, owner)
+
     def __post_init__(self) -> None:
-        for f in fields(self):
-            value = getattr(self, f.name)
-            if f.name in PART_PARAMS and isinstance(value, Mapping):
-                owner = f"StackParams.{f.name}"
-                fixed = sorted(set(value) & set(SET_BY_STACK.get(f.name, ())))
-                if fixed:
-                    raise ValueError(
-                        f"{owner}: {', '.join(fixed)} set by the stack (the cruise speed, robot "
-                        "radius and safety_margin_m), not by the part's table"
-                    )
-                part = config_from_params(PART_PARAMS[f.name], owner, value)
-                object.__setattr__(self, f.name, part)
-        for name in (
-            "speed_mps",
-            "route_half_width_m",
-            "replan_period_s",
-            "goal_tolerance_m",
-            "lost_std_m",
-        ):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0.0):
-                raise ValueError(f"StackParams.{name} must be finite and > 0, got {v!r}")
-        if not (math.isfinite(self.loop_via_spacing_m) and self.loop_via_spacing_m >= 0.0):
-            raise ValueError(
-                f"StackParams.loop_via_spacing_m must be finite and >= 0, got "
-                f"{self.loop_via_spacing_m!r}"
-            )
         if self.cut_offsets < 1 or self.cut_offsets % 2 == 0:
-            raise ValueError(
-                f"StackParams.cut_offsets must be odd and >= 1, got {self.cut_offsets}"
-            )
+            raise ValueError(f"cut_offsets must be odd and >= 1, got {self.cut_offsets}")
 
-
-#: The parts' parameter classes by :class:`StackParams` field.
-PART_PARAMS: dict[str, type] = {
-    "route_memory": RouteMemoryParams,
-    "costmap": CostmapParams,
-    "follower": CorridorFollowerParams,
-    "monitor": CollisionMonitorParams,
-    "recovery": RecoveryParams,
-}
 
 #: The fields of a part's parameters that the stack sets (from its own speed, the robot's
 #: radius and the hard clearance) and so a scenario's table may not.

@@ -38,13 +38,13 @@ and columns x.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import OCCUPIED, UNKNOWN, OccupancyGrid
+from dynmap_sim.agent.params import Positive, PositiveInt, params_dataclass
 from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
 from dynmap_sim.agent.planning.costmap_kernels import (
     GridFrame,
@@ -59,11 +59,11 @@ FloatArray = NDArray[np.float64]
 IntArray = NDArray[np.int64]
 
 
-@dataclass(frozen=True)
+@params_dataclass("costmap")
 class CostmapParams:
     """Tunables of :class:`Costmap` (nav2 ``costmap_2d`` names where they exist)."""
 
-    resolution_m: float = 0.05
+    resolution_m: Positive = 0.05
     """Cell size [m]. H&W's replanning grid and the agent's maps use 5 cm (nav2's
     default); a 0.8 m doorway is 16 cells wide, enough for a 0.2 m robot radius."""
 
@@ -84,7 +84,7 @@ class CostmapParams:
     this range [m] (nav2 ``inf_is_valid``); 0 disables it, for a laser that also returns
     nothing from black or glossy surfaces."""
 
-    max_persistence_scans: int = 3
+    max_persistence_scans: PositiveInt = 3
     """A mark survives up to this many scans that see through its cell: one scan that saw it
     once clears it (a person who left), a mark seen in several scans outlives a few grazing
     or noisy beams (nav2 keeps marks until a single ray clears them)."""
@@ -104,14 +104,6 @@ class CostmapParams:
     covers when the prior has neither bounds nor walls (a first run without a map): 20 m x
     20 m holds a flat or a lab floor (the apartment is 8 m x 10 m); 441 x 441 cells, 0.2 MB a
     layer."""
-
-    def __post_init__(self) -> None:
-        if self.resolution_m <= 0:
-            raise ValueError(f"resolution_m must be > 0, got {self.resolution_m}")
-        if self.max_persistence_scans < 1:
-            raise ValueError(
-                f"max_persistence_scans must be >= 1, got {self.max_persistence_scans}"
-            )
 
 
 def samples_along(

@@ -136,7 +136,9 @@ def test_bad_input_is_a_clear_error():
         StackParams(cut_offsets=4)
     with pytest.raises(TypeError, match=r"StackParams.follower: unknown parameters \['nope'\]"):
         StackParams(follower={"nope": 1.0})
-    with pytest.raises(ValueError, match="corridor-follower: full_speed_clearance_m"):
+    with pytest.raises(
+        ValueError, match="StackParams.follower: full_speed_clearance_m must be a finite number > 0"
+    ):
         StackParams(follower={"full_speed_clearance_m": -1.0})
     with pytest.raises(ValueError, match="StackParams.follower: speed_mps set by the stack"):
         StackParams(follower={"speed_mps": 0.5})

@@ -27,11 +27,12 @@ Odometry, scans and the prior only: the agent never sees the truth.
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field, replace
-from typing import Any
+from dataclasses import asdict, field, replace
+from typing import Annotated, Any
 
 import numpy as np
 from numpy.typing import NDArray
+from pydantic import Field
 
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import FREE
@@ -65,7 +66,16 @@ from dynmap_sim.agent.localization.particle_filter import (
     reported_covariance,
 )
 from dynmap_sim.agent.localizer import Localizer, register_localizer
-from dynmap_sim.agent.params import check_fields, coerce_fields
+from dynmap_sim.agent.params import (
+    Finite,
+    Fraction,
+    NonNegative,
+    NonNegativeInt,
+    Positive,
+    PositiveInt,
+    int_range,
+    params_dataclass,
+)
 from dynmap_sim.jit import compiled
 from dynmap_sim.types import Diagnostic, LaserSpec, Odometry, PoseEstimate, Prior, Scan
 
@@ -79,21 +89,21 @@ LTM_UPDATE_POSES = ("estimate", "predicted")
 SEMISTATIC_MAPS = ("run_start", "current")
 
 
-@dataclass(frozen=True)
+@params_dataclass(NAME)
 class AdaptiveMemoryConfig:
     """Parameters of ``adaptive-memory`` (H&W 2011; § and eq. are the paper's; "ours" where
     the paper is silent)."""
 
     # -- stores (§3, eq. 1; §7.1) --------------------------------------------------------
     #: Sensory memory: slot length [s] and slots (§7.1: 0.1 s, 10).
-    sm_dt_s: float = 0.1
-    sm_slots: int = 10
+    sm_dt_s: Positive = 0.1
+    sm_slots: PositiveInt = 10
     #: Short-term memory: slot length [s] and slots (§7.1: 0.1 s, 100).
-    stm_dt_s: float = 0.1
-    stm_slots: int = 100
+    stm_dt_s: Positive = 0.1
+    stm_slots: PositiveInt = 100
     #: Long-term memory: slot length [s] and slots (§7.1: 8640 s, 10: one day).
-    ltm_dt_s: float = 8640.0
-    ltm_slots: int = 10
+    ltm_dt_s: Positive = 8640.0
+    ltm_slots: PositiveInt = 10
     #: What a long-term slot starts from when it becomes current (ours; §3 is silent):
     #: ``copy_latest`` | ``prior_only`` | ``keep`` (:class:`.memory_stores.LTMStore`).
     slot_init: str = "copy_latest"
@@ -103,13 +113,13 @@ class AdaptiveMemoryConfig:
     #: the time since the run's first scan, ``t_s`` the first midnight: the stamps' own
     #: origin (seconds since midnight in an experiment, a log's clock in a replay) is not
     #: added again.
-    run_clock_s: float = 36000.0
-    run_spacing_s: float = 0.0
+    run_clock_s: NonNegative = 36000.0
+    run_spacing_s: NonNegative = 0.0
     # -- long-term grids (§4.3, eqs. 12-15; §7.1) -----------------------------------------
     #: Grid cell [m] (§7.1: 50 mm).
-    cell_m: float = 0.05
+    cell_m: Positive = 0.05
     #: Share of the static points that enter the long-term map per scan (§4.3, §7.1: 0.05).
-    u: float = 0.05
+    u: Fraction = 0.05
     #: The pose the long-term update uses (ours; Fig. 2 draws the LTM update before MCL):
     #: ``predicted`` (default): the odometry-predicted pose, before MCL as in Fig. 2;
     #: ``estimate``: after this scan's MCL step, with its covariance. Either way the §4.4
@@ -120,7 +130,7 @@ class AdaptiveMemoryConfig:
     #: share of the scan's static points (ours; 0: from every scan, as the paper). Meant
     #: against learning at a wrong pose; off by default because it also keeps new furniture
     #: out of the map on day 1 and leaves MCL with too few static points.
-    ltm_min_explained: float = 0.0
+    ltm_min_explained: Fraction = 0.0
     #: Whether a sampled static point that the walls prior (H&W Fig. 4) already explains
     #: within its uncertainty adds occupied evidence: ``True`` is §4.3's transfer rule taken
     #: literally; ``False`` (default, ours) keeps only the free space along its beam. The
@@ -135,27 +145,27 @@ class AdaptiveMemoryConfig:
     #: moves furniture every day and a map that keeps every old place attracts MCL to them.
     free_space: bool = True
     #: Log-odds added to a cell a sampled beam passed (ours: P = 0.4).
-    l_free: float = -0.4
+    l_free: Finite = -0.4
     #: Free space stops this many standard deviations of the point before it (ours).
-    free_stop_sigma: float = 3.0
+    free_stop_sigma: Positive = 3.0
     #: Log-odds clamp (ours): a cell at ``l_max`` needs ~6 free passes to drop below
     #: ``l_occupied``, so a moved cupboard fades within a run, a wall seen past a person not.
-    l_min: float = -2.0
-    l_max: float = 3.5
+    l_min: Finite = -2.0
+    l_max: Positive = 3.5
     #: A cell is an obstacle (§4.4's test, §6.1's map) from this log-odds (ours: P = 0.92,
     #: three hits at a point's mean, so one scan's stray points never make an obstacle).
-    l_occupied: float = 2.5
+    l_occupied: Positive = 2.5
     #: Half-width of the Gaussian stencil of a point [cells] (ours: 3 cells = 15 cm, > 3σ of a
     #: well-localized point).
-    stencil_cells: int = 3
+    stencil_cells: int_range(1, 20) = 3
     #: Floor added to every point covariance [m, std] (ours: half a cell).
-    cov_floor_m: float = 0.025
+    cov_floor_m: Positive = 0.025
     # -- reading covariance Σ_s (§4.1, eq. 4; URG-04LX datasheet) ---------------------------
     #: Range noise: max(sigma_r_min_m, sigma_r_rel · r) (URG-04LX: 10 mm or 1 %).
-    sigma_r_min_m: float = 0.01
-    sigma_r_rel: float = 0.01
+    sigma_r_min_m: NonNegative = 0.01
+    sigma_r_rel: NonNegative = 0.01
     #: Bearing noise [rad] (ours: the 0.36° step's quantization, 0.36°/sqrt(12)).
-    sigma_alpha_rad: float = float(np.deg2rad(0.36) / np.sqrt(12.0))
+    sigma_alpha_rad: NonNegative = float(np.deg2rad(0.36) / np.sqrt(12.0))
     # -- semistatic test (§4.4) ------------------------------------------------------------
     #: The long-term map a point is checked against (§4.4 names ``M_τ^LTM``; which state of
     #: it the paper leaves open, docs/replicas/hentschel-wagner.md):
@@ -167,36 +177,36 @@ class AdaptiveMemoryConfig:
     semistatic_map: str = "run_start"
     #: "Within the uncertainty of the scan point" (ours: Mahalanobis <= 2, at least 1.5
     #: cells), searched at most this many cells away.
-    semistatic_sigma: float = 2.0
-    semistatic_max_cells: int = 4
+    semistatic_sigma: Positive = 2.0
+    semistatic_max_cells: int_range(1, 20) = 4
     # -- objects (§4.2, eqs. 8-11) ----------------------------------------------------------
     #: Speed threshold of eq. 10 [m/s] (§7.1: 0.3).
-    v_thres: float = 0.3
+    v_thres: Positive = 0.3
     #: Segmentation (ours; the paper gives none): adaptive breakpoint angle [deg] (Borges &
     #: Aldon 2004), least points of a box, missing beams bridged inside a segment.
-    breakpoint_lambda_deg: float = 10.0
-    min_box_points: int = 3
-    max_gap_beams: int = 2
+    breakpoint_lambda_deg: Annotated[Positive, Field(le=89.0)] = 10.0
+    min_box_points: PositiveInt = 3
+    max_gap_beams: NonNegativeInt = 2
     #: The sliding-wall trap (ours; :mod:`.object_tracker`): boxes longer than this [m] are
     #: never dynamic (a person or a robot is shorter), nor those cut by the field of view
     #: and, with ``occlusion_never_dynamic``, by a nearer return.
-    max_dynamic_length_m: float = 1.2
+    max_dynamic_length_m: Positive = 1.2
     occlusion_never_dynamic: bool = True
     #: A fast box at least this share of whose points the long-term map explains is not
     #: dynamic (ours; 1 keeps only boxes the map explains entirely): a new face of a known
     #: cupboard makes its box's centre jump and look fast for a few scans, while a person
     #: stands where the map has free space.
-    ltm_veto_dynamic: float = 0.5
+    ltm_veto_dynamic: Fraction = 0.5
     #: Kalman filter (ours; "a common Kalman filter as in [7]"): white acceleration [m/s^2],
     #: centre measurement noise [m], initial speed std [m/s], association gate [m]; a box is
     #: dynamic after ``confirm_steps`` fast updates in a row (and static again after as many
     #: slow ones); a track is dropped after ``max_misses`` scans unseen.
-    track_sigma_accel: float = 1.0
-    track_sigma_meas_m: float = 0.05
-    track_sigma_v0: float = 1.0
-    track_gate_m: float = 0.5
-    confirm_steps: int = 2
-    max_misses: int = 2
+    track_sigma_accel: Positive = 1.0
+    track_sigma_meas_m: Positive = 0.05
+    track_sigma_v0: Positive = 1.0
+    track_gate_m: Positive = 0.5
+    confirm_steps: PositiveInt = 2
+    max_misses: NonNegativeInt = 2
     # -- localization (§6.1) -----------------------------------------------------------------
     #: The project's AMCL configuration (``tuned-end-points`` | ``tuned`` | ``nav2-default`` |
     #: ``walls-only``) and field overrides. ``tuned-end-points``: the likelihood field on the
@@ -205,62 +215,41 @@ class AdaptiveMemoryConfig:
     mcl_config: str = "tuned-end-points"
     mcl_overrides: dict[str, Any] = field(default_factory=dict)
     #: Below this many static points, the explained unknown ones join (ours).
-    min_static_points: int = 20
+    min_static_points: NonNegativeInt = 20
     #: The points MCL uses: ``static`` (§6.1) or ``non-dynamic`` (static, unknown and
     #: semistatic: the whole scan but the people; ours, for comparison).
     mcl_points: str = "static"
     #: Map selection (§6.1: least mean squared error of expected ranges) every this many
     #: scans (ours: 1 Hz), over ``select_beams`` beams; switch only if better by
     #: ``select_margin`` (ours: 10 %, no flapping between equal maps).
-    select_every_scans: int = 10
-    select_beams: int = 60
-    select_margin: float = 0.1
+    select_every_scans: PositiveInt = 10
+    select_beams: PositiveInt = 60
+    select_margin: Fraction = 0.1
     #: The MCL's likelihood field is rebuilt from the chosen long-term map every this many
     #: scans (ours: 5 s; the map changes a little every scan, the field costs a distance
     #: transform).
-    map_refresh_scans: int = 50
+    map_refresh_scans: PositiveInt = 50
 
     def __post_init__(self) -> None:
-        coerce_fields(self, NAME)
-        check_fields(
-            self,
-            NAME,
-            positive=(
-                "sm_dt_s", "sm_slots", "stm_dt_s", "stm_slots", "ltm_dt_s", "ltm_slots",
-                "cell_m", "l_max", "l_occupied", "stencil_cells", "cov_floor_m",
-                "semistatic_sigma", "semistatic_max_cells", "v_thres", "breakpoint_lambda_deg",
-                "min_box_points", "max_dynamic_length_m", "track_sigma_accel",
-                "track_sigma_meas_m", "track_sigma_v0", "track_gate_m", "confirm_steps",
-                "select_every_scans", "select_beams", "map_refresh_scans", "free_stop_sigma",
-            ),
-            non_negative=(
-                "run_clock_s", "run_spacing_s", "sigma_r_min_m", "sigma_r_rel",
-                "sigma_alpha_rad", "max_gap_beams", "max_misses", "min_static_points",
-            ),
-            fraction=("u", "select_margin", "ltm_veto_dynamic", "ltm_min_explained"),
-            finite=("l_free", "l_min"),
-            at_most={"p_hit": 1.0, "breakpoint_lambda_deg": 89.0, "stencil_cells": 20,
-                     "semistatic_max_cells": 20},
-        )  # fmt: skip
         if not 0.5 < self.p_hit < 1.0:
-            raise ValueError(f"{NAME}: p_hit must be in (0.5, 1), got {self.p_hit!r}")
+            raise ValueError(f"p_hit must be in (0.5, 1), got {self.p_hit!r}")
         if self.l_free > 0 or self.l_min > 0:
-            raise ValueError(f"{NAME}: l_free and l_min must be <= 0")
+            raise ValueError("l_free and l_min must be <= 0")
         if self.l_occupied > self.l_max:
-            raise ValueError(f"{NAME}: l_occupied must be <= l_max")
+            raise ValueError("l_occupied must be <= l_max")
         if self.semistatic_map not in SEMISTATIC_MAPS:
-            raise ValueError(f"{NAME}: semistatic_map must be one of {SEMISTATIC_MAPS}")
+            raise ValueError(f"semistatic_map must be one of {SEMISTATIC_MAPS}")
         if self.ltm_update_pose not in LTM_UPDATE_POSES:
-            raise ValueError(f"{NAME}: ltm_update_pose must be one of {LTM_UPDATE_POSES}")
+            raise ValueError(f"ltm_update_pose must be one of {LTM_UPDATE_POSES}")
         if self.mcl_points not in ("static", "non-dynamic"):
-            raise ValueError(f"{NAME}: mcl_points must be 'static' or 'non-dynamic'")
+            raise ValueError("mcl_points must be 'static' or 'non-dynamic'")
         if self.slot_init not in SLOT_INITS:
-            raise ValueError(f"{NAME}: slot_init must be one of {SLOT_INITS}")
+            raise ValueError(f"slot_init must be one of {SLOT_INITS}")
         if self.mcl_config not in CONFIGS:
-            raise ValueError(f"{NAME}: mcl_config must be one of {sorted(CONFIGS)}")
+            raise ValueError(f"mcl_config must be one of {sorted(CONFIGS)}")
         unknown = set(self.mcl_overrides) - set(asdict(CONFIGS[self.mcl_config]))
         if unknown:
-            raise ValueError(f"{NAME}: unknown mcl_overrides {sorted(unknown)}")
+            raise ValueError(f"unknown mcl_overrides {sorted(unknown)}")
 
     def ltm_params(self) -> LTMParams:
         return LTMParams(
@@ -396,10 +385,6 @@ class AdaptiveMemoryLocalizer(Localizer):
     )
 
     def __init__(self, laser: LaserSpec, rng: np.random.Generator, **params: Any) -> None:
-        fields_ = set(AdaptiveMemoryConfig.__dataclass_fields__)
-        unknown = sorted(set(params) - fields_)
-        if unknown:
-            raise TypeError(f"{NAME}: unknown parameters {unknown}; known: {sorted(fields_)}")
         super().__init__(laser, rng)
         self.config = AdaptiveMemoryConfig(**params)
         c = self.config
