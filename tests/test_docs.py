@@ -12,6 +12,7 @@ site with ``mkdocs build --strict``; the pages' commands and examples are tested
 """
 
 import argparse
+import dataclasses
 import importlib.util
 import re
 from pathlib import Path
@@ -165,6 +166,20 @@ def test_the_field_reference_shows_every_field_of_the_schema(kind):
             assert f"### {name}\n" in text, f"model {name} missing"
         for field in model.get("properties", {}):
             assert f"| `{field}` |" in text, f"{name or kind}.{field} missing"
+
+
+def test_the_parameter_reference_shows_every_parameter_with_its_comment():
+    from dynmap_sim.agent.control.corridor_follower import CorridorFollowerParams
+    from dynmap_sim.agent.localization.particle_filter import MCLConfig
+    from dynmap_sim.agent.navigation.stack_params import StackParams
+
+    assert "<!-- generate: params-schema -->" in (ROOT / "docs" / "scenarios.md").read_text()
+    text = _hook().expand("<!-- generate: params-schema -->")
+    for cls in (MCLConfig, StackParams, CorridorFollowerParams):
+        for field in dataclasses.fields(cls):
+            assert f"| `{field.name}` |" in text, f"{cls.__name__}.{field.name} missing"
+    assert "| `max_particles` | integer | `2000` | Most particles KLD-sampling keeps" in text
+    assert "(&gt;= 1, &lt;= 1000000) |" in text
 
 
 def test_the_type_of_a_field_reads_as_words():

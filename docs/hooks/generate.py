@@ -7,6 +7,8 @@ read as plain Markdown):
 - ``<!-- generate: world-schema -->``: the world file's fields, from ``world_json_schema()``;
 - ``<!-- generate: scenario-schema -->``: the scenario file's fields, from
   ``scenario_json_schema()``;
+- ``<!-- generate: params-schema -->``: the localizers' and the navigation stack's parameters,
+  from their classes' JSON schemas (:mod:`dynmap_sim.agent.params`);
 - ``<!-- generate: cli -->``: every ``dynmap-sim`` command and option, from ``build_parser()``;
 - ``<!-- generate: roles -->``: the built-in localizers, drivers, planners and controllers,
   from their registries, each with the first paragraph of its class's docstring.
@@ -21,6 +23,8 @@ titled by each page's first heading, so that pages added there need no edit of `
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import inspect
 import json
 import re
 import sys
@@ -269,6 +273,57 @@ def _scenario_schema() -> str:
     return schema_reference(scenario_json_schema(), "Scenario")
 
 
+def _field_comments(cls: type) -> dict[str, str]:
+    """The ``#:`` comment lines above each field of a class (Sphinx's attribute docs)."""
+    out: dict[str, str] = {}
+    lines: list[str] = []
+    for line in inspect.getsource(cls).splitlines():
+        text = line.strip()
+        if text.startswith("#:"):
+            lines.append(text[2:].strip())
+        elif lines and (m := re.match(r"(\w+)\s*:", text)):
+            what = re.sub(r":[a-z]+:`~?\.?([^`]+)`", r"``\1``", " ".join(lines))
+            out[m.group(1)] = _docstring(what)
+            lines = []
+    return out
+
+
+def params_reference(cls: type, title: str) -> str:
+    """A parameter class (:func:`dynmap_sim.agent.params.params_dataclass`) and the parameter
+    classes of its fields, from its JSON schema, each field described by its ``#:`` comment."""
+    from pydantic import TypeAdapter
+
+    schema = TypeAdapter(cls).json_schema()
+    models = {"": (cls, schema)}
+    for f in dataclasses.fields(cls):
+        if f.type in schema.get("$defs", {}):
+            models[f.type] = (
+                cls.__pydantic_fields__[f.name].annotation,
+                schema["$defs"][f.type],
+            )
+    for kind, model in models.values():
+        for name, what in _field_comments(kind).items():
+            model.get("properties", {}).get(name, {}).setdefault("description", what)
+    return schema_reference(schema, title)
+
+
+def _params_schema() -> str:
+    from dynmap_sim.agent.localization.adaptive_memory.localizer import AdaptiveMemoryConfig
+    from dynmap_sim.agent.localization.dynamic_map_localizer import DynamicMapConfig
+    from dynmap_sim.agent.localization.particle_filter import MCLConfig
+    from dynmap_sim.agent.mapping.first_run import FirstRunConfig
+    from dynmap_sim.agent.navigation.stack_params import StackParams
+
+    parts = {
+        "static-mcl: overrides (MCLConfig)": MCLConfig,
+        "static-mcl: mapper_params (FirstRunConfig)": FirstRunConfig,
+        "dynamic-map, static-map, static-map+stm: params (DynamicMapConfig)": DynamicMapConfig,
+        "adaptive-memory: params (AdaptiveMemoryConfig)": AdaptiveMemoryConfig,
+        "autonomous driver: params (StackParams)": StackParams,
+    }
+    return "\n".join(params_reference(cls, title) for title, cls in parts.items())
+
+
 def _cli() -> str:
     from dynmap_sim.cli import build_parser
 
@@ -312,6 +367,7 @@ def _roles() -> str:
 PARTS = {
     "world-schema": _world_schema,
     "scenario-schema": _scenario_schema,
+    "params-schema": _params_schema,
     "cli": _cli,
     "roles": _roles,
 }
