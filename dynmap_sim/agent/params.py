@@ -6,11 +6,12 @@ min_update_dist_m = 0.1 }``); each module keeps them in a frozen dataclass made 
 :class:`~dynmap_sim.agent.localization.particle_filter.MCLConfig`), validated by pydantic
 as the world and scenario files are. The fields are strict, so that the numbers a module
 computes do not depend on how a value was spelled: a TOML ``3`` for a float field becomes
-``3.0``; an :data:`Int` takes an integral float (``8000.0``); a :data:`Tuple` field takes a
-list; anything else of the wrong kind (a string for a number, 1.5 for an integer) is an
-error. The range types below (:data:`Positive` ...) check the values, so that a scenario's
-bad parameter is an error naming it when the scenario is loaded rather than a crash in the
-middle of a run. ``pydantic.TypeAdapter(cls).json_schema()`` describes a class's fields.
+``3.0``; an :data:`Int` takes an integral float (``8000.0``); a tuple field marked
+:data:`AsTuple` takes a list; anything else of the wrong kind (a string for a number, 1.5
+for an integer) is an error. The range types below (:data:`Positive` ...) check the
+values, so that a scenario's bad parameter is an error naming it when the scenario is
+loaded rather than a crash in the middle of a run. ``pydantic.TypeAdapter(cls)
+.json_schema()`` describes a class's fields.
 """
 
 from __future__ import annotations
@@ -60,7 +61,7 @@ def _not_nan(value: float) -> float:
 #: An integer field; an integral float (TOML ``1e3``, ``8000.0``) becomes an ``int``.
 Int = Annotated[int, BeforeValidator(_integral)]
 #: A tuple field; a list (TOML's arrays) becomes a tuple.
-Tuple = BeforeValidator(lambda v: tuple(v) if isinstance(v, list) else v)
+AsTuple = BeforeValidator(lambda v: tuple(v) if isinstance(v, list) else v)
 #: Finite and > 0.
 Positive = Annotated[float, Field(gt=0, allow_inf_nan=False), Says("a finite number > 0")]
 #: Finite and >= 0.
@@ -147,7 +148,7 @@ def params_dataclass(owner: str | None = None) -> Callable[[type[C]], type[C]]:
     and the field (:func:`_one_line`). ``dataclasses.replace`` validates again."""
 
     def make(cls: type[C]) -> type[C]:
-        config = ConfigDict(extra="forbid", strict=True, arbitrary_types_allowed=True)
+        config = ConfigDict(extra="forbid", strict=True)
         dc: Any = pydantic.dataclasses.dataclass(frozen=True, config=config)(cls)
         init = dc.__init__
 
@@ -158,7 +159,7 @@ def params_dataclass(owner: str | None = None) -> Callable[[type[C]], type[C]]:
             except ValidationError as error:
                 raise _one_line(dc, owner or cls.__name__, error) from None
 
-        dc.__init__, dc.__validate_init__ = __init__, init
+        dc.__init__, dc._params_init = __init__, init
         return dc  # type: ignore[no-any-return]
 
     return make
@@ -169,7 +170,7 @@ def build(cls: type[C], params: Mapping[str, Any], owner: str) -> C:
     (e.g. the scenario table it came from) instead of the class's own."""
     config = cls.__new__(cls)
     try:
-        cls.__validate_init__(config, **params)  # type: ignore[attr-defined]
+        cls._params_init(config, **params)  # type: ignore[attr-defined]
     except ValidationError as error:
         raise _one_line(cls, owner, error) from None
     return config

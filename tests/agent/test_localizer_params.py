@@ -17,10 +17,10 @@ from dynmap_sim.agent.localization.particle_filter import TUNED, MCLConfig, Stat
 from dynmap_sim.agent.localizer import make_localizer
 from dynmap_sim.agent.mapping.first_run import FirstRunConfig
 from dynmap_sim.agent.params import (
+    AsTuple,
     Fraction,
     NonNegative,
     NotNaN,
-    Tuple,
     int_range,
     params_dataclass,
 )
@@ -116,8 +116,8 @@ def test_one_helper_checks_every_config():
         x: NonNegative = 1.0
         share: Fraction = 0.5
         floor: NotNaN = -1.0
-        flags: Annotated[tuple[bool, ...], Tuple] = (True,)
-        pair: Annotated[tuple[float, float], Tuple] = (1.0, 2.0)
+        flags: Annotated[tuple[bool, ...], AsTuple] = (True,)
+        pair: Annotated[tuple[float, float], AsTuple] = (1.0, 2.0)
 
     cfg = Cfg(n=np.int64(4), x=np.float32(2), floor=-math.inf, flags=[True, False], pair=[1, 2])
     assert cfg.flags == (True, False) and cfg.pair == (1.0, 2.0) and type(cfg.pair[0]) is float

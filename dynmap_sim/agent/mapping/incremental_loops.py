@@ -31,7 +31,7 @@ from numpy.typing import NDArray
 
 from dynmap_sim import se2
 from dynmap_sim.agent.mapping.pose_graph import Edge, optimize_pose_graph
-from dynmap_sim.agent.params import Int, Tuple, params_dataclass
+from dynmap_sim.agent.params import AsTuple, Int, params_dataclass
 
 FloatArray = NDArray[np.float64]
 
@@ -45,9 +45,9 @@ class IncrementalLoopConfig:
 
     #: Search half-window in x and y after driving ``s`` m since the last closure:
     #: ``min(a + b s, cap)`` as ``(a, b, cap)``.
-    drift_window_m: Annotated[tuple[float, float, float], Tuple] = (0.3, 0.05, 4.0)
+    drift_window_m: Annotated[tuple[float, float, float], AsTuple] = (0.3, 0.05, 4.0)
     #: ... and in theta [rad, rad/m, rad].
-    drift_window_rad: Annotated[tuple[float, float, float], Tuple] = (0.1, 0.01, 0.6)
+    drift_window_rad: Annotated[tuple[float, float, float], AsTuple] = (0.1, 0.01, 0.6)
     #: A verified closure whose implied correction is within this [m] / [rad] of the
     #: current estimate is accepted at once (it agrees with what is already known).
     accept_m: float = 0.15

@@ -38,7 +38,7 @@ from dynmap_sim.agent.mapping.scan_points import (
     scan_points_base,
     voxel_downsample,
 )
-from dynmap_sim.agent.params import Int, Tuple, params_dataclass
+from dynmap_sim.agent.params import AsTuple, Int, params_dataclass
 from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Scan
 
 FloatArray = NDArray[np.float64]
@@ -93,7 +93,7 @@ class KeyframeSLAMConfig:
     #: ``s_xy0`` is paid on every scan and sets how loose the prior is per metre at a given
     #: scan rate: 1 mm keeps the scan-to-map ICP's small forward bias from stretching long
     #: corridors (measurements: docs/tuning/slam.md).
-    odom_sigma: Annotated[tuple[float, float, float, float, float, float], Tuple] = (
+    odom_sigma: Annotated[tuple[float, float, float, float, float, float], AsTuple] = (
         0.001,
         0.05,
         0.01,
@@ -109,7 +109,7 @@ class KeyframeSLAMConfig:
     #: Leave out readings in space that the scans this many steps earlier saw free (walking
     #: people; :func:`.scan_points.free_space_violations`); ``()`` off. 0.3 s and 0.8 s at
     #: 10 Hz: a walking leg has moved on, the robot has hardly moved.
-    dynamic_filter_lags: Annotated[tuple[Int, ...], Tuple] = (3, 8)
+    dynamic_filter_lags: Annotated[tuple[Int, ...], AsTuple] = (3, 8)
     #: Seed ICP by a correlative search around the odometry prediction (Olson 2009; the
     #: real-time correlative matcher of Hess et al. 2016 §IV, whose result is then the prior
     #: of the fine matcher): half-windows ``(xy [m], theta [rad])``, each widened by the
@@ -117,7 +117,7 @@ class KeyframeSLAMConfig:
     #: ``(0, 0)`` off. Real wheel odometry errs by up to 20 degrees in a step, beyond ICP's
     #: 0.3 m basin; ``seed_verify`` keeps near-exact odometry from being overruled by the
     #: seed's grid (docs/tuning/slam.md).
-    seed_window: Annotated[tuple[float, float], Tuple] = (0.3, 0.4)
+    seed_window: Annotated[tuple[float, float], AsTuple] = (0.3, 0.4)
     #: The seed's likelihood grid: cell side and Gaussian width [m], and the range [m]
     #: within which map and scan points take part.
     seed_resolution_m: float = 0.1

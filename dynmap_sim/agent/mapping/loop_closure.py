@@ -34,7 +34,7 @@ from dynmap_sim.agent.mapping.pose_graph import (
 )
 from dynmap_sim.agent.mapping.scan_matcher import MatchResult, PointMap, match_scan
 from dynmap_sim.agent.mapping.scan_points import voxel_downsample
-from dynmap_sim.agent.params import Int, Tuple, params_dataclass
+from dynmap_sim.agent.params import AsTuple, Int, params_dataclass
 
 FloatArray = NDArray[np.float64]
 
@@ -58,9 +58,9 @@ class LoopClosureConfig:
     #: Correlative search half-window in x and y: ``min(a + b s, cap)`` [m] for a path length
     #: ``s`` [m] between the two keyframes, as ``(a, b, cap)``: 2.5 % of the path, the drift
     #: the front end may gather, at most 3 m.
-    loop_window_m: Annotated[tuple[float, float, float], Tuple] = (0.3, 0.025, 3.0)
+    loop_window_m: Annotated[tuple[float, float, float], AsTuple] = (0.3, 0.025, 3.0)
     #: ... and in theta, ``(a, b, cap)`` [rad, rad/m, rad].
-    loop_window_rad: Annotated[tuple[float, float, float], Tuple] = (0.05, 0.004, 0.5)
+    loop_window_rad: Annotated[tuple[float, float, float], AsTuple] = (0.05, 0.004, 0.5)
     #: A closure's target is the submap of keyframes ``j +- loop_submap_half``.
     loop_submap_half: Int = 4
     #: Least correlative score (share of points on the submap) of a closure candidate.
@@ -88,7 +88,7 @@ class LoopClosureConfig:
     #: ``(s_xy0, k_xy_d, s_th0, k_th_d, k_th_a)``: ``sigma_xy = s_xy0 + k_xy_d d`` [m],
     #: ``sigma_th = s_th0 + k_th_d d + k_th_a |a|`` [rad] (the front end drifts ~3 % of the
     #: distance).
-    seq_sigma: Annotated[tuple[float, float, float, float, float], Tuple] = (
+    seq_sigma: Annotated[tuple[float, float, float, float, float], AsTuple] = (
         0.01,
         0.03,
         0.005,
