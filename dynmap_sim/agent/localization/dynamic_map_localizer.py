@@ -467,7 +467,7 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
         self._mapper = None
         mapped = self._map_given and len(self.dmap) > 0
         if (prior.first_run or len(self.dmap) == 0) and not self.frozen and not mapped:
-            self._mapper = FirstRunMapper(self.laser, self._pose)
+            self._mapper = FirstRunMapper(self.laser, self._pose, walls=prior.walls)
 
     def _beam_directions(self) -> BeamDirections:
         """The laser's beam directions (cached; rebuilt for pickles made before the cache)."""

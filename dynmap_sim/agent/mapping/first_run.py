@@ -82,11 +82,15 @@ class FirstRunMapper:
     """Online keyframe SLAM; :meth:`finish` closes loops and renders the map."""
 
     def __init__(
-        self, laser: LaserSpec, initial_pose: ArrayLike, config: FirstRunConfig | None = None
+        self,
+        laser: LaserSpec,
+        initial_pose: ArrayLike,
+        config: FirstRunConfig | None = None,
+        walls: FloatArray | None = None,
     ) -> None:
         self.laser = laser
         self.config = FirstRunConfig() if config is None else config
-        self.slam = KeyframeSLAM(laser, initial_pose, self.config.slam)
+        self.slam = KeyframeSLAM(laser, initial_pose, self.config.slam, walls)
         self.loop_closure = LoopClosure(self.config.loops)
 
     def update(self, odom: Odometry, scan: Scan) -> PoseEstimate:
@@ -98,7 +102,12 @@ class FirstRunMapper:
         slam = self.slam
         if not slam.keyframes:
             raise ValueError("FirstRunMapper.finish() before any update()")
-        poses, n_loops = self.loop_closure.optimize(slam)
+        if len(slam.wall_points):
+            # The prior's walls hold the map frame (KeyframeSLAMConfig.anchor_walls): a pose
+            # graph of relative edges would only move the keyframes off the walls they matched.
+            poses, n_loops = np.array([k.pose for k in slam.keyframes]), 0
+        else:
+            poses, n_loops = self.loop_closure.optimize(slam)
         kfs = [Keyframe(poses[m], k.ranges_m, k.scan_index) for m, k in enumerate(slam.keyframes)]
         grid = OccupancyGrid.from_scans(
             poses,

@@ -33,6 +33,7 @@ from dynmap_sim.agent.mapping.scan_matcher import MatchResult, PointMap, match_s
 from dynmap_sim.agent.mapping.scan_points import (
     BeamDirections,
     free_space_violations,
+    points_on_segments,
     range_discontinuities,
     range_weights,
     scan_points_base,
@@ -150,6 +151,14 @@ class KeyframeSLAMConfig:
     #: 10 cm grid's (aliasing, see ``seed_compare_steps``), ICP's is the continuous
     #: point-to-line fit, which tells the right optimum from a grid alias.
     seed_verify: bool = True
+    #: Match every scan against the walls the prior grants too (when it grants them), as
+    #: localization in an architectural floor plan does (Boniardi et al. 2017): walls do not
+    #: drift, so the front end's drift stays bounded where it sees one, instead of growing
+    #: with the path until a loop closes (B&D §4 map without a plan; this is off without
+    #: one). The furniture in front of walls is in the keyframes, nearer than the wall. An
+    #: anchored first run skips the loop closure back end: the walls already hold the map
+    #: frame, and a graph of relative edges could only pull keyframes off them.
+    anchor_walls: bool = True
 
     def __post_init__(self) -> None:
         if self.drop_edges not in DROP_EDGES:
@@ -169,10 +178,20 @@ class KeyframeSLAM:
     """Online scan-to-local-map ICP with keyframes (the first run's front end)."""
 
     def __init__(
-        self, laser: LaserSpec, initial_pose: ArrayLike, config: KeyframeSLAMConfig
+        self,
+        laser: LaserSpec,
+        initial_pose: ArrayLike,
+        config: KeyframeSLAMConfig,
+        walls: FloatArray | None = None,
     ) -> None:
         self.laser = laser
         self.config = config
+        #: The prior's walls as map-frame points (``anchor_walls``), matched with the keyframes.
+        self.wall_points = (
+            points_on_segments(walls, config.voxel_m)
+            if config.anchor_walls and walls is not None
+            else np.zeros((0, 2))
+        )
         self._beams = BeamDirections(laser)
         self.initial_pose = np.asarray(initial_pose, dtype=np.float64).reshape(3).copy()
         self._kf_maps: dict[int, PointMap | None] | None = None
@@ -221,6 +240,11 @@ class KeyframeSLAM:
             [se2.transform_points(self.keyframes[k].pose, self.keyframe_points[k]) for k in sel]
         )
         pts = voxel_downsample(pts, c.voxel_m, mean=c.voxel_mean)
+        if len(self.wall_points):
+            here = self.keyframes[-1].pose[:2]
+            reach = self.laser.range_max_m + c.max_correspondence_m
+            walls = self.wall_points[np.hypot(*(self.wall_points - here).T) <= reach]
+            pts = np.concatenate([pts, walls])
         self._local = PointMap(pts, k_normal=c.k_normal) if len(pts) >= 3 else None
         self._seed_table = None
         if c.seed_window[0] > 0 or c.seed_window[1] > 0:

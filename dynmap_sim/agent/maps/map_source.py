@@ -109,7 +109,7 @@ class FirstRunMap(MapSource):
         self._mapper = None
         if self.grid is None:  # the map is still to build: map during this run
             start = np.zeros(3) if prior.initial_pose is None else np.asarray(prior.initial_pose)
-            self._mapper = FirstRunMapper(self.laser, start, self.config)
+            self._mapper = FirstRunMapper(self.laser, start, self.config, prior.walls)
 
     def update(self, odom: Odometry, scan: Scan) -> PoseEstimate:
         if self._mapper is None:

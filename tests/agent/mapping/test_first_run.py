@@ -121,3 +121,43 @@ def test_flat_mapper_params_fill_both_parts_of_the_config():
         FirstRunConfig.from_params(voxel=0.05)
     with pytest.raises(ValueError, match="drop_edges"):
         FirstRunConfig.from_params(drop_edges="some")
+
+
+def _run_mapper(walls, segments, laser, cast, path_fn, odo_fn):
+    """Four laps of the loop on drifting odometry; (online errors, finished map) [m]."""
+    rng = np.random.default_rng(0)
+    truth = path_fn(laps=4)
+    odo = odo_fn(truth, rng)
+    mapper = FirstRunMapper(laser, truth[0], walls=walls)
+    est = []
+    for k in range(len(truth)):
+        r = cast(truth[k], laser.angles(), segments, laser.range_max_m)
+        r = (r + rng.normal(0, 0.01, r.shape)).astype(np.float32)
+        est.append(mapper.update(Odometry(odo[k], 0.1 * k), Scan(r, 0.1 * k)).mean)
+    online = np.hypot(*(np.array(est)[:, :2] - truth[:, :2]).T)
+    smap = mapper.finish()
+    return online, smap, truth
+
+
+def test_prior_walls_bound_the_front_end_drift(segments, laser, cast, path_fn, odo_fn):
+    """Granted the room's six outer walls (not the pillar or the cupboards), the front end
+    matches them too: its online error stays at the range noise's scale instead of growing
+    lap by lap, and the finished map keeps those poses (no loop back end)."""
+    free, _, _ = _run_mapper(None, segments, laser, cast, path_fn, odo_fn)
+    anchored, smap, truth = _run_mapper(segments[:6], segments, laser, cast, path_fn, odo_fn)
+    assert free.max() > 0.03  # without the plan, drift builds up between closures
+    assert anchored.max() < 0.02
+    assert np.sqrt(np.mean(anchored**2)) < 0.5 * np.sqrt(np.mean(free**2))
+    assert smap.n_loop_closures == 0
+    final = np.hypot(*(smap.trajectory[:, :2] - truth[:, :2]).T)
+    assert np.allclose(final, anchored, atol=1e-9)
+
+
+def test_anchor_walls_off_ignores_the_prior(segments, laser):
+    """``anchor_walls = False`` is B&D's first run: walls given or not, nothing is matched."""
+    config = FirstRunConfig(slam=KeyframeSLAMConfig(anchor_walls=False))
+    mapper = FirstRunMapper(laser, np.zeros(3), config, walls=segments)
+    assert len(mapper.slam.wall_points) == 0
+    on = FirstRunMapper(laser, np.zeros(3), walls=segments[:1])
+    spacing = np.hypot(*np.diff(on.slam.wall_points, axis=0).T)
+    assert len(on.slam.wall_points) >= 8 / 0.03 and spacing.max() <= 0.03 + 1e-12
