@@ -11,10 +11,10 @@ store as simulated experiments (:mod:`dynmap_sim.experiments.results`):
 With ``map_from_log_poses=True`` the map is instead rendered directly from poses (keyframes
 every 0.3 m / 0.3 rad): the reference poses when there is a reference, else the poses on the
 log's laser lines (on a raw log: its odometry). It goes to every localizer that accepts a
-map: a grid to a :class:`~dynmap_sim.agent.localizer.MapUser` (``static-mcl``), the keyframe
-scans at those poses to a :class:`~dynmap_sim.agent.localizer.ScanMapUser` (``dynamic-map``);
-the others still map on day 1 (``note`` says which), and when none accepts one the option is
-refused.
+map: a grid to a :class:`~dynmap_sim.agent.localization.localizer.MapUser`
+(``static-mcl``), the keyframe scans at those poses to a
+:class:`~dynmap_sim.agent.localization.localizer.ScanMapUser` (``dynamic-map``); the others
+still map on day 1 (``note`` says which), and when none accepts one the option is refused.
 
 The results folder reads like a simulated experiment's: ``meta`` names the log as the world,
 lists the two runs as ``slots`` (so the report says "2 of 2 runs done") and keeps the log's
@@ -46,7 +46,7 @@ import numpy as np
 
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import OccupancyGrid
-from dynmap_sim.agent.localizer import Localizer, MapUser, ScanMapUser, make_localizer
+from dynmap_sim.agent.localization.localizer import Localizer, MapUser, ScanMapUser, make_localizer
 from dynmap_sim.errors import InputError
 from dynmap_sim.experiments.localizer_pool import DiagnosticsRecorder, LocalizerRun
 from dynmap_sim.experiments.reference import (

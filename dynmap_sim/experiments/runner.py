@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from dynmap_sim.agent.localizer import Localizer, make_localizer
+from dynmap_sim.agent.localization.localizer import Localizer, make_localizer
 from dynmap_sim.env_factory import SimSpecError
 from dynmap_sim.env_factory import make_env as build_env
 from dynmap_sim.errors import InputError

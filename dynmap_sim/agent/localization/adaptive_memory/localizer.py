@@ -59,12 +59,12 @@ from dynmap_sim.agent.localization.adaptive_memory.object_tracker import (
     segment_scan,
 )
 from dynmap_sim.agent.localization.likelihood_field import LikelihoodTable, select_beams
+from dynmap_sim.agent.localization.localizer import Localizer, register_localizer
 from dynmap_sim.agent.localization.particle_filter import (
     CONFIGS,
     AMCLFilter,
     reported_covariance,
 )
-from dynmap_sim.agent.localizer import Localizer, register_localizer
 from dynmap_sim.agent.params import check_fields, coerce_fields
 from dynmap_sim.jit import compiled
 from dynmap_sim.types import Diagnostic, LaserSpec, Odometry, PoseEstimate, Prior, Scan
