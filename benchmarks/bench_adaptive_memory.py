@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dynmap_sim.agent.localizer import make_localizer
+from dynmap_sim.agent.localization.localizer import make_localizer
 from dynmap_sim.types import LaserSpec, Prior
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))

@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from dynmap_sim import se2
-from dynmap_sim.agent.localizer import make_localizer
+from dynmap_sim.agent.localization.localizer import make_localizer
 from dynmap_sim.agent.mapping.scan_matcher import PointMap, match_scan
 from dynmap_sim.agent.mapping.scan_points import scan_points_base, voxel_downsample
 from dynmap_sim.agent.maps.dynamic_map import DynamicMap

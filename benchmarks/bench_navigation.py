@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from dynmap_sim.agent.localizer import make_localizer
+from dynmap_sim.agent.localization.localizer import make_localizer
 from dynmap_sim.agent.navigation.policy import NavigationPolicy
 from dynmap_sim.agent.navigation.stack import NavigationStack
 from dynmap_sim.env import DynMapEnv

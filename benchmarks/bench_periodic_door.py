@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from dynmap_sim.agent.grid import OCCUPIED
-from dynmap_sim.agent.localizer import make_localizer
+from dynmap_sim.agent.localization.localizer import make_localizer
 from dynmap_sim.agent.maps.fremen import WEEK_S, Fremen, default_periods
 from dynmap_sim.agent.maps.markov_grid import MarkovGrid
 from dynmap_sim.sensors.lidar import make_lidar

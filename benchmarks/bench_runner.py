@@ -27,7 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
-from dynmap_sim.agent.localizer import make_localizer
+from dynmap_sim.agent.localization.localizer import make_localizer
 from dynmap_sim.experiments.drivers import (
     DriverContext,
     RunStart,

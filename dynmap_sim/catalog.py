@@ -54,7 +54,7 @@ def _files(folder: Path) -> list[Entry]:
 
 def _registry(section: str) -> list[Entry]:
     from dynmap_sim.agent.control.controller import CONTROLLERS
-    from dynmap_sim.agent.localizer import LOCALIZERS
+    from dynmap_sim.agent.localization.localizer import LOCALIZERS
     from dynmap_sim.agent.planning.planner import PLANNERS
     from dynmap_sim.experiments.drivers.driver import DRIVERS
 

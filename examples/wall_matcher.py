@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from dynmap_sim import se2
-from dynmap_sim.agent.localizer import Localizer
+from dynmap_sim.agent.localization.localizer import Localizer
 from dynmap_sim.agent.mapping.scan_matcher import PointMap, match_scan
 from dynmap_sim.agent.mapping.scan_points import scan_points_base
 from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Prior, Scan

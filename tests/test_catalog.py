@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from dynmap_sim import cli
-from dynmap_sim.agent.localizer import LOCALIZERS
+from dynmap_sim.agent.localization.localizer import LOCALIZERS
 from dynmap_sim.catalog import SECTIONS, catalog, catalog_text
 from dynmap_sim.registration import WORLDS_DIR
 

@@ -161,7 +161,7 @@ def test_check_runs_every_seed(capsys, tmp_path):
 
 def test_a_failing_localizer_is_named_with_its_traceback_and_exit_1(capsys, tmp_path, monkeypatch):
     (tmp_path / "boom_loc.py").write_text(
-        "from dynmap_sim.agent.dead_reckoning import DeadReckoning\n"
+        "from dynmap_sim.agent.localization.dead_reckoning import DeadReckoning\n"
         "class Boom(DeadReckoning):\n"
         "    def update(self, odom, scan):\n"
         "        raise ZeroDivisionError('my localizer divides by zero')\n"

@@ -234,7 +234,7 @@ def test_sphinx_roles_leave_the_api_pages():
 
 def test_the_roles_table_lists_every_registered_name():
     from dynmap_sim.agent.control.controller import CONTROLLERS
-    from dynmap_sim.agent.localizer import LOCALIZERS
+    from dynmap_sim.agent.localization.localizer import LOCALIZERS
     from dynmap_sim.agent.planning.planner import PLANNERS
     from dynmap_sim.experiments.drivers.driver import DRIVERS
 

@@ -350,7 +350,7 @@ def roles_table(registries: dict[str, Any]) -> str:
 
 def _roles() -> str:
     from dynmap_sim.agent.control.controller import CONTROLLERS
-    from dynmap_sim.agent.localizer import LOCALIZERS
+    from dynmap_sim.agent.localization.localizer import LOCALIZERS
     from dynmap_sim.agent.planning.planner import PLANNERS
     from dynmap_sim.experiments.drivers.driver import DRIVERS
 

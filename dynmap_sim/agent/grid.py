@@ -87,6 +87,71 @@ def squared_distances(occupied: NDArray[np.bool_]) -> NDArray[np.float64]:
     return out
 
 
+def _sample_counts(clear: FloatArray, step: float) -> NDArray[np.int64]:
+    """How many samples ``i * step`` [m] (``i >= 0``) fall short of each beam's clear length
+    ``clear`` [m]: ``#{i : i * step < clear}``, exactly (the float ceil may be off by one)."""
+    n_b = np.maximum(np.ceil(clear / step), 0.0).astype(np.int64)
+    n_b -= (n_b > 0) & ((n_b - 1) * step >= clear)
+    n_b += n_b * step < clear
+    return n_b
+
+
+def _beam_passes(
+    lp: FloatArray,
+    cos_b: FloatArray,
+    sin_b: FloatArray,
+    n_b: NDArray[np.int64],
+    step: float,
+    origin: FloatArray,
+    resolution_m: float,
+    shape: tuple[int, int],
+) -> FloatArray:
+    """How many beams pass each cell of a grid of ``shape`` ``(H, W)`` at ``origin`` [m]
+    (flat, ``(H * W,)``): beam ``b`` of laser pose ``lp`` ``(K, 3)`` with direction
+    ``cos_b, sin_b`` ``(K, n_beams)`` is sampled every ``step`` [m] ``n_b[b]`` times, and a
+    cell it passes counts once for it. Along a ray the cell indices change monotonically,
+    so a beam's repeated cells are consecutive samples; the samples go in batches."""
+    h, w = shape
+    n_beams = cos_b.shape[1]
+    lx = np.repeat(lp[:, 0], n_beams)
+    ly = np.repeat(lp[:, 1], n_beams)
+    cb, sb = cos_b.ravel(), sin_b.ravel()
+    passes = np.zeros(h * w, dtype=np.float64)
+    ends = np.cumsum(n_b)
+    chunk = 1 << 17  # samples per vectorized batch
+    lo = 0
+    while lo < len(n_b):
+        start = int(ends[lo - 1]) if lo else 0
+        hi = max(int(np.searchsorted(ends, start + chunk, side="right")), lo + 1)
+        cnt = n_b[lo:hi]
+        beam = np.repeat(np.arange(lo, hi), cnt)
+        first = np.cumsum(cnt) - cnt
+        t = (np.arange(len(beam)) - np.repeat(first, cnt)) * step
+        ix = np.floor((lx[beam] + cb[beam] * t - origin[0]) / resolution_m).astype(np.intp)
+        iy = np.floor((ly[beam] + sb[beam] * t - origin[1]) / resolution_m).astype(np.intp)
+        key = iy * w + ix
+        new = t == 0.0
+        new[1:] |= key[1:] != key[:-1]
+        passes += np.bincount(key[new], minlength=h * w)
+        lo = hi
+    return passes
+
+
+def _cells_of_counts(
+    hits: FloatArray, passes: FloatArray, l_hit: float, l_pass: float
+) -> NDArray[np.int8]:
+    """Cell values (flat) from the beams ending in each cell (``hits``) and passing it
+    (``passes``), combined as log-odds ``l_hit * hits + l_pass * passes``: negative free,
+    else occupied where a beam ended, free where none did; unseen unknown."""
+    logodds = l_hit * hits + l_pass * passes
+    grid = np.full(len(hits), UNKNOWN, dtype=np.int8)
+    seen = (hits + passes) > 0
+    grid[seen & (logodds < 0)] = FREE
+    grid[seen & (logodds >= 0) & (hits > 0)] = OCCUPIED
+    grid[seen & (logodds >= 0) & (hits == 0)] = FREE
+    return grid
+
+
 class OccupancyGrid:
     """A 2-D occupancy grid with a cached likelihood field.
 
@@ -280,9 +345,8 @@ class OccupancyGrid:
             max(lp[:, 1].max(), ey.max(initial=-np.inf)) + reach,
         )
         origin, h, w = cls._empty(bounds, resolution_m, margin_m)
-        # Free space: samples every step along each beam up to its clear length; a cell a
-        # beam passes is counted once for that beam. Along a ray the cell indices change
-        # monotonically, so a beam's repeated cells are consecutive samples.
+        # each beam clears free space up to its hit (less a cell), to the hit range for a far
+        # reading, or ``reach`` for no return
         far = valid & ~hit
         clear = np.where(
             hit,
@@ -290,39 +354,10 @@ class OccupancyGrid:
             np.where(far, hit_max, np.where(rng_all == np.inf, reach, 0.0)),
         ).ravel()
         step = 0.5 * resolution_m
-        # n_b = #{i >= 0 : i * step < clear_b}, exactly (the float ceil may be off by one).
-        n_b = np.maximum(np.ceil(clear / step), 0.0).astype(np.int64)
-        n_b -= (n_b > 0) & ((n_b - 1) * step >= clear)
-        n_b += n_b * step < clear
-        n_beams = rng_all.shape[1]
-        lx = np.repeat(lp[:, 0], n_beams)
-        ly = np.repeat(lp[:, 1], n_beams)
-        cb, sb = cos_b.ravel(), sin_b.ravel()
-        passes = np.zeros(h * w, dtype=np.float64)
-        ends = np.cumsum(n_b)
-        chunk = 1 << 17  # samples per vectorized batch
-        lo = 0
-        while lo < len(n_b):
-            start = int(ends[lo - 1]) if lo else 0
-            hi = max(int(np.searchsorted(ends, start + chunk, side="right")), lo + 1)
-            cnt = n_b[lo:hi]
-            beam = np.repeat(np.arange(lo, hi), cnt)
-            first = np.cumsum(cnt) - cnt
-            t = (np.arange(len(beam)) - np.repeat(first, cnt)) * step
-            ix = np.floor((lx[beam] + cb[beam] * t - origin[0]) / resolution_m).astype(np.intp)
-            iy = np.floor((ly[beam] + sb[beam] * t - origin[1]) / resolution_m).astype(np.intp)
-            key = iy * w + ix
-            new = t == 0.0
-            new[1:] |= key[1:] != key[:-1]
-            passes += np.bincount(key[new], minlength=h * w)
-            lo = hi
+        n_b = _sample_counts(clear, step)
+        passes = _beam_passes(lp, cos_b, sin_b, n_b, step, origin, resolution_m, (h, w))
         ix = np.floor((ex - origin[0]) / resolution_m).astype(np.intp)
         iy = np.floor((ey - origin[1]) / resolution_m).astype(np.intp)
         hits = np.bincount(iy * w + ix, minlength=h * w).astype(np.float64)
-        logodds = l_hit * hits + l_pass * passes
-        grid = np.full(h * w, UNKNOWN, dtype=np.int8)
-        seen = (hits + passes) > 0
-        grid[seen & (logodds < 0)] = FREE
-        grid[seen & (logodds >= 0) & (hits > 0)] = OCCUPIED
-        grid[seen & (logodds >= 0) & (hits == 0)] = FREE
+        grid = _cells_of_counts(hits, passes, l_hit, l_pass)
         return cls(grid.reshape(h, w), origin, resolution_m, max_dist_m)

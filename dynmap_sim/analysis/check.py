@@ -15,7 +15,12 @@ from dynmap_sim.analysis.report import overall_of
 from dynmap_sim.analysis.scenarios import load_scenario
 from dynmap_sim.experiments.results import ResultsDB
 from dynmap_sim.experiments.runner import run_experiment
-from dynmap_sim.experiments.scenario import NavigationExpectation, Scenario
+from dynmap_sim.experiments.scenario import (
+    Expectations,
+    LocalizerExpectation,
+    NavigationExpectation,
+    Scenario,
+)
 from dynmap_sim.studies.study import Study, study_of_finding
 
 
@@ -81,80 +86,90 @@ def evaluate(scenario: Scenario, out_dir: Path, seed: int) -> list[CheckRow]:
     rows: list[CheckRow] = []
     with ResultsDB.open(out_dir) as db:
         labels = db.labels()
-        if exp.no_collisions:
-            n = db.query("SELECT coalesce(sum(collisions), 0) FROM runs")[0][0]
-            rows.append(CheckRow(seed, "robot", "collisions", 0, float(n), n == 0))
-        if exp.max_skipped_waypoints is not None:
-            n = db.query("SELECT coalesce(sum(skipped_waypoints), 0) FROM runs")[0][0]
-            lim = exp.max_skipped_waypoints
-            rows.append(CheckRow(seed, "robot", "skipped waypoints", lim, float(n), n <= lim))
+        rows += _robot_rows(db, exp, seed)
         if exp.findings:
             rows += _finding_rows(db, exp.findings, seed)
         if exp.navigation is not None:
             rows += _navigation_rows(db, exp.navigation, seed)
         for label, e in exp.localizers.items():
-            k = labels.index(label)
-            overall = overall_of(db, k) if _needs_scans(e) else None
-            days = db.query(
-                "SELECT day, mean_error_m, rmse_m, mean_heading_error_rad FROM day_summaries "
-                "WHERE loc=? ORDER BY day",
-                (k,),
+            rows += _localizer_rows(db, labels.index(label), label, e, seed)
+    return rows
+
+
+def _robot_rows(db: ResultsDB, exp: Expectations, seed: int) -> list[CheckRow]:
+    """Rows for the robot's expectations over every stored run: no collisions, at most so
+    many skipped waypoints."""
+    rows = []
+    if exp.no_collisions:
+        n = db.query("SELECT coalesce(sum(collisions), 0) FROM runs")[0][0]
+        rows.append(CheckRow(seed, "robot", "collisions", 0, float(n), n == 0))
+    if exp.max_skipped_waypoints is not None:
+        n = db.query("SELECT coalesce(sum(skipped_waypoints), 0) FROM runs")[0][0]
+        lim = exp.max_skipped_waypoints
+        rows.append(CheckRow(seed, "robot", "skipped waypoints", lim, float(n), n <= lim))
+    return rows
+
+
+def _localizer_rows(
+    db: ResultsDB, k: int, label: str, e: LocalizerExpectation, seed: int
+) -> list[CheckRow]:
+    """Rows for the expectations of localizer ``k`` (``label``): the worst day's mean
+    error, RMSE and heading error, and over every scan the largest error, the longest
+    recovery and the lost fraction."""
+    rows: list[CheckRow] = []
+    overall = overall_of(db, k) if _needs_scans(e) else None
+    days = db.query(
+        "SELECT day, mean_error_m, rmse_m, mean_heading_error_rad FROM day_summaries "
+        "WHERE loc=? ORDER BY day",
+        (k,),
+    )
+
+    def worst(col: int) -> tuple[float, str]:
+        vals = [(math.nan if r[col] is None else r[col], r[0]) for r in days]
+        if not vals:
+            return math.nan, ""
+        v, d = max(vals, key=lambda x: math.inf if math.isnan(x[0]) else x[0])
+        return v, f"day {d}"
+
+    if e.mean_error_m is not None:
+        v, w = worst(1)
+        rows.append(
+            CheckRow(
+                seed,
+                label,
+                "mean error per day [m]",
+                e.mean_error_m,
+                v,
+                _le(v, e.mean_error_m),
+                w,
             )
-
-            def worst(col: int, days=days) -> tuple[float, str]:
-                vals = [(math.nan if r[col] is None else r[col], r[0]) for r in days]
-                if not vals:
-                    return math.nan, ""
-                v, d = max(vals, key=lambda x: math.inf if math.isnan(x[0]) else x[0])
-                return v, f"day {d}"
-
-            if e.mean_error_m is not None:
-                v, w = worst(1)
-                rows.append(
-                    CheckRow(
-                        seed,
-                        label,
-                        "mean error per day [m]",
-                        e.mean_error_m,
-                        v,
-                        _le(v, e.mean_error_m),
-                        w,
-                    )
-                )
-            if e.rmse_m is not None:
-                v, w = worst(2)
-                rows.append(
-                    CheckRow(seed, label, "RMSE per day [m]", e.rmse_m, v, _le(v, e.rmse_m), w)
-                )
-            if e.mean_heading_error_rad is not None:
-                v, w = worst(3)
-                lim = e.mean_heading_error_rad
-                rows.append(
-                    CheckRow(
-                        seed, label, "mean heading error per day [rad]", lim, v, _le(v, lim), w
-                    )
-                )
-            if e.max_error_m is not None and overall is not None:
-                v = overall.worst_error_m
-                rows.append(
-                    CheckRow(seed, label, "max error [m]", e.max_error_m, v, _le(v, e.max_error_m))
-                )
-            if e.max_time_to_recover_s is not None and overall is not None:
-                v = overall.worst_time_to_recover_s
-                w = (
-                    "day {} run {}".format(*overall.worst_recovery_run)
-                    if overall.worst_recovery_run
-                    else ""
-                )
-                lim = e.max_time_to_recover_s
-                rows.append(CheckRow(seed, label, "time to recover [s]", lim, v, _le(v, lim), w))
-            if e.lost_fraction is not None and overall is not None:
-                v = overall.lost_fraction
-                rows.append(
-                    CheckRow(
-                        seed, label, "lost fraction", e.lost_fraction, v, _le(v, e.lost_fraction)
-                    )
-                )
+        )
+    if e.rmse_m is not None:
+        v, w = worst(2)
+        rows.append(CheckRow(seed, label, "RMSE per day [m]", e.rmse_m, v, _le(v, e.rmse_m), w))
+    if e.mean_heading_error_rad is not None:
+        v, w = worst(3)
+        lim = e.mean_heading_error_rad
+        rows.append(
+            CheckRow(seed, label, "mean heading error per day [rad]", lim, v, _le(v, lim), w)
+        )
+    if e.max_error_m is not None and overall is not None:
+        v = overall.worst_error_m
+        rows.append(CheckRow(seed, label, "max error [m]", e.max_error_m, v, _le(v, e.max_error_m)))
+    if e.max_time_to_recover_s is not None and overall is not None:
+        v = overall.worst_time_to_recover_s
+        w = (
+            "day {} run {}".format(*overall.worst_recovery_run)
+            if overall.worst_recovery_run
+            else ""
+        )
+        lim = e.max_time_to_recover_s
+        rows.append(CheckRow(seed, label, "time to recover [s]", lim, v, _le(v, lim), w))
+    if e.lost_fraction is not None and overall is not None:
+        v = overall.lost_fraction
+        rows.append(
+            CheckRow(seed, label, "lost fraction", e.lost_fraction, v, _le(v, e.lost_fraction))
+        )
     return rows
 
 

@@ -488,6 +488,114 @@ def _refuse_or_clear(out: Path, force: bool) -> None:
         )
 
 
+def _prepare_destination(dst: Path, out: str | Path, force: bool) -> None:
+    """Refuse or clear an existing bag at ``dst`` (:func:`_refuse_or_clear`) and make the
+    folders above it, as ``--parquet``'s and ``--tum``'s are made."""
+    _refuse_or_clear(dst, force)
+    try:
+        dst.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(
+            f"--mcap {out}: cannot create folder {dst.parent}: {exc.strerror}"
+        ) from None
+
+
+@dataclass(frozen=True)
+class _Source:
+    """What a bag is made of, read once from the results: the chosen runs ``(day, run,
+    date)``, the localizers' labels, the index of the one that gives ``map`` -> ``odom``
+    and of the dead-reckoning one (None: none ran), the laser's mount pose ``(x, y, θ)``
+    [m, rad], the driver's planned paths per ``(day, run)``, the run metadata of a replay
+    (None: an experiment), the laser's parameters and each localizer's stored grids."""
+
+    db: ResultsDB
+    runs: list[tuple[int, int, str]]
+    labels: list[str]
+    chosen: int
+    odo_loc: int | None
+    mount: np.ndarray
+    plans: dict[tuple[int, int], bytes]
+    replay_meta: dict[str, Any] | None
+    laser: dict[str, Any] | None
+    grids: dict[int, list[tuple[int, _Grid]]]
+    keep_scans: bool
+
+
+def _chosen_localizer(labels: list[str], localizer: str | None, results_dir: str | Path) -> int:
+    """The index of the label ``localizer`` (None: the first) among ``labels``."""
+    if not labels:
+        raise InputError(f"{results_dir}: no localizers in the results")
+    if localizer is None:
+        return 0
+    if localizer in labels:
+        return labels.index(localizer)
+    raise InputError(
+        f"--localizer {localizer!r}: not in the results; they have {', '.join(labels)}"
+    )
+
+
+def _read_source(
+    db: ResultsDB,
+    results_dir: str | Path,
+    localizer: str | None,
+    days: tuple[int, int] | None,
+    run: int | None,
+) -> _Source:
+    """The :class:`_Source` of the runs of ``db`` that :func:`export_mcap` chose."""
+    meta = db.meta()
+    labels = db.labels()
+    classes = [str(r[0]) for r in db.query("SELECT name FROM localizers ORDER BY idx")]
+    chosen = _chosen_localizer(labels, localizer, results_dir)
+    replay = "log_path" in meta
+    runs = _selected_runs(db, replay, days, run)
+    return _Source(
+        db=db,
+        runs=runs,
+        labels=labels,
+        chosen=chosen,
+        odo_loc=classes.index(ODOMETRY_CLASS) if ODOMETRY_CLASS in classes else None,
+        mount=np.asarray((meta.get("laser") or {}).get("mount_pose", [0.0, 0.0, 0.0]), float),
+        plans={(d, r): blob for d, r, blob in db.driver_artifacts("planned_path.f8")},
+        replay_meta=meta if replay else None,
+        laser=meta.get("laser"),
+        grids={k: g for k in range(len(labels)) if (g := stored_grids(db, k))},
+        keep_scans=bool(meta.get("keep_scans")),
+    )
+
+
+def _missing_notes(src: _Source) -> list[str]:
+    """Why ``/scan``, ``/odom`` or the occupancy grids are not in the bag, for those that
+    are not."""
+    notes = []
+    if not src.keep_scans:
+        notes.append(
+            "/scan not exported: the experiment kept no laser ranges (run it with "
+            "--keep-scans to store them)"
+        )
+    if src.odo_loc is None:
+        notes.append(
+            "/odom not exported: no dead-reckoning localizer ('odometry') in the results; "
+            f"/tf has map->odom identity and odom->base_link from {src.labels[src.chosen]!r}"
+        )
+    if not src.grids:
+        notes.append(
+            "no OccupancyGrid: no localizer's map is stored as a grid in the results (the "
+            "artifacts hold at most the dynamic map's range medians per local map)"
+        )
+    return notes
+
+
+def _people_note(src: _Source) -> str:
+    """Why ``/world/people`` is not in the bag: nobody on the floor, or no tracks kept."""
+    kept = any(src.db.scan_people(d, r) is not None for d, r, _ in src.runs)
+    return (
+        "/world/people not exported: no people on the floor in the exported runs"
+        if kept
+        else "/world/people not exported: the results hold no people's tracks "
+        "(run the experiment with --keep-scans to store them)"
+    )
+
+
 def export_mcap(
     results_dir: str | Path,
     out: str | Path,
@@ -505,50 +613,12 @@ def export_mcap(
     ``out`` and moved there when complete, so a failure leaves no half bag."""
     rosbag2 = _import_rosbags()
     dst = Path(out)
-    _refuse_or_clear(dst, force)
-    try:  # its folder is made as --parquet's and --tum's are
-        dst.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(
-            f"--mcap {out}: cannot create folder {dst.parent}: {exc.strerror}"
-        ) from None
+    _prepare_destination(dst, out, force)
     msgs = _Msgs()
     with ResultsDB.open(results_dir) as db:
-        meta = db.meta()
-        labels = db.labels()
-        classes = [str(r[0]) for r in db.query("SELECT name FROM localizers ORDER BY idx")]
-        if not labels:
-            raise InputError(f"{results_dir}: no localizers in the results")
-        if localizer is None:
-            chosen = 0
-        elif localizer in labels:
-            chosen = labels.index(localizer)
-        else:
-            raise InputError(
-                f"--localizer {localizer!r}: not in the results; they have {', '.join(labels)}"
-            )
-        replay = "log_path" in meta
-        runs = _selected_runs(db, replay, days, run)
-        odo_loc = classes.index(ODOMETRY_CLASS) if ODOMETRY_CLASS in classes else None
-        mount = np.asarray((meta.get("laser") or {}).get("mount_pose", [0.0, 0.0, 0.0]), float)
+        src = _read_source(db, results_dir, localizer, days, run)
         result = McapExport(dst, dst / f"{dst.name}.mcap")
-        if not meta.get("keep_scans"):
-            result.notes.append(
-                "/scan not exported: the experiment kept no laser ranges (run it with "
-                "--keep-scans to store them)"
-            )
-        if odo_loc is None:
-            result.notes.append(
-                "/odom not exported: no dead-reckoning localizer ('odometry') in the results; "
-                f"/tf has map->odom identity and odom->base_link from {labels[chosen]!r}"
-            )
-        grids = {k: g for k in range(len(labels)) if (g := stored_grids(db, k))}
-        if not grids:
-            result.notes.append(
-                "no OccupancyGrid: no localizer's map is stored as a grid in the results (the "
-                "artifacts hold at most the dynamic map's range medians per local map)"
-            )
-        plans = {(d, r): blob for d, r, blob in db.driver_artifacts("planned_path.f8")}
+        result.notes.extend(_missing_notes(src))
         staging = dst.parent / f".{dst.name}.partial-{os.getpid()}"
         shutil.rmtree(staging, ignore_errors=True)
         staging.mkdir()
@@ -560,29 +630,9 @@ def export_mcap(
             # STORAGE: zstd-compressed MCAP chunks (FILE/MESSAGE would hide them from Foxglove)
             writer.set_compression(rosbag2.CompressionMode.STORAGE, rosbag2.CompressionFormat.ZSTD)
             with writer:
-                _write_runs(
-                    db,
-                    writer,
-                    msgs,
-                    result,
-                    runs,
-                    labels,
-                    chosen,
-                    odo_loc,
-                    mount,
-                    plans,
-                    meta if replay else None,
-                    meta.get("laser"),
-                    grids,
-                )
+                _write_runs(src, _Topics(writer, msgs, result, src.labels, src.grids))
             if "/world/people" not in result.counts:
-                kept = any(db.scan_people(d, r) is not None for d, r, _ in runs)
-                result.notes.append(
-                    "/world/people not exported: no people on the floor in the exported runs"
-                    if kept
-                    else "/world/people not exported: the results hold no people's tracks "
-                    "(run the experiment with --keep-scans to store them)"
-                )
+                result.notes.append(_people_note(src))
             if dst.exists():
                 shutil.rmtree(dst)
             os.replace(bag, dst)
@@ -591,119 +641,175 @@ def export_mcap(
     return result
 
 
-def _write_runs(
-    db: ResultsDB,
-    writer: Any,
-    msgs: _Msgs,
-    result: McapExport,
-    runs: list[tuple[int, int, str]],
-    labels: list[str],
-    chosen: int,
-    odo_loc: int | None,
-    mount: np.ndarray,
-    plans: dict[tuple[int, int], bytes],
-    replay_meta: dict[str, Any] | None,
-    laser: dict[str, Any] | None,
-    grids: dict[int, list[tuple[int, _Grid]]],
-) -> None:
-    """Every message of the chosen runs, in time order per run."""
-    conns: dict[str, Any] = {}
-    types = {
-        "/tf_static": "tf2_msgs/msg/TFMessage",
-        "/world/obstacles": "visualization_msgs/msg/MarkerArray",
-        "/tf": "tf2_msgs/msg/TFMessage",
-        "/odom": "nav_msgs/msg/Odometry",
-        "/truth/pose": "geometry_msgs/msg/PoseStamped",
-        "/plan": "nav_msgs/msg/Path",
-        "/scan": "sensor_msgs/msg/LaserScan",
-        "/world/people": "visualization_msgs/msg/MarkerArray",
-    }
-    latched = {"/tf_static", "/world/obstacles", "/plan"}
-    topics = pose_topics(labels)
-    for topic in topics:
-        types[topic] = "geometry_msgs/msg/PoseStamped"
-    map_topics = {k: topics[k].removesuffix("/pose") + "/map" for k in grids}
-    for topic in map_topics.values():
-        types[topic] = "nav_msgs/msg/OccupancyGrid"
-        latched.add(topic)
-    period_s = float((laser or {}).get("scan_period_s") or 0.0)
+class _Topics:
+    """The bag's topics: their message types and offered QoS, each localizer's pose topic
+    and, for those that stored grids, map topic; a topic's connection is added when its
+    first message is written, and :attr:`McapExport.counts` counts the messages."""
 
-    def put(topic: str, ns: int, msg: Any) -> None:
-        if topic not in conns:
-            conns[topic] = writer.add_connection(
+    def __init__(
+        self,
+        writer: Any,
+        msgs: _Msgs,
+        result: McapExport,
+        labels: list[str],
+        grids: dict[int, list[tuple[int, _Grid]]],
+    ) -> None:
+        self.writer, self.msgs, self.result = writer, msgs, result
+        self.conns: dict[str, Any] = {}
+        self.types = {
+            "/tf_static": "tf2_msgs/msg/TFMessage",
+            "/world/obstacles": "visualization_msgs/msg/MarkerArray",
+            "/tf": "tf2_msgs/msg/TFMessage",
+            "/odom": "nav_msgs/msg/Odometry",
+            "/truth/pose": "geometry_msgs/msg/PoseStamped",
+            "/plan": "nav_msgs/msg/Path",
+            "/scan": "sensor_msgs/msg/LaserScan",
+            "/world/people": "visualization_msgs/msg/MarkerArray",
+        }
+        self.latched = {"/tf_static", "/world/obstacles", "/plan"}
+        self.poses = pose_topics(labels)
+        for topic in self.poses:
+            self.types[topic] = "geometry_msgs/msg/PoseStamped"
+        self.maps = {k: self.poses[k].removesuffix("/pose") + "/map" for k in grids}
+        for topic in self.maps.values():
+            self.types[topic] = "nav_msgs/msg/OccupancyGrid"
+            self.latched.add(topic)
+
+    def put(self, topic: str, ns: int, msg: Any) -> None:
+        """Write ``msg`` on ``topic`` stamped ``ns`` [ns since the epoch]."""
+        if topic not in self.conns:
+            self.conns[topic] = self.writer.add_connection(
                 topic,
-                types[topic],
-                typestore=msgs.store,
-                offered_qos_profiles=_qos(topic in latched),
+                self.types[topic],
+                typestore=self.msgs.store,
+                offered_qos_profiles=_qos(topic in self.latched),
             )
-            result.counts[topic] = 0
-        writer.write(conns[topic], int(ns), msgs.store.serialize_cdr(msg, types[topic]))
-        result.counts[topic] += 1
+            self.result.counts[topic] = 0
+        ser = self.msgs.store.serialize_cdr(msg, self.types[topic])
+        self.writer.write(self.conns[topic], int(ns), ser)
+        self.result.counts[topic] += 1
 
-    for day, run_, date in runs:
-        rows = db.query(
-            "SELECT t_s, x, y, theta FROM scans WHERE day=? AND run=? ORDER BY step", (day, run_)
+
+@dataclass(frozen=True)
+class _Run:
+    """One run's contents, per scan: stamps [ns since the epoch], true poses, every
+    localizer's estimates and covariance diagonals, the ``odom`` -> ``base_link`` pose, its
+    covariance diagonal and body twist (None: no odometry), ``map`` -> ``odom``, the laser
+    ranges and people (None: not kept), and how long a person's marker lives [ns]."""
+
+    ns: np.ndarray
+    truth: np.ndarray
+    est: list[tuple[np.ndarray, np.ndarray]]
+    odom: np.ndarray
+    odom_var: np.ndarray
+    twist: np.ndarray | None
+    map_odom: np.ndarray
+    ranges: np.ndarray | None
+    people: Any
+    life_ns: int
+
+
+def _run_stamps(date: str, t_s: np.ndarray, replay_meta: dict[str, Any] | None) -> np.ndarray:
+    """Nanoseconds since the epoch of a run's scans at clock times ``t_s`` [s]: the run's
+    calendar date, or a replay's log's own clock (as the TUM export)."""
+    if replay_meta is None:
+        return stamp_ns(date, t_s)
+    t0 = float(replay_meta.get("log_start_s") or 0.0)
+    return np.rint((t0 + t_s) * _NS).astype(np.int64)
+
+
+def _run_people(db: ResultsDB, day: int, run_: int, n: int) -> Any:
+    """The people kept at each of a run's ``n`` scans (None: not kept, or nobody on the
+    floor this run)."""
+    people = db.scan_people(day, run_)
+    if people is not None and not people.ids:
+        return None
+    if people is not None and len(people.xy) != n:
+        raise InputError(
+            f"{db.path}: day {day} run {run_}: {len(people.xy)} people's rows for {n} scans"
         )
-        scans = np.array(rows, dtype=np.float64).reshape(-1, 4)
-        n = len(scans)
-        if n == 0:
+    return people
+
+
+def _read_run(src: _Source, day: int, run_: int, date: str) -> _Run | None:
+    """The :class:`_Run` of ``(day, run_)`` (None: it has no scans)."""
+    db = src.db
+    rows = db.query(
+        "SELECT t_s, x, y, theta FROM scans WHERE day=? AND run=? ORDER BY step", (day, run_)
+    )
+    scans = np.array(rows, dtype=np.float64).reshape(-1, 4)
+    n = len(scans)
+    if n == 0:
+        return None
+    t_s, truth = scans[:, 0], scans[:, 1:]
+    est = [_poses(db, k, day, run_, n) for k in range(len(src.labels))]
+    if src.odo_loc is not None:
+        odom, odom_var = est[src.odo_loc]
+        map_odom = se2.compose(est[src.chosen][0], se2.inverse(odom))
+        twist = _body_twist(odom, t_s)
+    else:
+        odom, odom_var, twist = est[src.chosen][0], est[src.chosen][1], None
+        map_odom = np.zeros((n, 3))
+    period_s = float((src.laser or {}).get("scan_period_s") or 0.0)
+    life_s = period_s if period_s > 0 else float(np.median(np.diff(t_s))) if n > 1 else 0.0
+    return _Run(
+        ns=_run_stamps(date, t_s, src.replay_meta),
+        truth=truth,
+        est=est,
+        odom=odom,
+        odom_var=odom_var,
+        twist=twist,
+        map_odom=map_odom,
+        ranges=db.scan_ranges(day, run_) if src.laser is not None else None,
+        people=_run_people(db, day, run_, n),
+        life_ns=int(round(life_s * _NS)),  # 0: forever (ids are stable: the next replaces)
+    )
+
+
+def _write_scan(topics: _Topics, run: _Run, i: int, laser: dict[str, Any] | None) -> None:
+    """The messages of a run's scan ``i``: frames, odometry, poses, ranges and people."""
+    msgs, s = topics.msgs, int(run.ns[i])
+    tf = [
+        msgs.transform(s, "map", "odom", run.map_odom[i]),
+        msgs.transform(s, "odom", "base_link", run.odom[i]),
+    ]
+    topics.put("/tf", s, msgs.tf(tf))
+    if run.twist is not None:
+        topics.put("/odom", s, msgs.odometry(s, run.odom[i], run.odom_var[i], run.twist[i]))
+    if np.isfinite(run.truth[i]).all():  # a replay's scans without reference: none
+        topics.put("/truth/pose", s, msgs.pose_stamped(s, "map", run.truth[i]))
+    if run.ranges is not None:
+        topics.put("/scan", s, msgs.laser_scan(s, laser, run.ranges[i]))
+    if run.people is not None:
+        people = msgs.people(s, run.people.xy[i], run.people.radius_m, run.life_ns)
+        topics.put("/world/people", s, people)
+    for topic, (poses, _) in zip(topics.poses, run.est, strict=True):
+        topics.put(topic, s, msgs.pose_stamped(s, "map", poses[i]))
+
+
+def _write_runs(src: _Source, topics: _Topics) -> None:
+    """Every message of the chosen runs, in time order per run: at a run's first scan the
+    laser mount, the obstacles and the maps, then each scan's, then the planned path at
+    its last."""
+    msgs = topics.msgs
+    for day, run_, date in src.runs:
+        run = _read_run(src, day, run_, date)
+        if run is None:
             continue
-        t_s, truth = scans[:, 0], scans[:, 1:]
-        if replay_meta is not None:  # the log's own clock, as the TUM export
-            t0 = float(replay_meta.get("log_start_s") or 0.0)
-            ns = np.rint((t0 + t_s) * _NS).astype(np.int64)
-        else:
-            ns = stamp_ns(date, t_s)
-        est = [_poses(db, k, day, run_, n) for k in range(len(labels))]
-        if odo_loc is not None:
-            odom, odom_var = est[odo_loc]
-            map_odom = se2.compose(est[chosen][0], se2.inverse(odom))
-            twist = _body_twist(odom, t_s)
-        else:
-            odom, odom_var, twist = est[chosen][0], est[chosen][1], None
-            map_odom = np.zeros((n, 3))
-        t0_ns = int(ns[0])
-        put("/tf_static", t0_ns, msgs.tf([msgs.transform(t0_ns, "base_link", "laser", mount)]))
-        geom = db.geometry(day, run_)
+        t0_ns = int(run.ns[0])
+        topics.put(
+            "/tf_static", t0_ns, msgs.tf([msgs.transform(t0_ns, "base_link", "laser", src.mount)])
+        )
+        geom = src.db.geometry(day, run_)
         if geom is not None:
-            put("/world/obstacles", t0_ns, msgs.obstacles(t0_ns, *geom))
-        for k, topic in map_topics.items():
-            grid = _grid_for_day(grids[k], day)
+            topics.put("/world/obstacles", t0_ns, msgs.obstacles(t0_ns, *geom))
+        for k, topic in topics.maps.items():
+            grid = _grid_for_day(src.grids[k], day)
             if grid is not None:
-                put(topic, t0_ns, msgs.occupancy_grid(t0_ns, grid))
-        ranges = db.scan_ranges(day, run_) if laser is not None else None
-        people = db.scan_people(day, run_)
-        if people is not None and not people.ids:
-            people = None  # nobody on the floor this run
-        if people is not None and len(people.xy) != n:
-            raise InputError(
-                f"{db.path}: day {day} run {run_}: {len(people.xy)} people's rows for {n} scans"
-            )
-        life_s = period_s if period_s > 0 else float(np.median(np.diff(t_s))) if n > 1 else 0.0
-        life_ns = int(round(life_s * _NS))  # 0: forever (ids are stable: the next replaces)
-        for i in range(n):
-            s = int(ns[i])
-            put(
-                "/tf",
-                s,
-                msgs.tf(
-                    [
-                        msgs.transform(s, "map", "odom", map_odom[i]),
-                        msgs.transform(s, "odom", "base_link", odom[i]),
-                    ]
-                ),
-            )
-            if twist is not None:
-                put("/odom", s, msgs.odometry(s, odom[i], odom_var[i], twist[i]))
-            if np.isfinite(truth[i]).all():  # a replay's scans without reference: none
-                put("/truth/pose", s, msgs.pose_stamped(s, "map", truth[i]))
-            if ranges is not None:
-                put("/scan", s, msgs.laser_scan(s, laser, ranges[i]))
-            if people is not None:
-                put("/world/people", s, msgs.people(s, people.xy[i], people.radius_m, life_ns))
-            for topic, (poses, _) in zip(topics, est, strict=True):
-                put(topic, s, msgs.pose_stamped(s, "map", poses[i]))
-        blob = plans.get((day, run_))
+                topics.put(topic, t0_ns, msgs.occupancy_grid(t0_ns, grid))
+        for i in range(len(run.ns)):
+            _write_scan(topics, run, i, src.laser)
+        blob = src.plans.get((day, run_))
         if blob is not None:
-            s = int(ns[-1])
-            put("/plan", s, msgs.path(s, np.frombuffer(blob, dtype="<f8").reshape(-1, 2)))
+            s = int(run.ns[-1])
+            topics.put("/plan", s, msgs.path(s, np.frombuffer(blob, dtype="<f8").reshape(-1, 2)))

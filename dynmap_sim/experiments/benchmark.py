@@ -50,7 +50,7 @@ from dynmap_sim.experiments.scenario import ParamValue, Scenario, load_scenario
 from dynmap_sim.experiments.sweep import (
     SweepOutcome,
     SweepSpec,
-    _days_of,
+    parse_day_range,
     parse_seeds,
     run_sweep,
     seeds_text,
@@ -95,7 +95,7 @@ class _SuiteModel(BaseModel):
     @field_validator("days")
     @classmethod
     def _days(cls, v: Any) -> Any:
-        _days_of(v)
+        parse_day_range(v)
         return v
 
     @field_validator("scenario")
@@ -203,7 +203,7 @@ def load_suite(path: str | Path, kinds: tuple[str, ...] = ()) -> Suite:
     return Suite(
         name=m.name or p.stem,
         path=p.resolve(),
-        days=_days_of(m.days),
+        days=parse_day_range(m.days),
         run_seeds=run_seeds,
         baseline=m.baseline,
         worlds=tuple(worlds),

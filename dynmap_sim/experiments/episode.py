@@ -34,7 +34,7 @@ from typing import Any, Protocol
 import numpy as np
 from numpy.typing import NDArray
 
-from dynmap_sim.agent.localizer import Localizer
+from dynmap_sim.agent.localization.localizer import Localizer
 from dynmap_sim.agent.planning.clearance_grid import ClearanceGrid
 from dynmap_sim.agent.planning.grid_dijkstra import GridDijkstra
 from dynmap_sim.experiments.drivers import Driver, RunStart, StepInput

@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from dynmap_sim.agent.localizer import Localizer
+from dynmap_sim.agent.localization.localizer import Localizer
 from dynmap_sim.errors import InputError
 from dynmap_sim.experiments.results import LocalizerDiagnostics
 from dynmap_sim.metrics import PointClassTally, confusion_matrix
@@ -253,9 +253,9 @@ def pickle_localizer(label: str, loc: Localizer) -> bytes:
 
 
 class LocalizerContractError(InputError):
-    """A localizer broke the :class:`~dynmap_sim.agent.localizer.Localizer` contract: the
-    message names it, the rule and the run and scan (one line, no traceback: the fault is in
-    what it returned, not in the testbed's frames)."""
+    """A localizer broke the :class:`~dynmap_sim.agent.localization.localizer.Localizer`
+    contract: the message names it, the rule and the run and scan (one line, no traceback:
+    the fault is in what it returned, not in the testbed's frames)."""
 
 
 class LocalizerRun:

@@ -11,10 +11,10 @@ store as simulated experiments (:mod:`dynmap_sim.experiments.results`):
 With ``map_from_log_poses=True`` the map is instead rendered directly from poses (keyframes
 every 0.3 m / 0.3 rad): the reference poses when there is a reference, else the poses on the
 log's laser lines (on a raw log: its odometry). It goes to every localizer that accepts a
-map: a grid to a :class:`~dynmap_sim.agent.localizer.MapUser` (``static-mcl``), the keyframe
-scans at those poses to a :class:`~dynmap_sim.agent.localizer.ScanMapUser` (``dynamic-map``);
-the others still map on day 1 (``note`` says which), and when none accepts one the option is
-refused.
+map: a grid to a :class:`~dynmap_sim.agent.localization.localizer.MapUser`
+(``static-mcl``), the keyframe scans at those poses to a
+:class:`~dynmap_sim.agent.localization.localizer.ScanMapUser` (``dynamic-map``); the others
+still map on day 1 (``note`` says which), and when none accepts one the option is refused.
 
 The results folder reads like a simulated experiment's: ``meta`` names the log as the world,
 lists the two runs as ``slots`` (so the report says "2 of 2 runs done") and keeps the log's
@@ -46,7 +46,7 @@ import numpy as np
 
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import OccupancyGrid
-from dynmap_sim.agent.localizer import Localizer, MapUser, ScanMapUser, make_localizer
+from dynmap_sim.agent.localization.localizer import Localizer, MapUser, ScanMapUser, make_localizer
 from dynmap_sim.errors import InputError
 from dynmap_sim.experiments.localizer_pool import DiagnosticsRecorder, LocalizerRun
 from dynmap_sim.experiments.reference import (
@@ -216,6 +216,127 @@ def _log_date_and_start(log: CarmenLog) -> tuple[str, float]:
     return start.date().isoformat(), float(start.hour * 3600 + start.minute * 60 + start.second)
 
 
+def _make_localizers(
+    specs: list[tuple[str, dict[str, Any]]], data: CarmenLog, seed: int
+) -> list[Localizer]:
+    """The localizers ``(name, params)`` of ``specs`` for the log's laser, each with its
+    generator from ``seed`` (:func:`~dynmap_sim.experiments.runner.localizer_seeds`)."""
+    rngs = localizer_seeds(seed, len(specs))
+    try:
+        return [
+            make_localizer(name, laser=data.laser, rng=rngs[k + 1], **params)
+            for k, (name, params) in enumerate(specs)
+        ]
+    except (TypeError, ValueError) as exc:
+        raise InputError(f"--localizer: {exc}") from None
+
+
+def _replay_start(data: CarmenLog, ref: ReferenceMatch | None) -> np.ndarray:
+    """The pose ``(x, y, θ)`` [m, rad] each pass starts from: the reference's at the first
+    scan, else the frame the laser-line poses (and a map from them) are in."""
+    if ref is not None:
+        return start_pose(data, ref.poses)
+    return data.reference[0] if data.reference is not None else np.zeros(3)
+
+
+def _replay_hash(
+    log: Path,
+    data: CarmenLog,
+    localizers: list[str],
+    map_from_log_poses: bool,
+    bag: BagOptions | None,
+    seed: int,
+    ref: ReferenceMatch | None,
+) -> str:
+    """The replay's experiment hash: the log's and the reference's contents and every
+    option that changes the results."""
+    ident = log_digest(log)
+    ident.update(json.dumps([localizers, bool(map_from_log_poses)]).encode())
+    if bag is not None and bag.given():
+        ident.update(json.dumps(dataclasses.asdict(bag)).encode())
+    ident.update(json.dumps([data.odometry_source, data.reversals]).encode())
+    if seed:  # seed 0 keeps the hash of the replays before the option
+        ident.update(json.dumps({"seed": seed}).encode())
+    if ref is not None:
+        ident.update(log_digest(ref.path).digest())
+        ident.update(json.dumps([ref.offset_s, ref.tolerance_s]).encode())
+    return ident.hexdigest()
+
+
+def _reference_meta(ref: ReferenceMatch | None) -> dict[str, Any]:
+    """The ``meta`` entries that say how the reference matched the log (empty ones without
+    a reference)."""
+    return {
+        "has_reference": ref is not None,
+        "reference_path": str(ref.path) if ref is not None else None,
+        "reference_offset_s": ref.offset_s if ref is not None else None,
+        "reference_offset_source": ref.offset_source if ref is not None else None,
+        "reference_tolerance_s": ref.tolerance_s if ref is not None else None,
+        "reference_matched": ref.n_matched if ref is not None else 0,
+        "reference_summary": ref.describe() if ref is not None else None,
+    }
+
+
+def _replay_meta(
+    log: Path,
+    data: CarmenLog,
+    ref: ReferenceMatch | None,
+    seed: int,
+    experiment_hash: str,
+    map_from_log_poses: bool,
+    keep_scans: bool,
+) -> dict[str, Any]:
+    """The replay's ``meta`` (as yet incomplete): the log as the world, its two passes as
+    the slots, the reference's match and the options."""
+    date, start_s = _log_date_and_start(data)
+    return {
+        "scenario": None,
+        "scenario_name": f"replay:{Path(log).name}",
+        "world": f"{'ROS bag' if is_bag(log) else 'CARMEN log'} {Path(log).name}",
+        "log_path": str(log),
+        "log_message": data.message,
+        "log_start_s": float(data.stamps_s[0]),
+        "seed": seed,
+        "days": [1, 2],
+        "slots": [[1, 1, date, start_s], [2, 1, date, start_s]],
+        "first_date": date,
+        "experiment_hash": experiment_hash,
+        "laser": dataclasses.asdict(data.laser),
+        **_reference_meta(ref),
+        "map_from_log_poses": bool(map_from_log_poses),
+        "odometry_source": data.odometry_source,
+        "odometry_reversals": data.reversals,
+        "odometry_reversals_found": data.n_reversals,
+        "keep_scans": bool(keep_scans),
+        "complete": False,
+    }
+
+
+def _replay_passes(
+    db: ResultsDB,
+    data: CarmenLog,
+    locs: list[Localizer],
+    labels: list[str],
+    given_map: list[bool],
+    start: np.ndarray,
+    truth: np.ndarray,
+    keep_scans: bool,
+    seed: int,
+) -> None:
+    """The mapping pass (day 1) and the localization pass (day 2) of the log, each written
+    to ``db`` as run 1 of its day; a localizer given the log's map does not map on day 1."""
+    for day in (1, 2):
+        priors = [
+            Prior(initial_pose=start.copy(), day=day, run=1, first_run=day == 1 and not g)
+            for g in given_map
+        ]
+        rec = _run_pass(data, locs, priors, day, truth, labels=labels)
+        if keep_scans:
+            rec = dataclasses.replace(rec, ranges=data.ranges_m)
+        summaries = [ExperimentRunner._run_summary(k, rec) for k in range(len(locs))]
+        db.write_run(rec, summaries, True, None, "replay", seed)
+
+
 def replay_log(
     log: Path,
     localizers: list[str],
@@ -255,74 +376,22 @@ def replay_log(
             note(f"note: {ref.describe()}")
     truth = ref.poses if ref is not None else np.full((len(data), 3), np.nan)
     specs = [parse_localizer_arg(a) for a in localizers]
-    rngs = localizer_seeds(seed, len(specs))
-    try:
-        locs = [
-            make_localizer(name, laser=data.laser, rng=rngs[k + 1], **params)
-            for k, (name, params) in enumerate(specs)
-        ]
-    except (TypeError, ValueError) as exc:
-        raise InputError(f"--localizer: {exc}") from None
+    locs = _make_localizers(specs, data, seed)
     given_map = (
         _give_maps(data, ref, locs, localizers, note) if map_from_log_poses else [False] * len(locs)
     )
-    if ref is not None:
-        start = start_pose(data, ref.poses)
-    else:  # the frame the laser-line poses (and a map from them) are in
-        start = data.reference[0] if data.reference is not None else np.zeros(3)
-    date, start_s = _log_date_and_start(data)
-    ident = log_digest(log)
-    ident.update(json.dumps([localizers, bool(map_from_log_poses)]).encode())
-    if bag is not None and bag.given():
-        ident.update(json.dumps(dataclasses.asdict(bag)).encode())
-    ident.update(json.dumps([data.odometry_source, data.reversals]).encode())
-    if seed:  # seed 0 keeps the hash of the replays before the option
-        ident.update(json.dumps({"seed": seed}).encode())
-    if ref is not None:
-        ident.update(log_digest(ref.path).digest())
-        ident.update(json.dumps([ref.offset_s, ref.tolerance_s]).encode())
+    start = _replay_start(data, ref)
+    experiment_hash = _replay_hash(log, data, localizers, map_from_log_poses, bag, seed, ref)
     db = ResultsDB.create(out_dir, overwrite=True)
     try:
         db.set_meta(
-            scenario=None,
-            scenario_name=f"replay:{Path(log).name}",
-            world=f"{'ROS bag' if is_bag(log) else 'CARMEN log'} {Path(log).name}",
-            log_path=str(log),
-            log_message=data.message,
-            log_start_s=float(data.stamps_s[0]),
-            seed=seed,
-            days=[1, 2],
-            slots=[[1, 1, date, start_s], [2, 1, date, start_s]],
-            first_date=date,
-            experiment_hash=ident.hexdigest(),
-            laser=dataclasses.asdict(data.laser),
-            has_reference=ref is not None,
-            reference_path=str(ref.path) if ref is not None else None,
-            reference_offset_s=ref.offset_s if ref is not None else None,
-            reference_offset_source=ref.offset_source if ref is not None else None,
-            reference_tolerance_s=ref.tolerance_s if ref is not None else None,
-            reference_matched=ref.n_matched if ref is not None else 0,
-            reference_summary=ref.describe() if ref is not None else None,
-            map_from_log_poses=bool(map_from_log_poses),
-            odometry_source=data.odometry_source,
-            odometry_reversals=data.reversals,
-            odometry_reversals_found=data.n_reversals,
-            keep_scans=bool(keep_scans),
-            complete=False,
+            **_replay_meta(log, data, ref, seed, experiment_hash, map_from_log_poses, keep_scans)
         )
         db.set_localizers(
             [(a, name, params) for a, (name, params) in zip(localizers, specs, strict=True)]
         )
-        for day in (1, 2):
-            priors = [
-                Prior(initial_pose=start.copy(), day=day, run=1, first_run=day == 1 and not g)
-                for g in given_map
-            ]
-            rec = _run_pass(data, locs, priors, day, truth, labels=list(localizers))
-            if keep_scans:
-                rec = dataclasses.replace(rec, ranges=data.ranges_m)
-            summaries = [ExperimentRunner._run_summary(k, rec) for k in range(len(locs))]
-            db.write_run(rec, summaries, True, None, "replay", seed)
+        labels = list(localizers)
+        _replay_passes(db, data, locs, labels, given_map, start, truth, keep_scans, seed)
         db.set_meta(complete=True)
     finally:
         db.close()

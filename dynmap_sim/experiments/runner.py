@@ -24,12 +24,13 @@ import pickle
 import sys
 import time
 from collections import deque
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from dynmap_sim.agent.localizer import Localizer, make_localizer
+from dynmap_sim.agent.localization.localizer import Localizer, make_localizer
 from dynmap_sim.env_factory import SimSpecError
 from dynmap_sim.env_factory import make_env as build_env
 from dynmap_sim.errors import InputError
@@ -44,6 +45,7 @@ from dynmap_sim.experiments.localizer_pool import (
 from dynmap_sim.experiments.results import Checkpoint, ResultsDB, RunRecord
 from dynmap_sim.experiments.scenario import Scenario
 from dynmap_sim.metrics import NavRunSummary, RunSummary, nav_run_summary, run_summary
+from dynmap_sim.truth import RunSlot
 
 #: The layout of what the runner checkpoints (format 1: a dict of the tour driver and the RNG,
 #: before the episode loop; 2: an :class:`EngineState` with a registered Driver; 3: and the
@@ -169,6 +171,28 @@ def _duration(s: float) -> str:
     return f"{s / 3600:.1f} h"
 
 
+def _slots_of_days(slots: Sequence[RunSlot], days: tuple[int, int]) -> list[RunSlot]:
+    """The world's runs (calendar slots) on days ``days`` ``(first, last)``; an InputError
+    when there are none."""
+    chosen = [s for s in slots if days[0] <= s.day <= days[1]]
+    if not chosen:
+        raise InputError(
+            f"days {days[0]}-{days[1]}: the world's calendar has days 1-{max(s.day for s in slots)}"
+        )
+    return chosen
+
+
+def _worker_count(scenario: Scenario, n_runs: int, workers: int | None) -> int:
+    """``workers``, or (None) the default for the scenario's localizers over ``n_runs`` runs
+    (:func:`default_workers`)."""
+    if workers is None:
+        run_s = scenario.driver.max_run_s
+        robot_s = None if run_s is None else n_runs * float(run_s)
+        steered = int(scenario.driver.localizer is not None)
+        workers = default_workers(len(scenario.localizers), robot_s, steered)
+    return int(workers)
+
+
 class ExperimentRunner:
     """Holds an experiment's env, localizers, driver and results store (see module doc)."""
 
@@ -197,39 +221,16 @@ class ExperimentRunner:
         self.u = self.env.unwrapped
         self.laser = self.u.laser_spec
         self.facts = self.u.world_facts()
-        self.slots = [s for s in self.facts.slots if days[0] <= s.day <= days[1]]
-        if not self.slots:
-            raise InputError(
-                f"days {days[0]}-{days[1]}: the world's calendar has days "
-                f"1-{max(s.day for s in self.facts.slots)}"
-            )
+        self.slots = _slots_of_days(self.facts.slots, days)
         self.route = clip_route(np.asarray(self.facts.route, float), scenario.driver.route_fraction)
-        d = scenario.driver
-        self.loop = EpisodeLoop(
-            self.env,
-            LoopConfig(
-                seed=self.seed,
-                route=self.route,
-                speed_mps=d.speed_mps,
-                max_run_s=d.max_run_s,
-                prior=scenario.prior,
-                kidnappings=tuple(scenario.kidnappings),
-            ),
-            self.slots,
-        )
-        if workers is None:
-            run_s = scenario.driver.max_run_s
-            robot_s = None if run_s is None else len(self.slots) * float(run_s)
-            steered = int(scenario.driver.localizer is not None)
-            workers = default_workers(len(scenario.localizers), robot_s, steered)
-        self.workers = int(workers)
+        self.loop = self._episode_loop()
+        self.workers = _worker_count(scenario, len(self.slots), workers)
         self.hash = experiment_hash(scenario, self.seed, days)
         #: the experiment's size (the runs still to do are from :attr:`start_index` on)
         self.size = experiment_size(
             scenario, len(self.slots), self.route, float(self.laser.scan_period_s)
         )
         self.start_index = 0
-        state: EngineState | None = None
         #: the localizers pickled after the last stored run (None: fresh, in _fresh_locs)
         self._loc_states: list[bytes] | None = None
         self._fresh_locs: list[Localizer] = []
@@ -238,26 +239,46 @@ class ExperimentRunner:
         self._steer: tuple[str, Localizer] | None = None
         steer = scenario.driver.localizer
         self.steer_index = scenario.labels.index(steer) if steer is not None else None
-        db_file = out_dir / "results.db"
-        if resume and db_file.exists():
-            self.db = ResultsDB.open(out_dir, lock=True)  # one writer per folder
-            try:
-                self.keep_scans |= bool(self.db.meta().get("keep_scans", False))
-                state = self._resume_state(db_file, days)
-            except BaseException:
-                self.db.close()
-                raise
-        else:
-            sc = scenario
-            self.db = ResultsDB.create(  # locks the folder
-                out_dir,
-                overwrite=overwrite,
-                meta=self._meta(),
-                localizers=[(loc.display, loc.name, dict(loc.params)) for loc in sc.localizers],
-            )
+        state = self._open_store(resume, overwrite)
         self.loop.keep_people = self.keep_scans  # the people's tracks go with the ranges
         try:
             self.state = state if state is not None else self._fresh_state()
+        except BaseException:
+            self.db.close()
+            raise
+
+    def _episode_loop(self) -> EpisodeLoop:
+        """The loop that drives the robot through the chosen runs (:attr:`slots`)."""
+        d = self.scenario.driver
+        config = LoopConfig(
+            seed=self.seed,
+            route=self.route,
+            speed_mps=d.speed_mps,
+            max_run_s=d.max_run_s,
+            prior=self.scenario.prior,
+            kidnappings=tuple(self.scenario.kidnappings),
+        )
+        return EpisodeLoop(self.env, config, self.slots)
+
+    def _open_store(self, resume: bool, overwrite: bool) -> EngineState | None:
+        """Open the results store (the folder locked: one writer): with ``resume`` the one
+        there, checked and its checkpoint loaded (the engine state it holds; None: none),
+        else a new one (``overwrite``: replacing what is there)."""
+        db_file = self.out_dir / "results.db"
+        if not (resume and db_file.exists()):
+            self.db = ResultsDB.create(
+                self.out_dir,
+                overwrite=overwrite,
+                meta=self._meta(),
+                localizers=[
+                    (loc.display, loc.name, dict(loc.params)) for loc in self.scenario.localizers
+                ],
+            )
+            return None
+        self.db = ResultsDB.open(self.out_dir, lock=True)
+        try:
+            self.keep_scans |= bool(self.db.meta().get("keep_scans", False))
+            return self._resume_state(db_file, self.days)
         except BaseException:
             self.db.close()
             raise

@@ -56,7 +56,7 @@ from pydantic import (
     model_validator,
 )
 
-from dynmap_sim.agent.localizer import LOCALIZERS, make_localizer
+from dynmap_sim.agent.localization.localizer import LOCALIZERS, make_localizer
 from dynmap_sim.env_factory import SimSpec, kidnapping_errors, resolve_world, sim_spec_errors
 from dynmap_sim.errors import FileError, pydantic_errors, read_toml
 from dynmap_sim.experiments.drivers import DRIVERS, DriverContext, make_driver

@@ -358,7 +358,7 @@ class _SweepFileModel(BaseModel):
     @classmethod
     def _days(cls, v: Any) -> Any:
         if v is not None:
-            _days_of(v)
+            parse_day_range(v)
         return v
 
 
@@ -367,8 +367,9 @@ def seeds_text(v: str | int | list[int]) -> str:
     return ",".join(map(str, v)) if isinstance(v, list) else str(v)
 
 
-def _days_of(v: Any) -> tuple[int, int]:
-    """``'1-7'``, ``3`` or ``[1, 7]`` as a day range (ValueError when not one)."""
+def parse_day_range(v: Any) -> tuple[int, int]:
+    """A file's ``days`` (``'1-7'``, ``3`` or ``[1, 7]``) as the day range ``(first, last)``,
+    both counted from 1; ValueError when it is not one (sweep and benchmark files share it)."""
     if isinstance(v, list):
         if len(v) != 2:
             raise ValueError(f"days must look like '1-7' or [1, 7], not {v!r}")
@@ -420,7 +421,7 @@ def load_sweep_file(path: str | Path, load: Any = load_scenario) -> SweepSpec:
     return SweepSpec(
         scenarios=tuple(load(f) for f in files),
         seeds=parse_seeds(seeds_text(m.seeds), f"{p}: seeds"),
-        days=None if m.days is None else _days_of(m.days),
+        days=None if m.days is None else parse_day_range(m.days),
         settings=tuple(settings),
         only=None if m.localizers is None else tuple(m.localizers),
         name=m.name or p.stem,

@@ -17,8 +17,8 @@ from dynmap_sim.agent.localization.dynamic_map_localizer import (
     odometry_covariance,
     remap_degenerate,
 )
+from dynmap_sim.agent.localization.localizer import LOCALIZERS, make_localizer
 from dynmap_sim.agent.localization.odometry_calibration import odometry_error_rates
-from dynmap_sim.agent.localizer import LOCALIZERS, make_localizer
 from dynmap_sim.types import Prior
 
 

@@ -13,8 +13,8 @@ from pydantic import TypeAdapter
 from synthetic_scans import LASER
 
 from dynmap_sim.agent.localization.dynamic_map_localizer import DynamicMapConfig
+from dynmap_sim.agent.localization.localizer import make_localizer
 from dynmap_sim.agent.localization.particle_filter import TUNED, MCLConfig, StaticMCL
-from dynmap_sim.agent.localizer import make_localizer
 from dynmap_sim.agent.mapping.first_run import FirstRunConfig
 from dynmap_sim.agent.params import (
     AsTuple,

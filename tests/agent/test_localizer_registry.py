@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from dynmap_sim import se2
-from dynmap_sim.agent.localizer import LOCALIZERS, Localizer, make_localizer
+from dynmap_sim.agent.localization.localizer import LOCALIZERS, Localizer, make_localizer
 from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Prior, Scan
 
 LASER = LaserSpec("test", 3, -0.1, 0.1, 0.02, 5.6, 0.1, 0.0)

@@ -26,6 +26,7 @@ from dynmap_sim.agent.localization.likelihood_field import (
     likelihood_field_prob_beams,
     select_beams,
 )
+from dynmap_sim.agent.localization.localizer import MapUser, make_localizer
 from dynmap_sim.agent.localization.motion_model import decompose_odometry, sample_odometry_motion
 from dynmap_sim.agent.localization.particle_filter import (
     CONFIGS,
@@ -43,7 +44,6 @@ from dynmap_sim.agent.localization.particle_filter import (
 )
 from dynmap_sim.agent.localization.resampling import LowVarianceDraws, low_variance_resample
 from dynmap_sim.agent.localization.verified_recovery import VerifiedRecovery
-from dynmap_sim.agent.localizer import MapUser, make_localizer
 from dynmap_sim.agent.maps.map_source import FirstRunMap, PriorWallsMap, make_map_source
 from dynmap_sim.types import Odometry, Prior, Scan
 

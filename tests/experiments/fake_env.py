@@ -77,7 +77,7 @@ class FakeEnv:
         pass
 
 
-from dynmap_sim.agent.localizer import Localizer  # noqa: E402
+from dynmap_sim.agent.localization.localizer import Localizer  # noqa: E402
 from dynmap_sim.types import Diagnostic, PoseEstimate  # noqa: E402
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from dynmap_sim.agent.dead_reckoning import DeadReckoning as OdometryLocalizer
+from dynmap_sim.agent.localization.dead_reckoning import DeadReckoning as OdometryLocalizer
 from dynmap_sim.types import PoseEstimate
 
 

@@ -253,7 +253,7 @@ def test_a_localizer_that_breaks_its_contract_is_named_with_the_rule_run_and_sca
 def test_the_cli_shows_a_broken_contract_without_a_traceback(tmp_path, capsys):
     (tmp_path / "mine.py").write_text(
         "import numpy as np\n"
-        "from dynmap_sim.agent.dead_reckoning import DeadReckoning\n"
+        "from dynmap_sim.agent.localization.dead_reckoning import DeadReckoning\n"
         "class Bad(DeadReckoning):\n"
         "    def update(self, odom, scan):\n"
         "        return None\n"

@@ -85,7 +85,7 @@ days = "1-40"
 [[localizers]]
 name = "odometry"
 [[localizers]]
-name = "dynmap_sim.agent.dead_reckoning:DeadReckoning"
+name = "dynmap_sim.agent.localization.dead_reckoning:DeadReckoning"
 label = "odometry"
 params = { wrong = 1 }
 [[kidnappings]]
@@ -141,7 +141,7 @@ days = 3
 name = "odometry"
 label = "odo-a"
 [[localizers]]
-name = "dynmap_sim.agent.dead_reckoning:DeadReckoning"
+name = "dynmap_sim.agent.localization.dead_reckoning:DeadReckoning"
 label = "odo-b"
 params = { var_per_m = 0.01 }
 [[kidnappings]]

@@ -267,7 +267,7 @@ def test_another_sweep_in_the_same_folder_is_refused(tiny, tmp_path, capsys):
 
 
 BOOM = '''
-from dynmap_sim.agent.dead_reckoning import DeadReckoning
+from dynmap_sim.agent.localization.dead_reckoning import DeadReckoning
 
 
 class Boom(DeadReckoning):

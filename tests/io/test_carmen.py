@@ -259,7 +259,7 @@ def test_a_replay_folder_reports_and_exports_like_an_experiment(tmp_path, capsys
 
 
 def test_a_localizer_breaking_its_contract_in_a_replay_is_named(tmp_path, capsys, monkeypatch):
-    from dynmap_sim.agent.dead_reckoning import DeadReckoning
+    from dynmap_sim.agent.localization.dead_reckoning import DeadReckoning
 
     p = tmp_path / "loop.log"
     write_log(p)
@@ -267,5 +267,6 @@ def test_a_localizer_breaking_its_contract_in_a_replay_is_named(tmp_path, capsys
     assert main(["replay", str(p), "--localizer", "odometry", "--out", str(tmp_path / "r")]) == 2
     err = capsys.readouterr().err.strip()
     assert "Traceback" not in err and err.count("\n") == 0
-    assert "localizer 'odometry' (dynmap_sim.agent.dead_reckoning.DeadReckoning) broke" in err
+    cls = "dynmap_sim.agent.localization.dead_reckoning.DeadReckoning"
+    assert f"localizer 'odometry' ({cls}) broke" in err
     assert "on pass 1 (mapping) at scan 0: update() must return a PoseEstimate, got None" in err

@@ -157,8 +157,8 @@ def test_dynamic_map_acquires_c_o_from_the_reference_run_only(tmp_path):
     """With a reference, --map-from-log-poses also hands dynamic-map the reference's poses of
     every scan and the log's odometry, from which it acquires ``C_O`` (B&D §4.3); without
     one it keeps its configured rates (the laser lines' poses may be the odometry itself)."""
+    from dynmap_sim.agent.localization.localizer import make_localizer
     from dynmap_sim.agent.localization.odometry_calibration import odometry_error_rates
-    from dynmap_sim.agent.localizer import make_localizer
     from dynmap_sim.experiments.reference import load_reference
     from dynmap_sim.experiments.replay import _give_maps
     from dynmap_sim.io.carmen import read_carmen
@@ -178,7 +178,7 @@ def test_dynamic_map_acquires_c_o_from_the_reference_run_only(tmp_path):
 def test_dynamic_map_given_scans_maps_no_first_run():
     """``set_map_from_scans``: local maps at the given poses, none of the first-run mapper;
     a static variant freezes as after its first day; mismatched input is refused."""
-    from dynmap_sim.agent.localizer import make_localizer
+    from dynmap_sim.agent.localization.localizer import make_localizer
     from dynmap_sim.types import LaserSpec, Prior
 
     truth = _trajectory()

@@ -66,11 +66,11 @@ from numpy.typing import ArrayLike
 from pydantic import Field
 
 from dynmap_sim import se2
+from dynmap_sim.agent.localization.localizer import Localizer, ScanMapUser, register_localizer
 from dynmap_sim.agent.localization.odometry_calibration import (
     OdometryRates,
     odometry_error_rates,
 )
-from dynmap_sim.agent.localizer import Localizer, ScanMapUser, register_localizer
 from dynmap_sim.agent.mapping.first_run import FirstRunMapper
 from dynmap_sim.agent.mapping.scan_matcher import (
     MatchResult,

@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from dynmap_sim.agent.localization.localizer import register_localizer
 from dynmap_sim.agent.localization.temporal_map_mcl import TemporalMapMCL
-from dynmap_sim.agent.localizer import register_localizer
 from dynmap_sim.agent.maps.fremen import WEEK_S, Fremen, default_periods
 from dynmap_sim.types import LaserSpec
 

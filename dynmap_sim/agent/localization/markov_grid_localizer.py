@@ -15,8 +15,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from dynmap_sim.agent.localization.localizer import register_localizer
 from dynmap_sim.agent.localization.temporal_map_mcl import TemporalMapMCL
-from dynmap_sim.agent.localizer import register_localizer
 from dynmap_sim.agent.maps.markov_grid import WEEK_S, MarkovGrid
 from dynmap_sim.types import LaserSpec
 

@@ -42,8 +42,8 @@ Table 8.4 "KLD_Sampling_MCL"; Fox 2003) exactly as nav2_amcl composes it:
 The map comes from a map source (:mod:`dynmap_sim.agent.maps.map_source`): the first run's
 SLAM map (built by :class:`~dynmap_sim.agent.mapping.first_run.FirstRunMapper` on the
 experiment's first run, whose estimates it reports meanwhile) or the prior walls rasterized
-to a 5 cm grid; or it is handed over (:class:`~dynmap_sim.agent.localizer.MapUser`). It never
-changes afterwards.
+to a 5 cm grid; or it is handed over
+(:class:`~dynmap_sim.agent.localization.localizer.MapUser`). It never changes afterwards.
 """
 
 from __future__ import annotations
@@ -74,12 +74,12 @@ from dynmap_sim.agent.localization.likelihood_field import (
     select_beams,
     valid_beams,
 )
+from dynmap_sim.agent.localization.localizer import Localizer, MapUser, register_localizer
 from dynmap_sim.agent.localization.motion_model import sample_odometry_motion
 from dynmap_sim.agent.localization.particle_filter_kernels import bin_clusters
 from dynmap_sim.agent.localization.resampling import LowVarianceDraws, low_variance_resample
 from dynmap_sim.agent.localization.see_through import see_through_logp, wall_depths
 from dynmap_sim.agent.localization.verified_recovery import VerifiedRecovery
-from dynmap_sim.agent.localizer import Localizer, MapUser, register_localizer
 from dynmap_sim.agent.maps.map_source import MapSource, PriorWallsMap, make_map_source
 from dynmap_sim.agent.params import (
     Finite,
@@ -941,7 +941,8 @@ class StaticMCL(Localizer, MapUser):
         return self.map_source.grid
 
     def set_map(self, grid: OccupancyGrid) -> None:
-        """Use ``grid`` as the (fixed) map (:class:`~dynmap_sim.agent.localizer.MapUser`)."""
+        """Use ``grid`` as the (fixed) map
+        (:class:`~dynmap_sim.agent.localization.localizer.MapUser`)."""
         self.map_source.set_grid(grid)
         self.filter = AMCLFilter(grid, self.laser, self.config)
 

@@ -24,7 +24,7 @@ Off by default (``LoopClosureConfig.incremental_loops``; measurements: docs/tuni
 
 from __future__ import annotations
 
-from typing import Annotated
+from typing import Annotated, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -62,6 +62,26 @@ class IncrementalLoopConfig:
     reoptimize_m: float = 0.05
 
 
+def _candidates(cur: FloatArray, i: int, lcc: Any, w_xy: float) -> list[int] | None:
+    """The earlier keyframes to verify as closures of keyframe ``i``: the nearest in the
+    current estimate ``cur`` ``(n, 3)`` within the loop radius widened by the drift window
+    ``w_xy`` [m], at most ``lcc.loop_candidates``, no two within twice the loop gap of each
+    other (None: none is near); ``lcc``: the :class:`~.loop_closure.LoopClosureConfig`."""
+    cand = np.arange(0, i - lcc.loop_min_gap)
+    dist = np.hypot(*(cur[cand, :2] - cur[i, :2]).T)
+    near = dist < 0.5 * lcc.loop_radius_m + w_xy
+    if not np.any(near):
+        return None
+    cand, dist = cand[near], dist[near]
+    chosen: list[int] = []
+    for m in np.argsort(dist):
+        if len(chosen) >= lcc.loop_candidates:
+            break
+        if all(abs(int(cand[m]) - o) > 2 * lcc.loop_min_gap for o in chosen):
+            chosen.append(int(cand[m]))
+    return chosen
+
+
 def incremental_closures(
     lc,  # noqa: ANN001  # LoopClosure (circular import)
     slam,  # noqa: ANN001  # KeyframeSLAM
@@ -88,19 +108,10 @@ def incremental_closures(
         s = path[i] - since
         w_xy = min(c.drift_window_m[0] + c.drift_window_m[1] * s, c.drift_window_m[2])
         w_th = min(c.drift_window_rad[0] + c.drift_window_rad[1] * s, c.drift_window_rad[2])
-        cand = np.arange(0, i - lcc.loop_min_gap)
-        dist = np.hypot(*(cur[cand, :2] - cur[i, :2]).T)
-        near = dist < 0.5 * lcc.loop_radius_m + w_xy
-        if not np.any(near):
+        chosen = _candidates(cur, i, lcc, w_xy)
+        if chosen is None:
             stats["no_candidate"] += 1
             continue
-        cand, dist = cand[near], dist[near]
-        chosen: list[int] = []
-        for m in np.argsort(dist):
-            if len(chosen) >= lcc.loop_candidates:
-                break
-            if all(abs(int(cand[m]) - o) > 2 * lcc.loop_min_gap for o in chosen):
-                chosen.append(int(cand[m]))
         accepted: list[Edge] = []
         pending = [p for p in pending if i - p[0] <= c.confirm_keyframes]
         for j in chosen:

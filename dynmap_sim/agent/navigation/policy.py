@@ -12,7 +12,7 @@ its first run)::
 
     import numpy as np
     from dynmap_sim.env import DynMapEnv
-    from dynmap_sim.agent.localizer import make_localizer
+    from dynmap_sim.agent.localization.localizer import make_localizer
     from dynmap_sim.agent.navigation.policy import NavigationPolicy
     from dynmap_sim.agent.navigation.stack import NavigationStack
     from dynmap_sim.types import Prior
@@ -50,7 +50,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from dynmap_sim.agent.grid import OccupancyGrid
-from dynmap_sim.agent.localizer import Localizer
+from dynmap_sim.agent.localization.localizer import Localizer
 from dynmap_sim.agent.navigation.stack import NavigationStack
 from dynmap_sim.types import Odometry, PoseEstimate, Prior, Scan
 

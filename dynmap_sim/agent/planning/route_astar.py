@@ -134,6 +134,67 @@ def astar(
     return None
 
 
+def _nearest_node_edge(graph: RouteGraph, p: FloatArray, v_h: float, avoid: int | None) -> Edge:
+    """The virtual start edge straight from ``p`` [m] to the nearest node other than
+    ``avoid``, costed at its length / ``v_h`` [s]."""
+    near = graph.nearest_node(p, exclude=avoid)
+    d = float(np.hypot(*(graph.position(near) - p)))
+    hw_near = float(graph.half_width_m[graph.index[near]])
+    return Edge(START, near, d, 0.0 if math.isinf(v_h) else d / v_h, False, hw_near, -1)
+
+
+def _projection_edges(
+    graph: RouteGraph, hit: tuple[Edge, float, FloatArray], avoid: int | None, leave_goal_m: float
+) -> list[Edge]:
+    """The virtual start edges from the robot's projection at fraction ``u`` along segment
+    ``e`` (``hit``): on to its end for the rest of its travel time, and back to its start at
+    the reverse edge's cost (not towards ``avoid``, nor when the plan must leave the goal)."""
+    e, u, _ = hit
+    rest_m, rest_s = (1.0 - u) * e.length_m, (1.0 - u) * e.travel_time_s
+    out = [Edge(START, e.v, rest_m, rest_s, e.learned, e.half_width_m, e.route_id)]
+    back = graph.reverse_of(e)
+    if back is not None and back.v != avoid and leave_goal_m <= 0.0:  # back, at its cost
+        out.append(
+            Edge(START, e.u, u * e.length_m, u * back.travel_time_s, back.learned,
+                 e.half_width_m, e.route_id, True)
+        )  # fmt: skip
+    return out
+
+
+def _path_of(
+    graph: RouteGraph, start_point: FloatArray, cost: float, edges: list[Edge]
+) -> PlannedPath:
+    """The :class:`PlannedPath` from ``start_point`` [m] along ``edges`` (cost [s]); a join of
+    coincident waypoints shows only its far end."""
+    taken = tuple((e.u, e.v) for e in edges if e.u != START)
+    rows = [graph.index[e.v] for e in edges]
+    q = graph.xy[rows]
+    step = np.hypot(*(q - np.concatenate([np.asarray(start_point)[None], q[:-1]])).T)
+    if not np.any(step < 1e-9):  # no join of coincident waypoints: a point per edge
+        return PlannedPath(
+            (START, *(e.v for e in edges)),
+            np.concatenate([np.asarray(start_point)[None], q]),
+            np.array([edges[0].half_width_m, *(e.half_width_m for e in edges)]),
+            graph.v_max_mps[[rows[0], *rows]],
+            float(cost),
+            taken,
+        )
+    xy = [start_point]
+    hw = [edges[0].half_width_m]
+    v = [float(graph.v_max_mps[graph.index[edges[0].v]])]
+    ids = [START]
+    for e in edges:
+        q = graph.position(e.v)
+        if np.hypot(*(q - xy[-1])) < 1e-9:  # a join of coincident waypoints
+            ids[-1] = e.v
+            continue
+        xy.append(q)
+        hw.append(e.half_width_m)
+        v.append(float(graph.v_max_mps[graph.index[e.v]]))
+        ids.append(e.v)
+    return PlannedPath(tuple(ids), np.array(xy), np.array(hw), np.array(v), float(cost), taken)
+
+
 def plan_route(
     graph: RouteGraph,
     start_xy: ArrayLike,
@@ -175,24 +236,10 @@ def plan_route(
     if hit is not None and hit[0].v != avoid:
         starts = []  # along the tracked segment only
     else:
-        near = graph.nearest_node(p, exclude=avoid)
-        d = float(np.hypot(*(graph.position(near) - p)))
-        hw_near = float(graph.half_width_m[graph.index[near]])
-        starts = [Edge(START, near, d, 0.0 if math.isinf(v_h) else d / v_h, False, hw_near, -1)]
+        starts = [_nearest_node_edge(graph, p, v_h, avoid)]
         hit = graph.nearest_edge(p, exclude_to=avoid)
-    start_point = p
-    projected: list[Edge] = []  # start edges from the projection onto the segment
-    if hit is not None:
-        e, u, proj = hit
-        rest_m, rest_s = (1.0 - u) * e.length_m, (1.0 - u) * e.travel_time_s
-        projected.append(Edge(START, e.v, rest_m, rest_s, e.learned, e.half_width_m, e.route_id))
-        back = graph.reverse_of(e)
-        if back is not None and back.v != avoid and leave_goal_m <= 0.0:  # back, at its cost
-            projected.append(
-                Edge(START, e.u, u * e.length_m, u * back.travel_time_s, back.learned,
-                     e.half_width_m, e.route_id, True)
-            )  # fmt: skip
-        starts += projected
+    projected = [] if hit is None else _projection_edges(graph, hit, avoid, leave_goal_m)
+    starts += projected
     found = astar(
         graph,
         START,
@@ -205,33 +252,7 @@ def plan_route(
     )
     if found is None:
         return None
-    cost, nodes, edges = found
-    if any(edges[0] is s for s in projected):
-        start_point = proj
-    taken = tuple((e.u, e.v) for e in edges if e.u != START)
-    rows = [graph.index[e.v] for e in edges]
-    q = graph.xy[rows]
-    step = np.hypot(*(q - np.concatenate([np.asarray(start_point)[None], q[:-1]])).T)
-    if not np.any(step < 1e-9):  # no join of coincident waypoints: a point per edge
-        return PlannedPath(
-            (START, *(e.v for e in edges)),
-            np.concatenate([np.asarray(start_point)[None], q]),
-            np.array([edges[0].half_width_m, *(e.half_width_m for e in edges)]),
-            graph.v_max_mps[[rows[0], *rows]],
-            float(cost),
-            taken,
-        )
-    xy = [start_point]
-    hw = [edges[0].half_width_m]
-    v = [float(graph.v_max_mps[graph.index[edges[0].v]])]
-    ids = [START]
-    for e in edges:
-        q = graph.position(e.v)
-        if np.hypot(*(q - xy[-1])) < 1e-9:  # a join of coincident waypoints
-            ids[-1] = e.v
-            continue
-        xy.append(q)
-        hw.append(e.half_width_m)
-        v.append(float(graph.v_max_mps[graph.index[e.v]]))
-        ids.append(e.v)
-    return PlannedPath(tuple(ids), np.array(xy), np.array(hw), np.array(v), float(cost), taken)
+    cost, _, edges = found
+    on_projection = any(edges[0] is s for s in projected)  # only when there is a hit
+    start_point = hit[2] if hit is not None and on_projection else p
+    return _path_of(graph, start_point, cost, edges)

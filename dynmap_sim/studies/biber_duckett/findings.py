@@ -162,30 +162,13 @@ def _compare_daily(
     )
 
 
-def evaluate_findings(
+def _trend_finding(
     dynamic: dict[str, NDArray[Any]],
     statics: dict[str, dict[str, NDArray[Any]]],
-    baselines: dict[str, dict[str, NDArray[Any]]],
-    week_of_day: dict[int, int],
-    first_day: int = 3,
-    selections: tuple[NDArray[np.integer], NDArray[np.integer]] | None = None,
-) -> list[Finding]:
-    """Check the §5 findings on per-scan arrays.
-
-    Each series is a dict of equal-length arrays ``day``, ``err_m``, ``scan_loglik``,
-    ``lambda_min``, ``timescale`` (0-based index, NaN or negative: none) and ``safe_mode``
-    (1/0/NaN), as :meth:`ResultsDB.per_scan` returns them. ``statics`` maps labels of the
-    static variants to their series, ``baselines`` labels of static MCL runs to theirs,
-    ``week_of_day`` the 1-based week of every day. ``first_day``: the comparisons of
-    Figs. 10–11 start there (the maps of day 1 are the static maps themselves).
-    ``selections``: days and ``(n_days, 5)`` counts of every timescale selection (what
-    Figs. 12–13 count); without them the first selection of each scan stands in.
-    """
-    out = [
-        _compare_daily("likelihood_above_static", "scan_loglik", dynamic, statics, first_day),
-        _compare_daily("certainty_above_static", "lambda_min", dynamic, statics, first_day),
-    ]
-    # Trends of Figs. 10-11: static maps degrade, the dynamic map does not.
+    first_day: int,
+) -> Finding:
+    """The trends of Figs. 10-11: the static maps' daily mean likelihood falls from
+    ``first_day`` while the dynamic map's does not."""
     trend = []
     ok_trend: bool | None = True if statics else None
     for label, s in {"dynamic-map": dynamic, **statics}.items():
@@ -199,31 +182,37 @@ def evaluate_findings(
         trend.append(f"{label} {slope:+.4f}/day")
         if ok_trend is not None:
             ok_trend &= bool(slope >= 0) if s is dynamic else bool(slope < 0)
-    out.append(
-        Finding(
-            "static_degrades_dynamic_does_not",
-            "the static map performs better at the beginning than at the end, the dynamic map "
-            "improves with time (slope of the daily mean likelihood from day "
-            f"{first_day}, on >= {MIN_TREND_DAYS} days)",
-            ", ".join(trend),
-            ok_trend,
-        )
+    return Finding(
+        "static_degrades_dynamic_does_not",
+        "the static map performs better at the beginning than at the end, the dynamic map "
+        "improves with time (slope of the daily mean likelihood from day "
+        f"{first_day}, on >= {MIN_TREND_DAYS} days)",
+        ", ".join(trend),
+        ok_trend,
     )
-    days, day_counts, every = selection_counts_per_day(
-        dynamic["day"], dynamic["timescale"], selections
-    )
+
+
+def _timescales_used_finding(day_counts: NDArray[np.integer], every: bool) -> Finding:
+    """Fig. 12: each timescale chosen for at least :data:`MIN_TIMESCALE_SHARE` of the
+    selections; ``day_counts`` are the ``(n_days, 5)`` selection counts, ``every`` whether
+    they count every selection or only each scan's first."""
     what = "every selection" if every else "first selection of each scan"
     counts = day_counts.sum(axis=0).astype(float)
     share = counts / max(counts.sum(), 1.0)
-    out.append(
-        Finding(
-            "all_timescales_used",
-            f"each timescale was actually used (Fig. 12), here >= {MIN_TIMESCALE_SHARE:.0%} each",
-            ", ".join(f"λ{i + 1} {100 * v:.1f} %" for i, v in enumerate(share)) + f" ({what})",
-            bool(counts.sum() > 0 and np.all(share >= MIN_TIMESCALE_SHARE)),
-        )
+    return Finding(
+        "all_timescales_used",
+        f"each timescale was actually used (Fig. 12), here >= {MIN_TIMESCALE_SHARE:.0%} each",
+        ", ".join(f"λ{i + 1} {100 * v:.1f} %" for i, v in enumerate(share)) + f" ({what})",
+        bool(counts.sum() > 0 and np.all(share >= MIN_TIMESCALE_SHARE)),
     )
-    # Fig. 13's trends from day 2: day 1 maps the building, so its choices are special.
+
+
+def _usage_trend_findings(
+    days: NDArray[np.integer], day_counts: NDArray[np.integer]
+) -> list[Finding]:
+    """Fig. 13's trends from day 2 (day 1 maps the building, so its choices are special):
+    λ1's daily share of the selections falls, λ5's rises (:func:`_trend_holds`)."""
+    out = []
     usage = day_counts / np.maximum(day_counts.sum(axis=1, keepdims=True), 1)
     usage, days = usage[days >= 2], days[days >= 2]
     for key, level, sign, claim in (
@@ -247,24 +236,34 @@ def evaluate_findings(
         holds, numbers = _trend_holds(days, usage[:, level], sign)
         slope = 100 * _slope_per_day(days, usage[:, level])
         out.append(Finding(key, paper, f"{measured}: {numbers} ({slope:+.3f} %/day)", holds))
+    return out
+
+
+def _safe_mode_finding(dynamic: dict[str, NDArray[Any]]) -> Finding:
+    """§4.3: safe mode on at most :data:`SAFE_MODE_MAX` of the dynamic map's scans after
+    day 1."""
     sm = dynamic["safe_mode"]
     later = (dynamic["day"] > 1) & np.isfinite(sm)
     frac = float(np.mean(sm[later] > 0.5)) if later.any() else float("nan")
-    out.append(
-        Finding(
-            "safe_mode_rare",
-            f"safe mode in approximately 0.5 % of the cases (§4.3), here <= {SAFE_MODE_MAX:.0%}",
-            f"{100 * frac:.3f} % of the scans after day 1"
-            if np.isfinite(frac)
-            else "not measurable: no scans after day 1",
-            bool(frac <= SAFE_MODE_MAX) if np.isfinite(frac) else None,
-        )
+    return Finding(
+        "safe_mode_rare",
+        f"safe mode in approximately 0.5 % of the cases (§4.3), here <= {SAFE_MODE_MAX:.0%}",
+        f"{100 * frac:.3f} % of the scans after day 1"
+        if np.isfinite(frac)
+        else "not measurable: no scans after day 1",
+        bool(frac <= SAFE_MODE_MAX) if np.isfinite(frac) else None,
     )
+
+
+def _error_finding(
+    dynamic: dict[str, NDArray[Any]],
+    baselines: dict[str, dict[str, NDArray[Any]]],
+    week_of_day: dict[int, int],
+) -> Finding:
+    """Ground truth: the dynamic map's weekly mean position error (m) below each static MCL
+    run's in every week after the first."""
     if not baselines:
-        out.append(
-            Finding("error_below_static_mcl", "(ground truth)", "no static-mcl localizer", None)
-        )
-        return out
+        return Finding("error_below_static_mcl", "(ground truth)", "no static-mcl localizer", None)
     weeks = sorted({week_of_day[int(d)] for d in np.unique(dynamic["day"])})
     parts, ok, measurable = [], True, len(weeks) > 1
     for b_label, base in baselines.items():
@@ -281,16 +280,46 @@ def evaluate_findings(
                 ok &= bool(e_d < e_b)
             cells.append(f"week {w}: {e_d:.3f} vs {e_b:.3f} m")
         parts.append(f"{b_label}: " + ", ".join(cells))
-    out.append(
-        Finding(
-            "error_below_static_mcl",
-            "(new, from ground truth) the dynamic map's mean position error below static "
-            "MCL's (every configuration that ran) in every week after the first",
-            "; ".join(parts),
-            ok if measurable or not ok else None,
-        )
+    return Finding(
+        "error_below_static_mcl",
+        "(new, from ground truth) the dynamic map's mean position error below static "
+        "MCL's (every configuration that ran) in every week after the first",
+        "; ".join(parts),
+        ok if measurable or not ok else None,
     )
-    return out
+
+
+def evaluate_findings(
+    dynamic: dict[str, NDArray[Any]],
+    statics: dict[str, dict[str, NDArray[Any]]],
+    baselines: dict[str, dict[str, NDArray[Any]]],
+    week_of_day: dict[int, int],
+    first_day: int = 3,
+    selections: tuple[NDArray[np.integer], NDArray[np.integer]] | None = None,
+) -> list[Finding]:
+    """Check the §5 findings on per-scan arrays.
+
+    Each series is a dict of equal-length arrays ``day``, ``err_m``, ``scan_loglik``,
+    ``lambda_min``, ``timescale`` (0-based index, NaN or negative: none) and ``safe_mode``
+    (1/0/NaN), as :meth:`ResultsDB.per_scan` returns them. ``statics`` maps labels of the
+    static variants to their series, ``baselines`` labels of static MCL runs to theirs,
+    ``week_of_day`` the 1-based week of every day. ``first_day``: the comparisons of
+    Figs. 10–11 start there (the maps of day 1 are the static maps themselves).
+    ``selections``: days and ``(n_days, 5)`` counts of every timescale selection (what
+    Figs. 12–13 count); without them the first selection of each scan stands in.
+    """
+    days, day_counts, every = selection_counts_per_day(
+        dynamic["day"], dynamic["timescale"], selections
+    )
+    return [
+        _compare_daily("likelihood_above_static", "scan_loglik", dynamic, statics, first_day),
+        _compare_daily("certainty_above_static", "lambda_min", dynamic, statics, first_day),
+        _trend_finding(dynamic, statics, first_day),
+        _timescales_used_finding(day_counts, every),
+        *_usage_trend_findings(days, day_counts),
+        _safe_mode_finding(dynamic),
+        _error_finding(dynamic, baselines, week_of_day),
+    ]
 
 
 def exhibition_finding(mem: Any, exhibition_days: list[int]) -> Finding:

@@ -35,12 +35,12 @@ from dynmap_sim.agent.localization.adaptive_memory.object_tracker import (
     point_classes_of,
     segment_scan,
 )
+from dynmap_sim.agent.localization.localizer import LOCALIZERS, make_localizer
 from dynmap_sim.agent.localization.particle_filter import (
     AMCLFilter,
     information_lambda_min,
     regularized_covariance,
 )
-from dynmap_sim.agent.localizer import LOCALIZERS, make_localizer
 from dynmap_sim.types import Prior
 
 WALLS = np.concatenate(

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from dynmap_sim.agent.control.corridor_follower import CorridorFollowerParams
-from dynmap_sim.agent.localizer import make_localizer
+from dynmap_sim.agent.localization.localizer import make_localizer
 from dynmap_sim.agent.navigation.policy import NavigationPolicy
 from dynmap_sim.agent.navigation.route_memory import RouteMemory
 from dynmap_sim.agent.navigation.route_tracking import RoutePosition

@@ -9,7 +9,7 @@ import pytest
 from synthetic_scans import LASER
 
 from dynmap_sim.agent.localization.fremen_localizer import FremenLocalizer
-from dynmap_sim.agent.localizer import LOCALIZERS, make_localizer
+from dynmap_sim.agent.localization.localizer import LOCALIZERS, make_localizer
 from dynmap_sim.types import Prior
 
 

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from synthetic_scans import LASER
 
+from dynmap_sim.agent.localization.localizer import LOCALIZERS, make_localizer
 from dynmap_sim.agent.localization.markov_grid_localizer import MarkovGridLocalizer
-from dynmap_sim.agent.localizer import LOCALIZERS, make_localizer
 from dynmap_sim.types import Prior
 
 

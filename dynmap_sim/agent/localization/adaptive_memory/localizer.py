@@ -60,12 +60,12 @@ from dynmap_sim.agent.localization.adaptive_memory.object_tracker import (
     segment_scan,
 )
 from dynmap_sim.agent.localization.likelihood_field import LikelihoodTable, select_beams
+from dynmap_sim.agent.localization.localizer import Localizer, register_localizer
 from dynmap_sim.agent.localization.particle_filter import (
     CONFIGS,
     AMCLFilter,
     reported_covariance,
 )
-from dynmap_sim.agent.localizer import Localizer, register_localizer
 from dynmap_sim.agent.params import (
     Finite,
     Fraction,
@@ -513,13 +513,7 @@ class AdaptiveMemoryLocalizer(Localizer):
             self._select_map(pred, ranges)
         elif self._n_scans % c.map_refresh_scans == 0:
             self._use_map(self.used_slot)
-        use = classes == STATIC
-        if c.mcl_points == "non-dynamic":
-            use = np.zeros(len(ranges), dtype=bool)
-            use[vi] = classes[vi] != DYNAMIC
-        elif int(n_class[STATIC]) < c.min_static_points:
-            use |= classes == UNKNOWN
-        f.point_mask = use
+        f.point_mask = self._mcl_points(classes, n_class, vi)
         f.hold_beams(ranges)  # this scan's beams, picked once (released below)
         self._mcl_step(pose_odom, ranges)
         self._n_scans += 1
@@ -545,6 +539,20 @@ class AdaptiveMemoryLocalizer(Localizer):
         }
         f.release_beams()
         return PoseEstimate(mean=mean, cov=cov, extras=extras)
+
+    def _mcl_points(
+        self, classes: NDArray[np.int8], n_class: NDArray[np.int64], vi: NDArray[np.intp]
+    ) -> NDArray[np.bool_]:
+        """Which beams MCL weighs (§6.1): the static points; with ``mcl_points``
+        "non-dynamic" every valid beam (``vi``) not classed dynamic; with fewer than
+        ``min_static_points`` static points the unknown ones too."""
+        use = classes == STATIC
+        if self.config.mcl_points == "non-dynamic":
+            use = np.zeros(len(classes), dtype=bool)
+            use[vi] = classes[vi] != DYNAMIC
+        elif int(n_class[STATIC]) < self.config.min_static_points:
+            use |= classes == UNKNOWN
+        return use
 
     def _scan_points(
         self, ranges: FloatArray, boxes: Boxes, box_cls: NDArray[np.int8]

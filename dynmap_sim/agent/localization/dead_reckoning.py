@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from dynmap_sim import se2
-from dynmap_sim.agent.localizer import Localizer, register_localizer
+from dynmap_sim.agent.localization.localizer import Localizer, register_localizer
 from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Prior, Scan
 
 

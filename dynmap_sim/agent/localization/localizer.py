@@ -121,7 +121,7 @@ LOCALIZERS: Registry[Localizer] = Registry(
     "localizer",
     Localizer,
     builtin_modules=(
-        "dynmap_sim.agent.dead_reckoning",
+        "dynmap_sim.agent.localization.dead_reckoning",
         "dynmap_sim.agent.localization.particle_filter",
         "dynmap_sim.agent.localization.dynamic_map_localizer",
         "dynmap_sim.agent.localization.adaptive_memory.localizer",
