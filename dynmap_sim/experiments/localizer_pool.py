@@ -52,6 +52,7 @@ from numpy.typing import NDArray
 from dynmap_sim.agent.localization.localizer import Localizer
 from dynmap_sim.errors import InputError
 from dynmap_sim.experiments.results import LocalizerDiagnostics
+from dynmap_sim.experiments.results.checkpoints import load_state
 from dynmap_sim.metrics import PointClassTally, confusion_matrix
 from dynmap_sim.types import Diagnostic, Odometry, PoseEstimate, Prior, Scan
 
@@ -596,7 +597,7 @@ def _worker_main(conn: Connection, parent_pid: int) -> None:
         try:
             if kind == "adopt":
                 for k, (label, blob) in msg[1].items():
-                    locs[k] = (label, pickle.loads(blob))  # noqa: S301 - our own state
+                    locs[k] = (label, load_state(blob))
                 reply: tuple[Any, ...] = ("ok", None)
             elif kind == "drop":
                 for k in msg[1]:

@@ -43,6 +43,7 @@ from dynmap_sim.experiments.localizer_pool import (
     pickle_localizer,
 )
 from dynmap_sim.experiments.results import Checkpoint, ResultsDB, RunRecord
+from dynmap_sim.experiments.results.checkpoints import load_state
 from dynmap_sim.experiments.scenario import Scenario
 from dynmap_sim.metrics import NavRunSummary, RunSummary, nav_run_summary, run_summary
 from dynmap_sim.truth import RunSlot
@@ -385,7 +386,7 @@ class ExperimentRunner:
             return self._live_locs
         if self._loc_states is None:
             return self._fresh_locs
-        return [pickle.loads(b) for b in self._loc_states]  # noqa: S301 - our own state
+        return [load_state(b) for b in self._loc_states]
 
     def _start_localizers(self) -> InProcessLocalizers | LocalizerPool:
         """The localizer bench for every localizer but the one the driver steers on, which
@@ -397,7 +398,7 @@ class ExperimentRunner:
             locs = (
                 self._fresh_locs
                 if self._loc_states is None
-                else [pickle.loads(b) for b in self._loc_states]  # noqa: S301
+                else [load_state(b) for b in self._loc_states]
             )
             self._live_locs = locs
             self._steer = None if k is None else (labels[k], locs[k])
@@ -409,7 +410,7 @@ class ExperimentRunner:
                 for lab, loc in zip(labels, self._fresh_locs, strict=True)
             ]
         self._live_locs = None
-        self._steer = None if k is None else (labels[k], pickle.loads(states[k]))  # noqa: S301
+        self._steer = None if k is None else (labels[k], load_state(states[k]))
         return LocalizerPool([labels[j] for j in rest], [states[j] for j in rest], self.workers)
 
     def _with_steered(self, episode: Episode, outs: list[LocalizerOutput]) -> list[LocalizerOutput]:

@@ -186,3 +186,22 @@ def test_garbage_appended_to_the_wal_loses_nothing(tmp_path, finished):
         f.write(bytes(range(256)) * 20)
     ResultsDB.open(copy).close()
     assert tables(copy) == ref
+
+
+def test_a_state_pickled_before_a_module_moved_still_loads():
+    """A checkpoint pickled when ``DeadReckoning`` lived in ``dynmap_sim.agent.dead_reckoning``
+    resumes: the unpickler looks the class up at its new place."""
+    import pickle
+
+    from dynmap_sim.agent.localization.dead_reckoning import DeadReckoning
+    from dynmap_sim.experiments.results.checkpoints import MOVED_MODULES, load_state
+
+    blob = pickle.dumps({"localizers": [DeadReckoning]}, protocol=2)  # GLOBAL "module\nname"
+    new = b"dynmap_sim.agent.localization.dead_reckoning"
+    old = b"dynmap_sim.agent.dead_reckoning"
+    assert MOVED_MODULES[old.decode()] == new.decode()
+    before = blob.replace(new + b"\n", old + b"\n")
+    assert before != blob
+    with pytest.raises(ModuleNotFoundError):
+        pickle.loads(before)  # noqa: S301 - the test's own bytes
+    assert load_state(before) == {"localizers": [DeadReckoning]}

@@ -16,6 +16,7 @@ seed or deleted run is refused like a flipped bit.
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import os
 import pickle
@@ -26,6 +27,25 @@ from typing import Any
 from dynmap_sim.errors import InputError
 from dynmap_sim.experiments.results.records import Checkpoint
 from dynmap_sim.experiments.results.schema import CHECKPOINT_DIR
+
+#: Modules that moved, old name to new: a state pickled before the move still loads.
+MOVED_MODULES = {
+    "dynmap_sim.agent.localizer": "dynmap_sim.agent.localization.localizer",
+    "dynmap_sim.agent.dead_reckoning": "dynmap_sim.agent.localization.dead_reckoning",
+}
+
+
+class _StateUnpickler(pickle.Unpickler):
+    """An unpickler that finds the classes of :data:`MOVED_MODULES` at their new place."""
+
+    def find_class(self, module: str, name: str) -> Any:
+        return super().find_class(MOVED_MODULES.get(module, module), name)
+
+
+def load_state(blob: bytes) -> Any:
+    """Unpickle the engine's own state (a checkpoint, a localizer), classes that moved
+    found at their new module (:data:`MOVED_MODULES`)."""
+    return _StateUnpickler(io.BytesIO(blob)).load()  # noqa: S301 - our own state
 
 
 def checkpoint_digest(
@@ -76,7 +96,7 @@ class CheckpointStore:
         try:
             row = self.con.execute("SELECT blob FROM checkpoint WHERE id = 1").fetchone()
             if row is not None and row[0] is not None:
-                content = pickle.loads(bytes(row[0]))  # noqa: S301 - our own checkpoint
+                content = load_state(bytes(row[0]))
                 keep = {name for name, _ in content.get("localizer_files", ())}
         except Exception:  # noqa: BLE001 - unreadable: keep every file but the new ones
             pass
@@ -160,7 +180,7 @@ class CheckpointStore:
             raise InputError(f"{self.path}: the checkpoint was made with seed {s}, not {seed}")
         self.verify(row, cover)
         try:
-            content = pickle.loads(bytes(blob))  # noqa: S301 - our own checksummed blob
+            content = load_state(bytes(blob))
         except Exception as exc:  # noqa: BLE001 - any failure means unusable
             raise InputError(f"{self.path}: the checkpoint cannot be loaded ({exc})") from None
         if not (isinstance(content, dict) and content.get("format") == 2):
