@@ -338,16 +338,18 @@ class OccupancyGrid:
         ex = (lp[:, 0:1] + cos_b * rng_all)[hit]  # end points of the hits
         ey = (lp[:, 1:2] + sin_b * rng_all)[hit]
         reach = max(no_return_free_m, 0.0)
+        far = valid & ~hit
+        # the grid holds every cell a beam clears: a far reading clears up to the hit range
+        extent = max(reach, hit_max) if np.any(far) else reach
         bounds = (
-            min(lp[:, 0].min(), ex.min(initial=np.inf)) - reach,
-            min(lp[:, 1].min(), ey.min(initial=np.inf)) - reach,
-            max(lp[:, 0].max(), ex.max(initial=-np.inf)) + reach,
-            max(lp[:, 1].max(), ey.max(initial=-np.inf)) + reach,
+            min(lp[:, 0].min(), ex.min(initial=np.inf)) - extent,
+            min(lp[:, 1].min(), ey.min(initial=np.inf)) - extent,
+            max(lp[:, 0].max(), ex.max(initial=-np.inf)) + extent,
+            max(lp[:, 1].max(), ey.max(initial=-np.inf)) + extent,
         )
         origin, h, w = cls._empty(bounds, resolution_m, margin_m)
         # each beam clears free space up to its hit (less a cell), to the hit range for a far
         # reading, or ``reach`` for no return
-        far = valid & ~hit
         clear = np.where(
             hit,
             rng_all - resolution_m,

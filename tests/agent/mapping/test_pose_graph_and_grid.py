@@ -219,3 +219,17 @@ def test_dcs_keeps_true_closures_and_ignores_false_ones(n_false):
     if n_false:
         plain = optimize_pose_graph(init, edges, anchor=0, loss="linear")
         assert np.hypot(*(plain[:, :2] - truth[:, :2]).T).max() > 0.3
+
+
+def test_grid_from_scans_holds_far_readings_cleared_beyond_no_return_reach():
+    """A hit range above ``no_return_free_m``: readings beyond it clear free space up to the
+    hit range, and the grid is large enough to hold it (no out-of-bounds cells)."""
+    from dynmap_sim.types import LaserSpec
+
+    laser = LaserSpec("far", 11, -0.5, 0.1, 0.1, 80.0, 0.1, 0.0)
+    ranges = np.full((1, 11), 30.0)  # far readings only: beyond the 10 m hit range
+    grid = OccupancyGrid.from_scans(
+        np.zeros((1, 3)), ranges, laser, resolution_m=0.1, max_hit_range_m=10.0
+    )
+    ix, iy = grid.cell_of(np.array([[5.0, 0.0], [9.5, 0.0], [10.5, 0.0]]))
+    assert list(grid.occupancy[iy, ix]) == [FREE, FREE, UNKNOWN]
