@@ -34,7 +34,7 @@ by :mod:`dynmap_sim.world.loader`. A minimal file::
     pose = [4.0, 2.0, 0.0]
 
     [[schedule]]                               # add | remove | install | move | open | close
-    action = "present"                         # | present | shuffle | grow
+    action = "present"                         # | present | shuffle | grow | periodic
     group = "expo"
     start = 3
     end = 5
@@ -61,6 +61,7 @@ from pydantic import (
     ConfigDict,
     Field,
     PlainValidator,
+    ValidationInfo,
     WithJsonSchema,
     field_validator,
     model_validator,
@@ -374,6 +375,95 @@ class GrowEvent(_Event):
     scale_end: float = Field(gt=0.0)
 
 
+def _hhmm_minutes(t: str, allow_24: bool = False) -> int:
+    """Minutes after midnight of a clock time ``"HH:MM"`` (``"24:00"`` too with ``allow_24``)."""
+    if allow_24 and t == "24:00":
+        return 24 * 60
+    m = _HHMM.match(t)
+    if not m:
+        raise ValueError(f'clock time {t!r} must look like "HH:MM" (00:00 .. 23:59)')
+    return int(m.group(1)) * 60 + int(m.group(2))
+
+
+class PeriodicEvent(_Event):
+    """An object, a group or a door in ``state`` inside a daily clock window, the other state
+    outside it (a door open in office hours, chairs taken away at lunch).
+
+    On each working day from ``start`` to ``end`` whose weekday is in ``weekdays``, the window
+    applies with probability ``p``, drawn from a ``SeedSequence`` keyed by (seed, event, date);
+    a run is inside the window when its start time is in ``[from, to)``. Inside ``start`` ..
+    ``end`` the target is in the window's state at the runs inside an applying window and in
+    the other state at every other run (on a day the window does not apply, all day); outside
+    ``start`` .. ``end`` the event does nothing. It acts on top of the other events: it can
+    only take away, making the target absent (or a door closed) where its rule says so, and
+    elsewhere the target keeps the state the rest of the schedule gives it. An object removed
+    by a ``remove`` stays removed, a door shut by a ``close`` stays shut, and a door opened by
+    the window must be open in the file (``open = true``) or by an ``open`` event.
+    """
+
+    model_config = ConfigDict(
+        extra="forbid", frozen=True, allow_inf_nan=False, populate_by_name=True
+    )
+
+    action: Literal["periodic"]
+    target: str | None = Field(default=None, description="object id (a door for open/closed)")
+    group: str | None = Field(default=None, description="group name")
+    state: Literal["present", "absent", "open", "closed"] = Field(
+        description="state inside the window (the other one outside): present/absent for "
+        "objects and groups, open/closed for doors"
+    )
+    from_: str = Field(alias="from", description='window start, clock time "HH:MM"')
+    to: str = Field(description='window end, clock time "HH:MM" after `from` (or "24:00")')
+    weekdays: tuple[Weekday, ...] | None = Field(
+        default=None, description="weekdays the window applies on (default: every working day)"
+    )
+    start: When = Field(default=1, description="first day the event acts")
+    end: When | None = Field(default=None, description="last day it acts (default: calendar end)")
+    p: float = Field(
+        default=1.0, ge=0.0, le=1.0, description="probability that the window applies on a day"
+    )
+
+    @field_validator("from_")
+    @classmethod
+    def _from(cls, v: str) -> str:
+        _hhmm_minutes(v)
+        return v
+
+    @field_validator("to")
+    @classmethod
+    def _to(cls, v: str, info: ValidationInfo) -> str:
+        end = _hhmm_minutes(v, allow_24=True)
+        start = info.data.get("from_")
+        if start is not None and end <= _hhmm_minutes(start):
+            raise ValueError(f"the window must end after it starts: to {v!r} <= from {start!r}")
+        return v
+
+    @field_validator("weekdays")
+    @classmethod
+    def _weekdays(cls, v: tuple[str, ...] | None) -> tuple[str, ...] | None:
+        if v is not None and not v:
+            raise ValueError("give at least one weekday, or leave weekdays out for every day")
+        if v is not None and len(set(v)) != len(v):
+            raise ValueError("weekdays must not repeat")
+        return v
+
+    @model_validator(mode="after")
+    def _check(self) -> PeriodicEvent:
+        if (self.target is None) == (self.group is None):
+            raise ValueError("give exactly one of 'target' or 'group'")
+        return self
+
+    @property
+    def from_minutes(self) -> int:
+        """Window start [min after midnight]."""
+        return _hhmm_minutes(self.from_)
+
+    @property
+    def to_minutes(self) -> int:
+        """Window end [min after midnight], exclusive."""
+        return _hhmm_minutes(self.to, allow_24=True)
+
+
 Event = Annotated[
     AddEvent
     | RemoveEvent
@@ -382,7 +472,8 @@ Event = Annotated[
     | DoorEvent
     | PresentEvent
     | ShuffleEvent
-    | GrowEvent,
+    | GrowEvent
+    | PeriodicEvent,
     Field(discriminator="action"),
 ]
 
