@@ -19,6 +19,7 @@ from dynmap_sim.world.calendar import Calendar
 from dynmap_sim.world.polygons import edge_normals, sat_separation, transform
 from dynmap_sim.world.schedule import wall_pieces
 from dynmap_sim.world.spec import (
+    ACTIONS,
     AddEvent,
     DoorEvent,
     GrowEvent,
@@ -60,24 +61,10 @@ def world_json_schema() -> dict[str, Any]:
     return schema
 
 
-_ACTIONS = (
-    "add",
-    "remove",
-    "install",
-    "move",
-    "open",
-    "close",
-    "present",
-    "shuffle",
-    "grow",
-    "periodic",
-)
-
-
 def _drop_action_tag(loc: str) -> str:
     """``schedule.1.shuffle.region`` -> ``schedule.1.region`` (pydantic adds the union tag)."""
     parts = loc.split(".")
-    if len(parts) >= 3 and parts[0] == "schedule" and parts[2] in _ACTIONS:
+    if len(parts) >= 3 and parts[0] == "schedule" and parts[2] in ACTIONS:
         del parts[2]
     return ".".join(parts)
 
@@ -473,7 +460,8 @@ def _check_start(spec: WorldSpec, walls: list[tuple[str, np.ndarray]]) -> _Error
 
 
 def _check_people(spec: WorldSpec, cal: Calendar) -> _Errors:
-    """People's areas, goals and routes lie in the bounds; their start and end in the calendar."""
+    """People's areas, goals and routes lie in the bounds; their start and end in the calendar;
+    their weekday profiles are for working days."""
     errs: _Errors = []
     for i, p in enumerate(spec.people):
         for k, area in enumerate(p.areas):
@@ -487,4 +475,12 @@ def _check_people(spec: WorldSpec, cal: Calendar) -> _Errors:
             when = getattr(p, key)
             if when is not None and cal.day_of(when) is None:
                 errs.append((f"people.{i}.{key}", f"{when} is outside the calendar"))
+        for day in type(p.weekday_profiles).model_fields:
+            if getattr(p.weekday_profiles, day) is not None and day not in spec.calendar.weekdays:
+                errs.append(
+                    (
+                        f"people.{i}.weekday_profiles.{day}",
+                        f"{day!r} is not a working day of the calendar",
+                    )
+                )
     return errs

@@ -53,10 +53,11 @@ from __future__ import annotations
 
 import datetime as dt
 import re
-from typing import Annotated, Literal
+from typing import Annotated, Literal, get_args
 
 import numpy as np
 from pydantic import (
+    AfterValidator,
     BaseModel,
     ConfigDict,
     Field,
@@ -385,6 +386,15 @@ def _hhmm_minutes(t: str, allow_24: bool = False) -> int:
     return int(m.group(1)) * 60 + int(m.group(2))
 
 
+def _clock_time(v: str) -> str:
+    """``v`` if it is a clock time ``"HH:MM"``, else ``ValueError``."""
+    _hhmm_minutes(v)
+    return v
+
+
+ClockTime = Annotated[str, AfterValidator(_clock_time)]
+
+
 class PeriodicEvent(_Event):
     """An object, a group or a door in ``state`` inside a daily clock window, the other state
     outside it (a door open in office hours, chairs taken away at lunch).
@@ -412,7 +422,7 @@ class PeriodicEvent(_Event):
         description="state inside the window (the other one outside): present/absent for "
         "objects and groups, open/closed for doors"
     )
-    from_: str = Field(alias="from", description='window start, clock time "HH:MM"')
+    from_: ClockTime = Field(alias="from", description='window start, clock time "HH:MM"')
     to: str = Field(description='window end, clock time "HH:MM" after `from` (or "24:00")')
     weekdays: tuple[Weekday, ...] | None = Field(
         default=None, description="weekdays the window applies on (default: every working day)"
@@ -422,12 +432,6 @@ class PeriodicEvent(_Event):
     p: float = Field(
         default=1.0, ge=0.0, le=1.0, description="probability that the window applies on a day"
     )
-
-    @field_validator("from_")
-    @classmethod
-    def _from(cls, v: str) -> str:
-        _hhmm_minutes(v)
-        return v
 
     @field_validator("to")
     @classmethod
@@ -476,6 +480,44 @@ Event = Annotated[
     | PeriodicEvent,
     Field(discriminator="action"),
 ]
+#: Every ``action`` a schedule entry may have, in the order of :data:`Event`.
+ACTIONS: tuple[str, ...] = tuple(
+    a
+    for cls in get_args(get_args(Event)[0])
+    for a in get_args(cls.model_fields["action"].annotation)
+)
+
+
+Profile = tuple[Point, ...]
+
+
+def _check_profile(v: Profile) -> Profile:
+    """``v`` if it is a profile ``[[hour, fraction], ...]`` (hours increasing in [0, 24],
+    fractions in [0, 1]), else ``ValueError``."""
+    if not v:
+        raise ValueError("profile needs at least one [hour, fraction] point")
+    hours = [h for h, _ in v]
+    if any(b <= a for a, b in zip(hours, hours[1:], strict=False)):
+        raise ValueError("profile hours must be strictly increasing")
+    if any(not (0 <= h <= 24) for h in hours) or any(not (0 <= f <= 1) for _, f in v):
+        raise ValueError("profile hours must be in [0, 24] and fractions in [0, 1]")
+    return v
+
+
+CheckedProfile = Annotated[Profile, AfterValidator(_check_profile)]
+
+
+class WeekdayProfiles(_Model):
+    """Profiles ``[[hour, fraction], ...]`` for some weekdays, instead of ``profile`` on them
+    (nobody on Saturdays, a busy Friday afternoon)."""
+
+    mon: CheckedProfile | None = None
+    tue: CheckedProfile | None = None
+    wed: CheckedProfile | None = None
+    thu: CheckedProfile | None = None
+    fri: CheckedProfile | None = None
+    sat: CheckedProfile | None = None
+    sun: CheckedProfile | None = None
 
 
 class PeopleSpec(_Model):
@@ -484,9 +526,10 @@ class PeopleSpec(_Model):
     Up to ``count`` people walk inside ``areas`` between ``goals`` (attraction points; random
     points of the areas if empty), or along a ``route`` of waypoints (a closed loop, each
     person starting somewhere on it). ``profile`` gives, as ``[[hour, fraction], ...]`` linearly
-    interpolated, the fraction of ``count`` present at a time of day; ``start``/``end``
-    restrict the days they come. The number present in a run is fixed at the run's start
-    time (runs last minutes; the profile changes over hours).
+    interpolated, the fraction of ``count`` present at a time of day, and ``weekday_profiles``
+    another profile for some weekdays (``{ sat = [[0, 0], [24, 0]] }``: nobody on Saturdays);
+    ``start``/``end`` restrict the days they come. The number present in a run is fixed at
+    the run's start time (runs last minutes; the profile changes over hours).
     """
 
     id: str = Field(min_length=1)
@@ -498,7 +541,11 @@ class PeopleSpec(_Model):
     )
     speed_mps: Point = (0.6, 1.3)
     radius_m: float = Field(default=0.22, gt=0.0, le=0.5)
-    profile: tuple[Point, ...] = ((0.0, 1.0), (24.0, 1.0))
+    profile: CheckedProfile = ((0.0, 1.0), (24.0, 1.0))
+    weekday_profiles: WeekdayProfiles = Field(
+        default_factory=WeekdayProfiles,
+        description="profiles for some weekdays instead of `profile`: { sat = [[0, 0], [24, 0]] }",
+    )
     start: When | None = None
     end: When | None = None
 
@@ -524,17 +571,10 @@ class PeopleSpec(_Model):
             raise ValueError("speed range must satisfy 0 < min <= max <= 3 m/s")
         return v
 
-    @field_validator("profile")
-    @classmethod
-    def _profile(cls, v: tuple[Point, ...]) -> tuple[Point, ...]:
-        if not v:
-            raise ValueError("profile needs at least one [hour, fraction] point")
-        hours = [h for h, _ in v]
-        if any(b <= a for a, b in zip(hours, hours[1:], strict=False)):
-            raise ValueError("profile hours must be strictly increasing")
-        if any(not (0 <= h <= 24) for h in hours) or any(not (0 <= f <= 1) for _, f in v):
-            raise ValueError("profile hours must be in [0, 24] and fractions in [0, 1]")
-        return v
+    def profile_on(self, weekday: int) -> Profile:
+        """The profile of a day with ``weekday`` (0 Monday .. 6 Sunday)."""
+        own = getattr(self.weekday_profiles, WEEKDAYS[weekday])
+        return self.profile if own is None else own
 
 
 class WorldSpec(_Model):

@@ -140,6 +140,34 @@ def chairs_in(w: World, day: int, run: int, group: str) -> int:
     return sum(o.group == group for o in w.snapshot(day, run).objects)
 
 
+def test_weekday_profile_replaces_the_profile_on_its_weekday(base_world):
+    data = world(base_world, calendar={**CAL, "runs": ["09:00"]})
+    data["schedule"] = []
+    data["people"][0].pop("end")
+    data["people"][0]["start"] = 1
+    data["people"][0]["weekday_profiles"] = {"sat": [[0.0, 0.0], [24.0, 0.0]]}
+    w = World(parse_world(data), seed=0)
+    counts = [len(w.snapshot(day, 1).people) for day in range(1, 8)]  # Mon 2024-01-01 ..
+    assert counts == [3, 3, 3, 3, 3, 0, 3]
+
+
+@pytest.mark.parametrize(
+    ("profiles", "field", "msg"),
+    [
+        ({"funday": [[0.0, 0.0]]}, "people.0.weekday_profiles.funday", "Extra inputs"),
+        ({"sat": [[5.0, 0.0], [2.0, 1.0]]}, "people.0.weekday_profiles.sat", "increasing"),
+        ({"sat": [[5.0, 2.0]]}, "people.0.weekday_profiles.sat", "fractions in [0, 1]"),
+        ({"sun": [[5.0, 0.5]]}, "people.0.weekday_profiles.sun", "not a working day"),
+    ],
+)
+def test_bad_weekday_profiles(base_world, profiles, field, msg):
+    data = world(base_world, calendar={**CAL, "weekdays": ["mon", "tue", "sat"]})
+    data["people"][0]["weekday_profiles"] = profiles
+    with pytest.raises(WorldFileError) as info:
+        parse_world(data, "bad.toml")
+    assert any(loc == field and msg in text for loc, text in info.value.errors), info.value.errors
+
+
 # -- validation -----------------------------------------------------------------------------
 
 BAD = [
