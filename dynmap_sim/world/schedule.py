@@ -12,11 +12,12 @@ A ``periodic`` event is no occurrence: it is a mask applied last, on the state a
 the run's date and clock time (whether its window applies that day is drawn from
 ``SeedSequence((seed, tag, event index, date ordinal))``); it makes its target absent (or a
 door closed) where its rule says so and leaves every other state as the schedule made it.
+A shuffle places its group around the others as they are in its run, periodic rules included.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -240,6 +241,16 @@ class Schedule:
         inside = ev.from_minutes * 60.0 <= rs.start_s < ev.to_minutes * 60.0
         return ev.state if inside else other[ev.state]
 
+    def _periodic_view(self, st: dict[str, _State], seed: int, t: int) -> dict[str, _State]:
+        """``st`` with the periodic rules of slot ``t`` applied to copies (``st`` as it is
+        without periodic events): what a shuffle at ``t`` places its group around."""
+        if not self._periodic:
+            return st
+        view = {oid: replace(s) for oid, s in st.items()}
+        for i, ev in self._periodic:
+            self._apply_periodic(view, ev, i, seed, t)
+        return view
+
     def _apply_periodic(
         self, st: dict[str, _State], ev: PeriodicEvent, idx: int, seed: int, t: int
     ) -> None:
@@ -280,7 +291,8 @@ class Schedule:
         mset = set(members)
         members.sort(key=lambda oid: -self._areas[oid])  # largest first packs best
         others = [p for _, p in self.walls]
-        for oid, s in st.items():
+        around = self._periodic_view(st, seed, slot)  # the others as they are in this run
+        for oid, s in around.items():
             if oid in mset:
                 continue
             p = self.polygon(oid, s)

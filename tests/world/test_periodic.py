@@ -270,3 +270,23 @@ def test_generator_on_writes_valid_periodic_events(kind, tmp_path):
     group = next(ev.group for ev in periodic if ev.group)
     assert chairs_in(w, 1, 2, group) == 0 and chairs_in(w, 1, 1, group) > 0
     assert generate(kind, 1, params).toml() == g.toml()
+
+
+def test_a_shuffle_places_its_group_around_a_door_the_periodic_rule_closes(base_world):
+    from dynmap_sim.world.polygons import sat_separation
+
+    shuffle = {"action": "shuffle", "group": "chairs", "region": [4.0, 0.9, 5.85, 3.0]}
+    data = world(base_world, shuffle, OFFICE)
+    data["schedule"] = [e for i, e in enumerate(data["schedule"]) if i != 1]  # the old shuffle
+    w = World(parse_world(data), seed=0)
+    gaps = []
+    for day in range(1, 15):
+        snap = w.snapshot(day, 1)  # 07:00: the door is closed
+        objs = snap.by_id()
+        assert "door" in objs
+        gaps += [
+            sat_separation(objs[c].polygon, objs["door"].polygon)
+            for c in ("chair_1", "chair_2")
+            if c in objs
+        ]
+    assert gaps and min(gaps) >= 0.1 - 1e-9
