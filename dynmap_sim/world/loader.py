@@ -19,12 +19,14 @@ from dynmap_sim.world.calendar import Calendar
 from dynmap_sim.world.polygons import edge_normals, sat_separation, transform
 from dynmap_sim.world.schedule import wall_pieces
 from dynmap_sim.world.spec import (
+    ACTIONS,
     AddEvent,
     DoorEvent,
     GrowEvent,
     InstallEvent,
     MoveEvent,
     ObjectSpec,
+    PeriodicEvent,
     PresentEvent,
     RemoveEvent,
     ShuffleEvent,
@@ -59,13 +61,10 @@ def world_json_schema() -> dict[str, Any]:
     return schema
 
 
-_ACTIONS = ("add", "remove", "install", "move", "open", "close", "present", "shuffle", "grow")
-
-
 def _drop_action_tag(loc: str) -> str:
     """``schedule.1.shuffle.region`` -> ``schedule.1.region`` (pydantic adds the union tag)."""
     parts = loc.split(".")
-    if len(parts) >= 3 and parts[0] == "schedule" and parts[2] in _ACTIONS:
+    if len(parts) >= 3 and parts[0] == "schedule" and parts[2] in ACTIONS:
         del parts[2]
     return ".".join(parts)
 
@@ -216,6 +215,36 @@ def _check_schedule(spec: WorldSpec, cal: Calendar, objects: dict[str, ObjectSpe
         errs += _event_installations(groups, ev, loc, days, installed)
         if isinstance(ev, ShuffleEvent):
             errs += _shuffle_region(spec, ev, loc, groups.get(ev.group, []))
+        if isinstance(ev, PeriodicEvent):
+            errs += _periodic_rule(spec, ev, loc, objects, groups)
+    return errs
+
+
+def _periodic_rule(
+    spec: WorldSpec,
+    ev: PeriodicEvent,
+    loc: str,
+    objects: dict[str, ObjectSpec],
+    groups: dict[str, list[ObjectSpec]],
+) -> _Errors:
+    """A periodic open/closed acts on doors only; its weekdays are working days."""
+    errs: _Errors = []
+    if ev.state in ("open", "closed"):
+        if ev.target is not None and ev.target in objects and objects[ev.target].kind != "door":
+            errs.append((f"{loc}.target", f"{ev.target!r} is not a door (state {ev.state!r})"))
+        for o in groups.get(ev.group or "", []) if ev.group is not None else []:
+            if o.kind != "door":
+                errs.append((f"{loc}.group", f"{o.id!r} of group {ev.group!r} is not a door"))
+                break
+    for k, day in enumerate(ev.weekdays or ()):
+        if day not in spec.calendar.weekdays:
+            errs.append(
+                (
+                    f"{loc}.weekdays.{k}",
+                    f"{day!r} is not a working day of the calendar "
+                    f"({', '.join(spec.calendar.weekdays)})",
+                )
+            )
     return errs
 
 
@@ -277,7 +306,9 @@ def _event_installations(
     if isinstance(ev, InstallEvent):
         for oid in _event_object_ids(groups, ev):
             installed[oid] = days.get("at") or 0
-    if isinstance(ev, RemoveEvent) or (isinstance(ev, PresentEvent)):
+    if isinstance(ev, RemoveEvent | PresentEvent) or (
+        isinstance(ev, PeriodicEvent) and ev.state in ("present", "absent")
+    ):
         for oid in _event_object_ids(groups, ev):
             if oid in installed and (days.get("at") or days.get("start") or 0) >= installed[oid]:
                 errs.append((loc, f"{oid!r} is a permanent installation and cannot be removed"))
@@ -429,7 +460,8 @@ def _check_start(spec: WorldSpec, walls: list[tuple[str, np.ndarray]]) -> _Error
 
 
 def _check_people(spec: WorldSpec, cal: Calendar) -> _Errors:
-    """People's areas, goals and routes lie in the bounds; their start and end in the calendar."""
+    """People's areas, goals and routes lie in the bounds; their start and end in the calendar;
+    their weekday profiles are for working days."""
     errs: _Errors = []
     for i, p in enumerate(spec.people):
         for k, area in enumerate(p.areas):
@@ -443,4 +475,12 @@ def _check_people(spec: WorldSpec, cal: Calendar) -> _Errors:
             when = getattr(p, key)
             if when is not None and cal.day_of(when) is None:
                 errs.append((f"people.{i}.{key}", f"{when} is outside the calendar"))
+        for day in type(p.weekday_profiles).model_fields:
+            if getattr(p.weekday_profiles, day) is not None and day not in spec.calendar.weekdays:
+                errs.append(
+                    (
+                        f"people.{i}.weekday_profiles.{day}",
+                        f"{day!r} is not a working day of the calendar",
+                    )
+                )
     return errs

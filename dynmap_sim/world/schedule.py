@@ -7,11 +7,17 @@ contributes its start and its end, a recurring ``shuffle`` only its latest occur
 a slot so that they place their group around whatever else changed in that run. Randomness of a
 shuffle occurrence comes from ``numpy.random.SeedSequence((seed, event index, day, run))``,
 never from a generator stepped through time, so runs can be visited in any order.
+
+A ``periodic`` event is no occurrence: it is a mask applied last, on the state at ``t``, from
+the run's date and clock time (whether its window applies that day is drawn from
+``SeedSequence((seed, tag, event index, date ordinal))``); it makes its target absent (or a
+door closed) where its rule says so and leaves every other state as the schedule made it.
+A shuffle places its group around the others as they are in its run, periodic rules included.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -25,12 +31,14 @@ from dynmap_sim.world.polygons import (
     transform,
 )
 from dynmap_sim.world.spec import (
+    WEEKDAYS,
     AddEvent,
     DoorEvent,
     GrowEvent,
     InstallEvent,
     MoveEvent,
     ObjectSpec,
+    PeriodicEvent,
     PresentEvent,
     RemoveEvent,
     ShuffleEvent,
@@ -39,6 +47,7 @@ from dynmap_sim.world.spec import (
 
 _SHUFFLE_TRIES = 200
 _SHUFFLE_TAG = 0x5F1E
+_PERIODIC_TAG = 0x9E71
 
 
 @dataclass(frozen=True)
@@ -118,6 +127,9 @@ class Schedule:
         for ev in spec.schedule:
             if isinstance(ev, PresentEvent):
                 self._windowed.update(self.groups.get(ev.group, []))
+        self._periodic = [
+            (i, ev) for i, ev in enumerate(spec.schedule) if isinstance(ev, PeriodicEvent)
+        ]
 
     # -- time helpers -------------------------------------------------------------------
     def _slot(self, when, run: int = 1) -> int:
@@ -154,6 +166,8 @@ class Schedule:
                 if s0 <= t:
                     s = s0 + ((min(t, s1) - s0) // ev.every_runs) * ev.every_runs
                     occ.append((s, i, "shuffle", ev))
+            elif isinstance(ev, PeriodicEvent):
+                continue  # a mask on the state at t, not an occurrence (see states)
             elif isinstance(ev, GrowEvent):
                 s0, s1 = self._slot(ev.start), self._end_slot(ev.end)
                 if s0 <= t:
@@ -203,7 +217,50 @@ class Schedule:
             elif what == "shuffle":
                 assert isinstance(ev, ShuffleEvent)
                 self._shuffle(st, ev, i, seed, slot)
+        for i, ev in self._periodic:
+            self._apply_periodic(st, ev, i, seed, t)
         return st
+
+    def periodic_state(self, ev: PeriodicEvent, idx: int, seed: int, t: int) -> str | None:
+        """The state periodic event ``ev`` (schedule index ``idx``) gives its target at slot
+        ``t``: its ``state`` at a run inside a window that applies that day, the opposite at
+        the other runs of its days, ``None`` on a day outside ``start`` .. ``end``."""
+        rs = self.calendar.slots[t]
+        first = self.calendar.day_of(ev.start)
+        last = self.calendar.n_days if ev.end is None else self.calendar.day_of(ev.end)
+        if first is None or last is None or not first <= rs.day <= last:
+            return None
+        other = {"present": "absent", "absent": "present", "open": "closed", "closed": "open"}
+        days = WEEKDAYS if ev.weekdays is None else ev.weekdays
+        if WEEKDAYS[rs.date.weekday()] not in days or ev.p <= 0.0:
+            return other[ev.state]
+        if ev.p < 1.0:
+            ss = np.random.SeedSequence((int(seed), _PERIODIC_TAG, idx, rs.date.toordinal()))
+            if not np.random.default_rng(ss).random() < ev.p:
+                return other[ev.state]
+        inside = ev.from_minutes * 60.0 <= rs.start_s < ev.to_minutes * 60.0
+        return ev.state if inside else other[ev.state]
+
+    def _periodic_view(self, st: dict[str, _State], seed: int, t: int) -> dict[str, _State]:
+        """``st`` with the periodic rules of slot ``t`` applied to copies (``st`` as it is
+        without periodic events): what a shuffle at ``t`` places its group around."""
+        if not self._periodic:
+            return st
+        view = {oid: replace(s) for oid, s in st.items()}
+        for i, ev in self._periodic:
+            self._apply_periodic(view, ev, i, seed, t)
+        return view
+
+    def _apply_periodic(
+        self, st: dict[str, _State], ev: PeriodicEvent, idx: int, seed: int, t: int
+    ) -> None:
+        """Make the members of ``ev`` absent (or closed) where its rule says so at slot ``t``."""
+        state = self.periodic_state(ev, idx, seed, t)
+        for oid in self.members(ev) if state in ("absent", "closed") else ():
+            if state == "absent":
+                st[oid].present = False
+            else:
+                st[oid].open = False
 
     def polygon(self, oid: str, s: _State) -> FloatArray | None:
         """Outline of object ``oid`` in state ``s``, or ``None`` when it is absent."""
@@ -234,7 +291,8 @@ class Schedule:
         mset = set(members)
         members.sort(key=lambda oid: -self._areas[oid])  # largest first packs best
         others = [p for _, p in self.walls]
-        for oid, s in st.items():
+        around = self._periodic_view(st, seed, slot)  # the others as they are in this run
+        for oid, s in around.items():
             if oid in mset:
                 continue
             p = self.polygon(oid, s)

@@ -34,7 +34,7 @@ by :mod:`dynmap_sim.world.loader`. A minimal file::
     pose = [4.0, 2.0, 0.0]
 
     [[schedule]]                               # add | remove | install | move | open | close
-    action = "present"                         # | present | shuffle | grow
+    action = "present"                         # | present | shuffle | grow | periodic
     group = "expo"
     start = 3
     end = 5
@@ -53,14 +53,16 @@ from __future__ import annotations
 
 import datetime as dt
 import re
-from typing import Annotated, Literal
+from typing import Annotated, Literal, get_args
 
 import numpy as np
 from pydantic import (
+    AfterValidator,
     BaseModel,
     ConfigDict,
     Field,
     PlainValidator,
+    ValidationInfo,
     WithJsonSchema,
     field_validator,
     model_validator,
@@ -374,6 +376,98 @@ class GrowEvent(_Event):
     scale_end: float = Field(gt=0.0)
 
 
+def _hhmm_minutes(t: str, allow_24: bool = False) -> int:
+    """Minutes after midnight of a clock time ``"HH:MM"`` (``"24:00"`` too with ``allow_24``)."""
+    if allow_24 and t == "24:00":
+        return 24 * 60
+    m = _HHMM.match(t)
+    if not m:
+        raise ValueError(f'clock time {t!r} must look like "HH:MM" (00:00 .. 23:59)')
+    return int(m.group(1)) * 60 + int(m.group(2))
+
+
+def _clock_time(v: str) -> str:
+    """``v`` if it is a clock time ``"HH:MM"``, else ``ValueError``."""
+    _hhmm_minutes(v)
+    return v
+
+
+ClockTime = Annotated[str, AfterValidator(_clock_time)]
+
+
+class PeriodicEvent(_Event):
+    """An object, a group or a door in ``state`` inside a daily clock window, the other state
+    outside it (a door open in office hours, chairs taken away at lunch).
+
+    On each working day from ``start`` to ``end`` whose weekday is in ``weekdays``, the window
+    applies with probability ``p``, drawn from a ``SeedSequence`` keyed by (seed, event, date);
+    a run is inside the window when its start time is in ``[from, to)``. Inside ``start`` ..
+    ``end`` the target is in the window's state at the runs inside an applying window and in
+    the other state at every other run (on a day the window does not apply, all day); outside
+    ``start`` .. ``end`` the event does nothing. It acts on top of the other events: it can
+    only take away, making the target absent (or a door closed) where its rule says so, and
+    elsewhere the target keeps the state the rest of the schedule gives it. An object removed
+    by a ``remove`` stays removed, a door shut by a ``close`` stays shut, and a door opened by
+    the window must be open in the file (``open = true``) or by an ``open`` event.
+    """
+
+    model_config = ConfigDict(
+        extra="forbid", frozen=True, allow_inf_nan=False, populate_by_name=True
+    )
+
+    action: Literal["periodic"]
+    target: str | None = Field(default=None, description="object id (a door for open/closed)")
+    group: str | None = Field(default=None, description="group name")
+    state: Literal["present", "absent", "open", "closed"] = Field(
+        description="state inside the window (the other one outside): present/absent for "
+        "objects and groups, open/closed for doors"
+    )
+    from_: ClockTime = Field(alias="from", description='window start, clock time "HH:MM"')
+    to: str = Field(description='window end, clock time "HH:MM" after `from` (or "24:00")')
+    weekdays: tuple[Weekday, ...] | None = Field(
+        default=None, description="weekdays the window applies on (default: every working day)"
+    )
+    start: When = Field(default=1, description="first day the event acts")
+    end: When | None = Field(default=None, description="last day it acts (default: calendar end)")
+    p: float = Field(
+        default=1.0, ge=0.0, le=1.0, description="probability that the window applies on a day"
+    )
+
+    @field_validator("to")
+    @classmethod
+    def _to(cls, v: str, info: ValidationInfo) -> str:
+        end = _hhmm_minutes(v, allow_24=True)
+        start = info.data.get("from_")
+        if start is not None and end <= _hhmm_minutes(start):
+            raise ValueError(f"the window must end after it starts: to {v!r} <= from {start!r}")
+        return v
+
+    @field_validator("weekdays")
+    @classmethod
+    def _weekdays(cls, v: tuple[str, ...] | None) -> tuple[str, ...] | None:
+        if v is not None and not v:
+            raise ValueError("give at least one weekday, or leave weekdays out for every day")
+        if v is not None and len(set(v)) != len(v):
+            raise ValueError("weekdays must not repeat")
+        return v
+
+    @model_validator(mode="after")
+    def _check(self) -> PeriodicEvent:
+        if (self.target is None) == (self.group is None):
+            raise ValueError("give exactly one of 'target' or 'group'")
+        return self
+
+    @property
+    def from_minutes(self) -> int:
+        """Window start [min after midnight]."""
+        return _hhmm_minutes(self.from_)
+
+    @property
+    def to_minutes(self) -> int:
+        """Window end [min after midnight], exclusive."""
+        return _hhmm_minutes(self.to, allow_24=True)
+
+
 Event = Annotated[
     AddEvent
     | RemoveEvent
@@ -382,9 +476,48 @@ Event = Annotated[
     | DoorEvent
     | PresentEvent
     | ShuffleEvent
-    | GrowEvent,
+    | GrowEvent
+    | PeriodicEvent,
     Field(discriminator="action"),
 ]
+#: Every ``action`` a schedule entry may have, in the order of :data:`Event`.
+ACTIONS: tuple[str, ...] = tuple(
+    a
+    for cls in get_args(get_args(Event)[0])
+    for a in get_args(cls.model_fields["action"].annotation)
+)
+
+
+Profile = tuple[Point, ...]
+
+
+def _check_profile(v: Profile) -> Profile:
+    """``v`` if it is a profile ``[[hour, fraction], ...]`` (hours increasing in [0, 24],
+    fractions in [0, 1]), else ``ValueError``."""
+    if not v:
+        raise ValueError("profile needs at least one [hour, fraction] point")
+    hours = [h for h, _ in v]
+    if any(b <= a for a, b in zip(hours, hours[1:], strict=False)):
+        raise ValueError("profile hours must be strictly increasing")
+    if any(not (0 <= h <= 24) for h in hours) or any(not (0 <= f <= 1) for _, f in v):
+        raise ValueError("profile hours must be in [0, 24] and fractions in [0, 1]")
+    return v
+
+
+CheckedProfile = Annotated[Profile, AfterValidator(_check_profile)]
+
+
+class WeekdayProfiles(_Model):
+    """Profiles ``[[hour, fraction], ...]`` for some weekdays, instead of ``profile`` on them
+    (nobody on Saturdays, a busy Friday afternoon)."""
+
+    mon: CheckedProfile | None = None
+    tue: CheckedProfile | None = None
+    wed: CheckedProfile | None = None
+    thu: CheckedProfile | None = None
+    fri: CheckedProfile | None = None
+    sat: CheckedProfile | None = None
+    sun: CheckedProfile | None = None
 
 
 class PeopleSpec(_Model):
@@ -393,9 +526,10 @@ class PeopleSpec(_Model):
     Up to ``count`` people walk inside ``areas`` between ``goals`` (attraction points; random
     points of the areas if empty), or along a ``route`` of waypoints (a closed loop, each
     person starting somewhere on it). ``profile`` gives, as ``[[hour, fraction], ...]`` linearly
-    interpolated, the fraction of ``count`` present at a time of day; ``start``/``end``
-    restrict the days they come. The number present in a run is fixed at the run's start
-    time (runs last minutes; the profile changes over hours).
+    interpolated, the fraction of ``count`` present at a time of day, and ``weekday_profiles``
+    another profile for some weekdays (``{ sat = [[0, 0], [24, 0]] }``: nobody on Saturdays);
+    ``start``/``end`` restrict the days they come. The number present in a run is fixed at
+    the run's start time (runs last minutes; the profile changes over hours).
     """
 
     id: str = Field(min_length=1)
@@ -407,7 +541,11 @@ class PeopleSpec(_Model):
     )
     speed_mps: Point = (0.6, 1.3)
     radius_m: float = Field(default=0.22, gt=0.0, le=0.5)
-    profile: tuple[Point, ...] = ((0.0, 1.0), (24.0, 1.0))
+    profile: CheckedProfile = ((0.0, 1.0), (24.0, 1.0))
+    weekday_profiles: WeekdayProfiles = Field(
+        default_factory=WeekdayProfiles,
+        description="profiles for some weekdays instead of `profile`: { sat = [[0, 0], [24, 0]] }",
+    )
     start: When | None = None
     end: When | None = None
 
@@ -433,17 +571,10 @@ class PeopleSpec(_Model):
             raise ValueError("speed range must satisfy 0 < min <= max <= 3 m/s")
         return v
 
-    @field_validator("profile")
-    @classmethod
-    def _profile(cls, v: tuple[Point, ...]) -> tuple[Point, ...]:
-        if not v:
-            raise ValueError("profile needs at least one [hour, fraction] point")
-        hours = [h for h, _ in v]
-        if any(b <= a for a, b in zip(hours, hours[1:], strict=False)):
-            raise ValueError("profile hours must be strictly increasing")
-        if any(not (0 <= h <= 24) for h in hours) or any(not (0 <= f <= 1) for _, f in v):
-            raise ValueError("profile hours must be in [0, 24] and fractions in [0, 1]")
-        return v
+    def profile_on(self, weekday: int) -> Profile:
+        """The profile of a day with ``weekday`` (0 Monday .. 6 Sunday)."""
+        own = getattr(self.weekday_profiles, WEEKDAYS[weekday])
+        return self.profile if own is None else own
 
 
 class WorldSpec(_Model):

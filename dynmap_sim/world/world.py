@@ -189,7 +189,8 @@ class World:
             d1 = self.calendar.n_days if p.end is None else self.calendar.day_of(p.end) or 0
             active.append(d0 <= day <= d1)
         start = np.array(self.spec.robot.start[:2])
-        crowd = forces.spawn(self.calendar.slot(day, run).start_s, active, keep_away=start)
+        slot = self.calendar.slot(day, run)
+        crowd = forces.spawn(slot.start_s, active, keep_away=start, weekday=slot.date.weekday())
         return forces, crowd
 
     def _refresh_people(self) -> None:

@@ -73,7 +73,8 @@ def test_the_route_is_a_closed_tour_with_out_and_back_legs(worlds, kind):
 
 
 def test_every_action_of_the_world_format_is_drawn(worlds):
-    actions = {ev.action for g in worlds.values() for ev in g.spec.schedule}
+    periodic = generate("lab", 0, {**SMALL, "periodic_doors": 1, "periodic_groups": 1})
+    actions = {ev.action for g in [*worlds.values(), periodic] for ev in g.spec.schedule}
     assert actions == {
         "add",
         "remove",
@@ -84,6 +85,7 @@ def test_every_action_of_the_world_format_is_drawn(worlds):
         "present",
         "shuffle",
         "grow",
+        "periodic",
     }
     assert all(g.spec.people for g in worlds.values())
     kinds = {o.kind for g in worlds.values() for o in g.spec.objects}

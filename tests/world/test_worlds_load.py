@@ -58,7 +58,15 @@ def test_world_api_shapes(name):
 
 def test_every_shipped_world_is_tested_validates_loads_and_renders(tmp_path):
     # a new world: add it to the lists here
-    assert SHIPPED == ["apartment", "apartment-hw", "corridor", "hall", "lab", "office"]
+    assert SHIPPED == [
+        "apartment",
+        "apartment-hw",
+        "corridor",
+        "hall",
+        "lab",
+        "lab-periodic",
+        "office",
+    ]
     for name in SHIPPED:
         spec = load_world(name)  # validates: raises on any problem of the file
         w = World(spec, seed=0)

@@ -23,7 +23,7 @@ import numpy as np
 
 from dynmap_sim.world.calendar import Calendar
 from dynmap_sim.world.generator.blocks import draw_blocks
-from dynmap_sim.world.generator.changes import draw_changes
+from dynmap_sim.world.generator.changes import draw_changes, draw_periodic
 from dynmap_sim.world.generator.feasibility import RouteProblem, route_problems
 from dynmap_sim.world.generator.furnish import furnish
 from dynmap_sim.world.generator.grid import rasterize
@@ -63,7 +63,8 @@ __all__ = [
 ]
 
 _SKIP_ALWAYS = ("bath", "store")
-_STREAMS = ("plan", "furnish", "calendar", "changes", "blocks", "people", "route")
+#: One random stream per concern; a new one goes last so the others stay as they were.
+_STREAMS = ("plan", "furnish", "calendar", "changes", "blocks", "people", "route", "periodic")
 
 
 @dataclass(frozen=True)
@@ -127,6 +128,10 @@ def generate(kind: str, seed: int, params: Mapping[str, Any] | None = None) -> G
     n_runs = len(cal["runs"])
     visit, closable = _route_rooms(plan, rng["route"])
     ch = draw_changes(plan, fur, placer, rng["changes"], p, n_runs, closable)
+    periodic = draw_periodic(fur, rng["periodic"], p, closable)
+    if periodic.events:  # written only when asked for: other worlds stay byte for byte
+        ch.events += periodic.events
+        ch.counts.update(periodic.counts)
     closed = tuple(f"door_closed:{d}" for d in closable)
     polys = placer.polygons(skip=("keepout", "lane", "door_closed:")) + placer.polygons(only=closed)
     grid = rasterize(plan.bounds, polys)

@@ -1,9 +1,11 @@
 """The schedule of change: every family of event the world format knows, at named rates.
 
 Moves, additions, removals, shuffles, doors closed and opened again, exhibitions,
-installations and growth are drawn here, before the route; every outline an object ever
-takes is put into the :class:`~dynmap_sim.world.generator.place.Placer`, so the route (drawn
-round all of them) keeps clear of every change. Route blocks come after the route
+installations and growth are drawn here, before the route (periodic doors and chair
+groups, which only take things away, by :func:`draw_periodic` from a stream of their own);
+every outline an object ever takes is put into the
+:class:`~dynmap_sim.world.generator.place.Placer`, so the route (drawn round all of them)
+keeps clear of every change. Route blocks come after the route
 (:mod:`dynmap_sim.world.generator.blocks`).
 """
 
@@ -259,3 +261,44 @@ def draw_changes(
         family(dr)
     _doors(dr, closable)
     return dr.out
+
+
+#: Office hours of a periodic door and lunch hours of a periodic chair group ("HH:MM").
+OFFICE_HOURS = ("08:00", "18:00")
+LUNCH_HOURS = ("12:00", "13:30")
+
+
+def draw_periodic(fur: Furnished, rng, p: dict, closable: list[str]) -> Changes:
+    """Periodic events: ``periodic_doors`` of the ``closable`` doors (off the route) open in
+    office hours on a day with probability ``periodic_p`` and closed otherwise, and
+    ``periodic_groups`` shuffled chair groups taken out at lunch. They only close doors and
+    take chairs away, so the route drawn round everything stays clear."""
+    out = Changes()
+    doors = list(closable)
+    rng.shuffle(doors)
+    for door in sorted(doors[: int(p["periodic_doors"])]):
+        out.events.append(
+            {
+                "action": "periodic",
+                "target": door,
+                "state": "open",
+                "from": OFFICE_HOURS[0],
+                "to": OFFICE_HOURS[1],
+                "p": float(p["periodic_p"]),
+            }
+        )
+    groups = sorted(fur.regions)
+    rng.shuffle(groups)
+    for g in sorted(groups[: int(p["periodic_groups"])]):
+        out.events.append(
+            {
+                "action": "periodic",
+                "group": g,
+                "state": "absent",
+                "from": LUNCH_HOURS[0],
+                "to": LUNCH_HOURS[1],
+            }
+        )
+    out.counts["periodic_door"] = min(int(p["periodic_doors"]), len(doors))
+    out.counts["periodic_group"] = min(int(p["periodic_groups"]), len(groups))
+    return out

@@ -23,7 +23,7 @@ from dynmap_sim.world.polygons import (
     polygon_edges,
 )
 from dynmap_sim.world.schedule import ObjectState, Schedule
-from dynmap_sim.world.spec import WorldSpec
+from dynmap_sim.world.spec import PeriodicEvent, WorldSpec
 
 #: Most cells along the longer side of a check grid (a larger world gets coarser cells).
 MAX_CELLS = 1600
@@ -175,20 +175,28 @@ def leg_problems(
     return out
 
 
+def _has_periodic(spec: WorldSpec) -> bool:
+    """True when a periodic event changes the world between the runs of a day."""
+    return any(isinstance(ev, PeriodicEvent) for ev in spec.schedule)
+
+
 def route_problems(
     spec: WorldSpec,
     seed: int = 0,
     radius: float = 0.2,
     slots: list[tuple[int, int]] | None = None,
 ) -> list[RouteProblem]:
-    """Problems of the route at the runs ``slots`` (default: run 1 of every day, and every
-    run where an event takes effect), each distinct geometry checked once and a problem
+    """Problems of the route at the runs ``slots`` (default: run 1 of every day, every run of
+    every day with a periodic event in the schedule, and every run where an event takes
+    effect), each distinct geometry checked once and a problem
     reported at the first run it is seen."""
     cal = Calendar(spec.calendar)
     sched = Schedule(spec, cal)
     if slots is None:
         extra = {(cal.day_of(ev.at), ev.run) for ev in spec.schedule if getattr(ev, "run", 1) > 1}
-        slots = sorted({(d, 1) for d in range(1, cal.n_days + 1)} | {s for s in extra if s[0]})
+        runs = range(1, (cal.runs_per_day if _has_periodic(spec) else 1) + 1)
+        every = {(d, r) for d in range(1, cal.n_days + 1) for r in runs}
+        slots = sorted(every | {s for s in extra if s[0]})
     out = _static_problems(spec)
     seen_geometry: set = set()
     seen_problem: set = set()

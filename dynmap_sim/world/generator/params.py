@@ -48,6 +48,10 @@ PARAMS: tuple[Param, ...] = (
     Param("exhibitions", int, 1, 0, 2, "temporary exhibitions (a group present for some days)"),
     Param("installs", int, 1, 0, 4, "permanent installations (radiators, cabinets)"),
     Param("growth", int, 1, 0, 3, "plants that grow over the calendar"),
+    Param("periodic_doors", int, 0, 0, 6, "doors off the route open in office hours only"),
+    Param("periodic_groups", int, 0, 0, 3, "groups of chairs taken out at lunch every day"),
+    Param("periodic_p", float, 0.9, 0.0, 1.0, "chance a periodic door keeps its hours that day"),
+    Param("runs_through_day", int, 0, 0, 1, "1: runs at set times from morning to evening"),
     Param("people", int, 6, 0, 40, "people walking in the world at the busiest hour"),
     Param("robot_radius_m", float, 0.2, 0.1, 0.4, "robot radius the route is checked for [m]"),
 )

@@ -22,6 +22,14 @@ RUN_TIMES = (
     "16:30",
     "17:30",
 )
+#: Run times by runs a day with ``runs_through_day``: morning, lunch, evening, after hours,
+#: so that periodic change (doors in office hours, chairs out at lunch) shows between runs.
+DAY_RUN_TIMES = {
+    1: ("12:30",),
+    2: ("09:00", "12:30"),
+    3: ("09:00", "12:30", "17:00"),
+    4: ("09:00", "12:30", "17:00", "19:30"),
+}
 
 _PROFILES = {  # [hour, fraction of the group present]
     "residents": [[0.0, 1.0], [7.5, 1.0], [8.5, 0.4], [17.0, 0.4], [18.5, 1.0], [24.0, 1.0]],
@@ -91,7 +99,8 @@ def draw_people(plan: Plan, rng, p: dict, places: list[tuple], on_route: set[str
 
 
 def draw_calendar(rng, p: dict) -> dict[str, Any]:
-    """A Monday start in 2024-2026, Mon-Fri, perhaps a holiday, runs at drawn times."""
+    """A Monday start in 2024-2026, Mon-Fri, perhaps a holiday, runs at drawn times (or at
+    :data:`DAY_RUN_TIMES` with ``runs_through_day``)."""
     start = dt.date(2024, 1, 1) + dt.timedelta(weeks=int(rng.integers(0, 150)))
     runs = sorted(rng.choice(len(RUN_TIMES), size=int(p["runs_per_day"]), replace=False))
     cal: dict[str, Any] = {
@@ -102,4 +111,6 @@ def draw_calendar(rng, p: dict) -> dict[str, Any]:
     if int(p["days"]) >= 8 and rng.random() < 0.5:
         cal["holidays"] = [start + dt.timedelta(days=int(rng.integers(1, 5)) + 7)]
     cal["runs"] = [RUN_TIMES[int(k)] for k in runs]
+    if p["runs_through_day"]:  # drawn all the same, so the stream stays where it was
+        cal["runs"] = list(DAY_RUN_TIMES[int(p["runs_per_day"])])
     return cal

@@ -76,11 +76,16 @@ class SocialForce:
         return spawning.pick_goal(self.obstacles, self.rng, pop, frm, r, avoid)
 
     def spawn(
-        self, time_s: float, day_active: list[bool], keep_away: FloatArray | None = None
+        self,
+        time_s: float,
+        day_active: list[bool],
+        keep_away: FloatArray | None = None,
+        weekday: int | None = None,
     ) -> Crowd:
-        """Place the people present at ``time_s`` (profile x count) on free spots of their areas."""
+        """Place the people present at ``time_s`` (profile x count, the profile of
+        ``weekday`` where a population has one) on free spots of their areas."""
         return spawning.spawn(
-            self.populations, self.obstacles, self.rng, time_s, day_active, keep_away
+            self.populations, self.obstacles, self.rng, time_s, day_active, keep_away, weekday
         )
 
     def _constants(self, crowd: Crowd, robot_radius_m: float) -> StepConstants:

@@ -204,13 +204,16 @@ def spawn(
     time_s: float,
     day_active: list[bool],
     keep_away: FloatArray | None = None,
+    weekday: int | None = None,
 ) -> Crowd:
-    """Place the people present at ``time_s`` (profile x count) on free spots of their areas."""
+    """Place the people present at ``time_s`` (profile x count) on free spots of their areas;
+    ``weekday`` (0 Monday .. 6 Sunday) picks a population's profile for that day, if any."""
     pos, goal, v0, rad, popi, ids, wps = [], [], [], [], [], [], []
     for k, pop in enumerate(populations):
         if not day_active[k]:
             continue
-        n = int(round(pop.count * profile_fraction(pop.profile, time_s)))
+        profile = pop.profile if weekday is None else pop.profile_on(weekday)
+        n = int(round(pop.count * profile_fraction(profile, time_s)))
         for j in range(n):
             wp = int(rng.integers(len(pop.route))) if pop.route else -1
             xy = _free_spot(obstacles, rng, pop, wp, pos, rad, keep_away)
