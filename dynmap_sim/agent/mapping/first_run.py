@@ -13,6 +13,11 @@ then the optimized keyframe scans are rendered into a 5 cm
 :class:`~dynmap_sim.agent.grid.OccupancyGrid`, and every scan's pose is re-attached rigidly
 to its reference keyframe. Its parameters are one :class:`FirstRunConfig`, which a scenario's
 flat ``mapper_params`` table fills (:meth:`FirstRunConfig.from_params`).
+
+Where the scenario's prior grants the walls, the front end matches them too
+(:attr:`~.keyframe_slam.KeyframeSLAMConfig.anchor_walls`): the map is then registered to the
+plan as it is built, and the loop back end is skipped (B&D had no plan; without one, or with
+``anchor_walls = false``, this is their first run).
 """
 
 from __future__ import annotations
