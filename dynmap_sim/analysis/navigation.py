@@ -75,6 +75,39 @@ def goals_reached_line(db: ResultsDB) -> str:
     return line
 
 
+#: At most this many runs that missed their goal are named one by one (the rest counted).
+MAX_MISSED_LINES = 5
+
+
+def missed_goal_lines(db: ResultsDB) -> list[str]:
+    """One sentence per run that did not reach its goal, saying why in words: the driver's
+    ``unreachable`` event (the navigation stack's cause: no way, lost, stuck, with its
+    figures), else the scenario's ``driver.max_run_s`` or a give-up. At most
+    :data:`MAX_MISSED_LINES` runs, then how many more."""
+    why = {
+        (int(d), int(r)): str(detail)
+        for d, r, detail in db.query(
+            "SELECT day, run, detail FROM events WHERE kind = 'unreachable' ORDER BY rowid"
+        )
+    }
+    max_run_s = (db.meta().get("scenario") or {}).get("driver", {}).get("max_run_s")
+    lines = []
+    missed = [(d, r, s) for d, r, s in db.nav_runs() if not s.goal_reached]
+    for day, run, s in missed[:MAX_MISSED_LINES]:
+        if (day, run) in why:
+            reason = why[(day, run)]
+        elif max_run_s is not None and s.time_s >= max_run_s - 1e-9:
+            reason = f"stopped by the scenario's max_run_s = {max_run_s:g} s"
+        elif s.gave_up:
+            reason = f"the driver gave up after {s.time_s:.0f} s"
+        else:
+            reason = f"the run ended after {s.time_s:.0f} s"
+        lines.append(f"day {day} run {run}: goal not reached: {reason}")
+    if len(missed) > MAX_MISSED_LINES:
+        lines.append(f"and {len(missed) - MAX_MISSED_LINES} more runs without the goal")
+    return lines
+
+
 def nav_summary_lines(db: ResultsDB, rows: list[tuple[int, NavDaySummary]]) -> list[str]:
     """The ``summary.md`` section: totals over the experiment."""
     runs = [s for _, _, s in db.nav_runs()]
@@ -92,6 +125,7 @@ def nav_summary_lines(db: ResultsDB, rows: list[tuple[int, NavDaySummary]]) -> l
         "runs",
         f"- driven {sum(s.path_length_m for s in runs):.1f} m in "
         f"{sum(s.time_s for s in runs) / 60.0:.1f} min of robot time over {len(rows)} days",
+        *(f"- {line}" for line in missed_goal_lines(db)),
     ]
 
 

@@ -384,7 +384,7 @@ class NavigationStack:
             if act.kind == "give_up":
                 self.mode = NavMode.GAVE_UP
                 self._event(t_s, "gave_up", act.detail)
-                self._unreachable(t_s, act.detail)
+                self._unreachable(t_s, act.detail, pose)
                 cmd = stop
             elif act.kind == "replan":
                 if self.params.clear_costmap_on_replan:
@@ -429,8 +429,10 @@ class NavigationStack:
             self._event(t_s, "found", f"the localizer's position std is {std:.2f} m again")
         self._lost_std_m = std if lost else None
 
-    def _unreachable(self, t_s: float, stuck_detail: str) -> None:
-        """The run ends without the goal: an ``unreachable`` event that says why."""
+    def _unreachable(self, t_s: float, stuck_detail: str, pose: FloatArray) -> None:
+        """The run ends without the goal: an ``unreachable`` event that says why in words,
+        ending with the cause in brackets (``(no_way)``, ``(lost)``, ``(stuck)``) for the
+        results' summary; ``pose`` is the estimate (where a stuck robot stands)."""
         if self._lost_std_m is not None:
             self.unreachable_cause = LOST
             detail = (
@@ -442,8 +444,11 @@ class NavigationStack:
             detail = f"no way to the goal exists: {self._no_way}"
         else:
             self.unreachable_cause = STUCK
-            detail = f"stuck on the way to the goal: {stuck_detail}"
-        self._event(t_s, "unreachable", detail)
+            detail = (
+                f"stuck for {self.stuck_s:.0f} s near ({float(pose[0]):.1f}, "
+                f"{float(pose[1]):.1f}) on the way to the goal: {stuck_detail}"
+            )
+        self._event(t_s, "unreachable", f"{detail} ({self.unreachable_cause})")
 
     def _force(self) -> None:
         """Plan at the next step (a recovery's pending replan stays one)."""
