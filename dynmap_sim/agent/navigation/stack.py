@@ -38,8 +38,8 @@ nav2 composes its servers:
    the robot frame, so a wrong estimate or a controller bug cannot drive into an obstacle.
 
 A route may be driven against its direction at ``RouteMemoryParams.reverse_cost_factor``
-times its travel time (a route that returns through a doorway it passed; off by default),
-and a block holds both ways. When the recovery gives up, an ``unreachable`` event says why
+times its travel time (a route that returns through a doorway it passed), never back over a
+loop's via point already passed (the loop is closed forwards), and a block holds both ways. When the recovery gives up, an ``unreachable`` event says why
 the goal was not reached (:attr:`NavigationStack.unreachable_cause`): no way exists on the
 routes or the costmap, the localizer is lost (its position std above ``lost_std_m``; ``lost`` and
 ``found`` events mark when), or the robot was stuck on a way that exists.
