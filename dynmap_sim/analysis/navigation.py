@@ -82,13 +82,18 @@ MAX_MISSED_LINES = 5
 def missed_goal_lines(db: ResultsDB) -> list[str]:
     """One sentence per run that did not reach its goal, saying why in words: the driver's
     ``unreachable`` event (the navigation stack's cause: no way, lost, stuck, with its
-    figures), else the scenario's ``driver.max_run_s`` or a give-up. At most
+    figures), else the scenario's ``driver.max_run_s``, a give-up, or the driver stopping
+    short of the route's end (the share of the route it followed, by the env). At most
     :data:`MAX_MISSED_LINES` runs, then how many more."""
     why = {
         (int(d), int(r)): str(detail)
         for d, r, detail in db.query(
             "SELECT day, run, detail FROM events WHERE kind = 'unreachable' ORDER BY rowid"
         )
+    }
+    progress = {
+        (int(d), int(r)): float(p)
+        for d, r, p in db.query("SELECT day, run, route_progress FROM runs")
     }
     max_run_s = (db.meta().get("scenario") or {}).get("driver", {}).get("max_run_s")
     lines = []
@@ -100,8 +105,12 @@ def missed_goal_lines(db: ResultsDB) -> list[str]:
             reason = f"stopped by the scenario's max_run_s = {max_run_s:g} s"
         elif s.gave_up:
             reason = f"the driver gave up after {s.time_s:.0f} s"
-        else:
-            reason = f"the run ended after {s.time_s:.0f} s"
+        else:  # the driver stopped where it took the goal to be
+            share = progress.get((day, run), math.nan)
+            reason = (
+                f"the driver stopped after {s.time_s:.0f} s with {100.0 * share:.0f} % of "
+                "the route followed"
+            )
         lines.append(f"day {day} run {run}: goal not reached: {reason}")
     if len(missed) > MAX_MISSED_LINES:
         lines.append(f"and {len(missed) - MAX_MISSED_LINES} more runs without the goal")

@@ -12,10 +12,10 @@ STUCK = (
 )
 
 
-def nav(reached: bool, time_s: float = 60.0) -> NavRunSummary:
+def nav(reached: bool, gave_up: bool) -> NavRunSummary:
     return NavRunSummary(
         goal_reached=int(reached),
-        time_s=time_s,
+        time_s=60.0,
         path_length_m=5.0,
         shortest_path_m=5.0,
         spl=1.0 if reached else 0.0,
@@ -25,11 +25,13 @@ def nav(reached: bool, time_s: float = 60.0) -> NavRunSummary:
         replans=0,
         recoveries=0 if reached else 3,
         stuck_s=0.0 if reached else 40.0,
-        gave_up=int(not reached),
+        gave_up=int(gave_up),
     )
 
 
-def record(day: int, run: int, reached: bool, events: list) -> RunRecord:
+def record(
+    day: int, run: int, reached: bool, events: list, progress: float = 1.0, gave_up: bool = False
+) -> RunRecord:
     n = 5
     truth = np.stack([0.1 * np.arange(n), np.zeros(n), np.zeros(n)], axis=1)
     return RunRecord(
@@ -44,12 +46,12 @@ def record(day: int, run: int, reached: bool, events: list) -> RunRecord:
         cov_diag=np.full((1, n, 3), 0.01),
         confusion=np.zeros((1, 4, 4), np.int64),
         terminated=True,
-        route_progress=1.0,
+        route_progress=progress,
         skipped_waypoints=0,
         wall_s=0.1,
         events=events,
         diagnostics=[LocalizerDiagnostics()],
-        nav=nav(reached),
+        nav=nav(reached, gave_up),
     )
 
 
@@ -59,9 +61,15 @@ def test_a_run_that_missed_its_goal_is_named_with_the_reason(tmp_path):
         db.write_run(
             record(1, 1, True, [(4, 0.4, "goal", "0.1 m from the goal")]), [], True, None, "h", 0
         )
-        db.write_run(record(3, 2, False, [(4, 0.4, "unreachable", STUCK)]), [], True, None, "h", 0)
+        stuck = record(3, 2, False, [(4, 0.4, "unreachable", STUCK)], gave_up=True)
+        db.write_run(stuck, [], True, None, "h", 0)
+        db.write_run(record(3, 3, False, [], progress=0.55), [], True, None, "h", 0)
         lines = missed_goal_lines(db)
-    assert lines == [f"day 3 run 2: goal not reached: {STUCK}"]
+    assert lines == [
+        f"day 3 run 2: goal not reached: {STUCK}",
+        "day 3 run 3: goal not reached: the driver stopped after 60 s with 55 % of the route "
+        "followed",
+    ]
     headline = results_headline(tmp_path)
-    assert any("goal reached in 1 of 2 runs" in line for line in headline)
-    assert headline[-1].strip() == lines[0]
+    assert any("goal reached in 1 of 3 runs" in line for line in headline)
+    assert [line.strip() for line in headline[-2:]] == lines
