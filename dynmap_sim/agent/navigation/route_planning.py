@@ -178,12 +178,11 @@ class RoutePlanning:
         """Route A* on ``g`` from the estimate ``pose`` to the target's node (H&W §6.2): from
         the segment the robot is tracked on (``pos``); failing that (the way on is blocked,
         the way back is not), from wherever the graph is nearest. A plan must make progress
-        in route order: one that passes a node behind the target (:meth:`Targets.goes_back`,
-        which only reverse edges can make it do on a loop) is planned again on the routes'
-        direction alone, so a loop is closed forwards, and through a block (seen again, gone
-        round) rather than driven back to its start; reverse edges serve where they take the
-        robot back over no passed target (a route out of a room and back, a block's way
-        round along the route's later part)."""
+        in route order: one that passes a node behind the target (:meth:`Targets.goes_back`)
+        is planned again without reverse edges, so a loop is closed forwards, through or
+        round a block on it (seen again, gone round) rather than driven back to its start;
+        reverse edges serve where they take the robot back over no passed target (a route
+        out of a room and back, a block's way round along the route's later part)."""
         if g.node_ids.size == 0:
             return None, 0
         plan = self._route_plan_on(g, pose, pos, targets)

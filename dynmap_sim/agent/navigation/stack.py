@@ -39,10 +39,11 @@ nav2 composes its servers:
 
 A route may be driven against its direction at ``RouteMemoryParams.reverse_cost_factor``
 times its travel time (a route that returns through a doorway it passed), never back over a
-loop's via point already passed (the loop is closed forwards), and a block holds both ways. When the recovery gives up, an ``unreachable`` event says why
-the goal was not reached (:attr:`NavigationStack.unreachable_cause`): no way exists on the
-routes or the costmap, the localizer is lost (its position std above ``lost_std_m``; ``lost`` and
-``found`` events mark when), or the robot was stuck on a way that exists.
+loop's via point already passed (the loop is closed forwards), and a block holds both ways.
+When the recovery gives up, an ``unreachable`` event says why the goal was not reached
+(:attr:`NavigationStack.unreachable_cause`): no way exists on the routes or the costmap, the
+localizer is lost (its position std above ``lost_std_m``; ``lost`` and ``found`` events mark
+when), or the robot was stuck on a way that exists.
 
 The run ends for the stack when the estimate is within ``goal_tolerance_m`` of the goal
 (:attr:`NavigationStack.done`); a route that ends where it starts (a loop) is driven through
