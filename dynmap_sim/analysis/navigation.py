@@ -82,8 +82,9 @@ MAX_MISSED_LINES = 5
 def missed_goal_lines(db: ResultsDB) -> list[str]:
     """One sentence per run that did not reach its goal, saying why in words: the driver's
     ``unreachable`` event (the navigation stack's cause: no way, lost, stuck, with its
-    figures), else the scenario's ``driver.max_run_s``, a give-up, or the driver stopping
-    short of the route's end (the share of the route it followed, by the env). At most
+    figures), else a give-up or the driver stopping short of the route's end (the share of
+    the route it followed, by the env); not the runs the scenario's ``driver.max_run_s``
+    stopped (:func:`goals_reached_line` counts them: a smoke test's time limit). At most
     :data:`MAX_MISSED_LINES` runs, then how many more."""
     why = {
         (int(d), int(r)): str(detail)
@@ -97,12 +98,15 @@ def missed_goal_lines(db: ResultsDB) -> list[str]:
     }
     max_run_s = (db.meta().get("scenario") or {}).get("driver", {}).get("max_run_s")
     lines = []
-    missed = [(d, r, s) for d, r, s in db.nav_runs() if not s.goal_reached]
+    limit = math.inf if max_run_s is None else max_run_s - 1e-9
+    missed = [  # not the runs the time limit stopped (said in goals_reached_line)
+        (d, r, s)
+        for d, r, s in db.nav_runs()
+        if not s.goal_reached and ((d, r) in why or s.time_s < limit)
+    ]
     for day, run, s in missed[:MAX_MISSED_LINES]:
         if (day, run) in why:
             reason = why[(day, run)]
-        elif max_run_s is not None and s.time_s >= max_run_s - 1e-9:
-            reason = f"stopped by the scenario's max_run_s = {max_run_s:g} s"
         elif s.gave_up:
             reason = f"the driver gave up after {s.time_s:.0f} s"
         else:  # the driver stopped where it took the goal to be
