@@ -10,7 +10,7 @@ import math
 from pathlib import Path
 from typing import Any
 
-from dynmap_sim.analysis.navigation import goals_reached_line
+from dynmap_sim.analysis.navigation import goals_reached_line, missed_goal_lines
 from dynmap_sim.analysis.report import NO_GROUND_TRUTH, has_ground_truth, overall_stats
 from dynmap_sim.experiments.results import ResultsDB
 
@@ -38,7 +38,8 @@ def results_headline(
     """The headline numbers of a results folder: per localizer ATE RMSE, mean and max
     position error and the lost fraction (:func:`dynmap_sim.analysis.report.overall_stats`;
     ``overall``: those, when the report just computed them), with ``timing`` the time per
-    scan too; goals reached and collisions when the results hold navigation measures.
+    scan too; goals reached and collisions when the results hold navigation measures, and
+    why each run that missed its goal missed it (:func:`.navigation.missed_goal_lines`).
     Without any ground truth: that line and the time per scan only. No lines for a folder
     without runs."""
     with ResultsDB.open(out) as db:
@@ -47,6 +48,7 @@ def results_headline(
         stats = overall_stats(db) if overall is None else overall
         nav = db.nav_runs()
         goals = goals_reached_line(db)
+        missed = missed_goal_lines(db)
         truth = has_ground_truth(db)
         update_header = db.update_time_header()
 
@@ -75,4 +77,5 @@ def results_headline(
     if nav:
         collisions = sum(int(n.collisions) for _, _, n in nav)
         lines.append(f"navigation: {goals}; {collisions} collisions")
+        lines += [f"  {line}" for line in missed]
     return lines

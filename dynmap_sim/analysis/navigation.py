@@ -75,6 +75,52 @@ def goals_reached_line(db: ResultsDB) -> str:
     return line
 
 
+#: At most this many runs that missed their goal are named one by one (the rest counted).
+MAX_MISSED_LINES = 5
+
+
+def missed_goal_lines(db: ResultsDB) -> list[str]:
+    """One sentence per run that did not reach its goal, saying why in words: the driver's
+    ``unreachable`` event (the navigation stack's cause: no way, lost, stuck, with its
+    figures), else a give-up or the driver stopping short of the route's end (the share of
+    the route it followed, by the env); not the runs the scenario's ``driver.max_run_s``
+    stopped (:func:`goals_reached_line` counts them: a smoke test's time limit). At most
+    :data:`MAX_MISSED_LINES` runs, then how many more."""
+    why = {
+        (int(d), int(r)): str(detail)
+        for d, r, detail in db.query(
+            "SELECT day, run, detail FROM events WHERE kind = 'unreachable' ORDER BY rowid"
+        )
+    }
+    progress = {
+        (int(d), int(r)): float(p)
+        for d, r, p in db.query("SELECT day, run, route_progress FROM runs")
+    }
+    max_run_s = (db.meta().get("scenario") or {}).get("driver", {}).get("max_run_s")
+    lines = []
+    limit = math.inf if max_run_s is None else max_run_s - 1e-9
+    missed = [  # not the runs the time limit stopped (said in goals_reached_line)
+        (d, r, s)
+        for d, r, s in db.nav_runs()
+        if not s.goal_reached and ((d, r) in why or s.time_s < limit)
+    ]
+    for day, run, s in missed[:MAX_MISSED_LINES]:
+        if (day, run) in why:
+            reason = why[(day, run)]
+        elif s.gave_up:
+            reason = f"the driver gave up after {s.time_s:.0f} s"
+        else:  # the driver stopped where it took the goal to be
+            share = progress.get((day, run), math.nan)
+            reason = (
+                f"the driver stopped after {s.time_s:.0f} s with {100.0 * share:.0f} % of "
+                "the route followed"
+            )
+        lines.append(f"day {day} run {run}: goal not reached: {reason}")
+    if len(missed) > MAX_MISSED_LINES:
+        lines.append(f"and {len(missed) - MAX_MISSED_LINES} more runs without the goal")
+    return lines
+
+
 def nav_summary_lines(db: ResultsDB, rows: list[tuple[int, NavDaySummary]]) -> list[str]:
     """The ``summary.md`` section: totals over the experiment."""
     runs = [s for _, _, s in db.nav_runs()]
@@ -92,6 +138,7 @@ def nav_summary_lines(db: ResultsDB, rows: list[tuple[int, NavDaySummary]]) -> l
         "runs",
         f"- driven {sum(s.path_length_m for s in runs):.1f} m in "
         f"{sum(s.time_s for s in runs) / 60.0:.1f} min of robot time over {len(rows)} days",
+        *(f"- {line}" for line in missed_goal_lines(db)),
     ]
 
 

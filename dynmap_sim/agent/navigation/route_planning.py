@@ -133,6 +133,21 @@ class Targets:
         xy, waypoint_id, _ = self.target()
         return node_of(g, xy, waypoint_id)
 
+    def behind_nodes(self, g: RouteGraph) -> set[int]:
+        """The nodes a plan to the current target must not pass (route order): a loop's via
+        points already passed in this run and, while a via point is the target, the loop's
+        end (on its start). A plan through one of them drives the loop backwards."""
+        behind = {node_of(g, xy, wid) for xy, wid in self.vias[: self.via_k]}
+        if self.target()[2]:
+            behind.add(node_of(g, self.goal_xy, self.goal_id))
+        return behind
+
+    def goes_back(self, g: RouteGraph, plan: PlannedPath) -> bool:
+        """Whether ``plan`` passes a node behind the target in route order
+        (:meth:`behind_nodes`)."""
+        behind = self.behind_nodes(g)
+        return any(n in behind for n in plan.node_ids)
+
     def nodes(self, g: RouteGraph) -> list[int]:
         """The goal's and the via points' nodes on ``g`` (they must stay reachable)."""
         keep = [node_of(g, self.goal_xy, self.goal_id)]
@@ -162,9 +177,24 @@ class RoutePlanning:
     ) -> tuple[PlannedPath | None, int]:
         """Route A* on ``g`` from the estimate ``pose`` to the target's node (H&W §6.2): from
         the segment the robot is tracked on (``pos``); failing that (the way on is blocked,
-        the way back is not), from wherever the graph is nearest."""
+        the way back is not), from wherever the graph is nearest. A plan must make progress
+        in route order: one that passes a node behind the target (:meth:`Targets.goes_back`)
+        is planned again without reverse edges, so a loop is closed forwards, through or
+        round a block on it (seen again, gone round) rather than driven back to its start;
+        reverse edges serve where they take the robot back over no passed target (a route
+        out of a room and back, a block's way round along the route's later part)."""
         if g.node_ids.size == 0:
             return None, 0
+        plan = self._route_plan_on(g, pose, pos, targets)
+        forward = g.forward_only()
+        if forward is not g and plan is not None and targets.goes_back(g, plan):
+            return self._route_plan_on(forward, pose, pos, targets), 2
+        return plan, 1
+
+    def _route_plan_on(
+        self, g: RouteGraph, pose: FloatArray, pos: RoutePosition | None, targets: Targets
+    ) -> PlannedPath | None:
+        """:meth:`route_plan` on ``g`` as it is."""
         target_xy = targets.target()[0]
         on = (pos.from_id, pos.to_id) if pos is not None and pos.inside else None
         for start_on in (on, None) if on is not None else (None,):
@@ -179,8 +209,8 @@ class RoutePlanning:
                 avoid_entry=targets.avoid_entry(g),
             )
             if plan is not None:
-                return plan, 1
-        return None, 1
+                return plan
+        return None
 
     def bridged_plan(
         self, g: RouteGraph, pose: FloatArray, grid: ClearanceGrid, targets: Targets
@@ -192,7 +222,9 @@ class RoutePlanning:
         left of its routes and crosses the gap on the costmap, and a loop's start still
         leaves the goal (``leave_goal_m`` as for any route plan). The bridges' grid paths
         are in the plan's ``xy`` (their interior points have node id :data:`BRIDGE`); None
-        when no dead end has a grid path to the goal or the graph none to a dead end."""
+        when no dead end has a grid path to the goal or the graph none to a dead end. A
+        plan that goes back in route order is planned again without reverse edges, as in
+        :meth:`route_plan`."""
         if g.node_ids.size == 0:
             return None, 0
         p = self.params
@@ -204,18 +236,25 @@ class RoutePlanning:
         legs, bridges = self._bridges(g, goal, goal_xy, end, grid)
         if not bridges:
             return None, 0
-        plan = plan_route(
-            RouteGraph(g.node_ids, g.xy, g.v_max_mps, g.half_width_m, [*g.edges, *bridges]),
-            pose[:2],
-            goal_xy,
-            p.speed_mps,
-            goal_id=goal,
-            leave_goal_m=targets.leave_target_m(),
-            avoid_entry=targets.avoid_entry(g),
-        )
+
+        def plan_on(edges: list[Edge]) -> PlannedPath | None:
+            return plan_route(
+                RouteGraph(g.node_ids, g.xy, g.v_max_mps, g.half_width_m, [*edges, *bridges]),
+                pose[:2],
+                goal_xy,
+                p.speed_mps,
+                goal_id=goal,
+                leave_goal_m=targets.leave_target_m(),
+                avoid_entry=targets.avoid_entry(g),
+            )
+
+        plan, n = plan_on(g.edges), 1
+        forward = g.forward_only()
+        if forward is not g and plan is not None and targets.goes_back(g, plan):
+            plan, n = plan_on(forward.edges), 2
         if plan is None or not any(e in legs for e in plan.edges):
-            return plan, 1
-        return self._with_legs(plan, legs), 1
+            return plan, n
+        return self._with_legs(plan, legs), n
 
     def _bridges(
         self, g: RouteGraph, goal: int, goal_xy: FloatArray, end: FloatArray, grid: ClearanceGrid

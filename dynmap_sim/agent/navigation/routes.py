@@ -92,13 +92,13 @@ class RouteMemoryParams:
     #: A route segment may be driven against its direction at its travel time times this
     #: (H&W's routes are directed): a route that returns through a doorway it passed, or a
     #: block whose way round is the route's own later part driven backwards, has a plan.
-    #: The corridor is the same both ways, but the way back was never timed that way and
-    #: starts with a turn: 1.5 keeps the robot to the routes' direction unless going back
-    #: saves a third of the time. Default ``inf`` (directed routes only, as H&W's): on a loop
-    #: whose goal is its start, reverse edges let the last leg go back the way it came
-    #: instead of closing the loop, which the run's goal (the route followed to its end) does
-    #: not count as reached.
-    reverse_cost_factor: float = math.inf
+    #: 1.5 is a judgement of how much worse a leg driven backwards is than the same
+    #: corridor forwards (never timed that way, it starts with a turn): the robot keeps to
+    #: the routes' direction unless going back saves a third of the time. A loop is still
+    #: closed forwards: a plan that passes a via point behind its target is planned again
+    #: without reverse edges (route planning's route order). ``inf``: directed routes only,
+    #: as H&W's.
+    reverse_cost_factor: float = 1.5
     #: A recorded route is dropped when the robot drove less than this outside the corridors
     #: (from where it left one to where it re-entered one, not counting the legs to the
     #: centre lines): an excursion of less than one ``Δd`` is localization noise or an

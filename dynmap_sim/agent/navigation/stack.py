@@ -38,11 +38,12 @@ nav2 composes its servers:
    the robot frame, so a wrong estimate or a controller bug cannot drive into an obstacle.
 
 A route may be driven against its direction at ``RouteMemoryParams.reverse_cost_factor``
-times its travel time (a route that returns through a doorway it passed; off by default),
-and a block holds both ways. When the recovery gives up, an ``unreachable`` event says why
-the goal was not reached (:attr:`NavigationStack.unreachable_cause`): no way exists on the
-routes or the costmap, the localizer is lost (its position std above ``lost_std_m``; ``lost`` and
-``found`` events mark when), or the robot was stuck on a way that exists.
+times its travel time (a route that returns through a doorway it passed), never back over a
+loop's via point already passed (the loop is closed forwards), and a block holds both ways.
+When the recovery gives up, an ``unreachable`` event says why the goal was not reached
+(:attr:`NavigationStack.unreachable_cause`): no way exists on the routes or the costmap, the
+localizer is lost (its position std above ``lost_std_m``; ``lost`` and ``found`` events mark
+when), or the robot was stuck on a way that exists.
 
 The run ends for the stack when the estimate is within ``goal_tolerance_m`` of the goal
 (:attr:`NavigationStack.done`); a route that ends where it starts (a loop) is driven through
@@ -384,7 +385,7 @@ class NavigationStack:
             if act.kind == "give_up":
                 self.mode = NavMode.GAVE_UP
                 self._event(t_s, "gave_up", act.detail)
-                self._unreachable(t_s, act.detail)
+                self._unreachable(t_s, act.detail, pose)
                 cmd = stop
             elif act.kind == "replan":
                 if self.params.clear_costmap_on_replan:
@@ -429,8 +430,10 @@ class NavigationStack:
             self._event(t_s, "found", f"the localizer's position std is {std:.2f} m again")
         self._lost_std_m = std if lost else None
 
-    def _unreachable(self, t_s: float, stuck_detail: str) -> None:
-        """The run ends without the goal: an ``unreachable`` event that says why."""
+    def _unreachable(self, t_s: float, stuck_detail: str, pose: FloatArray) -> None:
+        """The run ends without the goal: an ``unreachable`` event that says why in words,
+        ending with the cause in brackets (``(no_way)``, ``(lost)``, ``(stuck)``) for the
+        results' summary; ``pose`` is the estimate (where a stuck robot stands)."""
         if self._lost_std_m is not None:
             self.unreachable_cause = LOST
             detail = (
@@ -442,8 +445,11 @@ class NavigationStack:
             detail = f"no way to the goal exists: {self._no_way}"
         else:
             self.unreachable_cause = STUCK
-            detail = f"stuck on the way to the goal: {stuck_detail}"
-        self._event(t_s, "unreachable", detail)
+            detail = (
+                f"stuck for {self.stuck_s:.0f} s near ({float(pose[0]):.1f}, "
+                f"{float(pose[1]):.1f}) on the way to the goal: {stuck_detail}"
+            )
+        self._event(t_s, "unreachable", f"{detail} ({self.unreachable_cause})")
 
     def _force(self) -> None:
         """Plan at the next step (a recovery's pending replan stays one)."""

@@ -122,6 +122,14 @@ class RouteGraph:
         k = int(np.argmin(dist))
         return segs[k], float(u[k]), proj[k]
 
+    def forward_only(self) -> RouteGraph:
+        """The graph without its reverse edges (itself when it has none): the routes driven
+        in their direction and the joins."""
+        if not any(e.reverse for e in self.edges):
+            return self
+        edges = [e for e in self.edges if not e.reverse]
+        return RouteGraph(self.node_ids, self.xy, self.v_max_mps, self.half_width_m, edges)
+
     def reverse_of(self, e: Edge) -> Edge | None:
         """The passable reverse edge of route segment ``e`` (``e.v -> e.u``), if any."""
         for r in self.out.get(e.v, []):

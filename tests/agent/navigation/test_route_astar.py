@@ -77,7 +77,7 @@ def test_the_start_is_projected_onto_the_nearest_segment():
     assert path.travel_time_s == pytest.approx((3.0 + 4.0) / 0.2)
 
 
-#: Reverse edges are off by default; these tests switch them on at the cost a user would.
+#: Reverse edges at their default cost, named: these tests need them on.
 REVERSE = RouteMemoryParams(reverse_cost_factor=1.5)
 
 

@@ -53,6 +53,7 @@ def test_no_way_to_the_goal_ends_the_run_with_an_unreachable_event():
     assert stack.unreachable_cause == NO_WAY
     why = [detail for _, kind, detail in stack.events if kind == "unreachable"]
     assert len(why) == 1 and why[0].startswith("no way to the goal exists")
+    assert why[0].endswith("(no_way)")  # the cause, for the results summary
 
 
 def test_a_lost_localizer_is_named_when_the_goal_is_not_reached():
@@ -64,7 +65,7 @@ def test_a_lost_localizer_is_named_when_the_goal_is_not_reached():
     kinds = [kind for _, kind, _ in stack.events]
     assert kinds.index("lost") < kinds.index("unreachable")
     why = [detail for _, kind, detail in stack.events if kind == "unreachable"]
-    assert len(why) == 1 and "localizer is lost" in why[0]
+    assert len(why) == 1 and "localizer is lost" in why[0] and why[0].endswith("(lost)")
 
 
 @pytest.mark.parametrize("std_m, lost", [(0.3, False), (1.2, True)])
