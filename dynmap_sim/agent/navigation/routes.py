@@ -96,9 +96,12 @@ class RouteMemoryParams:
     #: corridor forwards (never timed that way, it starts with a turn): the robot keeps to
     #: the routes' direction unless going back saves a third of the time. A loop is still
     #: closed forwards: a plan that passes a via point behind its target is planned again
-    #: without reverse edges (route planning's route order). ``inf``: directed routes only,
-    #: as H&W's.
-    reverse_cost_factor: float = 1.5
+    #: without reverse edges (route planning's route order). ``inf`` (the default):
+    #: directed routes only, as H&W's. Off because on a generated loop route whose waypoints
+    #: carry no via points the robot went back to its start (the route's end) after a quarter
+    #: of the route, and that counts as the goal reached: 1.5 is the value to try with a
+    #: scenario's ``route_memory`` table where a route returns through a doorway.
+    reverse_cost_factor: float = math.inf
     #: A recorded route is dropped when the robot drove less than this outside the corridors
     #: (from where it left one to where it re-entered one, not counting the legs to the
     #: centre lines): an excursion of less than one ``Δd`` is localization noise or an
