@@ -22,6 +22,7 @@ from typing import Annotated
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import cKDTree
 
 from dynmap_sim import se2
 from dynmap_sim.agent.mapping.correlative_matcher import (
@@ -39,7 +40,7 @@ from dynmap_sim.agent.mapping.scan_points import (
     scan_points_base,
     voxel_downsample,
 )
-from dynmap_sim.agent.params import AsTuple, Int, params_dataclass
+from dynmap_sim.agent.params import AsTuple, Int, Positive, params_dataclass
 from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Scan
 
 FloatArray = NDArray[np.float64]
@@ -159,6 +160,12 @@ class KeyframeSLAMConfig:
     #: anchored first run skips the loop closure back end: the walls already hold the map
     #: frame, and a graph of relative edges could only pull keyframes off them.
     anchor_walls: bool = True
+    #: Only the walls the local map has seen take part: a wall point counts when a keyframe
+    #: point lies within this distance [m] of it. A wall hidden behind furniture (shelves
+    #: and desks against it, in view of a scan where the keyframes do not yet hold them)
+    #: would otherwise pull those readings onto itself; 0.1 m is ten times the range noise
+    #: and more than the front end drifts between two keyframes.
+    anchor_seen_m: Positive = 0.1
 
     def __post_init__(self) -> None:
         if self.drop_edges not in DROP_EDGES:
@@ -244,7 +251,9 @@ class KeyframeSLAM:
             here = self.keyframes[-1].pose[:2]
             reach = self.laser.range_max_m + c.max_correspondence_m
             walls = self.wall_points[np.hypot(*(self.wall_points - here).T) <= reach]
-            pts = np.concatenate([pts, walls])
+            if len(walls):
+                gap, _ = cKDTree(pts).query(walls, distance_upper_bound=c.anchor_seen_m)
+                pts = np.concatenate([pts, walls[np.isfinite(gap)]])
         self._local = PointMap(pts, k_normal=c.k_normal) if len(pts) >= 3 else None
         self._seed_table = None
         if c.seed_window[0] > 0 or c.seed_window[1] > 0:
