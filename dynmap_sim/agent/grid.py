@@ -152,6 +152,19 @@ def _cells_of_counts(
     return grid
 
 
+def points_on_segments(segments: ArrayLike, spacing_m: float) -> FloatArray:
+    """Points ``(M, 2)`` [m] every ``spacing_m`` or closer along the segments ``(N, 4)``
+    (``x0, y0, x1, y1``), both ends included: a wall plan as points (rasterizing, ICP)."""
+    seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
+    if len(seg) == 0:
+        return np.zeros((0, 2))
+    length = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
+    n = np.maximum(np.ceil(length / spacing_m).astype(np.intp), 1) + 1
+    t = np.concatenate([np.linspace(0.0, 1.0, k) for k in n])
+    s = np.repeat(seg, n, axis=0)
+    return np.column_stack([s[:, 0] + t * (s[:, 2] - s[:, 0]), s[:, 1] + t * (s[:, 3] - s[:, 1])])
+
+
 class OccupancyGrid:
     """A 2-D occupancy grid with a cached likelihood field.
 
@@ -278,12 +291,7 @@ class OccupancyGrid:
         pts_all = np.concatenate([segs[:, :2], segs[:, 2:]])
         bounds = (*pts_all.min(axis=0), *pts_all.max(axis=0))
         origin, h, w = cls._empty(bounds, resolution_m, margin_m)
-        lengths = np.hypot(segs[:, 2] - segs[:, 0], segs[:, 3] - segs[:, 1])
-        n = np.maximum(2, np.ceil(lengths / (0.25 * resolution_m)).astype(int) + 1)
-        seg_id = np.repeat(np.arange(len(segs)), n)
-        t = np.concatenate([np.linspace(0.0, 1.0, k) for k in n])
-        s = segs[seg_id]
-        xy = s[:, :2] + t[:, None] * (s[:, 2:] - s[:, :2])
+        xy = points_on_segments(segs, 0.25 * resolution_m)
         ix = np.floor((xy[:, 0] - origin[0]) / resolution_m).astype(np.intp)
         iy = np.floor((xy[:, 1] - origin[1]) / resolution_m).astype(np.intp)
         occ = np.zeros((h, w), dtype=bool)

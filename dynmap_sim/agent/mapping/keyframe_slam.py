@@ -25,6 +25,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from dynmap_sim import se2
+from dynmap_sim.agent.grid import points_on_segments
 from dynmap_sim.agent.mapping.correlative_matcher import (
     LikelihoodTable,
     angular_step,
@@ -34,7 +35,6 @@ from dynmap_sim.agent.mapping.scan_matcher import MatchResult, PointMap, match_s
 from dynmap_sim.agent.mapping.scan_points import (
     BeamDirections,
     free_space_violations,
-    points_on_segments,
     range_discontinuities,
     range_weights,
     scan_points_base,

@@ -223,16 +223,3 @@ def voxel_downsample(points: FloatArray, voxel_m: float, mean: bool = False) -> 
     cx = np.bincount(inv, weights=points[:, 0]) / cnt
     cy = np.bincount(inv, weights=points[:, 1]) / cnt
     return np.column_stack([cx, cy])
-
-
-def points_on_segments(segments: ArrayLike, spacing_m: float) -> FloatArray:
-    """Points ``(M, 2)`` [m] every ``spacing_m`` or closer along the segments ``(N, 4)``
-    (``x0, y0, x1, y1``), both ends included: a wall plan as a point map for ICP."""
-    seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
-    if len(seg) == 0:
-        return np.zeros((0, 2))
-    length = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
-    n = np.maximum(np.ceil(length / spacing_m).astype(np.intp), 1) + 1
-    t = np.concatenate([np.linspace(0.0, 1.0, k) for k in n])
-    s = np.repeat(seg, n, axis=0)
-    return np.column_stack([s[:, 0] + t * (s[:, 2] - s[:, 0]), s[:, 1] + t * (s[:, 3] - s[:, 1])])

@@ -13,6 +13,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
+from dynmap_sim.agent.grid import points_on_segments
+
 FloatArray = NDArray[np.float64]
 
 
@@ -112,12 +114,7 @@ def build_clearance_grid(
     grid = ClearanceGrid(lo, resolution_m, np.zeros(shape))
     occ = np.zeros(shape, dtype=bool)
     if len(seg):
-        length = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
-        n = np.maximum(2, np.ceil(length / (0.4 * resolution_m)).astype(int) + 1)
-        idx = np.repeat(np.arange(len(seg)), n)
-        u = np.concatenate([np.linspace(0.0, 1.0, k) for k in n])
-        p = seg[idx, :2] + u[:, None] * (seg[idx, 2:] - seg[idx, :2])
-        ij = grid.cell_of(p)
+        ij = grid.cell_of(points_on_segments(seg, 0.4 * resolution_m))
         occ[ij[:, 0], ij[:, 1]] = True
     for x, y, r in circ:
         ij = grid.cell_of(np.array([x, y]))
