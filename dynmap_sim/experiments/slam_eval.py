@@ -14,7 +14,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -54,6 +54,9 @@ class SlamEval:
     #: CPU seconds of the front end and the back end (one core: the mapper is sequential)
     front_end_cpu_s: float = math.nan
     back_end_cpu_s: float = math.nan
+    #: the loop-closure search's counts (:attr:`.loop_closure.LoopClosure.stats`): why
+    #: candidates were rejected, how many were verified and kept as consistent
+    closure_search: dict[str, int] = field(default_factory=dict)
 
     @property
     def duration_s(self) -> float:
@@ -96,6 +99,7 @@ class SlamEval:
             "odometry_source": self.odometry_source,
             "odometry_reversals": self.reversals,
             "odometry_reversals_found": self.n_reversals,
+            "closure_search": dict(self.closure_search),
         }
 
     def table(self) -> list[str]:
@@ -120,6 +124,9 @@ class SlamEval:
             f"{self.scans_per_s:.0f} scans/s; CPU {self.front_end_cpu_s:.1f} + "
             f"{self.back_end_cpu_s:.1f} s, {self.realtime_factor:.1f}x real time"
         )
+        if self.closure_search:
+            counts = ", ".join(f"{k} {v}" for k, v in self.closure_search.items() if v)
+            rows.append(f"closure search: {counts or 'no keyframe far enough along'}")
         return rows
 
 
@@ -192,4 +199,5 @@ def slam_eval(
         reversals=data.reversals,
         front_end_cpu_s=c1 - c0,
         back_end_cpu_s=c2 - c1,
+        closure_search=dict(mapper.loop_closure.stats),
     )

@@ -19,7 +19,7 @@ from dynmap_sim.agent.localization.dynamic_map_localizer import (
 )
 from dynmap_sim.agent.localization.localizer import LOCALIZERS, make_localizer
 from dynmap_sim.agent.localization.odometry_calibration import odometry_error_rates
-from dynmap_sim.types import Prior
+from dynmap_sim.types import Odometry, Prior
 
 
 def _world(cupboard: bool) -> np.ndarray:
@@ -179,6 +179,32 @@ def test_min_update_motion_skips_scans_with_odometry_prediction(learned):
     assert all("timescale" not in e.extras for e in np.array(ests)[skipped])
 
 
+def test_a_standing_robot_learns_its_scan_once(learned):
+    """``learn_min_dist_m``: while the odometry stands still (the robot waits behind a
+    person), λ1 learns no scan and none is stored for λ2; with both thresholds 0 every scan
+    is, as in the paper."""
+    truth = learned[2]
+    stand = 40
+    truth = np.concatenate([truth[:30], np.repeat(truth[30:31], stand, axis=0), truth[31:]])
+    stream = _stream(truth, _world(False), np.random.default_rng(4))
+    still = stream[30][0]
+    stream[30 : 30 + stand] = [
+        (Odometry(still.pose, o.stamp_s), s) for o, s in stream[30 : 30 + stand]
+    ]
+    stored = {}
+    for rule in ((0.01, 0.01), (0.0, 0.0)):
+        loc = pickle.loads(pickle.dumps(learned[0]["dynamic-map"]))
+        loc.config = replace(loc.config, learn_min_dist_m=rule[0], learn_min_angle_rad=rule[1])
+        loc.begin_run(Prior(initial_pose=truth[0].copy(), day=2, run=1))
+        ests = [loc.update(o, s) for o, s in stream]
+        stored[rule] = len(loc._run_poses)
+        err = np.hypot(*(np.array([e.mean[:2] for e in ests]) - truth[:, :2]).T)
+        assert err.max() < 0.1
+    assert stored[0.0, 0.0] == len(truth)
+    # the standing scans after the first, and at most one short step at a corner
+    assert len(truth) - stand <= stored[0.01, 0.01] <= len(truth) - (stand - 1)
+
+
 def test_long_term_maps_fill_by_u_n_per_step(learned):
     """§3.1 filling, §5.4: after one day (one step of λ3–λ5) a λ5 ray holds its seed (the
     keyframe scan that made the local map, §4.4: a few samples) plus u·n = 5, λ4 seed + 20;
@@ -302,7 +328,7 @@ def test_kappa_first_fuses_the_odometry_prior_from_the_first_match(learned):
     assert DynamicMapConfig().kappa_first == 0
     loc, truth, pts, target = _before_scan_30(learned)
     c_o = np.diag([0.02**2, 0.02**2, 0.01**2])
-    pred = truth[30] + [0.032, 0.016, 0.0]  # Mahalanobis 1.8: inside two sigma
+    pred = truth[30] + [0.027, 0.013, 0.0]  # Mahalanobis 1.5: inside two sigma
     alone, _, kappa_alone, _, _ = loc._match(pts, pred, c_o, target)
     loc.config = replace(loc.config, kappa_first=1.0)
     fused, _, kappa_fused, _, _ = loc._match(pts, pred, c_o, target)

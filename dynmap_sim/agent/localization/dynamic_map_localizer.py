@@ -274,6 +274,17 @@ class DynamicMapConfig:
     #: ... and turned this much [rad] since the last processed scan get the odometry
     #: prediction only (0: every scan, as in the paper; like AMCL's ``update_min_*``).
     min_update_angle_rad: NonNegative = 0.0
+    #: A scan is learned (λ1 online, and stored for λ2-λ5) only once the odometry says the
+    #: robot moved this far [m] ...
+    learn_min_dist_m: NonNegative = 0.01
+    #: ... or turned this much [rad] since the last learned scan (0 and 0: every scan, as
+    #: in the paper). §3's samples are independent draws of a ray; scans from a standing
+    #: robot repeat one draw, and while it waits (behind a person, for a door) λ1 learns its
+    #: own estimate over and over, so the estimate creeps with nothing to hold it. The
+    #: laser's range accuracy (1 cm) and the turn that moves a point at 1 m by as much:
+    #: below both the robot stands; a driving robot (3 cm a scan at 0.35 m/s) learns every
+    #: scan, as in the paper.
+    learn_min_angle_rad: NonNegative = 0.01
     #: λ3-λ5 learn this many random scans of each of the day's runs (0: all).
     ltm_day_scans_per_run: NonNegativeInt = 1500
     #: Keep a snapshot of λ2-λ5 after each day's learning (for figures like B&D Fig. 9; the
@@ -377,6 +388,8 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
         self._pose = np.zeros(3)
         self._cov = np.diag([1e-4, 1e-4, 1e-4])
         self._last_odom: FloatArray | None = None
+        #: odometry pose of the last learned scan (``learn_min_dist_m``)
+        self._learned_odom: FloatArray | None = None
         self._mapper: FirstRunMapper | None = None
         self._cmap_points = np.zeros((0, 2))
         self._cmap: PointMap | None = None
@@ -458,6 +471,7 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
             else np.asarray(prior.initial_pose_cov, dtype=np.float64).copy()
         )
         self._last_odom = None
+        self._learned_odom = None
         self._day = int(prior.day)
         self._cmap_points = np.zeros((0, 2))
         self._cmap = None
@@ -540,12 +554,14 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
                     self.dmap, self._pose, pts_map, levels, self.config.synthesis
                 ).points
             )
-        if self.learns_stm:
-            self.dmap.learn_online(
-                self._pose, pts_map, self.rng, levels=[0], allow_new=not self.frozen
-            )
-        if self.learns_ltm:
-            self._store(self._pose, ranges)
+        if self._moved_since_learning(opose):
+            self._learned_odom = opose.copy()
+            if self.learns_stm:
+                self.dmap.learn_online(
+                    self._pose, pts_map, self.rng, levels=[0], allow_new=not self.frozen
+                )
+            if self.learns_ltm:
+                self._store(self._pose, ranges)
         self.n_safe_mode += int(cur.safe_mode)
         extras = {
             "scan_loglik": cur.scan_loglik,
@@ -561,6 +577,19 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
             "odometry_slip": slipped,
         }
         return PoseEstimate(mean=self._pose.copy(), cov=self._cov.copy(), extras=extras)
+
+    def _moved_since_learning(self, opose: FloatArray) -> bool:
+        """Whether the odometry moved ``learn_min_dist_m`` or turned ``learn_min_angle_rad``
+        since the last learned scan (always true for a run's first scan)."""
+        last = self.__dict__.get("_learned_odom")  # absent in pickles made before the rule
+        if last is None:
+            return True
+        c = self.config
+        delta = se2.between(last, opose)
+        return bool(
+            np.hypot(delta[0], delta[1]) >= c.learn_min_dist_m
+            or abs(delta[2]) >= c.learn_min_angle_rad
+        )
 
     # ------------------------------------------------------------------ eq. 9
     def _match(

@@ -197,7 +197,7 @@ def correlative_match(
         theta_step_rad = angular_step(pts, res)
     n_th = int(np.ceil(window_theta_rad / theta_step_rad))
     thetas = init[2] + theta_step_rad * np.arange(-n_th, n_th + 1)
-    n_xy = int(np.ceil(window_xy_m / res))
+    n_xy = int(np.ceil(window_xy_m / res - 1e-9))  # a whole number of cells is exact
     block = max(1, int(block))
     n_blocks = int(np.ceil((2 * n_xy + 1) / block))
     start = -n_xy  # translation offsets [cells] of block b: start + b*block + (0..block-1)

@@ -17,6 +17,7 @@ two.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Annotated
 
@@ -115,11 +116,15 @@ class KeyframeSLAMConfig:
     #: Seed ICP by a correlative search around the odometry prediction (Olson 2009; the
     #: real-time correlative matcher of Hess et al. 2016 §IV, whose result is then the prior
     #: of the fine matcher): half-windows ``(xy [m], theta [rad])``, each widened by the
-    #: odometry step itself (a step odometry reports late, in one jump, is not trusted);
-    #: ``(0, 0)`` off. Real wheel odometry errs by up to 20 degrees in a step, beyond ICP's
-    #: 0.3 m basin; ``seed_verify`` keeps near-exact odometry from being overruled by the
-    #: seed's grid (docs/tuning/slam.md).
-    seed_window: Annotated[tuple[float, float], AsTuple] = (0.3, 0.4)
+    #: odometry step itself (a step odometry reports late, in one jump, is not trusted),
+    #: the translation rounded to whole cells of the seed's grid; ``(0, 0)`` off. Real
+    #: wheel odometry errs by up to 20 degrees in a step, beyond ICP's 0.3 m basin; in
+    #: translation a slipping wheel over-reports at most the step it reports, so only the
+    #: step is searched (a robot crawling or standing is searched in heading alone): a
+    #: wider translation window found the grid's aliases along aisles between shelf rows,
+    #: 0.3 m jumps that nothing pulled back. ``seed_verify`` keeps near-exact odometry from
+    #: being overruled by the seed's grid (docs/tuning/slam.md).
+    seed_window: Annotated[tuple[float, float], AsTuple] = (0.0, 0.4)
     #: The seed's likelihood grid: cell side and Gaussian width [m], and the range [m]
     #: within which map and scan points take part.
     seed_resolution_m: float = 0.1
@@ -313,7 +318,8 @@ class KeyframeSLAM:
             thin,
             self._seed_table,
             pred,
-            window_xy_m=c.seed_window[0] + d,
+            window_xy_m=c.seed_resolution_m
+            * math.floor((c.seed_window[0] + d) / c.seed_resolution_m + 0.5),
             window_theta_rad=c.seed_window[1] + a,
             theta_step_rad=step,
         )

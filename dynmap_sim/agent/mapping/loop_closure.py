@@ -101,10 +101,13 @@ class LoopClosureConfig:
     #: Close loops keyframe by keyframe with a window that grows with the path since the
     #: last closure (:mod:`.incremental_loops`) instead of once over the whole drift.
     incremental_loops: bool = False
-    #: Keep the correlative closures in the graph of the ICP rounds. Off (as before): the
-    #: ICP round optimizes the sequential edges and its own pairwise edges only, so where
-    #: those find no loop edge the graph relaxes back to the front end's shape.
-    keep_closures: bool = False
+    #: Keep the correlative closures in the graph of the ICP rounds: a verified, mutually
+    #: consistent closure is evidence the pose graph keeps (Olson 2009, Mangelson et al.
+    #: 2018). Off: the ICP round optimizes the sequential edges and its own pairwise edges
+    #: only, so where those find no loop edge (a long loop whose ends lie beyond
+    #: ``loop_radius_m`` in the front end's estimate) the graph relaxes back to the front
+    #: end's shape and the closures are lost.
+    keep_closures: bool = True
     #: The robust treatment of loop-closure and pairwise ICP edges in the pose graph:
     #: ``"dcs"`` dynamic covariance scaling (Agarwal et al. 2013: an edge whose error is far
     #: beyond its covariance loses its weight, so one wrong closure cannot bend the graph),
@@ -128,6 +131,19 @@ class LoopClosureConfig:
         object.__setattr__(self, "loop_stride", max(1, self.loop_stride))
 
 
+#: Why a closure candidate was rejected, first failed check first (:attr:`LoopClosure.stats`):
+#: an empty submap, a correlative score below ``loop_min_score``, ICP not converged, too few
+#: points matched (``loop_min_overlap``), an RMS residual of 3 cm or more, or a pose sliding
+#: in some direction (``loop_max_sigma_m``).
+REJECTIONS = (
+    "empty_submap",
+    "low_score",
+    "not_converged",
+    "low_overlap",
+    "high_rmse",
+    "sliding",
+)
+
 #: Information of a verified ICP edge: 1 cm in x and y, 0.005 rad in theta.
 EDGE_INFO = np.diag([1 / 0.01**2, 1 / 0.01**2, 1 / 0.005**2])
 EDGE_INFO.flags.writeable = False
@@ -138,7 +154,9 @@ class LoopClosure:
 
     def __init__(self, config: LoopClosureConfig) -> None:
         self.config = config
-        #: Counts of the last incremental closure search (:mod:`.incremental_loops`).
+        #: Counts of the last closure search: keyframes without a candidate, candidates
+        #: searched, rejected by each of :data:`REJECTIONS`, verified and kept as consistent
+        #: (:mod:`.incremental_loops` keeps its own counts here).
         self.stats: dict[str, int] = {}
 
     def optimize(self, slam: KeyframeSLAM) -> tuple[FloatArray, int]:
@@ -287,6 +305,7 @@ class LoopClosure:
         a_m, b_m, cap_m = c.loop_window_m
         tables: dict[int, tuple[LikelihoodTable, PointMap] | None] = {}
         edges: list[Edge] = []
+        self.stats = dict.fromkeys(REJECTIONS + ("searched", "no_candidate", "verified"), 0)
         for i in range(c.loop_min_gap + 1, n, c.loop_stride):
             src = slam.keyframe_points[i]
             if len(src) < 30:
@@ -297,6 +316,7 @@ class LoopClosure:
             dist = np.hypot(*(poses[cand, :2] - poses[i, :2]).T)
             near = dist < 0.5 * c.loop_radius_m + w_xy
             if not np.any(near):
+                self.stats["no_candidate"] += 1
                 continue
             cand, w_xy, s, dist = cand[near], w_xy[near], s[near], dist[near]
             chosen: list[int] = []
@@ -309,7 +329,11 @@ class LoopClosure:
                 edge = self._verified_loop(poses, slam, tables, int(cand[m]), i, w_xy[m], s[m])
                 if edge is not None:
                     edges.append(edge)
-        return self._consistent_loops(poses, edges)
+        self.stats["searched"] = sum(self.stats[k] for k in REJECTIONS) + len(edges)
+        self.stats["verified"] = len(edges)
+        kept = self._consistent_loops(poses, edges)
+        self.stats["consistent"] = len(kept)
+        return kept
 
     def _verified_loop(
         self,
@@ -333,6 +357,7 @@ class LoopClosure:
             )
         entry = tables[j]
         if entry is None:
+            self._reject("empty_submap")
             return None
         table, pmap = entry
         src = slam.keyframe_points[i]
@@ -347,6 +372,7 @@ class LoopClosure:
             ),
         )
         if cres.score < c.loop_min_score:
+            self._reject("low_score")
             return None
         res = match_scan(
             src,
@@ -357,14 +383,20 @@ class LoopClosure:
             huber_m=c.edge_huber_m,
         )
         sig = float(np.sqrt(np.max(np.linalg.eigvalsh(res.cov[:2, :2]))))
-        if (
-            res.converged
-            and res.n_matched >= max(60, c.loop_min_overlap * len(src))
-            and res.rmse_m < 0.03
-            and sig <= c.loop_max_sigma_m
+        for reason, failed in (
+            ("not_converged", not res.converged),
+            ("low_overlap", res.n_matched < max(60, c.loop_min_overlap * len(src))),
+            ("high_rmse", not res.rmse_m < 0.03),
+            ("sliding", sig > c.loop_max_sigma_m),
         ):
-            return Edge(j, i, res.pose, EDGE_INFO)
-        return None
+            if failed:
+                self._reject(reason)
+                return None
+        return Edge(j, i, res.pose, EDGE_INFO)
+
+    def _reject(self, reason: str) -> None:
+        """Count a closure candidate rejected for ``reason`` (one of :data:`REJECTIONS`)."""
+        self.stats[reason] = self.stats.get(reason, 0) + 1
 
     def _consistent_loops(self, poses: FloatArray, edges: list[Edge]) -> list[Edge]:
         """Keep loop edges that are pairwise consistent with others nearby.

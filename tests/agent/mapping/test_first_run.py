@@ -11,7 +11,7 @@ from dynmap_sim import se2
 from dynmap_sim.agent.grid import OCCUPIED
 from dynmap_sim.agent.mapping.first_run import FirstRunConfig, FirstRunMapper
 from dynmap_sim.agent.mapping.keyframe_slam import KeyframeSLAMConfig
-from dynmap_sim.agent.mapping.loop_closure import LoopClosureConfig
+from dynmap_sim.agent.mapping.loop_closure import REJECTIONS, LoopClosureConfig
 from dynmap_sim.agent.mapping.scan_points import (
     BeamDirections,
     free_space_violations,
@@ -50,6 +50,12 @@ def test_first_run_map_and_trajectory(segments, laser, cast, path_fn, odo_fn):
     assert ate_dead > 0.15  # the odometry really drifts
     assert ate < 0.03
     assert smap.n_loop_closures >= 1
+    # The closure search's counts add up: every candidate searched is rejected for one
+    # reason or verified, and the consistent ones are among the verified.
+    stats = mapper.loop_closure.stats
+    rejected = sum(stats[k] for k in REJECTIONS)
+    assert stats["searched"] == rejected + stats["verified"] > 0
+    assert 1 <= stats["consistent"] <= stats["verified"]
     # Online estimates are already good; the map frame is the initial pose's frame.
     assert np.max(np.hypot(*(est[:, :2] - truth[:, :2]).T)) < 0.1
     assert np.allclose(smap.trajectory[0], truth[0], atol=1e-6)

@@ -103,4 +103,31 @@ def test_verified_seed_keeps_odometry_along_a_corridor(laser, cast):
 def test_the_default_seed_is_checked():
     """The default first-run mapper seeds ICP correlatively and checks the seed (issue 16)."""
     cfg = FirstRunConfig().slam
-    assert cfg.seed_window == (0.3, 0.4) and cfg.seed_verify
+    assert cfg.seed_window == (0.0, 0.4) and cfg.seed_verify
+
+
+def test_the_default_window_searches_translation_only_as_far_as_the_step(laser, cast):
+    """In the corridor at the simulated robot's 3.5 cm a scan, the default window rounds
+    the step to no whole cell and searches heading alone: even unchecked, the seed then
+    cannot jump along the corridor, where a 0.3 m window does."""
+    segs = np.array(
+        [[0, 0, 13, 0], [0, 2, 13, 2], [0, 0, 0, 2], [13, 0, 13, 2], [4, 0, 4, 0.1]],
+        dtype=float,
+    )
+    truth = polyline_path(np.array([[1.0, 1.0], [12.0, 1.0]]), 0.035, 0.1)
+    odo = _odometry(truth, np.random.default_rng(0))
+    err = {}
+    for name, window in {"off": [0, 0], "default": [0.0, 0.4], "wide": [0.3, 0.4]}.items():
+        est, _ = _front_end(
+            laser,
+            cast,
+            segs,
+            truth,
+            odo,
+            np.random.default_rng(1),
+            seed_window=window,
+            seed_verify=False,
+        )
+        err[name] = np.max(np.hypot(*(est[:, :2] - truth[:, :2]).T))
+    assert err["default"] < err["off"] + 0.01
+    assert err["wide"] > err["off"] + 0.15
