@@ -153,6 +153,12 @@ def fit_cost(res: MatchResult, n_points: int, max_correspondence_m: float) -> fl
     return float(sq / n_points)
 
 
+def moved_at_least(delta: FloatArray, dist_m: float, angle_rad: float) -> bool:
+    """Whether the motion ``delta`` (x, y [m], θ [rad]) went ``dist_m`` or turned
+    ``angle_rad`` (0 and 0: any motion, also none)."""
+    return bool(np.hypot(delta[0], delta[1]) >= dist_m or abs(delta[2]) >= angle_rad)
+
+
 def remap_degenerate(
     pose: FloatArray, pred: FloatArray, scan_info: FloatArray, sigma_max_m: float
 ) -> FloatArray:
@@ -517,9 +523,8 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
         anchored = None
         if self._last_odom is not None:
             delta = se2.between(self._last_odom, opose)
-            if (
-                np.hypot(delta[0], delta[1]) < self.config.min_update_dist_m
-                and abs(delta[2]) < self.config.min_update_angle_rad
+            if not moved_at_least(
+                delta, self.config.min_update_dist_m, self.config.min_update_angle_rad
             ):  # not moved enough: odometry only, the scan is not used (like AMCL's update_min_*)
                 c_o = odometry_covariance(delta, *self._odom_params())
                 return PoseEstimate(
@@ -585,11 +590,7 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
         if last is None:
             return True
         c = self.config
-        delta = se2.between(last, opose)
-        return bool(
-            np.hypot(delta[0], delta[1]) >= c.learn_min_dist_m
-            or abs(delta[2]) >= c.learn_min_angle_rad
-        )
+        return moved_at_least(se2.between(last, opose), c.learn_min_dist_m, c.learn_min_angle_rad)
 
     # ------------------------------------------------------------------ eq. 9
     def _match(

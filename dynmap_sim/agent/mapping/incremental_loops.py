@@ -101,6 +101,7 @@ def incremental_closures(
     pending: list[tuple[int, Edge, FloatArray]] = []
     dirty = False
     stats = {"searched": 0, "verified": 0, "agreed": 0, "confirmed": 0, "no_candidate": 0}
+    lc.stats = stats  # _verified_loop counts its rejections here too
     for i in range(lcc.loop_min_gap + 1, n, lcc.loop_stride):
         src = slam.keyframe_points[i]
         if len(src) < 30:
@@ -154,5 +155,4 @@ def incremental_closures(
             dirty = True
     if dirty and loops:
         cur = optimize_pose_graph(cur, seq + loops, anchor=0, loss="huber", f_scale=3.0)
-    lc.stats = stats
     return cur, loops

@@ -305,7 +305,7 @@ class LoopClosure:
         a_m, b_m, cap_m = c.loop_window_m
         tables: dict[int, tuple[LikelihoodTable, PointMap] | None] = {}
         edges: list[Edge] = []
-        self.stats = dict.fromkeys(REJECTIONS + ("searched", "no_candidate", "verified"), 0)
+        self.stats = dict.fromkeys(REJECTIONS + ("no_candidate",), 0)
         for i in range(c.loop_min_gap + 1, n, c.loop_stride):
             src = slam.keyframe_points[i]
             if len(src) < 30:
