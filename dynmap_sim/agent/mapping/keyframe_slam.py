@@ -62,9 +62,17 @@ class KeyframeSLAMConfig:
     #: The local map a scan is matched against: the points of the last this many keyframes
     #: (~3.6 m of path at the default spacing): recent, so hardly drifted.
     local_map_keyframes: Int = 12
-    #: ... plus every keyframe within this distance [m] of the newest one (0: none). Off:
-    #: older keyframes nearby carry the drift gathered since, and ICP would follow it.
+    #: ... plus every keyframe within this distance [m] of the newest one (0: none), when no
+    #: walls anchor the front end. Off: without an anchor, older keyframes nearby carry the
+    #: drift gathered since, and ICP would follow it.
     local_map_radius_m: float = 0.0
+    #: The same radius [m] when the prior's walls anchor the front end (``anchor_walls``
+    #: with walls granted). The older keyframes were then held to the walls themselves, so
+    #: their drift is bounded, and they bring back what the robot saw of this place before:
+    #: along an aisle whose walls lie out of range, the last keyframes alone let the heading
+    #: drift and a second pass come back beside the first. 3 m: a keyframe that near shares
+    #: most of the view of a 5.6 m scan.
+    anchored_local_map_radius_m: float = 3.0
     #: Keyframe points and the local map are thinned to one point per square cell of this
     #: side [m] (3 cm: a few times the URG-04LX's 1 cm range noise).
     voxel_m: float = 0.03
@@ -238,16 +246,24 @@ class KeyframeSLAM:
         self._seq_cov.append(self.cov.copy())
         self._rebuild_local_map()
 
-    def _rebuild_local_map(self) -> None:
+    def local_keyframes(self) -> list[int]:
+        """Indices of the keyframes the local map holds, oldest first: the last
+        ``local_map_keyframes`` and those within the radius of the newest one
+        (``anchored_local_map_radius_m`` when walls anchor the front end, else
+        ``local_map_radius_m``)."""
         c = self.config
         n = len(self.keyframes)
-        recent = set(range(max(0, n - c.local_map_keyframes), n))
-        if c.local_map_radius_m > 0:
+        chosen = set(range(max(0, n - c.local_map_keyframes), n))
+        radius = c.anchored_local_map_radius_m if len(self.wall_points) else c.local_map_radius_m
+        if radius > 0 and n:
             kp = np.array([k.pose[:2] for k in self.keyframes])
-            near = np.nonzero(np.hypot(*(kp - kp[-1]).T) < c.local_map_radius_m)[0]
-            recent |= set(near.tolist())
+            chosen |= set(np.nonzero(np.hypot(*(kp - kp[-1]).T) < radius)[0].tolist())
+        return sorted(chosen)
+
+    def _rebuild_local_map(self) -> None:
+        c = self.config
         # Oldest first: the voxel filter keeps the first point, i.e. the least drifted one.
-        sel = sorted(recent)
+        sel = self.local_keyframes()
         pts = np.concatenate(
             [se2.transform_points(self.keyframes[k].pose, self.keyframe_points[k]) for k in sel]
         )

@@ -10,7 +10,7 @@ import pytest
 from dynmap_sim import se2
 from dynmap_sim.agent.grid import OCCUPIED
 from dynmap_sim.agent.mapping.first_run import FirstRunConfig, FirstRunMapper
-from dynmap_sim.agent.mapping.keyframe_slam import KeyframeSLAMConfig
+from dynmap_sim.agent.mapping.keyframe_slam import Keyframe, KeyframeSLAMConfig
 from dynmap_sim.agent.mapping.loop_closure import REJECTIONS, LoopClosureConfig
 from dynmap_sim.agent.mapping.scan_points import (
     BeamDirections,
@@ -167,3 +167,19 @@ def test_anchor_walls_off_ignores_the_prior(segments, laser):
     on = FirstRunMapper(laser, np.zeros(3), walls=segments[:1])
     spacing = np.hypot(*np.diff(on.slam.wall_points, axis=0).T)
     assert len(on.slam.wall_points) >= 8 / 0.03 and spacing.max() <= 0.03 + 1e-12
+
+
+def test_local_map_takes_nearby_keyframes_only_where_walls_anchor(segments, laser):
+    """A second pass of a place matches the first pass's keyframes when walls hold the
+    map frame (``anchored_local_map_radius_m``); without walls only the last keyframes."""
+    x = np.r_[np.arange(0.0, 9.0, 0.3), np.arange(9.0, 0.0, -0.3)]  # out and back, 60 keyframes
+    poses = np.c_[x, np.zeros_like(x), np.zeros_like(x)]
+    free = FirstRunMapper(laser, poses[0]).slam
+    anchored = FirstRunMapper(laser, poses[0], walls=segments).slam
+    for slam in (free, anchored):
+        slam.keyframes = [Keyframe(p, np.zeros(laser.n_beams, np.float32)) for p in poses]
+    last12 = list(range(len(poses) - 12, len(poses)))
+    assert free.local_keyframes() == last12
+    near_start = [k for k in range(len(poses)) if abs(x[k] - x[-1]) < 3.0]
+    assert anchored.local_keyframes() == sorted(set(near_start) | set(last12))
+    assert min(anchored.local_keyframes()) == 0  # the first pass's start is back in view
