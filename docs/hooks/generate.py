@@ -316,7 +316,9 @@ def _params_schema() -> str:
 
     parts = {
         "static-mcl: overrides (MCLConfig)": MCLConfig,
-        "static-mcl: mapper_params (FirstRunConfig)": FirstRunConfig,
+        "static-mcl, dynamic-map, static-map, static-map+stm: mapper_params (FirstRunConfig)": (
+            FirstRunConfig
+        ),
         "dynamic-map, static-map, static-map+stm: params (DynamicMapConfig)": DynamicMapConfig,
         "adaptive-memory: params (AdaptiveMemoryConfig)": AdaptiveMemoryConfig,
         "autonomous driver: params (StackParams)": StackParams,

@@ -25,6 +25,7 @@ from dynmap_sim.agent.params import (
     params_dataclass,
 )
 from dynmap_sim.agent.params import build as build_params
+from dynmap_sim.types import Prior
 
 
 def build(name, **params):
@@ -97,6 +98,20 @@ def test_static_mcl_map_and_flags_are_checked():
 def test_dynamic_map_params_are_checked(name, params, error, message):
     with pytest.raises(error, match=f"^dynamic-map: {message}".replace("(", r"\(")):
         build(name, **params)
+
+
+def test_dynamic_map_takes_the_first_runs_mapper_params():
+    """``mapper_params`` reach the first run's SLAM of ``dynamic-map`` as of ``static-mcl``,
+    checked when the localizer is built."""
+    loc = build("dynamic-map", mapper_params={"anchored_local_map_radius_m": 0.0})
+    assert loc.mapper_config.slam.anchored_local_map_radius_m == 0.0
+    assert build("dynamic-map").mapper_config == FirstRunConfig()
+    loc.begin_run(Prior(np.zeros(3), day=1, run=1, first_run=True))
+    assert loc._mapper is not None and loc._mapper.config == loc.mapper_config
+    with pytest.raises(TypeError, match=r"mapper_params: unknown parameters \['radius'\]"):
+        build("dynamic-map", mapper_params={"radius": 3.0})
+    with pytest.raises(ValueError, match="mapper_params: resolution_m must be a finite"):
+        build("static-map", mapper_params={"resolution_m": -1.0})
 
 
 def test_the_shipped_configs_and_defaults_pass_and_keep_their_types():

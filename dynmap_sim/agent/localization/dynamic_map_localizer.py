@@ -71,7 +71,7 @@ from dynmap_sim.agent.localization.odometry_calibration import (
     OdometryRates,
     odometry_error_rates,
 )
-from dynmap_sim.agent.mapping.first_run import FirstRunMapper
+from dynmap_sim.agent.mapping.first_run import FirstRunConfig, FirstRunMapper
 from dynmap_sim.agent.mapping.scan_matcher import (
     MatchResult,
     PointMap,
@@ -332,7 +332,8 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
 
     ``mode``: ``"dynamic"``, ``"static"`` or ``"static+stm"`` (the registered variants set
     it); ``config``: a :class:`DynamicMapConfig`; ``params``: its fields by name (replacing
-    those of ``config``), e.g. a scenario's ``params`` table.
+    those of ``config``), e.g. a scenario's ``params`` table; ``mapper_params``: fields of
+    the first run's SLAM (:meth:`~.first_run.FirstRunConfig.from_params`) when it maps.
 
     Besides its declared :attr:`diagnostics`, it hands over a ``map_snapshot`` artifact
     (:meth:`day_artifacts`) on every day its map learned.
@@ -375,12 +376,15 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
         rng: np.random.Generator,
         mode: str = "dynamic",
         config: DynamicMapConfig | None = None,
+        mapper_params: dict[str, Any] | None = None,
         **params: Any,
     ) -> None:
         if config is not None and not isinstance(config, DynamicMapConfig):
             raise TypeError(f"{type(self).__name__}: config must be a DynamicMapConfig")
         cfg = replace(config or DynamicMapConfig(), **params)
         super().__init__(laser, rng)
+        #: The first run's SLAM (a scenario's ``mapper_params``, as for ``static-mcl``).
+        self.mapper_config = FirstRunConfig.from_params(**(mapper_params or {}))
         if mode not in _MODES:
             raise ValueError(f"mode must be one of {_MODES}, got {mode!r}")
         self.mode = mode
@@ -487,7 +491,8 @@ class DynamicMapLocalizer(Localizer, ScanMapUser):
         self._mapper = None
         mapped = self._map_given and len(self.dmap) > 0
         if (prior.first_run or len(self.dmap) == 0) and not self.frozen and not mapped:
-            self._mapper = FirstRunMapper(self.laser, self._pose, walls=prior.walls)
+            mapper_config = self.__dict__.get("mapper_config") or FirstRunConfig()
+            self._mapper = FirstRunMapper(self.laser, self._pose, mapper_config, prior.walls)
 
     def _beam_directions(self) -> BeamDirections:
         """The laser's beam directions (cached; rebuilt for pickles made before the cache)."""
