@@ -48,10 +48,10 @@ REASONS = ("no box", "box cut (never dynamic)", "new track", "tracked slow", "tr
 
 @dataclass
 class Tally:
-    """Per person beam ``(speed [m/s], predicted class, reason code)``, and the dynamic
+    """Per person beam ``(day, speed [m/s], predicted class, reason code)``, and the dynamic
     predictions over all scored beams: ``n_dynamic``, ``n_dynamic_not_person``."""
 
-    rows: list[tuple[float, int, int]] = field(default_factory=list)
+    rows: list[tuple[int, float, int, int]] = field(default_factory=list)
     n_dynamic: int = 0
     n_dynamic_not_person: int = 0
 
@@ -122,7 +122,7 @@ def instrumented(tally: Tally, from_day: int) -> Iterator[None]:
             lab = int(boxes.labels[b])
             never = bool(boxes.never_dynamic[lab]) if lab >= 0 else False
             why = _reason(lab, never, int(box_cls[lab]) if lab >= 0 else -1)
-            tally.rows.append((float(speed[j]), int(pc[b]), why))
+            tally.rows.append((int(self.prior.day), float(speed[j]), int(pc[b]), why))
         return est
 
     episode.RunRecorder.record = record_truth  # type: ignore[method-assign]
@@ -141,7 +141,7 @@ def report(tally: Tally) -> list[str]:
     if not tally.rows:
         return ["no person beam scored"]
     a = np.array(tally.rows, dtype=np.float64)
-    speed, pc, why = a[:, 0], a[:, 1].astype(int), a[:, 2].astype(int)
+    day, speed, pc, why = a[:, 0].astype(int), a[:, 1], a[:, 2].astype(int), a[:, 3].astype(int)
     fast, dyn = speed >= V_THRES, pc == object_tracker.DYNAMIC
     prec = 1.0 - tally.n_dynamic_not_person / max(tally.n_dynamic, 1)
     standing = float(np.mean(speed < STANDING_MPS))
@@ -157,6 +157,12 @@ def report(tally: Tally) -> list[str]:
     miss = fast & ~dyn
     for k, name in enumerate(REASONS):
         lines.append(f"  {name}: {int(np.sum(miss & (why == k)))}")
+    lines.append("per day: person beams, share slower than v_thres, recall all / fast")
+    for d in np.unique(day):
+        m, mf = day == d, (day == d) & fast
+        rf = np.mean(dyn[mf]) if mf.any() else float("nan")
+        lines.append(f"  day {d}: {int(m.sum())}, {np.mean(~fast[m]):.3f}, "
+                     f"{np.mean(dyn[m]):.3f} / {rf:.3f}")  # fmt: skip
     return lines
 
 
