@@ -19,9 +19,10 @@ than ``max_dynamic_length_m`` (a person or a moving robot is well under 1.2 m), 
 reach the first or last beam of the scan (cut by the field of view) and, with
 ``occlusion_never_dynamic``, boxes whose end is hidden behind a nearer return (cut by
 occlusion). "Reach" and "next to" allow the ``max_gap_beams`` missing beams a segment
-bridges; beyond them lies open space (no return within the range), which cuts nothing: with
-the URG-04LX limited to 4 m (H&W §7.1) a person seen against an open room has no return on
-either side, and the nearest return farther along the scan says nothing about its ends.
+bridges; beyond them lie beams without a return (open space beyond the range, or readings
+the sensor dropped), which show no nearer object: with the URG-04LX limited to 4 m (H&W
+§7.1) a person seen against an open room has no return on either side, and the nearest
+return farther along the scan says nothing about its ends.
 Their points are still static when associated.
 
 The segmentation, the tracking and the per-point bookkeeping are compiled kernels
