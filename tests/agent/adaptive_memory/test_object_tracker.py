@@ -61,6 +61,50 @@ def segments_reference(r_all: np.ndarray, p: TrackerParams) -> list[list[int]]:
     return segs
 
 
+def never_dynamic_reference(
+    r: np.ndarray, segs: list[list[int]], k: int, length: float, p: TrackerParams
+) -> bool:
+    """The sliding-wall trap of segment ``k``: longer than ``max_dynamic_length_m``, or an
+    end cut by the field of view's edge or (``occlusion_never_dynamic``) by a nearer return,
+    where "cut" needs the edge or that return at most ``1 + max_gap_beams`` beams away."""
+    near = 1 + p.max_gap_beams
+    s = segs[k]
+    lo_cut = s[0] < near if k == 0 else s[0] - segs[k - 1][-1] <= near
+    hi_cut = s[-1] >= len(r) - near if k == len(segs) - 1 else segs[k + 1][0] - s[-1] <= near
+    if length > p.max_dynamic_length_m or (k == 0 and lo_cut) or (k == len(segs) - 1 and hi_cut):
+        return True
+    if not p.occlusion_never_dynamic:
+        return False
+    left = k > 0 and lo_cut and r[segs[k - 1][-1]] < r[s[0]]
+    right = k + 1 < len(segs) and hi_cut and r[segs[k + 1][0]] < r[s[-1]]
+    return bool(left or right)
+
+
+def test_an_end_next_to_beams_without_return_is_not_cut() -> None:
+    """A box in open space (no return on either side for more than ``max_gap_beams`` beams)
+    is not cut, though a nearer return lies farther along the scan; the same box with that
+    return right next to it is."""
+    p = TrackerParams(max_gap_beams=2)
+    n = len(LASER.angles())
+    r = np.full(n, np.inf)
+    mid = n // 2
+    r[mid - 40 : mid - 30] = 1.0  # a nearer object 10 beams before the box
+    r[mid : mid + 8] = 2.0  # the box
+    b = segment_scan(r, LASER.angles(), MOUNT, LASER.range_max_m, p)
+    assert len(b.length) == 2 and not b.never_dynamic[1]
+    r[mid - 40 : mid - 30] = np.inf
+    r[mid - 10 : mid - 1] = 1.0  # now it ends one beam before the box
+    b = segment_scan(r, LASER.angles(), MOUNT, LASER.range_max_m, p)
+    assert len(b.length) == 2 and b.never_dynamic[1]
+    r[mid - 10 : mid - 1] = np.inf
+    r[:8], r[mid : mid + 8] = 1.0, np.inf  # a box at the field of view's first beam
+    b = segment_scan(r, LASER.angles(), MOUNT, LASER.range_max_m, p)
+    assert len(b.length) == 1 and b.never_dynamic[0]
+    r[:8], r[10:18] = np.inf, 1.0  # 10 beams in: not cut by the field of view
+    b = segment_scan(r, LASER.angles(), MOUNT, LASER.range_max_m, p)
+    assert len(b.length) == 1 and not b.never_dynamic[0]
+
+
 def test_segment_scan_groups_by_breakpoints_and_boxes_each_segments_points() -> None:
     rng = np.random.default_rng(21)
     n_boxes = 0
@@ -90,9 +134,8 @@ def test_segment_scan_groups_by_breakpoints_and_boxes_each_segments_points() -> 
             np.testing.assert_allclose(
                 np.abs(loc).max(axis=0), [b.length[k] / 2, b.width[k] / 2], atol=1e-9
             )  # the box is the points' tight extent
-            first, last = segs.index(s) == 0, segs.index(s) == len(segs) - 1
-            if b.length[k] > p.max_dynamic_length_m or first or last:
-                assert b.never_dynamic[k]
+            assert b.never_dynamic[k] == never_dynamic_reference(r, segs, segs.index(s),
+                                                                 b.length[k], p)  # fmt: skip
         n_boxes += len(kept)
     assert n_boxes > 300
 

@@ -189,7 +189,8 @@ class AdaptiveMemoryConfig:
     max_gap_beams: NonNegativeInt = 2
     #: The sliding-wall trap (ours; :mod:`.object_tracker`): boxes longer than this [m] are
     #: never dynamic (a person or a robot is shorter), nor those cut by the field of view
-    #: and, with ``occlusion_never_dynamic``, by a nearer return.
+    #: and, with ``occlusion_never_dynamic``, by a nearer return next to them (not one across
+    #: beams without a return: :mod:`.object_tracker`).
     max_dynamic_length_m: Positive = 1.2
     occlusion_never_dynamic: bool = True
     #: A fast box at least this share of whose points the long-term map explains is not

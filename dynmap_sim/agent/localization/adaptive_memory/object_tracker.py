@@ -16,9 +16,14 @@ Aldon (2004): consecutive returns belong together when their distance is below
 view or by a nearer object) changes as the robot moves, so its box's centre slides along it
 and the filter sees motion where there is none. Such boxes are never dynamic: boxes longer
 than ``max_dynamic_length_m`` (a person or a moving robot is well under 1.2 m), boxes that
-touch the first or last return of the scan (cut by the field of view) and, with
+reach the first or last beam of the scan (cut by the field of view) and, with
 ``occlusion_never_dynamic``, boxes whose end is hidden behind a nearer return (cut by
-occlusion). Their points are still static when associated.
+occlusion). "Reach" and "next to" allow the ``max_gap_beams`` missing beams a segment
+bridges; beyond them lie beams without a return (open space beyond the range, or readings
+the sensor dropped), which show no nearer object: with the URG-04LX limited to 4 m (H&W
+§7.1) a person seen against an open room has no return on either side, and the nearest
+return farther along the scan says nothing about its ends.
+Their points are still static when associated.
 
 The segmentation, the tracking and the per-point bookkeeping are compiled kernels
 (:func:`_segment`, :func:`_track`, :func:`_scan_points`).
@@ -260,9 +265,17 @@ def _segment(r_all, angles, trig, mount, range_max_m, p):  # type: ignore[no-unt
         if hi - lo < p.min_points:
             continue
         center[b, 0], center[b, 1], phi[b], length[b], width[b] = _box(xy, lo, hi)
-        nv = length[b] > p.max_dynamic_length_m or k == 0 or k == m - 1
+        # an end is cut only by what lies next to it: the field of view's edge or a nearer
+        # return at most 1 + max_gap_beams beams away (beams without a return between a box
+        # and the next return are open space beyond the range, which hides nothing)
+        near = 1 + p.max_gap_beams
+        cut_lo = idx[lo] < near if k == 0 else idx[lo] - idx[lo - 1] <= near
+        cut_hi = idx[hi - 1] >= n_beams - near if k == m - 1 else idx[hi] - idx[hi - 1] <= near
+        nv = length[b] > p.max_dynamic_length_m or (k == 0 and cut_lo)
+        nv = nv or (k == m - 1 and cut_hi)
         if p.occlusion_never_dynamic:  # an end hidden behind the neighbour's nearer return
-            nv = nv or (k > 0 and r[lo - 1] < r[lo]) or (k + 1 < m and r[hi] < r[hi - 1])
+            nv = nv or (k > 0 and cut_lo and r[lo - 1] < r[lo])
+            nv = nv or (k + 1 < m and cut_hi and r[hi] < r[hi - 1])
         never[b] = nv
         for j in range(lo, hi):
             labels[idx[j]] = b
