@@ -74,6 +74,7 @@ STUDIES: Registry[Study] = Registry(
     builtin_modules=(
         "dynmap_sim.studies.biber_duckett.study",
         "dynmap_sim.studies.hentschel_wagner.study",
+        "dynmap_sim.studies.temporal_maps.study",
     ),
 )
 

@@ -18,6 +18,14 @@ is free in the first map without being an observation (the prior does not know t
 furniture: a "free" observation of a chair's cell a second before the run sees it would be
 a change). So both localizers need the prior's walls.
 
+The first run (``first_map = "slam"``, the default) is mapped as ``static-mcl``'s and
+``dynamic-map``'s are, by the project's first-run SLAM anchored on the prior's walls
+(:class:`~dynmap_sim.agent.maps.map_source.FirstRunMap`), and its scans at the optimized
+poses are the models' first observations: Krajník et al. build their maps from a localized
+robot too, and a map learned from scans placed by MCL on the bare walls of a furnished room
+learns that MCL's errors. ``first_map = "walls"`` localizes the first run on the walls
+instead (for worlds whose prior walls are all there is).
+
 The run's time [s] is ``(day − 1) · 86400`` plus the time of day: by default the first
 scan's stamp (an experiment stamps seconds since midnight), or ``run_clock_s + (run − 1) ·
 run_spacing_s`` when ``run_clock_s`` is set (a replayed log's clock is not the time of
@@ -35,6 +43,7 @@ from numpy.typing import NDArray
 
 from dynmap_sim.agent.grid import FREE, OCCUPIED, UNKNOWN, OccupancyGrid
 from dynmap_sim.agent.localization.particle_filter import StaticMCL
+from dynmap_sim.agent.maps.map_source import FirstRunMap
 from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Prior, Scan
 
 DAY_S = 86400.0
@@ -43,9 +52,11 @@ DAY_S = 86400.0
 class TemporalMapMCL(StaticMCL):
     """``static-mcl`` on the map a temporal model predicts for each run (module docstring).
 
-    ``config`` and ``overrides``: the MCL configuration, as ``static-mcl``'s (``walls-only``:
-    the first map is the prior's walls without the furniture, the map that configuration is
-    for, and later maps keep only what was seen);
+    ``first_map``: ``"slam"`` or ``"walls"``, what the first run localizes on (module
+    docstring); ``mapper_params``: the first-run SLAM's fields, as ``static-mcl``'s;
+    ``config`` and ``overrides``: the MCL configuration, as ``static-mcl``'s (default
+    ``tuned`` after a SLAM first run, whose maps hold the furniture, ``walls-only`` on the
+    walls, the configuration for a map without it);
     ``occupied_threshold``: probability above which a predicted cell is occupied (0.5: the
     more likely state); ``observation_interval_s`` [s]: the scans of one window make one
     observation per cell (600: much shorter than the 6 h shortest period the models resolve,
@@ -59,7 +70,9 @@ class TemporalMapMCL(StaticMCL):
         self,
         laser: LaserSpec,
         rng: np.random.Generator,
-        config: str = "walls-only",
+        first_map: str = "slam",
+        mapper_params: dict[str, Any] | None = None,
+        config: str | None = None,
         overrides: dict[str, Any] | None = None,
         occupied_threshold: float = 0.5,
         observation_interval_s: float = 600.0,
@@ -68,8 +81,21 @@ class TemporalMapMCL(StaticMCL):
         run_spacing_s: float = 0.0,
         **params: Any,
     ) -> None:
-        super().__init__(laser, rng, config=config, map_source="prior-walls", overrides=overrides)
         name = type(self).name
+        if first_map not in ("slam", "walls"):
+            raise ValueError(f"{name}: first_map must be 'slam' or 'walls', not {first_map!r}")
+        slam = first_map == "slam"
+        if mapper_params and not slam:
+            raise ValueError(f"{name}: mapper_params go with first_map = 'slam' only")
+        super().__init__(
+            laser,
+            rng,
+            config=config or ("tuned" if slam else "walls-only"),
+            map_source="first-run" if slam else "prior-walls",
+            overrides=overrides,
+            mapper_params=mapper_params,
+        )
+        self.first_map = first_map
         if params:
             raise TypeError(f"{name}: unknown parameters {sorted(params)}")
         if not 0.0 < occupied_threshold < 1.0:
@@ -90,7 +116,10 @@ class TemporalMapMCL(StaticMCL):
         self._stamp0: float | None = None
         self._run_time0_s = 0.0
         self._n_scans = 0
-        self._scans: list[tuple[float, NDArray, NDArray]] = []
+        self._scans: list[tuple[int, float, NDArray, NDArray]] = []
+        #: The day's runs: (run, time [s], occupancy probability each localized on).
+        self._day_maps: list[tuple[int, float, NDArray[np.float16]]] = []
+        self._maps_day = 0
 
     # -- the temporal model (subclasses) ---------------------------------------------------
     @abstractmethod
@@ -106,11 +135,12 @@ class TemporalMapMCL(StaticMCL):
         """Occupancy probability of every cell (flat ``H·W``) at ``t_s``."""
 
     # -- the map ---------------------------------------------------------------------------
-    def predicted_grid(self, t_s: float) -> OccupancyGrid:
+    def predicted_grid(self, t_s: float, p: NDArray[np.float64] | None = None) -> OccupancyGrid:
         """The time-specific map at ``t_s`` [s]: cells seen and predicted above the
-        threshold occupied, the other seen cells free, never-seen cells unknown."""
+        threshold occupied, the other seen cells free, never-seen cells unknown (``p``: the
+        prediction at ``t_s`` when already made)."""
         assert self.frame is not None and self.seen is not None
-        p = self._predict(t_s)
+        p = self._predict(t_s) if p is None else p
         occ = np.full(self.seen.size, UNKNOWN, np.int8)
         occ[self.seen] = FREE
         occ[self.seen & (p > self.occupied_threshold)] = OCCUPIED
@@ -139,6 +169,8 @@ class TemporalMapMCL(StaticMCL):
             self.seen = np.zeros(self.frame.occupancy.size, bool)
             self._make_model(self.seen.size)
         self._prior = prior
+        if prior.day != self._maps_day:
+            self._day_maps, self._maps_day = [], prior.day
         self._day_origin_s = max(prior.day - 1, 0) * DAY_S
         self._stamp0 = None
         self._n_scans = 0
@@ -153,43 +185,55 @@ class TemporalMapMCL(StaticMCL):
                 walls = np.flatnonzero(self.frame.occupancy.ravel() == OCCUPIED)
                 self._learn(t, walls, np.ones(walls.size))
                 self.seen[self.frame.occupancy.ravel() == FREE] = True
-            self.set_map(self.predicted_grid(t))
+            if self.map_source.ready:  # else the first-run SLAM maps this run
+                p = self._predict(t)
+                self.set_map(self.predicted_grid(t, p))
+                kept = np.where(self.seen, p, np.nan).astype(np.float16)
+                self._day_maps.append((prior.run, t, kept.reshape(self.frame.shape)))
             super().begin_run(prior)
         est = super().update(odom, scan)
         if self._n_scans % self.learn_every_scans == 0:
-            self._scans.append((t, est.mean.copy(), np.asarray(scan.ranges_m, np.float64)))
+            ranges = np.asarray(scan.ranges_m, np.float64)
+            self._scans.append((self._n_scans, t, est.mean.copy(), ranges))
         self._n_scans += 1
         return est
 
     def end_run(self) -> None:
+        mapped = self.map_source.building
         super().end_run()
+        if mapped:  # the first run: learn from its scans at the SLAM's optimized poses
+            assert isinstance(self.map_source, FirstRunMap)
+            static_map = self.map_source.static_map
+            assert static_map is not None
+            traj = static_map.trajectory
+            self._scans = [(n, t, traj[n].copy(), r) for n, t, _, r in self._scans]
+            self.map_source.static_map = None  # its keyframes are not needed any more
         if not self._scans:
             return
-        times = np.array([s[0] for s in self._scans])
+        times = np.array([s[1] for s in self._scans])
         window = np.floor((times - times[0]) / self.observation_interval_s).astype(np.int64)
         for w in np.unique(window):
             idx = np.flatnonzero(window == w)
-            poses = np.array([self._scans[i][1] for i in idx])
-            ranges = np.array([self._scans[i][2] for i in idx])
+            poses = np.array([self._scans[i][2] for i in idx])
+            ranges = np.array([self._scans[i][3] for i in idx])
             cells, states = self._trace(poses, ranges)
             self._learn(float(np.mean(times[idx])), cells, states)
         self._scans = []
 
     def day_artifacts(self) -> dict[str, dict[str, np.ndarray]]:
-        """``temporal_map``: the occupancy probability the model predicts for the time of the
-        day's last run after learning from it (``p_occupied`` ``(H, W)`` float32, rows along
-        y, NaN where never seen; ``origin_m``, ``resolution_m``, ``t_s``): what the model
-        expects there now, to set against the truth over the days."""
-        if self.frame is None or self.seen is None or not self.seen.any():
+        """``temporal_map``: the maps the day's runs localized on, as predicted at each run's
+        first scan before it was learned from (``p_occupied`` ``(runs, H, W)`` float16, rows
+        along y, NaN where never seen; ``run``, ``t_s`` [s] per map; ``origin_m``,
+        ``resolution_m``): what the model expected, to set against the truth of each run."""
+        if self.frame is None or not self._day_maps:
             return {}
-        p = self._predict(self._run_time0_s).astype(np.float32)
-        p[~self.seen] = np.nan
         return {
             "temporal_map": {
-                "p_occupied": p.reshape(self.frame.shape),
+                "p_occupied": np.stack([m[2] for m in self._day_maps]),
+                "run": np.array([m[0] for m in self._day_maps], np.int64),
+                "t_s": np.array([m[1] for m in self._day_maps]),
                 "origin_m": self.frame.origin_xy_m.copy(),
                 "resolution_m": np.array(self.frame.resolution_m),
-                "t_s": np.array(self._run_time0_s),
             }
         }
 
