@@ -61,6 +61,16 @@ class WorldRow:
 
 
 @dataclass(frozen=True)
+class DayRow:
+    """One localizer on one day of one world: that day's ATE RMSE [m]."""
+
+    world: str
+    localizer: str
+    day: int
+    ate_m: float
+
+
+@dataclass(frozen=True)
 class LocalizerScore:
     """One localizer over all worlds."""
 
@@ -88,6 +98,7 @@ class Leaderboard:
     failed: dict[str, str] = field(default_factory=dict)  # world -> error
     pending: list[str] = field(default_factory=list)
     references: tuple[str, ...] = ()  # labels of reference localizers (odometry): not ranked
+    days: list[DayRow] = field(default_factory=list)
 
     def worst(self, n: int = N_WORST) -> list[tuple[str, WorldRow]]:
         """The ``n`` worlds with the largest ATE of any ranked localizer, each with the row
@@ -107,6 +118,14 @@ def _key(r: WorldRow) -> float:
 
 def _world_of(entry: dict[str, Any]) -> str:
     return Path(entry.get("scenario_path") or entry["scenario"]).stem
+
+
+def _days_of_cell(db: ResultsDB, world: str) -> list[DayRow]:
+    labels = db.labels()
+    return [
+        DayRow(world, labels[int(loc)], int(day), math.nan if rmse is None else float(rmse))
+        for loc, day, rmse in db.query("SELECT loc, day, rmse_m FROM day_summaries ORDER BY day")
+    ]
 
 
 def _rows_of_cell(folder: Path, world: str, kind: str, wall_s: float) -> list[WorldRow]:
@@ -177,6 +196,7 @@ def leaderboard(out_dir: str | Path) -> Leaderboard:
     failed: dict[str, str] = {}
     pending: list[str] = []
     classes: dict[str, str] = {}
+    days: list[DayRow] = []
     for entry in index["cells"]:
         world = _world_of(entry)
         if entry["status"] == "failed":
@@ -189,6 +209,7 @@ def leaderboard(out_dir: str | Path) -> Leaderboard:
         rows += _rows_of_cell(folder, world, kinds.get(world, "file"), entry.get("wall_s") or 0)
         with ResultsDB.open(folder) as db:
             classes |= {str(lb): str(n) for lb, n in db.query("SELECT label, name FROM localizers")}
+            days += _days_of_cell(db, world)
     references = tuple(lb for lb, n in classes.items() if n in REFERENCE_CLASSES)
     labels = list(dict.fromkeys(r.localizer for r in rows))
     baseline = record.get("baseline") or next(
@@ -202,7 +223,9 @@ def leaderboard(out_dir: str | Path) -> Leaderboard:
         for lb in labels
         if lb not in references
     ]
-    return Leaderboard(record["name"], out, baseline, rows, scores, failed, pending, references)
+    return Leaderboard(
+        record["name"], out, baseline, rows, scores, failed, pending, references, days
+    )
 
 
 # ---------------------------------------------------------------------- writing
@@ -335,9 +358,48 @@ def plot_leaderboard(board: Leaderboard, path: Path, n_named: int = 3) -> Path:
     return path
 
 
+def plot_per_day(board: Leaderboard, path: Path) -> Path:
+    """Each localizer's ATE RMSE per day: the median over the worlds, and the band between
+    their 25th and 75th percentiles."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
+
+    order = {lb: k for k, lb in enumerate(dict.fromkeys(r.localizer for r in board.rows))}
+    fig, ax = plt.subplots(figsize=(8, 4.2))
+    for label, k in order.items():
+        if label in board.references:
+            continue
+        by_day: dict[int, list[float]] = {}
+        for r in board.days:
+            if r.localizer == label and math.isfinite(r.ate_m):
+                by_day.setdefault(r.day, []).append(r.ate_m)
+        if not by_day:
+            continue
+        d = np.array(sorted(by_day))
+        q = np.array([np.percentile(by_day[int(x)], [25, 50, 75]) for x in d])
+        ax.plot(d, q[:, 1], marker=".", color=localizer_color(k), label=label)
+        ax.fill_between(d, q[:, 0], q[:, 2], color=localizer_color(k), alpha=0.15, lw=0)
+    ax.axhline(BAR_ATE_M, color="0.5", ls="--", lw=0.8, label=f"bar {BAR_ATE_M} m")
+    ax.set_yscale("log")
+    ax.set_xlabel("day")
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    ax.set_ylabel("ATE RMSE of the day [m]")
+    n = len({r.world for r in board.days})
+    ax.set_title(f"{board.name}: median over {n} worlds, 25-75 % band", fontsize="medium")
+    ax.legend(fontsize="small", loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
 def write_leaderboard(out_dir: str | Path) -> list[Path]:
-    """Write ``leaderboard.md``, ``leaderboard.csv`` and ``leaderboard.png`` into a
-    benchmark folder; the files written."""
+    """Write ``leaderboard.md``, ``leaderboard.csv`` and ``leaderboard.png`` (and, over more
+    than one day, ``leaderboard_per_day.png``) into a benchmark folder; the files written."""
     board = leaderboard(out_dir)
     out = Path(out_dir)
     written = [
@@ -347,4 +409,6 @@ def write_leaderboard(out_dir: str | Path) -> list[Path]:
     written[0].write_text(leaderboard_md(board), encoding="utf-8")
     if board.rows:
         written.append(plot_leaderboard(board, out / "leaderboard.png"))
+    if len({r.day for r in board.days}) > 1:
+        written.append(plot_per_day(board, out / "leaderboard_per_day.png"))
     return written
