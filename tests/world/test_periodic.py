@@ -251,7 +251,7 @@ def test_generator_on_writes_valid_periodic_events(kind, tmp_path):
     g = generate(kind, 1, params)
     periodic = [ev for ev in g.spec.schedule if ev.action == "periodic"]
     assert periodic and g.counts["periodic_group"] == 1
-    assert g.spec.calendar.runs == ("09:00", "12:30", "17:00")
+    assert g.spec.calendar.runs == ("09:00", "12:30", "19:30")  # the third after hours
     doors = {o.id for o in g.spec.objects if o.kind == "door"}
     for ev in periodic:
         if ev.state == "open":

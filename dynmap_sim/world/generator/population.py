@@ -22,12 +22,14 @@ RUN_TIMES = (
     "16:30",
     "17:30",
 )
-#: Run times by runs a day with ``runs_through_day``: morning, lunch, evening, after hours,
-#: so that periodic change (doors in office hours, chairs out at lunch) shows between runs.
+#: Run times by runs a day with ``runs_through_day``, chosen so that the runs of a day meet
+#: different states of the periodic rules (doors open 08:00-18:00, chairs out 12:00-13:30):
+#: lunch and after hours (chairs out, door open; chairs in, door shut), then the morning
+#: (chairs in, door open), then the late afternoon.
 DAY_RUN_TIMES = {
     1: ("12:30",),
-    2: ("09:00", "12:30"),
-    3: ("09:00", "12:30", "17:00"),
+    2: ("12:30", "19:30"),
+    3: ("09:00", "12:30", "19:30"),
     4: ("09:00", "12:30", "17:00", "19:30"),
 }
 
