@@ -16,9 +16,9 @@ of its own run (walls, furniture where it stood, closed doors: the ``geometry`` 
   surfaces that never change. On all cells the walls dominate; the changing cells are where
   a temporal model has anything to predict.
 
-Doors get a series of their own: for each door whose leaf moves, the cells of its less
-frequent position, their true occupancy and each map's mean predicted probability there,
-per run.
+Doors get series of their own: for each door whose leaf moves, each of the leaf's two
+positions, its true occupancy and each map's mean predicted probability there (the highest
+within the tolerance of each cell), per run.
 
 Distances are in the map frame without alignment, as every error of the testbed; one cell
 of tolerance (5 cm) absorbs the localization error of the scans the models learned from.
@@ -38,7 +38,7 @@ from dynmap_sim.types import BeamClass
 
 #: The day artifact of the temporal-map localizers.
 ARTIFACT = "temporal_map"
-#: Fewest cells of a door's less frequent position for its series (a leaf is 20 or more).
+#: Fewest cells of a door leaf's position for its series (a leaf is 20 or more).
 MIN_DOOR_CELLS = 5
 
 FloatArray = NDArray[np.float64]
@@ -83,10 +83,10 @@ class MapAgreement:
 
 @dataclass(frozen=True)
 class DoorSeries:
-    """One door whose leaf moves: per run the true occupancy of the cells of its less
-    frequent position (``truth``, 1: the leaf is there) and each localizer's mean predicted
-    occupancy there (``predicted[label]``, NaN where the map had not seen it), at ``day`` +
-    ``clock_h`` [h]; ``locs[label]`` the localizer's index."""
+    """One position of a door leaf that moves: per run the true occupancy of its cells
+    (``truth``, 1: the leaf is there) and each localizer's mean predicted occupancy there
+    (``predicted[label]``, NaN where the map had not seen it), at ``day`` + ``clock_h`` [h];
+    ``locs[label]`` the localizer's index."""
 
     centre_m: FloatArray
     day: NDArray[np.int64]
@@ -274,7 +274,7 @@ def map_agreement(
                 n_changing=a[:, 6].astype(np.int64),
             )
         )
-    return out, _door_series(maps, index, cells, frame, clock)
+    return out, _door_series(maps, index, cells, frame, clock, tol_cells)
 
 
 def _mean_seen(p: FloatArray | None, cells: BoolArray) -> float:
@@ -285,42 +285,57 @@ def _mean_seen(p: FloatArray | None, cells: BoolArray) -> float:
     return float(np.nanmean(v)) if np.isfinite(v).any() else np.nan
 
 
+def _mean_near(p: FloatArray | None, cells: BoolArray, tol_cells: int) -> float:
+    """Mean over ``cells`` of the highest predicted occupancy within ``tol_cells`` of each
+    (the tolerance of :func:`precision_recall`); NaN where none of them was seen."""
+    if p is None:
+        return np.nan
+    near = ndimage.maximum_filter(np.where(np.isfinite(p), p, -1.0), size=2 * tol_cells + 1)
+    v = near[cells]
+    v = v[v >= 0]
+    return float(v.mean()) if v.size else np.nan
+
+
 def _door_series(
     maps: dict[str, list[_Map]],
     index: dict[str, int],
     cells: dict[tuple[int, int], tuple[BoolArray, BoolArray]],
     frame: Frame,
     clock: dict[tuple[int, int], float],
+    tol_cells: int,
 ) -> list[DoorSeries]:
-    """Per door whose leaf moves over the runs: the cells of its less frequent position (a
-    leaf swings between two: a door open by day is closed across its doorway at night),
-    their true occupancy and each map's mean predicted occupancy there, per run."""
+    """Per door whose leaf moves over the runs, each of the leaf's two positions (open
+    against a wall, shut across the doorway): the true occupancy of its cells and each
+    map's mean predicted occupancy there (within ``tol_cells``), per run."""
     keys = sorted(cells)
     doors = np.stack([cells[k][1] for k in keys])
     freq = doors.mean(axis=0)
     labels, n = ndimage.label(_dilate(doors.any(axis=0), 1), np.ones((3, 3), bool))
     out = []
     for g in range(1, n + 1):
-        rare = (labels == g) & (freq > 0) & (freq < 0.5)
-        if rare.sum() < MIN_DOOR_CELLS:
-            continue  # a door that never moved
-        truth = doors[:, rare].mean(axis=1)
-        predicted = {}
-        for label, ms in maps.items():
-            by_key = {(m.day, m.run): m.p for m in ms if m.frame == frame}
-            predicted[label] = np.array([_mean_seen(by_key.get(k), rare) for k in keys])
-        iy, ix = np.nonzero(rare)
-        centre = (
-            np.array(frame.origin_m) + (np.array([ix.mean(), iy.mean()]) + 0.5) * frame.resolution_m
-        )
-        out.append(
-            DoorSeries(
-                centre_m=centre,
-                day=np.array([k[0] for k in keys], np.int64),
-                clock_h=np.array([clock.get(k, np.nan) for k in keys]),
-                truth=truth,
-                predicted=predicted,
-                locs=index,
+        group = labels == g
+        for leaf in (group & (freq > 0) & (freq < 0.5), group & (freq >= 0.5) & (freq < 1)):
+            if leaf.sum() < MIN_DOOR_CELLS:
+                continue  # a door that never moved
+            predicted = {}
+            for label, ms in maps.items():
+                by_key = {(m.day, m.run): m.p for m in ms if m.frame == frame}
+                predicted[label] = np.array(
+                    [_mean_near(by_key.get(k), leaf, tol_cells) for k in keys]
+                )
+            iy, ix = np.nonzero(leaf)
+            centre = (
+                np.array(frame.origin_m)
+                + (np.array([ix.mean(), iy.mean()]) + 0.5) * frame.resolution_m
             )
-        )
+            out.append(
+                DoorSeries(
+                    centre_m=centre,
+                    day=np.array([k[0] for k in keys], np.int64),
+                    clock_h=np.array([clock.get(k, np.nan) for k in keys]),
+                    truth=doors[:, leaf].mean(axis=1),
+                    predicted=predicted,
+                    locs=index,
+                )
+            )
     return out

@@ -52,10 +52,10 @@ def plot_agreement(agreements: list[MapAgreement], path: Path) -> Path:
     return path
 
 
-def plot_doors(doors: list[DoorSeries], path: Path, days: int = 7, max_doors: int = 3) -> Path:
-    """For up to ``max_doors`` doors whose leaf moves, the last ``days`` days of runs: the
-    true occupancy of the leaf's less frequent position (squares) and each localizer's
-    predicted occupancy of those cells."""
+def plot_doors(doors: list[DoorSeries], path: Path, days: int = 7, max_doors: int = 4) -> Path:
+    """For up to ``max_doors`` door-leaf positions (two a door), the last ``days`` days of
+    runs: the true occupancy of the position (squares) and each localizer's predicted
+    occupancy of its cells."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -72,8 +72,8 @@ def plot_doors(doors: list[DoorSeries], path: Path, days: int = 7, max_doors: in
         ax.set_ylim(-0.05, 1.05)
         ax.set_ylabel("occupied")
         ax.set_title(
-            f"door leaf's less frequent position at ({door.centre_m[0]:.1f}, "
-            f"{door.centre_m[1]:.1f}) m",
+            f"door leaf position at ({door.centre_m[0]:.1f}, {door.centre_m[1]:.1f}) m, "
+            f"occupied at {100 * float(door.truth.mean()):.0f} % of the runs",
             fontsize=10,
         )
         ax.grid(alpha=0.3)
