@@ -106,6 +106,7 @@ def plot(data: Data, colours: dict[str, int], path: Path) -> Path:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
     for k, (label, measures) in enumerate(data.items()):
@@ -122,7 +123,8 @@ def plot(data: Data, colours: dict[str, int], path: Path) -> Path:
     axes[0].set_title("changing cells: F1 of the predicted occupied cells", fontsize=10)
     axes[1].set_title("moving doors: mean |predicted - true| occupancy", fontsize=10)
     for ax in axes:
-        ax.set_xlabel("week")
+        ax.set_xlabel("calendar week")
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.grid(alpha=0.3)
     axes[0].legend(fontsize=8)
     fig.suptitle("Each run's predicted map against its truth: mean over worlds, 95 % interval")

@@ -44,7 +44,7 @@ def plot_agreement(agreements: list[MapAgreement], path: Path) -> Path:
         ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     for ax in axes[1]:
         ax.set_xlabel("day")
-    axes[0, 0].legend(fontsize=8)
+    axes[0, 0].legend(fontsize=8, loc="lower left")
     fig.suptitle("The map each run localized on, predicted before it, against the run's truth")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -62,7 +62,7 @@ def plot_doors(doors: list[DoorSeries], path: Path, days: int = 7, max_doors: in
     import matplotlib.pyplot as plt
 
     shown = doors[:max_doors]
-    fig, axes = plt.subplots(len(shown), 1, figsize=(10, 2.3 * len(shown) + 0.6), squeeze=False)
+    fig, axes = plt.subplots(len(shown), 1, figsize=(11, 2.3 * len(shown) + 0.6), squeeze=False)
     for ax, door in zip(axes[:, 0], shown, strict=True):
         keep = door.day > door.day.max() - days
         x = door.day[keep] + np.nan_to_num(door.clock_h[keep]) / 24.0
@@ -78,7 +78,7 @@ def plot_doors(doors: list[DoorSeries], path: Path, days: int = 7, max_doors: in
         )
         ax.grid(alpha=0.3)
     axes[-1, 0].set_xlabel("day + time of day / 24 (runs)")
-    axes[0, 0].legend(fontsize=8, ncol=3)
+    axes[0, 0].legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.suptitle("Doors: the predicted occupancy each run localized on, against the truth")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
