@@ -21,10 +21,8 @@ a change). So both localizers need the prior's walls.
 The scans the models learn from are placed by a second MCL on the first map, which never
 changes (``learn_poses = "fixed-map"``, the default): Krajník et al.'s robots learned their
 spectral models while localized on a static map, and a map that learns from the estimates made
-on itself carries every bias of one run into the next (``"own"``: on the 28-day apartment
-the ATE RMSE per day rose from 0.007 m on day 1 to 0.09 m for ``fremen`` and 0.18 m for
-``markov-grid`` by day 14, and stays at 0.04-0.06 m with the fixed map's poses). It costs a
-second filter.
+on itself carries every bias of one run into the next and drifts with them (``"own"``; the
+measurements are in the docs' tuning notes on FreMEn). It costs a second filter.
 
 The first run (``first_map = "slam"``, the default) is mapped as ``static-mcl``'s and
 ``dynamic-map``'s are, by the project's first-run SLAM anchored on the prior's walls
@@ -62,8 +60,8 @@ class TemporalMapMCL(StaticMCL):
 
     ``first_map``: ``"slam"`` or ``"walls"``, what the first run localizes on;
     ``learn_poses``: ``"fixed-map"`` or ``"own"``, whose estimates place the scans the models
-    learn from;
-    (module docstring); ``mapper_params``: the first-run SLAM's fields, as ``static-mcl``'s;
+    learn from (both: module docstring); ``mapper_params``: the first-run SLAM's fields, as
+    ``static-mcl``'s;
     ``config`` and ``overrides``: the MCL configuration, as ``static-mcl``'s (default
     ``tuned`` after a SLAM first run, whose maps hold the furniture, ``walls-only`` on the
     walls, the configuration for a map without it);

@@ -34,6 +34,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import ndimage
 
+from dynmap_sim.agent.grid import points_on_segments
+from dynmap_sim.studies.biber_duckett.findings import weeks_of_days
 from dynmap_sim.types import BeamClass
 
 #: The day artifact of the temporal-map localizers.
@@ -107,17 +109,10 @@ class Frame:
 
 def rasterize(segments: FloatArray, frame: Frame, step_m: float | None = None) -> BoolArray:
     """Cells of ``frame`` crossed by ``segments`` ``(N, 4)`` (samples every ``step_m``,
-    default a quarter cell)."""
+    default a quarter cell, as the agent's grid rasterizes the prior's walls)."""
     step = frame.resolution_m / 4 if step_m is None else step_m
-    seg = np.asarray(segments, np.float64).reshape(-1, 4)
     out = np.zeros(frame.shape, bool)
-    if not len(seg):
-        return out
-    length = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
-    n = np.maximum(2, np.ceil(length / step).astype(np.int64) + 1)
-    k = np.repeat(np.arange(len(seg)), n)
-    u = (np.arange(n.sum()) - np.repeat(np.cumsum(n) - n, n)) / np.repeat(n - 1, n)
-    pts = seg[k, :2] + u[:, None] * (seg[k, 2:] - seg[k, :2])
+    pts = points_on_segments(segments, step)
     ij = np.floor((pts - np.array(frame.origin_m)) / frame.resolution_m).astype(np.int64)
     h, w = frame.shape
     ok = (ij[:, 0] >= 0) & (ij[:, 0] < w) & (ij[:, 1] >= 0) & (ij[:, 1] < h)
@@ -176,12 +171,6 @@ def _maps(db: Any, loc: int) -> list[_Map]:
     return out
 
 
-def _weeks(dates: dict[int, dt.date]) -> dict[int, int]:
-    first = min(dates.values())
-    monday = first - dt.timedelta(days=first.weekday())
-    return {d: (date - monday).days // 7 + 1 for d, date in dates.items()}
-
-
 class _Truth:
     """The true surface and door cells of each run on one frame (cached per run)."""
 
@@ -227,7 +216,7 @@ def map_agreement(
     runs = db.query("SELECT day, run, date, start_s FROM runs ORDER BY day, run")
     dates = {int(d): dt.date.fromisoformat(str(date)) for d, _, date, _ in runs}
     clock = {(int(d), int(r)): float(s) / 3600.0 for d, r, _, s in runs}
-    week = _weeks(dates) if dates else {}
+    week = weeks_of_days(dates) if dates else {}
     maps = {label: _maps(db, loc) for loc, label in locs}
     index = {label: loc for loc, label in locs}
     frame = next((m[0].frame for m in maps.values() if m), None)
@@ -311,18 +300,19 @@ def _door_series(
     doors = np.stack([cells[k][1] for k in keys])
     freq = doors.mean(axis=0)
     labels, n = ndimage.label(_dilate(doors.any(axis=0), 1), np.ones((3, 3), bool))
+    by_key = {
+        label: {(m.day, m.run): m.p for m in ms if m.frame == frame} for label, ms in maps.items()
+    }
     out = []
     for g in range(1, n + 1):
         group = labels == g
         for leaf in (group & (freq > 0) & (freq < 0.5), group & (freq >= 0.5) & (freq < 1)):
             if leaf.sum() < MIN_DOOR_CELLS:
                 continue  # a door that never moved
-            predicted = {}
-            for label, ms in maps.items():
-                by_key = {(m.day, m.run): m.p for m in ms if m.frame == frame}
-                predicted[label] = np.array(
-                    [_mean_near(by_key.get(k), leaf, tol_cells) for k in keys]
-                )
+            predicted = {
+                label: np.array([_mean_near(ps.get(k), leaf, tol_cells) for k in keys])
+                for label, ps in by_key.items()
+            }
             iy, ix = np.nonzero(leaf)
             centre = (
                 np.array(frame.origin_m)
