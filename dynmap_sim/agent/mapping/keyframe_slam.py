@@ -18,6 +18,7 @@ two.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass
 from typing import Annotated
 
@@ -41,7 +42,7 @@ from dynmap_sim.agent.mapping.scan_points import (
     scan_points_base,
     voxel_downsample,
 )
-from dynmap_sim.agent.params import AsTuple, Int, Positive, params_dataclass
+from dynmap_sim.agent.params import AsTuple, Int, NonNegative, Positive, params_dataclass
 from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Scan
 
 FloatArray = NDArray[np.float64]
@@ -133,6 +134,20 @@ class KeyframeSLAMConfig:
     #: 0.3 m jumps that nothing pulled back. ``seed_verify`` keeps near-exact odometry from
     #: being overruled by the seed's grid (docs/tuning/slam.md).
     seed_window: Annotated[tuple[float, float], AsTuple] = (0.0, 0.4)
+    #: > 0: the seed's heading half-window is this many times the 95th percentile of the
+    #: heading corrections ``|theta - theta_pred|`` of the last ``seed_theta_scans`` accepted
+    #: scans, at most ``seed_window[1]`` (then widened by the step's turn as above): the
+    #: window follows the odometry's own heading error, measured on the log, instead of
+    #: one bound for every robot. Wheel odometry that errs by degrees a step keeps the wide
+    #: search; odometry good to a fraction of a degree is not overruled by a grid alias
+    #: degrees away, which a view of few or noisy points can score higher. 4: the 95th
+    #: percentile is 2 sigma of a Gaussian error, so the window holds 8 sigma, and heavy
+    #: tails (slips) lift the percentile itself. 0: always ``seed_window[1]``.
+    seed_theta_gain: NonNegative = 4.0
+    #: ... over this many accepted scans (fewer: ``seed_window[1]``, nothing is known yet
+    #: of the odometry): 25 corrections lie beyond the percentile, enough for a stable
+    #: estimate, and a change of floor is followed within a minute of a 10 Hz scan.
+    seed_theta_scans: Int = 500
     #: The seed's likelihood grid: cell side and Gaussian width [m], and the range [m]
     #: within which map and scan points take part.
     seed_resolution_m: float = 0.1
@@ -234,6 +249,8 @@ class KeyframeSLAM:
         self.n_seeded = 0
         #: ... and on which ICP from the prediction then fit better (``seed_verify``)
         self.n_seed_refuted = 0
+        #: heading corrections [rad] of the last accepted scans (``seed_theta_gain``)
+        self._corrections: deque[float] = deque(maxlen=max(1, config.seed_theta_scans))
 
     # -- keyframes -----------------------------------------------------------------------
     def _add_keyframe(self, ranges: NDArray[np.float32], pts: FloatArray) -> None:
@@ -315,6 +332,15 @@ class KeyframeSLAM:
                 dyn |= free_space_violations(self.laser, ranges, pose, ref_ranges, ref_pose)
         return dyn
 
+    def seed_theta_window(self) -> float:
+        """The seed's heading half-window [rad] before the step's turn is added
+        (:attr:`KeyframeSLAMConfig.seed_theta_gain`)."""
+        c = self.config
+        if c.seed_theta_gain <= 0 or len(self._corrections) < self._corrections.maxlen:
+            return c.seed_window[1]
+        q95 = float(np.percentile(np.fromiter(self._corrections, float), 95.0))
+        return min(c.seed_window[1], c.seed_theta_gain * q95)
+
     def _seed(
         self, sub: FloatArray, pred: FloatArray, d: float, a: float, q: FloatArray
     ) -> tuple[FloatArray, FloatArray, bool]:
@@ -336,7 +362,7 @@ class KeyframeSLAM:
             pred,
             window_xy_m=c.seed_resolution_m
             * math.floor((c.seed_window[0] + d) / c.seed_resolution_m + 0.5),
-            window_theta_rad=c.seed_window[1] + a,
+            window_theta_rad=self.seed_theta_window() + a,
             theta_step_rad=step,
         )
         at_pred = correlative_match(
@@ -423,6 +449,7 @@ class KeyframeSLAM:
                     self.pose = res.pose
                     self.cov = res.cov
                     accepted = True
+                    self._corrections.append(float(abs(se2.wrap_angle(res.pose[2] - pred[2]))))
             if not accepted:
                 self.n_rejected += 1
                 self.pose = pred

@@ -131,3 +131,34 @@ def test_the_default_window_searches_translation_only_as_far_as_the_step(laser, 
         err[name] = np.max(np.hypot(*(est[:, :2] - truth[:, :2]).T))
     assert err["default"] < err["off"] + 0.01
     assert err["wide"] > err["off"] + 0.15
+
+
+def test_the_heading_window_follows_the_odometrys_error(segments, laser, cast, path_fn):
+    """``seed_theta_gain``: until ``seed_theta_scans`` scans are accepted the seed searches
+    ``seed_window``'s heading; then a window that scales with the corrections the scans made
+    to the odometry's heading: narrow for near-exact odometry, wider for odometry that errs
+    by a degree a step, never beyond ``seed_window``; with the gain 0 always the fixed one."""
+    truth = path_fn(step_m=0.05, laps=1)
+    windows = {}
+    for name, heading_noise, gain in (
+        ("exact", 0.0, 4.0),
+        ("noisy", 0.015, 4.0),
+        ("fixed", 0.015, 0.0),
+    ):
+        rng = np.random.default_rng(0)
+        odo = [truth[0].copy()]
+        for k in range(1, len(truth)):
+            d = se2.between(truth[k - 1], truth[k]) + rng.normal(0, 0.0005, 3)
+            d[2] += rng.normal(0, heading_noise)
+            odo.append(se2.compose(odo[-1], d))
+        params = {"seed_theta_gain": gain, "seed_theta_scans": 40}
+        mapper = FirstRunMapper(laser, truth[0], FirstRunConfig.from_params(**params))
+        assert mapper.slam.seed_theta_window() == 0.4  # nothing measured yet
+        _, mapper = _front_end(
+            laser, cast, segments, truth, np.array(odo), np.random.default_rng(1), **params
+        )
+        windows[name] = mapper.slam.seed_theta_window()
+    assert windows["exact"] < 0.02
+    assert windows["exact"] < windows["noisy"] < 0.4
+    assert windows["noisy"] > 4 * 1.5 * 0.015  # 4 x the 95th percentile of ~N(0, 0.015)
+    assert windows["fixed"] == 0.4
