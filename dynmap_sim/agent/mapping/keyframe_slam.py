@@ -42,7 +42,14 @@ from dynmap_sim.agent.mapping.scan_points import (
     scan_points_base,
     voxel_downsample,
 )
-from dynmap_sim.agent.params import AsTuple, Int, NonNegative, Positive, params_dataclass
+from dynmap_sim.agent.params import (
+    AsTuple,
+    Int,
+    NonNegative,
+    Positive,
+    PositiveInt,
+    params_dataclass,
+)
 from dynmap_sim.types import LaserSpec, Odometry, PoseEstimate, Scan
 
 FloatArray = NDArray[np.float64]
@@ -147,7 +154,7 @@ class KeyframeSLAMConfig:
     #: ... over this many accepted scans (fewer: ``seed_window[1]``, nothing is known yet
     #: of the odometry): 25 corrections lie beyond the percentile, enough for a stable
     #: estimate, and a change of floor is followed within a minute of a 10 Hz scan.
-    seed_theta_scans: Int = 500
+    seed_theta_scans: PositiveInt = 500
     #: The seed's likelihood grid: cell side and Gaussian width [m], and the range [m]
     #: within which map and scan points take part.
     seed_resolution_m: float = 0.1
@@ -250,7 +257,7 @@ class KeyframeSLAM:
         #: ... and on which ICP from the prediction then fit better (``seed_verify``)
         self.n_seed_refuted = 0
         #: heading corrections [rad] of the last accepted scans (``seed_theta_gain``)
-        self._corrections: deque[float] = deque(maxlen=max(1, config.seed_theta_scans))
+        self._corrections: deque[float] = deque(maxlen=config.seed_theta_scans)
 
     # -- keyframes -----------------------------------------------------------------------
     def _add_keyframe(self, ranges: NDArray[np.float32], pts: FloatArray) -> None:

@@ -30,12 +30,15 @@ def _front_end(laser, cast, segs, truth, odo, rng, **params):
     return np.array(est), mapper
 
 
-def _odometry(truth, rng, jump_at=None, jump_rad=0.0):
+def _odometry(truth, rng, jump_at=None, jump_rad=0.0, heading_noise=0.0):
     """Nearly exact odometry (0.5 mm / 0.5 mrad noise a step), optionally with one late
-    heading jump ``jump_rad`` reported at step ``jump_at``."""
+    heading jump ``jump_rad`` reported at step ``jump_at`` and a heading error of std
+    ``heading_noise`` [rad] on every step."""
     odo = [truth[0].copy()]
     for k in range(1, len(truth)):
         d = se2.between(truth[k - 1], truth[k]) + rng.normal(0, 0.0005, 3)
+        if heading_noise > 0:
+            d[2] += rng.normal(0, heading_noise)
         if k == jump_at:
             d[2] += jump_rad
         odo.append(se2.compose(odo[-1], d))
@@ -145,17 +148,12 @@ def test_the_heading_window_follows_the_odometrys_error(segments, laser, cast, p
         ("noisy", 0.015, 4.0),
         ("fixed", 0.015, 0.0),
     ):
-        rng = np.random.default_rng(0)
-        odo = [truth[0].copy()]
-        for k in range(1, len(truth)):
-            d = se2.between(truth[k - 1], truth[k]) + rng.normal(0, 0.0005, 3)
-            d[2] += rng.normal(0, heading_noise)
-            odo.append(se2.compose(odo[-1], d))
+        odo = _odometry(truth, np.random.default_rng(0), heading_noise=heading_noise)
         params = {"seed_theta_gain": gain, "seed_theta_scans": 40}
         mapper = FirstRunMapper(laser, truth[0], FirstRunConfig.from_params(**params))
         assert mapper.slam.seed_theta_window() == 0.4  # nothing measured yet
         _, mapper = _front_end(
-            laser, cast, segments, truth, np.array(odo), np.random.default_rng(1), **params
+            laser, cast, segments, truth, odo, np.random.default_rng(1), **params
         )
         windows[name] = mapper.slam.seed_theta_window()
     assert windows["exact"] < 0.02
