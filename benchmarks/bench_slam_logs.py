@@ -4,9 +4,10 @@ Maps every Radish log present (FR079, MIT CSAIL, the Freiburg hospital; raw whee
 :class:`~dynmap_sim.agent.mapping.first_run.FirstRunMapper`, exactly as ``dynmap-sim
 slam-eval`` does, and prints the issue's table: the project's loop-closed trajectory next to
 the published figures (translation error mean ± std [m]), with the rotation error, raw
-odometry's and the front end's error, the number of loop closures, mapping speed (scans/s)
-and back-end time, the CPU time and how many times faster than real time that is
-(one core), and writes a figure of each map with its trajectory (``--figures DIR``).
+odometry's and the front end's error, the correlative closures kept and the ICP round's loop
+edges, mapping speed (scans/s) and back-end time, the CPU time and how many times faster
+than real time that is (one core), and writes a figure of each map with its trajectory
+(``--figures DIR``).
 
 The logs are read from ``../shared/data/slam-benchmark`` (next to the repository) or from
 ``--data DIR``; without them the script says so and exits 0 (a clean clone has none).
@@ -95,16 +96,17 @@ def main() -> int:
         )
     print()
     print(
-        "| log | scans | raw odometry [m] | front end [m] | relations < 30 s [m] | loop closures "
-        "| scans/s | front end [s] | back end [s] | CPU [s] | x real time (CPU) |"
+        "| log | scans | raw odometry [m] | front end [m] | relations < 30 s [m] | closures kept "
+        "| ICP loop edges | scans/s | front end [s] | back end [s] | CPU [s] | x real time (CPU) |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for name, r, _ in rows:
         o, f, s = r.odometry_error, r.front_end_error, r.short_error
         cpu = r.front_end_cpu_s + r.back_end_cpu_s
         print(
             f"| {name} | {r.n_scans} | {o.translation_mean_m:.3f} | {f.translation_mean_m:.3f} "
-            f"| {s.translation_mean_m:.3f} | {r.n_loop_closures} | {r.scans_per_s:.0f} "
+            f"| {s.translation_mean_m:.3f} | {r.closure_search.get('consistent', 0)} "
+            f"| {r.n_loop_closures} | {r.scans_per_s:.0f} "
             f"| {r.front_end_s:.1f} | {r.back_end_s:.1f} | {cpu:.1f} | {r.realtime_factor:.1f} |"
         )
     return 0
