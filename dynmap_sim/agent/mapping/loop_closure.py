@@ -57,10 +57,10 @@ class LoopClosureConfig:
     loop_candidates: Int = 3
     #: Correlative search half-window in x and y: ``min(a + b s, cap)`` [m] for a path length
     #: ``s`` [m] between the two keyframes, as ``(a, b, cap)``: 2.5 % of the path, the drift
-    #: the front end may gather, at most the submap's length (``2 loop_submap_half`` x
-    #: ``keyframe_dist_m`` = 9 m): a scan displaced farther than that from the prediction
-    #: is off the submap it is matched against, and the search cost grows with the window's
-    #: area.
+    #: the front end may gather, at most 9 m, the default submap's length (``2
+    #: loop_submap_half`` x ``keyframe_dist_m``; a number of its own, which changing either
+    #: leaves as it is): a scan displaced farther than that from the prediction is off the
+    #: submap it is matched against, and the search cost grows with the window's area.
     loop_window_m: Annotated[tuple[float, float, float], AsTuple] = (0.3, 0.025, 9.0)
     #: ... and in theta, ``(a, b, cap)`` [rad, rad/m, rad].
     loop_window_rad: Annotated[tuple[float, float, float], AsTuple] = (0.05, 0.004, 0.5)
