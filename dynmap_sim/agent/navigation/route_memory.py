@@ -131,8 +131,11 @@ class RouteMemory:
         ``prefer_along_m`` (its last arc length on that route) that route's segments within
         ``continuity_window_m`` of it along the route win unless another is ``continuity_m``
         nearer (a route that passes a place twice keeps the robot's pass)."""
-        p = np.asarray(pose, float)
-        return self.tracker.locate_xy(float(p[0]), float(p[1]), prefer_route, prefer_along_m)
+        p = np.asarray(pose, float).ravel()
+        heading = float(p[2]) if p.size > 2 else math.nan
+        return self.tracker.locate_xy(
+            float(p[0]), float(p[1]), prefer_route, prefer_along_m, heading
+        )
 
     def reset_run(self) -> None:
         """Forget the short-term state (§5.1 STM): call at the start of every run. A route
@@ -158,14 +161,19 @@ class RouteMemory:
         pose = np.asarray(pose, float)
         values = pose.tolist()
         px, py = values[0], values[1]
-        heading = float(values[2]) if len(values) > 2 else 0.0
+        known = float(values[2]) if len(values) > 2 else math.nan  # the heading, if given
+        heading = 0.0 if math.isnan(known) else known
         xy = pose[:2]
         tr = self.tracker.track
-        pos = (
-            self.tracker.locate_xy(px, py, None, None)
-            if tr is None
-            else self.tracker.locate_xy(px, py, tr.route_id, tr.s_prev_m)
-        )
+        if tr is not None:
+            pos = self.tracker.locate_xy(px, py, tr.route_id, tr.s_prev_m, known)
+        elif self.tracker.at_run_start and (first := self._first_prior_route()) is not None:
+            # a run starts where its route starts: at a loop's start, where the route also
+            # ends, the robot is on its beginning
+            pos = self.tracker.locate_xy(px, py, first, 0.0, known)
+        else:
+            pos = self.tracker.locate_xy(px, py, None, None, known)
+        self.tracker.at_run_start = False
         if pos is None:
             return None
         if pos.inside:
@@ -173,7 +181,16 @@ class RouteMemory:
                 self.recorder.finish(pos, xy, t_s)
                 track = self.tracker.track
                 prefer = track.route_id if track is not None else None
-                pos = self.tracker.locate_xy(px, py, prefer, None)
+                pos = self.tracker.locate_xy(px, py, prefer, None, known)
+                if (
+                    track is not None
+                    and pos is not None
+                    and pos.route_id == track.route_id
+                    and abs(pos.along_m - track.s_prev_m) > self.params.continuity_window_m
+                ):
+                    # the entry's route at another pass (it passes this place twice, e.g.
+                    # a doorway driven out and back): the pass the robot entered on
+                    pos = self.tracker.locate_xy(px, py, prefer, track.s_prev_m, known)
                 assert pos is not None
             self.tracker.step(pos, px, py, t_s)
             self.tracker.last_inside = (pos, t_s, heading, (px, py))
@@ -183,6 +200,14 @@ class RouteMemory:
         self.recorder.step(xy, heading, t_s)
         self.tracker.last_inside = None
         return pos
+
+    def _first_prior_route(self) -> int | None:
+        """The id of the prior route's first piece (the one holding its lowest waypoint id;
+        forgetting may have cut it), None without one."""
+        pieces = [r for r in self.routes.values() if r.prior and len(r.ids)]
+        if not pieces:
+            return None
+        return min(pieces, key=lambda r: int(r.ids[0])).route_id
 
     def forget(self, now_s: float, keep: Iterable[int] = ()) -> int:
         """Forget stretches not updated for longer than ``forget_age_s`` (§5.2; the rules:

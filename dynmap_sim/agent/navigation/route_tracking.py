@@ -52,19 +52,24 @@ class RoutePosition(NamedTuple):
 
 @compiled
 def locate_segment(  # type: ignore[no-untyped-def]
-    px, py, segs, prefer_route, prefer_along_m, use_prefer, use_along, window_m, continuity_m
-):
+    px, py, heading, segs, prefer_route, prefer_along_m, use_prefer, use_along, window_m,
+    continuity_m,
+):  # fmt: skip
     """:meth:`.route_memory.RouteMemory.locate`'s search over ``segs``
     (:class:`SegmentArrays`) for the point ``(px, py)`` [m]: the index ``k`` of the segment
     picked, its clamped fraction ``u``, distance [m] and projection ``(qx, qy)`` [m];
-    ``k = -1`` without segments. With ``use_prefer`` route ``prefer_route``'s nearest
-    segment wins a tie; with ``use_along`` its segments within ``window_m`` of
-    ``prefer_along_m`` along it win unless another is ``continuity_m`` [m] nearer. The
-    first of equal minima wins."""
+    ``k = -1`` without segments. A segment that runs against the robot's ``heading`` [rad]
+    (more than 90° off; NaN: none known) counts ``continuity_m`` farther, so of two passes
+    of a place in opposite directions the one the robot drives along wins. With
+    ``use_prefer`` route ``prefer_route``'s nearest segment wins a tie; with ``use_along``
+    its segments within ``window_m`` of ``prefer_along_m`` along it win unless another is
+    ``continuity_m`` [m] nearer. The first of equal minima wins."""
     a, b, rid, s0, seg_len = segs
     k, k2, k3 = -1, -1, -1
     best, best2, best3 = 0.0, 0.0, 0.0
     u_k, u_k2, u_k3 = 0.0, 0.0, 0.0
+    use_heading = heading == heading
+    hx, hy = (np.cos(heading), np.sin(heading)) if use_heading else (0.0, 0.0)
     for i in range(a.shape[0]):
         ax, ay = a[i, 0], a[i, 1]
         dx, dy = b[i, 0] - ax, b[i, 1] - ay
@@ -73,6 +78,8 @@ def locate_segment(  # type: ignore[no-untyped-def]
         u = t if t > 0.0 else 0.0  # numpy's clip: max(t, 0), then min(., 1)
         u = u if u < 1.0 else 1.0
         dist = np.hypot(px - (ax + u * dx), py - (ay + u * dy))
+        if use_heading and dx * hx + dy * hy < 0.0:
+            dist += continuity_m
         if k < 0 or dist < best:
             k, best, u_k = i, dist, u
         if use_prefer and rid[i] == prefer_route:
@@ -88,7 +95,8 @@ def locate_segment(  # type: ignore[no-untyped-def]
     if k < 0:
         return -1, 0.0, 0.0, 0.0, 0.0
     ax, ay = a[k, 0], a[k, 1]
-    return k, u_k, best, ax + u_k * (b[k, 0] - ax), ay + u_k * (b[k, 1] - ay)
+    qx, qy = ax + u_k * (b[k, 0] - ax), ay + u_k * (b[k, 1] - ay)
+    return k, u_k, np.hypot(px - qx, py - qy), qx, qy
 
 
 @dataclass
@@ -127,6 +135,8 @@ class RouteTracker:
         self.passed: _Passed | None = None
         #: per waypoint id: the driven lateral offsets' weighted sums ``[Σwx, Σwy, Σw]``
         self.pending: dict[int, list[float]] = {}
+        #: no pose observed yet in this run (the first is placed at the prior route's start)
+        self.at_run_start = True
 
     def route_removed(self, route_id: int) -> None:
         """Route ``route_id`` was cut: stop tracking it."""
@@ -134,11 +144,16 @@ class RouteTracker:
             self.track = None
 
     def locate_xy(
-        self, px: float, py: float, prefer_route: int | None, prefer_along_m: float | None
+        self,
+        px: float,
+        py: float,
+        prefer_route: int | None,
+        prefer_along_m: float | None,
+        heading: float = math.nan,
     ) -> RoutePosition | None:
-        """The robot's position at ``(px, py)`` [m] relative to the routes (§5.1,
-        :meth:`.route_memory.RouteMemory.locate`); None for no routes or a non-finite
-        position."""
+        """The robot's position at ``(px, py)`` [m] with ``heading`` [rad] (NaN: unknown)
+        relative to the routes (§5.1, :meth:`.route_memory.RouteMemory.locate`); None for no
+        routes or a non-finite position."""
         s = self.route_set.segments()
         if not s.rows:
             return None
@@ -147,6 +162,7 @@ class RouteTracker:
         k, u_k, dist_k, qx, qy = locate_segment(
             px,
             py,
+            float(heading),
             s.arrays,
             -1 if prefer_route is None else prefer_route,
             0.0 if prefer_along_m is None else prefer_along_m,

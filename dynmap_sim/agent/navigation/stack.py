@@ -20,16 +20,19 @@ nav2 composes its servers:
 4. **Control** (:class:`~dynmap_sim.agent.control.corridor_follower.CorridorFollower`, §6.3):
    pure-pursuit tracking with a lateral offset inside the corridor, a clearance speed law.
 5. **Global replanning** (§6.3): when the follower reports ``blocked`` (no offset inside the
-   corridor is free) or the corridor is cut on the costmap within ``cut_check_m`` ahead (at a
-   replan), the route edges of the cut stretch are **blocked** in the route memory (infinite
-   cost), route A* is asked again (another route may exist, e.g. the detour recorded on an
-   earlier day), and failing that a **detour** is planned with grid A* on the costmap's
-   clearance around the block back onto the path
-   (:func:`~dynmap_sim.agent.planning.grid_astar.plan_around`). The robot drives it; the route
-   memory records it as a new route joined to the graph; once the robot is back on the path,
-   route planning takes over again. A blocked edge is **unblocked** when the scan sees its
-   centre line free (every point of it in view, a beam passing beyond it, and the costmap
-   clear there), or when the robot drives it (the route memory does that).
+   corridor is free) or the corridor is cut within ``cut_check_m`` ahead (at a replan), and
+   the obstacles that cut it have stood for ``block_persist_s`` (the paper cuts corridors on
+   its long-term map, which holds no dynamic points: a person passing by is left to the
+   follower, the monitor and the recovery's wait), the route edges of the cut stretch are
+   **blocked** in the route memory (infinite cost), route A* is asked again (another route
+   may exist, e.g. the detour recorded on an earlier day), and failing that a **detour** is
+   planned with grid A* on the costmap's clearance around the block back onto the path
+   (:func:`~dynmap_sim.agent.planning.grid_astar.plan_around`). The robot drives it (a detour
+   is planned again round whatever cuts it, as it is seen); the route memory records it as a
+   new route joined to the graph; once the robot is back on the path, route planning takes
+   over again. A blocked edge is **unblocked** when the scan sees its centre line free (every
+   point of it in view, a beam passing beyond it, and no lasting obstacle there), or when the
+   robot drives it (the route memory does that).
 6. **Recovery** (:class:`~dynmap_sim.agent.control.recovery.Recovery`): stuck detection on the
    odometry pose, then wait, back up, replan (with the costmap's obstacle layer cleared, nav2's
    first recovery), and a recorded give-up (:attr:`NavigationStack.gave_up`).
@@ -215,6 +218,8 @@ class NavigationStack:
         self._day_s = 0.0
         self._costmap_t: float | None = None
         self._global: ClearanceGrid | None = None  # the costmap's clearance at the last plan
+        #: the clearance of the lasting obstacles at the last plan (the cut check's map)
+        self._lasting: ClearanceGrid | None = None
         self._local: tuple[tuple[float, float], ClearanceGrid] | None = None  # (centre, grid)
         self._last_t = 0.0
 
@@ -359,7 +364,7 @@ class NavigationStack:
         p = self.params
         self._check_lost(t_s, estimate)
         if self._costmap_t is None or t_s - self._costmap_t >= p.costmap_period_s - 1e-9:
-            self.costmap.update(pose, scan, self.laser)
+            self.costmap.update(pose, scan, self.laser, t_s)
             self._costmap_t = t_s
             self._local = None
         self._route_pos = self.route_memory.observe(pose, self._day_s + t_s)
@@ -368,15 +373,13 @@ class NavigationStack:
             return self.monitor.filter(stop, scan, t_s)
         due = self._last_plan_t is None or t_s - self._last_plan_t >= p.replan_period_s
         if self._request is not PlanRequest.NONE or due or self._global is None:
-            self._global = self.costmap.clearance()
-            self._local = None
+            self._refresh_grids(t_s)
             self._plan_step(t_s, pose, self._global, scan)
         grid = self._local_clearance(pose)
         cmd = self.follower.command(pose, grid)
         if self.follower.blocked and self._may_replan(t_s):
             self._event(t_s, "blocked", "no free offset inside the corridor")
-            self._global = self.costmap.clearance()
-            self._local = None
+            self._refresh_grids(t_s)
             if self._go_around(t_s, pose, self._global):
                 grid = self._local_clearance(pose)
                 cmd = self.follower.command(pose, grid)
@@ -457,6 +460,14 @@ class NavigationStack:
             self._request = PlanRequest.FORCED
 
     # ------------------------------------------------------------------ planning
+    def _refresh_grids(self, t_s: float) -> None:
+        """The costmap's clearance for planning, and the clearance of its lasting obstacles
+        (``block_persist_s``) for the cut and unblock checks."""
+        assert self.costmap is not None
+        self._global = self.costmap.clearance()
+        self._local = None
+        self._lasting = self.costmap.persistent_clearance(t_s, self.params.block_persist_s)
+
     def _local_clearance(self, pose: FloatArray) -> ClearanceGrid:
         """The clearance for the follower: the last plan's, with a window around the robot
         recomputed from the costmap's current layers (module doc of the params)."""
@@ -512,7 +523,7 @@ class NavigationStack:
         request, self._request = self._request, PlanRequest.NONE
         forced = request is not PlanRequest.NONE
         self._last_plan_t = t_s
-        self._unblock_seen_free(t_s, pose, scan, grid)
+        self._unblock_seen_free(t_s, pose, scan)
         if self.mode is NavMode.DETOUR and self._keep_detour(t_s, pose, grid, request):
             return
         plan = self._route_plan(pose)
@@ -542,7 +553,7 @@ class NavigationStack:
                 self._event(
                     t_s, "bridge", "no route to the goal: routes and grid A* across the gap"
                 )
-        if self._cut_ahead(self._path, self._path_hw, grid, pose) is not None:
+        if self._cut_ahead(self._path, self._path_hw, pose) is not None:
             self._event(t_s, "cut", "the corridor ahead is cut on the costmap")
             self._go_around(t_s, pose, grid)
 
@@ -562,7 +573,7 @@ class NavigationStack:
             return True
         if request is PlanRequest.NONE and self._path is not None:
             if self.follower.segment < self._rejoin_seg and not self.follower.done:
-                if self._cut_ahead(self._path, self._path_hw, grid, pose) is not None:
+                if self._cut_ahead(self._path, self._path_hw, pose, lasting=False) is not None:
                     self._event(t_s, "cut", "the detour ahead is cut")
                     self._go_around(t_s, pose, grid)
                 return True
@@ -592,11 +603,16 @@ class NavigationStack:
         self,
         path: FloatArray | None,
         hw: FloatArray,
-        grid: ClearanceGrid,
         pose: FloatArray,
         seg0: int | None = None,
+        lasting: bool = True,
     ) -> FloatArray | None:
-        """:meth:`.BlockHandling.cut_ahead` from segment ``seg0`` (default: the follower's)."""
+        """:meth:`.BlockHandling.cut_ahead` from segment ``seg0`` (default: the follower's)
+        on the lasting obstacles (``block_persist_s``: a route's corridor, whose cut blocks
+        route edges), or with ``lasting=False`` on every mark (a detour's, re-planned round
+        whatever the robot sees as it drives into the unmapped)."""
+        grid = self._lasting if lasting else self._global
+        assert grid is not None
         seg = self.follower.segment if seg0 is None else seg0
         return self.blocks.cut_ahead(path, hw, grid, pose, seg)
 
@@ -608,17 +624,19 @@ class NavigationStack:
         self._last_plan_t = t_s
         self._request = PlanRequest.NONE
         if self.mode is NavMode.ROUTE and self._plan is not None:
-            cut = self._cut_ahead(self._path, self._path_hw, grid, pose)
+            cut = self._cut_ahead(self._path, self._path_hw, pose)
             if cut is None:  # blocked within the follower's probe, not as a whole corridor:
-                assert self._path is not None
+                assert self._path is not None and self._lasting is not None
                 cut = self.blocks.follower_block_points(self._path, self.follower.segment, pose)
+                if np.all(self._lasting.clearance_at(cut) >= self.min_clearance_m):
+                    cut = None  # by obstacles passing by: a grid detour, no route edge blocked
             self._block_edges(t_s, cut)
             plan = self._route_plan(pose)
             assert self.route_memory is not None
             if (
                 plan is not None
                 and not (set(plan.edges) & both_ways(self.route_memory.blocked))
-                and self._cut_ahead(plan.xy, plan.half_width_m, grid, pose, seg0=0) is None
+                and self._cut_ahead(plan.xy, plan.half_width_m, pose, seg0=0) is None
             ):
                 self._set_route_path(plan)
                 self.replans += 1
@@ -658,15 +676,16 @@ class NavigationStack:
             self._event(t_s, "block", f"route edges {hit}")
         self._graph = None
 
-    def _unblock_seen_free(
-        self, t_s: float, pose: FloatArray, scan: Scan, grid: ClearanceGrid
-    ) -> None:
+    def _unblock_seen_free(self, t_s: float, pose: FloatArray, scan: Scan) -> None:
         """Unblock every blocked edge whose centre line the scan sees free
-        (:meth:`.BlockHandling.seen_free`)."""
+        (:meth:`.BlockHandling.seen_free`, on the lasting obstacles)."""
         assert self.route_memory is not None
         if not self.route_memory.blocked:
             return
-        freed = self.blocks.seen_free(self.graph(), self.route_memory.blocked, pose, scan, grid)
+        assert self._lasting is not None
+        freed = self.blocks.seen_free(
+            self.graph(), self.route_memory.blocked, pose, scan, self._lasting
+        )
         for edge in freed:
             self.route_memory.unblock(edge)
         if freed:
@@ -714,5 +733,6 @@ class NavigationStack:
         state = self.__dict__.copy()
         state["_graph"] = None  # caches
         state["_global"] = None
+        state["_lasting"] = None
         state["_local"] = None
         return state

@@ -81,6 +81,13 @@ class StackParams:
     #: Clearance in the window is exact up to this [m] (obstacles farther outside the window
     #: are not looked at): the follower's speed law and offset choice saturate at 0.8 m.
     local_margin_m: float = 0.8
+    #: An obstacle mark cuts the corridor (blocks route edges, H&W §6.3) only once it has
+    #: stood this long [s]: the paper cuts corridors on its long-term map, which has no
+    #: dynamic points, so a person walking or pausing in a doorway is left to the reactive
+    #: layer (slow down, stop, the recovery's wait). 5 s is the recovery's wait, the time the
+    #: stack grants a passer-by (nav2's ``Wait`` recovery); furniture stays far longer. 0:
+    #: every mark cuts at once.
+    block_persist_s: NonNegative = 3.0
     #: Lateral samples across the corridor of the cut check (odd: the centre line is one).
     cut_offsets: Int = 9
     #: Corridor half-width of a grid detour's own vertices [m]: grid A* already keeps the

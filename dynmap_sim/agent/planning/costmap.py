@@ -168,6 +168,8 @@ class Costmap:
         self.static = np.zeros(self.shape, dtype=bool)
         #: obstacle layer: per cell, how many more scans seeing through it it survives
         self.marks = np.zeros(self.shape, dtype=np.int8)
+        #: per cell, the time [s] of the update since which it has been marked (NaN: unmarked)
+        self.marked_since_s = np.full(self.shape, np.nan)
         k = int(np.ceil(self.params.footprint_clear_radius_m / res))
         di, dj = np.mgrid[-k : k + 1, -k : k + 1]
         inside = np.hypot(di, dj) * res <= self.params.footprint_clear_radius_m
@@ -256,10 +258,14 @@ class Costmap:
             self._beams = (laser, laser.angles())
         return self._beams[1]
 
-    def update(self, pose: ArrayLike, scan: Scan | ArrayLike, laser: LaserSpec) -> bool:
+    def update(
+        self, pose: ArrayLike, scan: Scan | ArrayLike, laser: LaserSpec, t_s: float | None = None
+    ) -> bool:
         """Mark and clear the obstacle layer with one scan taken at the estimated robot
-        ``pose`` ``(x_m, y_m, theta_rad)`` in the map frame. Returns True when an obstacle
-        cell appeared or disappeared (the clearance is then recomputed on demand)."""
+        ``pose`` ``(x_m, y_m, theta_rad)`` in the map frame at time ``t_s`` [s] (default: the
+        scan's stamp; the marks' ages of :meth:`persistent_clearance` count from it). Returns
+        True when an obstacle cell appeared or disappeared (the clearance is then recomputed
+        on demand)."""
         p = self.params
         ranges = np.asarray(scan.ranges_m if isinstance(scan, Scan) else scan, dtype=np.float64)
         pose = np.asarray(pose, dtype=np.float64)
@@ -289,6 +295,12 @@ class Costmap:
         )
         if changed:
             self._changed()
+            if t_s is None:
+                t_s = scan.stamp_s if isinstance(scan, Scan) else 0.0
+            on = self.marks > 0
+            since = self.marked_since_s
+            since[on & np.isnan(since)] = float(t_s)
+            since[~on] = np.nan
         return changed
 
     def _frame(self) -> GridFrame:
@@ -305,6 +317,7 @@ class Costmap:
     def clear_obstacles(self) -> None:
         """Forget every mark of the obstacle layer (nav2's ``ClearEntireCostmap`` recovery)."""
         self.marks[:] = 0
+        self.marked_since_s[:] = np.nan
         self._changed()
 
     # -- outputs ---------------------------------------------------------------------------
@@ -330,6 +343,18 @@ class Costmap:
                 self.origin.copy(), self.resolution_m, self._distance_m((0, h), (0, w))
             )
         return self._clearance
+
+    def persistent_clearance(self, t_s: float, min_age_s: float) -> ClearanceGrid:
+        """The clearance [m] of the static layer and the marks that have stood for at least
+        ``min_age_s`` [s] at time ``t_s`` [s]: the obstacles that are not passing by (a
+        person walking through the view is marked for a second or two). Computed anew at
+        every call (the set of old marks changes with time alone)."""
+        with np.errstate(invalid="ignore"):
+            old = (t_s - self.marked_since_s) >= min_age_s
+        marks = np.where(old, self.marks, np.int8(0))
+        h, w = self.shape
+        dist = clearance_window(self.static, marks, (0, h), (0, w), self.resolution_m)
+        return ClearanceGrid(self.origin.copy(), self.resolution_m, dist)
 
     def _window_buffer(self, base: ClearanceGrid) -> FloatArray:
         """A copy of ``base``'s clearance for :meth:`window_clearance`: the last call's array

@@ -52,7 +52,7 @@ def test_the_cut_check_equals_the_check_of_the_whole_path():
         pose = np.array([*rng.uniform(-0.3, 0.3, 2), 0.0])
         seg0 = int(rng.integers(0, n))
         want = cut_whole_path(stack, path, hw, grid, pose, seg0)
-        got = stack._cut_ahead(path, hw, grid, pose, seg0=seg0)
+        got = stack.blocks.cut_ahead(path, hw, grid, pose, seg0)
         assert (got is None) == (want is None)
         if got is not None:
             np.testing.assert_array_equal(got, want)

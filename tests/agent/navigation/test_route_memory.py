@@ -31,22 +31,59 @@ ROOM = [[0.0, 0.0], [4.0, 0.0], [4.0, -3.0], [2.5, -3.0], [2.5, -2.0], [4.0, -1.
         [4.0, 0.0], [8.0, 0.0]]  # fmt: skip
 
 
-@pytest.mark.parametrize("window_m, on_way_out", [(2.0, True), (0.0, False)])
-def test_a_place_passed_twice_keeps_the_pass_the_robot_is_on(drive_fn, window_m, on_way_out):
+@pytest.mark.parametrize(
+    "window_m, pose, on_way_out",
+    [(2.0, [4.0, -0.5], True), (0.0, [4.0, -0.5], False), (0.0, [4.0, -0.5, math.pi / 2], True)],
+)
+def test_a_place_passed_twice_keeps_the_pass_the_robot_is_on(drive_fn, window_m, pose, on_way_out):
     """§5.1's nearest segment is ambiguous where a route passes a place twice; the tracked
-    position keeps the pass (``continuity_window_m``; 0 m: the nearest, the way in), and a
-    plan from it (``start_on``) goes on east instead of round the room again."""
+    position keeps the pass (``continuity_window_m``), and so does the robot's heading (the
+    way in runs south, the robot drives north); with neither it is the nearest, the way in.
+    A plan from it (``start_on``) goes on east instead of round the room again."""
     params = RouteMemoryParams(continuity_window_m=window_m)
     mem = RouteMemory.from_prior(ROOM, 0.35, 0.35, 0.0, params=params)
     out_m = float(np.sum(np.hypot(*np.diff(np.array(ROOM[:6]), axis=0).T))) + 0.5
     drive_fn(mem, [*ROOM[:6], [4.0, -0.5]], 0.35, 0.0)
-    pos = mem.locate(
-        [4.0, -0.5, math.pi / 2], mem.tracker.track.route_id, mem.tracker.track.s_prev_m
-    )
+    pos = mem.locate(pose, mem.tracker.track.route_id, mem.tracker.track.s_prev_m)
     assert (abs(pos.along_m - out_m) < 0.3) is on_way_out
     plan = plan_route(mem.graph(), [4.0, -0.5], ROOM[-1], 0.35, start_on=(pos.from_id, pos.to_id))
     length = float(np.sum(np.hypot(*np.diff(plan.xy, axis=0).T)))
     assert (length < 5.0) is on_way_out  # 0.5 m up and 4 m east; else ~12 m round the room
+
+
+def test_a_place_passed_twice_is_re_entered_on_the_pass_it_was_left(drive_fn):
+    """A short excursion out of the corridor on the way in (an avoidance wobble, too short
+    to record) re-enters where the way out lies 2 cm nearer: the robot is still on the way
+    in, so the tracker goes on along the way in and a plan leads round the room, not back
+    out east."""
+    room = [[x + 0.02 if k in (5, 6) else x, y] for k, (x, y) in enumerate(ROOM)]
+    mem = RouteMemory.from_prior(room, 0.35, 0.35, 0.0)
+    wobble = [[4.0, -0.3], [4.5, -0.45], [4.0, -0.6], [4.0, -0.9]]
+    drive_fn(mem, [*room[:2], *wobble], 0.35, 0.0)
+    assert len(mem.routes) == 1  # the wobble is no new route
+    way_in_m = 4.0 + 0.9
+    assert mem.tracker.track.route_id == 0
+    assert mem.tracker.track.s_prev_m == pytest.approx(way_in_m, abs=0.1)
+    pos = mem.locate(
+        [4.0, -0.9, -math.pi / 2], mem.tracker.track.route_id, mem.tracker.track.s_prev_m
+    )
+    plan = plan_route(mem.graph(), [4.0, -0.9], room[-1], 0.35, start_on=(pos.from_id, pos.to_id))
+    length = float(np.sum(np.hypot(*np.diff(plan.xy, axis=0).T)))
+    assert length > 8.0  # on round the room (~9.5 m), not 0.9 m up and 4 m east
+
+
+def test_a_run_starts_on_the_beginning_of_a_loop_not_its_end():
+    """A loop's end lies on its start: the first pose of every run is placed on the prior
+    route's beginning even where its last segment is nearer, so the run does not begin as
+    if the loop were already driven (and its goal, the end, ahead of nothing)."""
+    loop = [[0.0, 0.0], [4.0, 0.0], [4.0, 3.0], [0.0, 3.0], [0.0, 0.02]]
+    for run in range(2):
+        mem = RouteMemory.from_prior(loop, 0.35, 0.35, 0.0)
+        if run:
+            mem.reset_run()  # a later run: the same rule
+        pos = mem.observe([0.0, 0.03, 0.0], 0.0)
+        assert pos.inside and pos.along_m < 0.5
+        assert mem.locate([0.0, 0.03]).along_m > 10.0  # the nearest segment: the loop's end
 
 
 def test_locate_inside_and_outside_the_corridor():

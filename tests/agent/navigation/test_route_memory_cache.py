@@ -93,8 +93,9 @@ def first_min(dist: np.ndarray, among: np.ndarray) -> int | None:
 def test_the_locate_kernel_picks_the_segment_its_rules_name():
     """Random segments (zero-length ones, shared waypoints: exact ties): the kernel's pick
     is the nearest segment (the first of equal ones), else the tracked route's nearest when
-    within 1e-9, else its nearest within the window along it when within ``continuity_m``;
-    its fraction, distance and projection are the closed-form projection's."""
+    within 1e-9, else its nearest within the window along it when within ``continuity_m``,
+    where a segment against the heading (when one is given) counts ``continuity_m``
+    farther; its fraction, distance and projection are the closed-form projection's."""
     rng = np.random.default_rng(3)
     window, cont = 2.0, 0.35
     for trial in range(300):
@@ -108,12 +109,16 @@ def test_the_locate_kernel_picks_the_segment_its_rules_name():
         p = a[int(rng.integers(n))] if trial % 3 == 0 else rng.uniform(-5, 5, 2)
         prefer = None if trial % 4 == 0 else int(rng.integers(0, 3))
         along = None if trial % 5 == 0 else float(rng.uniform(0, 20))
+        heading = math.nan if trial % 2 == 0 else float(rng.uniform(-math.pi, math.pi))
         got = locate_segment(
-            p[0], p[1], SegmentArrays(a, b, rid, s0, length),
+            p[0], p[1], heading, SegmentArrays(a, b, rid, s0, length),
             -1 if prefer is None else prefer, 0.0 if along is None else along,
             prefer is not None, along is not None, window, cont,
         )  # fmt: skip
-        u, proj, dist = _project(p, a, b)
+        u, proj, true_dist = _project(p, a, b)
+        dist = true_dist.copy()
+        if not math.isnan(heading):
+            dist[(b - a) @ np.array([math.cos(heading), math.sin(heading)]) < 0.0] += cont
         want = first_min(dist, np.arange(n))
         if prefer is not None:
             mine = np.flatnonzero(rid == prefer)
@@ -128,7 +133,7 @@ def test_the_locate_kernel_picks_the_segment_its_rules_name():
         k = got[0]
         assert k == want
         assert got[1] == pytest.approx(u[k], abs=1e-12)
-        assert got[2] == pytest.approx(dist[k], abs=1e-12)
+        assert got[2] == pytest.approx(true_dist[k], abs=1e-12)
         np.testing.assert_allclose(got[3:], proj[k], atol=1e-12)
 
 

@@ -115,6 +115,34 @@ def test_marks_seen_often_persist_for_a_few_clearing_scans(cm: Costmap) -> None:
     assert len(block_cells(cm)) == 0
 
 
+def test_only_marks_that_have_stood_long_enough_are_lasting(cm: Costmap) -> None:
+    """``persistent_clearance``: the walls and the marks at least ``min_age_s`` old; a mark
+    seen through and marked again starts its age anew."""
+    face = np.array([2.5, 1.8])  # on the box's near face
+    for k in range(4):  # the box seen at t = 0, 1, 2, 3 s
+        cm.update(POSE, scan_of(np.concatenate([ROOM, BLOCK])), MOUNTED, t_s=float(k))
+    assert cm.clearance().clearance_at(face) == 0.0
+    assert cm.persistent_clearance(3.0, 5.0).clearance_at(face) > 0.5  # 3 s < 5 s
+    assert cm.persistent_clearance(5.0, 5.0).clearance_at(face) == 0.0
+    assert cm.persistent_clearance(3.0, 0.0).clearance_at(face) == 0.0
+    wall = np.array([3.0, 0.0])
+    assert cm.persistent_clearance(3.0, 5.0).clearance_at(wall) == 0.0  # static: always
+    for k in range(cm.params.max_persistence_scans):  # seen through until cleared
+        cm.update(POSE, scan_of(ROOM), MOUNTED, t_s=4.0 + k)
+    assert len(block_cells(cm)) == 0
+    cm.update(POSE, scan_of(np.concatenate([ROOM, BLOCK])), MOUNTED, t_s=10.0)
+    assert cm.persistent_clearance(12.0, 5.0).clearance_at(face) > 0.5  # 2 s old again
+    assert cm.persistent_clearance(15.0, 5.0).clearance_at(face) == 0.0
+    cm.clear_obstacles()
+    assert np.isnan(cm.marked_since_s).all()
+
+
+def test_a_scan_s_stamp_is_the_default_time_of_its_marks(cm: Costmap) -> None:
+    scan = scan_of(np.concatenate([ROOM, BLOCK]))
+    cm.update(POSE, Scan(scan.ranges_m, 7.5), MOUNTED)
+    assert np.nanmin(cm.marked_since_s) == np.nanmax(cm.marked_since_s) == 7.5
+
+
 @pytest.mark.parametrize("inf_clear_range_m", [3.0, 0.0])
 def test_inf_readings_clear_up_to_the_clearing_range(inf_clear_range_m: float) -> None:
     params = CostmapParams(inf_clear_range_m=inf_clear_range_m)
