@@ -13,12 +13,15 @@ from __future__ import annotations
 
 import csv
 import math
+import re
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from dynmap_sim.analysis.navigation import missed_goal_lines
 from dynmap_sim.analysis.report import overall_of
 from dynmap_sim.errors import InputError
 from dynmap_sim.experiments.benchmark import read_benchmark
@@ -99,6 +102,8 @@ class Leaderboard:
     pending: list[str] = field(default_factory=list)
     references: tuple[str, ...] = ()  # labels of reference localizers (odometry): not ranked
     days: list[DayRow] = field(default_factory=list)
+    #: world -> one line per driven run that missed its goal, saying why
+    missed: dict[str, list[str]] = field(default_factory=dict)
 
     def worst(self, n: int = N_WORST) -> list[tuple[str, WorldRow]]:
         """The ``n`` worlds with the largest ATE of any ranked localizer, each with the row
@@ -197,6 +202,7 @@ def leaderboard(out_dir: str | Path) -> Leaderboard:
     pending: list[str] = []
     classes: dict[str, str] = {}
     days: list[DayRow] = []
+    missed: dict[str, list[str]] = {}
     for entry in index["cells"]:
         world = _world_of(entry)
         if entry["status"] == "failed":
@@ -210,6 +216,9 @@ def leaderboard(out_dir: str | Path) -> Leaderboard:
         with ResultsDB.open(folder) as db:
             classes |= {str(lb): str(n) for lb, n in db.query("SELECT label, name FROM localizers")}
             days += _days_of_cell(db, world)
+            lines = missed_goal_lines(db)
+            if lines:
+                missed[world] = lines
     references = tuple(lb for lb, n in classes.items() if n in REFERENCE_CLASSES)
     labels = list(dict.fromkeys(r.localizer for r in rows))
     baseline = record.get("baseline") or next(
@@ -224,7 +233,7 @@ def leaderboard(out_dir: str | Path) -> Leaderboard:
         if lb not in references
     ]
     return Leaderboard(
-        record["name"], out, baseline, rows, scores, failed, pending, references, days
+        record["name"], out, baseline, rows, scores, failed, pending, references, days, missed
     )
 
 
@@ -287,11 +296,28 @@ def leaderboard_md(board: Leaderboard) -> str:
             f"Time per world: median {np.median(wall):.0f} s, most {max(wall):.0f} s "
             f"(sum {sum(wall) / 60:.1f} min of worker time).",
         ]
+    if board.missed:
+        lines += ["", "## Goals not reached", "", _miss_tally(board.missed), ""]
+        lines += [f"- {w}: {line}" for w, ls in board.missed.items() for line in ls]
     if board.failed:
         lines += ["", "## Failed worlds", ""] + [f"- {w}: {e}" for w, e in board.failed.items()]
     if board.pending:
         lines += ["", f"Not run yet: {', '.join(board.pending)} (the same command resumes)."]
     return "\n".join(lines) + "\n"
+
+
+def _miss_tally(missed: dict[str, list[str]]) -> str:
+    """How many of the runs named in ``missed`` ended for each cause the navigation stack
+    gave (the bracket at the end of its ``unreachable`` event: ``no_way``, ``lost``,
+    ``stuck``), the others as ``other``."""
+    causes: Counter[str] = Counter()
+    for ls in missed.values():
+        for line in ls:
+            if line.startswith("and "):
+                continue
+            m = re.search(r"\((\w+)\)$", line)
+            causes[m.group(1) if m else "other"] += 1
+    return "By cause: " + ", ".join(f"{k} {n}" for k, n in sorted(causes.items())) + "."
 
 
 def leaderboard_headline(board: Leaderboard) -> list[str]:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -159,3 +160,25 @@ def test_every_shipped_suite_loads(path: Path) -> None:
         assert len(suite.worlds) >= 24 and kinds == set(generator_kinds())  # every kind
     else:  # a suite of one kind, named for it
         assert len(kinds) == 1 and kinds.pop() in path.stem
+
+
+def test_the_goals_not_reached_are_listed_and_counted_by_cause(bench: Path) -> None:
+    board = leaderboard(bench)
+    assert board.missed == {}  # the tour reaches the end of every run
+    assert "## Goals not reached" not in leaderboard_md(board)
+    missed = {
+        "apartment": [
+            "day 1 run 1: goal not reached: no way to the goal exists: no way around the block "
+            "on the costmap (no_way)",
+            "day 2 run 1: goal not reached: stuck for 90 s near (1.0, 2.0) on the way to the "
+            "goal: no progress after 6 recoveries (stuck)",
+        ],
+        "office": [
+            "day 1 run 1: goal not reached: the driver gave up after 12 s",
+            "and 3 more runs without the goal",
+        ],
+    }
+    md = leaderboard_md(dataclasses.replace(board, missed=missed))
+    section = md.split("## Goals not reached")[1]
+    assert "By cause: no_way 1, other 1, stuck 1." in section
+    assert "- office: day 1 run 1: goal not reached: the driver gave up after 12 s" in section

@@ -204,7 +204,9 @@ class NavigationStack:
         #: why the goal was not reached (:data:`NO_WAY`, :data:`LOST`, :data:`STUCK`), None
         #: while it may be
         self.unreachable_cause: str | None = None
-        self._no_way: str | None = None  # the last planning failure, while nothing is followed
+        #: why no way to the goal exists, from the last planning failure that found none
+        #: (cleared by a plan that has one)
+        self._no_way: str | None = None
         self._lost_std_m: float | None = None  # the estimate's std while the localizer is lost
         self._events: list[tuple[float, str, str]] = []
         self._plan: PlannedPath | None = None  # the route plan (route mode; base of a detour)
@@ -527,6 +529,8 @@ class NavigationStack:
         if self.mode is NavMode.DETOUR and self._keep_detour(t_s, pose, grid, request):
             return
         plan = self._route_plan(pose)
+        if plan is not None:
+            self._no_way = None
         if plan is None and self.route_memory is not None and self.route_memory.blocked:
             # every route is blocked: drive the route up to the block and go around it there
             # (H&W §6.3); the blocks stay, so a detour driven now becomes a route
@@ -539,6 +543,8 @@ class NavigationStack:
             plan, n = self.routing.bridged_plan(self.graph(), pose, grid, self.targets)
             self.plans += n
             bridged = plan is not None
+            if bridged:
+                self._no_way = None
         if plan is None:
             self._grid_to_goal(t_s, pose, grid)
             return
@@ -594,7 +600,6 @@ class NavigationStack:
         self._follow(plan.xy, plan.half_width_m)
 
     def _follow(self, path: FloatArray, half_widths: FloatArray) -> None:
-        self._no_way = None
         self._path = np.asarray(path, dtype=np.float64)
         self._path_hw = np.asarray(half_widths, dtype=np.float64)
         self.follower.set_path(self._path, self._path_hw)
@@ -639,6 +644,7 @@ class NavigationStack:
                 and self._cut_ahead(plan.xy, plan.half_width_m, pose, seg0=0) is None
             ):
                 self._set_route_path(plan)
+                self._no_way = None
                 self.replans += 1
                 self._event(t_s, "replan", f"another route, {plan.travel_time_s:.0f} s")
                 return True
@@ -650,9 +656,11 @@ class NavigationStack:
         found = self.blocks.detour(base, base_hw, pose, grid)
         if found is None:
             self._event(t_s, "replan_failed", "no way around the block on the costmap")
-            if self.follower.blocked:
+            if self._cut_ahead(self._path, self._path_hw, pose) is not None:
+                # a lasting block and no way round it (a person in the way is no such block)
                 self._no_way = "no way around the block on the costmap"
             return False
+        self._no_way = None
         det, hw, rejoin, length = found
         self.mode = NavMode.DETOUR
         self._rejoin_seg = rejoin
@@ -726,6 +734,7 @@ class NavigationStack:
             return
         self.mode = NavMode.GRID
         self._plan = None
+        self._no_way = None
         self._follow(path, np.full(len(path), self.params.detour_half_width_m))
         self._event(t_s, "grid_path", "no route to the goal: grid A* on the costmap")
 
