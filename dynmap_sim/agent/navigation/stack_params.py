@@ -84,9 +84,10 @@ class StackParams:
     #: An obstacle mark cuts the corridor (blocks route edges, H&W §6.3) only once it has
     #: stood this long [s]: the paper cuts corridors on its long-term map, which has no
     #: dynamic points, so a person walking or pausing in a doorway is left to the reactive
-    #: layer (slow down, stop, the recovery's wait). 5 s is the recovery's wait, the time the
-    #: stack grants a passer-by (nav2's ``Wait`` recovery); furniture stays far longer. 0:
-    #: every mark cuts at once.
+    #: layer (slow down, stop, the recovery's wait). 3 s: a person crossing the corridor
+    #: (0.7 m plus the inflation) at 0.55 m/s or faster is gone before, and a block first
+    #: marked at the costmap's 2.5 m obstacle range lasts before a robot at 0.35 m/s is within
+    #: the follower's 1.35 m reach (docs/tuning/navigation.md). 0: every mark cuts at once.
     block_persist_s: NonNegative = 3.0
     #: Lateral samples across the corridor of the cut check (odd: the centre line is one).
     cut_offsets: Int = 9
