@@ -220,7 +220,8 @@ class NavigationStack:
         self._day_s = 0.0
         self._costmap_t: float | None = None
         self._global: ClearanceGrid | None = None  # the costmap's clearance at the last plan
-        #: the clearance of the lasting obstacles at the last plan (the cut check's map)
+        #: the clearance of the lasting obstacles at the last plan (the cut check's map),
+        #: computed on first use (:meth:`_lasting_grid`)
         self._lasting: ClearanceGrid | None = None
         self._local: tuple[tuple[float, float], ClearanceGrid] | None = None  # (centre, grid)
         self._last_t = 0.0
@@ -375,13 +376,13 @@ class NavigationStack:
             return self.monitor.filter(stop, scan, t_s)
         due = self._last_plan_t is None or t_s - self._last_plan_t >= p.replan_period_s
         if self._request is not PlanRequest.NONE or due or self._global is None:
-            self._refresh_grids(t_s)
+            self._refresh_grids()
             self._plan_step(t_s, pose, self._global, scan)
         grid = self._local_clearance(pose)
         cmd = self.follower.command(pose, grid)
         if self.follower.blocked and self._may_replan(t_s):
             self._event(t_s, "blocked", "no free offset inside the corridor")
-            self._refresh_grids(t_s)
+            self._refresh_grids()
             if self._go_around(t_s, pose, self._global):
                 grid = self._local_clearance(pose)
                 cmd = self.follower.command(pose, grid)
@@ -462,13 +463,24 @@ class NavigationStack:
             self._request = PlanRequest.FORCED
 
     # ------------------------------------------------------------------ planning
-    def _refresh_grids(self, t_s: float) -> None:
-        """The costmap's clearance for planning, and the clearance of its lasting obstacles
-        (``block_persist_s``) for the cut and unblock checks."""
+    def _refresh_grids(self) -> None:
+        """The costmap's clearance for planning; the clearance of its lasting obstacles is
+        computed again when next needed (:meth:`_lasting_grid`)."""
         assert self.costmap is not None
         self._global = self.costmap.clearance()
         self._local = None
-        self._lasting = self.costmap.persistent_clearance(t_s, self.params.block_persist_s)
+        self._lasting = None
+
+    def _lasting_grid(self) -> ClearanceGrid:
+        """The clearance of the lasting obstacles (``block_persist_s``) at this step, for the
+        cut and unblock checks: a distance transform of its own, computed on first use after
+        :meth:`_refresh_grids` (most plans never need it, see :meth:`_cut_ahead`)."""
+        assert self.costmap is not None
+        if self._lasting is None:
+            self._lasting = self.costmap.persistent_clearance(
+                self._last_t, self.params.block_persist_s
+            )
+        return self._lasting
 
     def _local_clearance(self, pose: FloatArray) -> ClearanceGrid:
         """The clearance for the follower: the last plan's, with a window around the robot
@@ -616,10 +628,14 @@ class NavigationStack:
         on the lasting obstacles (``block_persist_s``: a route's corridor, whose cut blocks
         route edges), or with ``lasting=False`` on every mark (a detour's, re-planned round
         whatever the robot sees as it drives into the unmapped)."""
-        grid = self._lasting if lasting else self._global
-        assert grid is not None
+        assert self._global is not None
         seg = self.follower.segment if seg0 is None else seg0
-        return self.blocks.cut_ahead(path, hw, grid, pose, seg)
+        cut = self.blocks.cut_ahead(path, hw, self._global, pose, seg)
+        if cut is None or not lasting:
+            return cut
+        # the lasting obstacles are some of all the marks: their clearance is nowhere
+        # smaller, so a corridor cut by them is cut on the whole costmap too
+        return self.blocks.cut_ahead(path, hw, self._lasting_grid(), pose, seg)
 
     # ------------------------------------------------------------------ blocks (H&W §6.3)
     def _go_around(self, t_s: float, pose: FloatArray, grid: ClearanceGrid) -> bool:
@@ -631,9 +647,9 @@ class NavigationStack:
         if self.mode is NavMode.ROUTE and self._plan is not None:
             cut = self._cut_ahead(self._path, self._path_hw, pose)
             if cut is None:  # blocked within the follower's probe, not as a whole corridor:
-                assert self._path is not None and self._lasting is not None
+                assert self._path is not None
                 cut = self.blocks.follower_block_points(self._path, self.follower.segment, pose)
-                if np.all(self._lasting.clearance_at(cut) >= self.min_clearance_m):
+                if np.all(self._lasting_grid().clearance_at(cut) >= self.min_clearance_m):
                     cut = None  # by obstacles passing by: a grid detour, no route edge blocked
             self._block_edges(t_s, cut)
             plan = self._route_plan(pose)
@@ -690,9 +706,8 @@ class NavigationStack:
         assert self.route_memory is not None
         if not self.route_memory.blocked:
             return
-        assert self._lasting is not None
         freed = self.blocks.seen_free(
-            self.graph(), self.route_memory.blocked, pose, scan, self._lasting
+            self.graph(), self.route_memory.blocked, pose, scan, self._lasting_grid()
         )
         for edge in freed:
             self.route_memory.unblock(edge)
