@@ -297,11 +297,28 @@ class Costmap:
             self._changed()
             if t_s is None:
                 t_s = scan.stamp_s if isinstance(scan, Scan) else 0.0
-            on = self.marks > 0
-            since = self.marked_since_s
+            rows, cols = self._scan_reach((lx, ly), pose)
+            on = self.marks[rows, cols] > 0
+            since = self.marked_since_s[rows, cols]  # a view: the ages of the cells a scan reaches
             since[on & np.isnan(since)] = float(t_s)
             since[~on] = np.nan
         return changed
+
+    def _scan_reach(self, laser_xy: tuple[float, float], pose: FloatArray) -> tuple[slice, slice]:
+        """The rows and columns of the cells one scan can mark or clear: within the longest
+        of ``raytrace_range_m`` and ``obstacle_range_m`` of the laser (``inf_clear_range_m``
+        is at most the former) or the footprint around the robot, a cell's rounding more."""
+        p, res = self.params, self.resolution_m
+        h, w = self.shape
+        k = int(math.ceil(max(p.raytrace_range_m, p.obstacle_range_m) / res)) + 1
+        f = int(math.ceil(p.footprint_clear_radius_m / res)) + 1
+        (i_l, j_l), (i_r, j_r) = (
+            np.rint((np.array(xy) - self.origin)[::-1] / res).astype(int).tolist()
+            for xy in (laser_xy, (float(pose[0]), float(pose[1])))
+        )
+        rows = slice(max(min(i_l - k, i_r - f), 0), min(max(i_l + k, i_r + f) + 1, h))
+        cols = slice(max(min(j_l - k, j_r - f), 0), min(max(j_l + k, j_r + f) + 1, w))
+        return rows, cols
 
     def _frame(self) -> GridFrame:
         """The grid's place for the kernels."""

@@ -137,6 +137,24 @@ def test_only_marks_that_have_stood_long_enough_are_lasting(cm: Costmap) -> None
     assert np.isnan(cm.marked_since_s).all()
 
 
+def test_the_marks_ages_are_those_of_the_whole_grid_rule(cm: Costmap) -> None:
+    """Ages are kept only where a scan reaches; a reference kept over the whole grid (a
+    mark's age starts when it appears and ends when it goes) agrees after every scan of a
+    drive past a box that comes and goes."""
+    ref = np.full(cm.shape, np.nan)
+    rng = np.random.default_rng(4)
+    for k in range(60):
+        pose = np.array([0.5 + 0.08 * k, 1.7 + rng.uniform(-0.3, 0.3), rng.uniform(-1.0, 1.0)])
+        walls = np.concatenate([ROOM, BLOCK]) if (k // 10) % 2 == 0 else ROOM
+        cm.update(pose, scan_of(walls, pose), MOUNTED, t_s=float(k))
+        on = cm.marks > 0
+        ref[on & np.isnan(ref)] = float(k)
+        ref[~on] = np.nan
+        np.testing.assert_array_equal(cm.marked_since_s, ref)
+    assert np.isfinite(ref).sum() > 50  # marks were kept, of several ages
+    assert len(np.unique(ref[np.isfinite(ref)])) > 5
+
+
 def test_a_scan_s_stamp_is_the_default_time_of_its_marks(cm: Costmap) -> None:
     scan = scan_of(np.concatenate([ROOM, BLOCK]))
     cm.update(POSE, Scan(scan.ranges_m, 7.5), MOUNTED)
