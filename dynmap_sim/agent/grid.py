@@ -155,14 +155,21 @@ def _cells_of_counts(
 def points_on_segments(segments: ArrayLike, spacing_m: float) -> FloatArray:
     """Points ``(M, 2)`` [m] every ``spacing_m`` or closer along the segments ``(N, 4)``
     (``x0, y0, x1, y1``), both ends included: a wall plan as points (rasterizing, ICP)."""
+    return sample_segments(segments, spacing_m)[0]
+
+
+def sample_segments(segments: ArrayLike, spacing_m: float) -> tuple[FloatArray, NDArray[np.intp]]:
+    """:func:`points_on_segments` and, for each point, the index of its segment ``(M,)``."""
     seg = np.asarray(segments, dtype=np.float64).reshape(-1, 4)
     if len(seg) == 0:
-        return np.zeros((0, 2))
+        return np.zeros((0, 2)), np.zeros(0, dtype=np.intp)
     length = np.hypot(seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1])
     n = np.maximum(np.ceil(length / spacing_m).astype(np.intp), 1) + 1
     t = np.concatenate([np.linspace(0.0, 1.0, k) for k in n])
-    s = np.repeat(seg, n, axis=0)
-    return np.column_stack([s[:, 0] + t * (s[:, 2] - s[:, 0]), s[:, 1] + t * (s[:, 3] - s[:, 1])])
+    of = np.repeat(np.arange(len(seg)), n)
+    s = seg[of]
+    pts = np.column_stack([s[:, 0] + t * (s[:, 2] - s[:, 0]), s[:, 1] + t * (s[:, 3] - s[:, 1])])
+    return pts, of
 
 
 class OccupancyGrid:

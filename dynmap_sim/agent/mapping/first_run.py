@@ -16,8 +16,9 @@ flat ``mapper_params`` table fills (:meth:`FirstRunConfig.from_params`).
 
 Where the scenario's prior grants the walls, the front end matches them too
 (:attr:`~.keyframe_slam.KeyframeSLAMConfig.anchor_walls`): the map is then registered to the
-plan as it is built, and the loop back end is skipped (B&D had no plan; without one, or with
-``anchor_walls = false``, this is their first run).
+plan as it is built, and the back end ties the keyframes to the walls they see instead of
+closing loops (:mod:`.wall_factors`; B&D had no plan; without one, or with ``anchor_walls =
+false``, this is their first run).
 """
 
 from __future__ import annotations
@@ -99,8 +100,23 @@ class FirstRunMapper:
         self.loop_closure = LoopClosure(self.config.loops)
 
     def update(self, odom: Odometry, scan: Scan) -> PoseEstimate:
-        """Fuse one odometry reading and scan; return the front end's pose estimate."""
-        return self.slam.update(odom, scan)
+        """Fuse one odometry reading and scan; return the front end's pose estimate (on an
+        anchored run, every ``wall_graph_every`` keyframes after the keyframes were optimized
+        on the walls)."""
+        slam = self.slam
+        n = len(slam.keyframes)
+        est = slam.update(odom, scan)
+        every = self.config.loops.wall_graph_every
+        k = len(slam.keyframes)
+        if k > n and every and k % every == 0 and self._on_walls:
+            slam.move_keyframes(self.loop_closure.optimize_on_walls(slam))
+            est = PoseEstimate(slam.pose.copy(), est.cov, est.extras)
+        return est
+
+    @property
+    def _on_walls(self) -> bool:
+        """The keyframes are optimized on the prior's walls (anchored, ``wall_factors``)."""
+        return bool(len(self.slam.wall_points)) and self.config.loops.wall_factors
 
     def finish(self) -> StaticMap:
         """Close loops, optimize the pose graph, render the grid; return the static map."""
@@ -108,9 +124,13 @@ class FirstRunMapper:
         if not slam.keyframes:
             raise ValueError("FirstRunMapper.finish() before any update()")
         if len(slam.wall_points):
-            # The prior's walls hold the map frame (KeyframeSLAMConfig.anchor_walls): a pose
-            # graph of relative edges would only move the keyframes off the walls they matched.
-            poses, n_loops = np.array([k.pose for k in slam.keyframes]), 0
+            # The prior's walls hold the map frame (KeyframeSLAMConfig.anchor_walls): the
+            # keyframes are optimized against them (LoopClosureConfig.wall_factors), or kept.
+            n_loops = 0
+            if self._on_walls:
+                poses = self.loop_closure.optimize_on_walls(slam, refresh=True)
+            else:
+                poses = np.array([k.pose for k in slam.keyframes])
         else:
             poses, n_loops = self.loop_closure.optimize(slam)
         kfs = [Keyframe(poses[m], k.ranges_m, k.scan_index) for m, k in enumerate(slam.keyframes)]

@@ -192,8 +192,8 @@ class KeyframeSLAMConfig:
     #: drift, so the front end's drift stays bounded where it sees one, instead of growing
     #: with the path until a loop closes (B&D §4 map without a plan; this is off without
     #: one). The furniture in front of walls is in the keyframes, nearer than the wall. An
-    #: anchored first run skips the loop closure back end: the walls already hold the map
-    #: frame, and a graph of relative edges could only pull keyframes off them.
+    #: anchored first run's back end ties the keyframes to the walls instead of closing
+    #: loops (:attr:`.loop_closure.LoopClosureConfig.wall_factors`).
     anchor_walls: bool = True
     #: Only the walls the local map has seen take part: a wall point counts when a keyframe
     #: point lies within this distance [m] of it. A wall hidden behind furniture (shelves
@@ -228,10 +228,16 @@ class KeyframeSLAM:
     ) -> None:
         self.laser = laser
         self.config = config
-        #: The prior's walls as map-frame points (``anchor_walls``), matched with the keyframes.
-        self.wall_points = (
-            points_on_segments(walls, config.voxel_m)
+        #: The prior's wall segments ``(N, 4)`` when they anchor the front end
+        #: (``anchor_walls``), else none; and as map-frame points, matched with the keyframes.
+        self.wall_segments = (
+            np.asarray(walls, dtype=np.float64).reshape(-1, 4)
             if config.anchor_walls and walls is not None
+            else np.zeros((0, 4))
+        )
+        self.wall_points = (
+            points_on_segments(self.wall_segments, config.voxel_m)
+            if len(self.wall_segments)
             else np.zeros((0, 2))
         )
         self._beams = BeamDirections(laser)
@@ -245,6 +251,9 @@ class KeyframeSLAM:
         self.keyframes: list[Keyframe] = []
         #: base-frame points of each keyframe (thinned, dynamic readings left out)
         self.keyframe_points: list[FloatArray] = []
+        #: each keyframe's pose in the previous one's frame as the front end measured it
+        #: (the sequential edges of a pose graph, whatever later moves the keyframes)
+        self.keyframe_steps: list[FloatArray] = []
         self._seq_cov: list[FloatArray] = []  # front-end covariance at each keyframe
         self._ref: list[tuple[int, FloatArray]] = []  # per scan: (keyframe, pose in it)
         self.stamps_s: list[float] = []
@@ -262,12 +271,28 @@ class KeyframeSLAM:
     # -- keyframes -----------------------------------------------------------------------
     def _add_keyframe(self, ranges: NDArray[np.float32], pts: FloatArray) -> None:
         c = self.config
+        if self.keyframes:
+            self.keyframe_steps.append(se2.between(self.keyframes[-1].pose, self.pose))
         self.keyframes.append(
             Keyframe(self.pose.copy(), np.asarray(ranges, np.float32).copy(), self.n_scans)
         )
         near = np.hypot(pts[:, 0], pts[:, 1]) <= c.map_max_range_m
         self.keyframe_points.append(voxel_downsample(pts[near], c.voxel_m))
         self._seq_cov.append(self.cov.copy())
+        self._rebuild_local_map()
+
+    def move_keyframes(self, poses: FloatArray) -> None:
+        """Put the keyframes at ``poses`` ``(K, 3)`` (a pose graph's answer); the current pose
+        and the recent scans' poses move rigidly with the newest keyframe, and the local map
+        is made again from the moved keyframes."""
+        last = self.keyframes[-1].pose
+        shift = se2.compose(poses[-1], se2.inverse(last))  # map-frame correction
+        self.keyframes = [
+            Keyframe(np.asarray(p, dtype=np.float64).copy(), k.ranges_m, k.scan_index)
+            for p, k in zip(poses, self.keyframes, strict=True)
+        ]
+        self.pose = se2.compose(shift, self.pose)
+        self._history = [(se2.compose(shift, p), r) for p, r in self._history]
         self._rebuild_local_map()
 
     def local_keyframes(self) -> list[int]:

@@ -34,6 +34,7 @@ from dynmap_sim.agent.mapping.pose_graph import (
 )
 from dynmap_sim.agent.mapping.scan_matcher import MatchResult, PointMap, match_scan
 from dynmap_sim.agent.mapping.scan_points import voxel_downsample
+from dynmap_sim.agent.mapping.wall_factors import WallPlan, wall_factor
 from dynmap_sim.agent.params import AsTuple, Int, params_dataclass
 
 FloatArray = NDArray[np.float64]
@@ -133,6 +134,31 @@ class LoopClosureConfig:
     #: The consistency test's bound in standard deviations of the legs' drift
     #: (``seq_sigma``); 3: a true pair passes with ~99 % probability per direction.
     consistency_gate: float = 3.0
+    #: Where the prior grants the walls (an anchored first run): optimize the keyframes
+    #: under their sequential edges and one factor per keyframe that sees a wall
+    #: (:mod:`.wall_factors`, Boniardi et al. 2017), instead of keeping the front end's
+    #: poses. Loop closures are not searched then: the walls bound the drift, and in halls
+    #: of identical aisles a closure aliases to the next aisle.
+    wall_factors: bool = True
+    #: ICP correspondence gates [m] of a wall factor, coarse then fine: the front end's
+    #: ``max_correspondence_m``, then its ``anchor_seen_m`` (readings of furniture in front
+    #: of a wall stay out of the fit).
+    wall_gate_m: Annotated[tuple[float, float], AsTuple] = (0.3, 0.1)
+    #: A wall factor needs this many of the keyframe's points within the fine gate (the
+    #: fewest a closure's source may have).
+    wall_min_points: Int = 30
+    #: ... at an RMS residual below this [m] (a verified closure's bound).
+    wall_max_rmse_m: float = 0.03
+    #: The scan's information in a wall factor is divided by this: the keyframe's points
+    #: are not independent (Censi 2007) and neighbouring keyframes see the same wall, so
+    #: that the factors of one wall do not outweigh the sequential edges that tie them
+    #: together. 20: on the development worlds the maps varied by millimetres over 20-60,
+    #: and came out worse at the front end's 5 (docs/tuning/slam.md).
+    wall_info_inflation: float = 20.0
+    #: The keyframes are optimized on the walls every this many keyframes during the run
+    #: (0: only at its end), so that the front end's local map and pose go on from
+    #: corrected keyframes: 10 keyframes, about 3 m of path, less than the laser's reach.
+    wall_graph_every: Int = 10
 
     def __post_init__(self) -> None:
         if self.robust_kernel not in ("dcs", "huber"):
@@ -167,13 +193,18 @@ class LoopClosure:
         #: searched, rejected by each of :data:`REJECTIONS`, verified and kept as consistent
         #: (:mod:`.incremental_loops` keeps its own counts here).
         self.stats: dict[str, int] = {}
+        self._walls: WallPlan | None = None  # the prior's walls (optimize_on_walls)
+        #: each keyframe's wall factor ``(pose, information)`` or None, in keyframe order
+        self._wall_cache: list[tuple[FloatArray, FloatArray] | None] = []
 
     def optimize(self, slam: KeyframeSLAM) -> tuple[FloatArray, int]:
         """The keyframe poses ``(K, 3)`` after closing loops, and the number of loop-closing
         edges of the last ICP round."""
         c = self.config
         poses = np.array([k.pose for k in slam.keyframes])
-        seq = self.sequential_edges(poses)
+        seq = self.sequential_edges(
+            [se2.between(poses[k], poses[k + 1]) for k in range(len(poses) - 1)]
+        )
         n_loops = 0
         kept: list[Edge] = []  # closures that stay in the graph of the ICP rounds
         if c.global_loops and c.incremental_loops:
@@ -193,6 +224,41 @@ class LoopClosure:
             poses = self._optimize(poses, seq, kept + matches, "huber")
         return poses, n_loops
 
+    def optimize_on_walls(self, slam: KeyframeSLAM, refresh: bool = False) -> FloatArray:
+        """The keyframe poses ``(K, 3)`` of an anchored first run, optimized under the
+        sequential edges (the front end's steps between keyframes as measured) and the wall
+        factors (:func:`.wall_factors.wall_factor`), the latter robust (DCS): a virtual node
+        at the map origin holds the factors, and it and the first keyframe (the known
+        initial pose) stay fixed. A keyframe's factor is found once, at its pose of the
+        first call that sees it; ``refresh`` finds every factor again at today's poses."""
+        poses = np.array([k.pose for k in slam.keyframes])
+        if self._walls is None:
+            self._walls = WallPlan.from_segments(slam.wall_segments, slam.config.voxel_m)
+        if refresh:
+            self._wall_cache.clear()
+        reach = slam.laser.range_max_m + self.config.wall_gate_m[0]
+        for k in range(len(self._wall_cache), len(poses)):
+            self._wall_cache.append(
+                wall_factor(
+                    self._walls,
+                    slam.keyframe_points[k],
+                    poses[k],
+                    reach,
+                    slam.config.huber_m,
+                    self.config,
+                )
+            )
+        v = len(poses)
+        walls = [Edge(v, k, *f) for k, f in enumerate(self._wall_cache) if f is not None]
+        self.stats = {"wall_factors": len(walls)}
+        if not walls:
+            return poses
+        seq = self.sequential_edges(slam.keyframe_steps)
+        robust = np.r_[np.zeros(len(seq), bool), np.ones(len(walls), bool)]
+        nodes = np.vstack([poses, np.zeros(3)])
+        out = optimize_pose_graph_dcs(nodes, seq + walls, robust, self.config.dcs_phi, (0, v))
+        return out[:-1]
+
     def _optimize(self, poses: FloatArray, seq: list[Edge], loops: list[Edge], loss: str):
         """The graph of sequential edges ``seq`` and loop/ICP edges ``loops`` optimized, the
         latter robust as ``robust_kernel`` says (``loss``: the Huber variant's loss)."""
@@ -202,11 +268,11 @@ class LoopClosure:
         return optimize_pose_graph(poses, seq + loops, anchor=0, loss=loss)
 
     # -- edges ---------------------------------------------------------------------------
-    def sequential_edges(self, poses: FloatArray) -> list[Edge]:
-        """Edges between consecutive keyframes at their relative poses in ``poses``."""
+    def sequential_edges(self, steps: list[FloatArray]) -> list[Edge]:
+        """Edges between consecutive keyframes measuring ``steps``, each keyframe's pose in
+        the previous one's frame."""
         edges = []
-        for k in range(len(poses) - 1):
-            z = se2.between(poses[k], poses[k + 1])
+        for k, z in enumerate(steps):
             d = float(np.hypot(z[0], z[1]))
             a_xy, b_xy, a_th, b_th, c_th = self.config.seq_sigma
             sxy = a_xy + b_xy * d

@@ -23,6 +23,8 @@ from scipy.sparse import csr_matrix, identity
 from dynmap_sim import se2
 
 FloatArray = NDArray[np.float64]
+#: The node or nodes an optimization holds fixed.
+Anchor = int | tuple[int, ...]
 
 
 @dataclass(frozen=True)
@@ -69,11 +71,13 @@ def edge_jacobians(poses: FloatArray, ii: NDArray[np.intp], jj: NDArray[np.intp]
     return a, b
 
 
-def _sparsity(k: int, ii: NDArray[np.intp], jj: NDArray[np.intp], anchor: int) -> tuple:
-    """The free nodes and the structure of the whitened residuals' Jacobian: rows 3m..3m+2
-    of edge m touch the columns of its free nodes. ``(free, rows, cols, use_i, use_j,
-    shape)``; ``use_*`` ``(E, 3, 3)`` mask the blocks of the edges' free ends."""
-    free = np.array([n for n in range(k) if n != anchor])
+def _sparsity(k: int, ii: NDArray[np.intp], jj: NDArray[np.intp], anchor: Anchor) -> tuple:
+    """The free nodes (all but the ``anchor`` node or nodes) and the structure of the
+    whitened residuals' Jacobian: rows 3m..3m+2 of edge m touch the columns of its free
+    nodes. ``(free, rows, cols, use_i, use_j, shape)``; ``use_*`` ``(E, 3, 3)`` mask the
+    blocks of the edges' free ends."""
+    fixed = set(np.atleast_1d(anchor).tolist())
+    free = np.array([n for n in range(k) if n not in fixed], dtype=np.intp)
     col_of = -np.ones(k, dtype=np.intp)
     col_of[free] = np.arange(len(free))
     n_e = len(ii)
@@ -92,12 +96,12 @@ def _sparsity(k: int, ii: NDArray[np.intp], jj: NDArray[np.intp], anchor: int) -
 def optimize_pose_graph(
     poses: ArrayLike,
     edges: list[Edge],
-    anchor: int = 0,
+    anchor: Anchor = 0,
     loss: str = "huber",
     f_scale: float = 3.0,
     max_nfev: int = 100,
 ) -> FloatArray:
-    """Optimize node ``poses`` ``(K, 3)`` under ``edges``; node ``anchor`` stays fixed.
+    """Optimize node ``poses`` ``(K, 3)`` under ``edges``; node(s) ``anchor`` stay fixed.
 
     ``loss``/``f_scale`` are passed to ``scipy.optimize.least_squares`` (on residuals
     whitened by each edge's information, so ``f_scale`` is in standard deviations). The
@@ -165,14 +169,14 @@ def optimize_pose_graph_dcs(
     edges: list[Edge],
     robust: NDArray[np.bool_],
     phi: float = 1.0,
-    anchor: int = 0,
+    anchor: Anchor = 0,
     max_iterations: int = 60,
     tol: float = 1e-6,
 ) -> FloatArray:
     """Optimize node ``poses`` ``(K, 3)`` by Gauss-Newton with dynamic covariance scaling
     (:func:`dcs_scale`, re-evaluated at every iteration as in Agarwal et al. 2013 §IV) on the
-    ``robust`` edges ``(E,)`` (loop closures; the others, e.g. odometry, stay Gaussian); node
-    ``anchor`` stays fixed.
+    ``robust`` edges ``(E,)`` (loop closures; the others, e.g. odometry, stay Gaussian); node(s)
+    ``anchor`` stay fixed.
 
     ``phi`` is reached by graduated non-convexity (Yang, Antonante, Tzoumas & Carlone 2020):
     it starts at the largest ``chi2`` of the robust edges -- every closure counts, whatever

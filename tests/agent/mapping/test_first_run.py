@@ -148,7 +148,8 @@ def _run_mapper(walls, segments, laser, cast, path_fn, odo_fn):
 def test_prior_walls_bound_the_front_end_drift(segments, laser, cast, path_fn, odo_fn):
     """Granted the room's six outer walls (not the pillar or the cupboards), the front end
     matches them too: its online error stays at the range noise's scale instead of growing
-    lap by lap, and the finished map keeps those poses (no loop back end)."""
+    lap by lap, and the finished map, tied to the walls it sees instead of closed in loops,
+    stays as close to the truth."""
     free, _, _ = _run_mapper(None, segments, laser, cast, path_fn, odo_fn)
     anchored, smap, truth = _run_mapper(segments[:6], segments, laser, cast, path_fn, odo_fn)
     assert free.max() > 0.03  # without the plan, drift builds up between closures
@@ -156,7 +157,8 @@ def test_prior_walls_bound_the_front_end_drift(segments, laser, cast, path_fn, o
     assert np.sqrt(np.mean(anchored**2)) < 0.5 * np.sqrt(np.mean(free**2))
     assert smap.n_loop_closures == 0
     final = np.hypot(*(smap.trajectory[:, :2] - truth[:, :2]).T)
-    assert np.allclose(final, anchored, atol=1e-9)
+    assert final.max() < 0.02
+    assert np.sqrt(np.mean(final**2)) < np.sqrt(np.mean(anchored**2))
 
 
 def test_anchor_walls_off_ignores_the_prior(segments, laser):
