@@ -28,6 +28,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from dynmap_sim.agent.grid import sample_segments
 from dynmap_sim.agent.mapping.scan_matcher import PointMap, match_scan
+from dynmap_sim.agent.planning.route_graph import project_onto_segments
 
 if TYPE_CHECKING:
     from dynmap_sim.agent.mapping.loop_closure import LoopClosureConfig
@@ -66,11 +67,9 @@ class WallPlan:
         if not near.any():
             return np.zeros((0, 2))
         d, dist, own = d[near], dist[near], self.segment_of[near]
-        a = self.segments[:, :2]
-        ab = self.segments[:, 2:] - a
-        t = np.clip(((o - a) * ab).sum(axis=1) / np.maximum((ab * ab).sum(axis=1), 1e-12), 0, 1)
-        cand = np.nonzero(np.hypot(*(a + t[:, None] * ab - o).T) <= reach_m)[0]
-        a, ab = a[cand], ab[cand]
+        a, b = self.segments[:, :2], self.segments[:, 2:]
+        cand = np.nonzero(project_onto_segments(o, a, b)[2] <= reach_m)[0]
+        a, ab = a[cand], b[cand] - a[cand]
         # the ray o + u d (0 < u < 1) against each segment a + v ab (0 <= v <= 1)
         den = d[:, None, 0] * ab[None, :, 1] - d[:, None, 1] * ab[None, :, 0]
         den = np.where(den == 0.0, np.nan, den)
