@@ -35,7 +35,14 @@ from dynmap_sim.agent.mapping.pose_graph import (
 from dynmap_sim.agent.mapping.scan_matcher import MatchResult, PointMap, match_scan
 from dynmap_sim.agent.mapping.scan_points import voxel_downsample
 from dynmap_sim.agent.mapping.wall_factors import WallPlan, wall_factor
-from dynmap_sim.agent.params import AsTuple, Int, params_dataclass
+from dynmap_sim.agent.params import (
+    AsTuple,
+    Int,
+    NonNegativeInt,
+    Positive,
+    PositiveInt,
+    params_dataclass,
+)
 
 FloatArray = NDArray[np.float64]
 
@@ -143,22 +150,22 @@ class LoopClosureConfig:
     #: ICP correspondence gates [m] of a wall factor, coarse then fine: the front end's
     #: ``max_correspondence_m``, then its ``anchor_seen_m`` (readings of furniture in front
     #: of a wall stay out of the fit).
-    wall_gate_m: Annotated[tuple[float, float], AsTuple] = (0.3, 0.1)
+    wall_gate_m: Annotated[tuple[Positive, Positive], AsTuple] = (0.3, 0.1)
     #: A wall factor needs this many of the keyframe's points within the fine gate (the
     #: fewest a closure's source may have).
-    wall_min_points: Int = 30
+    wall_min_points: PositiveInt = 30
     #: ... at an RMS residual below this [m] (a verified closure's bound).
-    wall_max_rmse_m: float = 0.03
+    wall_max_rmse_m: Positive = 0.03
     #: The scan's information in a wall factor is divided by this: the keyframe's points
     #: are not independent (Censi 2007) and neighbouring keyframes see the same wall, so
     #: that the factors of one wall do not outweigh the sequential edges that tie them
     #: together. 20: on the development worlds the maps varied by millimetres over 20-60,
     #: and came out worse at the front end's 5 (docs/tuning/slam.md).
-    wall_info_inflation: float = 20.0
+    wall_info_inflation: Positive = 20.0
     #: The keyframes are optimized on the walls every this many keyframes during the run
     #: (0: only at its end), so that the front end's local map and pose go on from
     #: corrected keyframes: 10 keyframes, about 3 m of path, less than the laser's reach.
-    wall_graph_every: Int = 10
+    wall_graph_every: NonNegativeInt = 10
 
     def __post_init__(self) -> None:
         if self.robust_kernel not in ("dcs", "huber"):

@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from dynmap_sim import se2
 from dynmap_sim.agent.mapping.first_run import FirstRunConfig, FirstRunMapper
 from dynmap_sim.agent.mapping.keyframe_slam import Keyframe
 from dynmap_sim.agent.mapping.loop_closure import LoopClosureConfig
 from dynmap_sim.agent.mapping.wall_factors import WallPlan
+from dynmap_sim.agent.params import ParamError
 from dynmap_sim.types import Odometry, Scan
 
 
@@ -114,3 +116,20 @@ def test_moving_the_keyframes_carries_the_pose_along(segments, laser, cast, path
     after = [se2.between(slam.keyframes[-1].pose, p) for p, _ in slam._history]
     assert np.allclose(after, hist, atol=1e-12)
     assert all(np.array_equal(a, b) for a, b in zip(steps, slam.keyframe_steps, strict=True))
+
+
+@pytest.mark.parametrize(
+    ("params", "message"),
+    [
+        ({"wall_graph_every": -1}, "wall_graph_every must be an integer >= 0"),
+        ({"wall_min_points": 0}, "wall_min_points must be an integer >= 1"),
+        ({"wall_info_inflation": 0}, "wall_info_inflation must be a finite number > 0"),
+        ({"wall_max_rmse_m": -0.01}, "wall_max_rmse_m must be a finite number > 0"),
+        ({"wall_gate_m": [0.3, -1]}, "wall_gate_m"),
+    ],
+)
+def test_bad_wall_parameters_are_refused_by_name(params, message):
+    """A scenario's ``mapper_params`` with a wall parameter out of its range: an error that
+    names the parameter."""
+    with pytest.raises(ParamError, match=message):
+        FirstRunConfig.from_params(**params)
