@@ -114,19 +114,6 @@ def point_segment_distance(points: FloatArray, segments: FloatArray) -> FloatArr
     return np.hypot(p[..., 0] - c[..., 0], p[..., 1] - c[..., 1])
 
 
-def segments_cross(s: FloatArray, segments: FloatArray) -> NDArray[np.bool_]:
-    """True where segment ``s`` (4,) properly intersects each of ``segments`` (N, 4)."""
-
-    def orient(ax, ay, bx, by, cx, cy):
-        return (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
-
-    o1 = orient(s[0], s[1], s[2], s[3], segments[:, 0], segments[:, 1])
-    o2 = orient(s[0], s[1], s[2], s[3], segments[:, 2], segments[:, 3])
-    o3 = orient(segments[:, 0], segments[:, 1], segments[:, 2], segments[:, 3], s[0], s[1])
-    o4 = orient(segments[:, 0], segments[:, 1], segments[:, 2], segments[:, 3], s[2], s[3])
-    return (o1 * o2 < 0) & (o3 * o4 < 0)
-
-
 def polygon_edges(poly: FloatArray) -> FloatArray:
     """Closed outline of ``poly`` as segments ``(K, 4)`` rows ``x0, y0, x1, y1``."""
     out = np.empty((len(poly), 4))

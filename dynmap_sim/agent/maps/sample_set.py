@@ -191,17 +191,6 @@ class SampleSets:
         _write_update(r_s, v_s, first, n_new, n_add, keys, self.samples_mm, self.count)
         self._changed()
 
-    def update_m(
-        self,
-        ray_idx: ArrayLike,
-        range_m: ArrayLike,
-        rng: np.random.Generator,
-        *,
-        fill: bool = False,
-    ) -> None:
-        """:meth:`update` with ranges in metres."""
-        self.update(ray_idx, to_mm(range_m), rng, fill=fill)
-
     # ------------------------------------------------------------------ statistics
     def estimates(self) -> RayEstimates:
         """Median, 1.48·MAD and outlier ratio of every ray (eq. 4–5, §3.3); cached."""
