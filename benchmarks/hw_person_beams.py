@@ -14,7 +14,8 @@ recall for the faster and the slower ones, the precision of the dynamic class ov
 and for the fast person beams not called dynamic the tracker's reason (no box, a box cut by
 the field of view or a nearer return, or tracked as slow).
 
-    python benchmarks/hw_person_beams.py --out /tmp/hw-person-beams --seed 0 [--days 1-21]
+    python benchmarks/hw_person_beams.py --out /tmp/hw-person-beams --seed 0 [--days 1-21] \
+        [--param leg_pair_m=0.5 ...]
 
 Takes about as long as the scenario's days with one localizer (about 90 s for days 1-21).
 """
@@ -22,6 +23,7 @@ Takes about as long as the scenario's days with one localizer (about 90 s for da
 from __future__ import annotations
 
 import argparse
+import tomllib
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -166,16 +168,32 @@ def report(tally: Tally) -> list[str]:
     return lines
 
 
+def _param(arg: str, ap: argparse.ArgumentParser) -> tuple[str, Any]:
+    """``NAME=VALUE`` as a name and its TOML value; a malformed one ends with a usage error."""
+    name, eq, value = arg.partition("=")
+    try:
+        if not (eq and name.isidentifier()):
+            raise ValueError("expected NAME=VALUE")
+        return name, tomllib.loads(f"v = {value}")["v"]
+    except (ValueError, tomllib.TOMLDecodeError) as exc:
+        ap.error(f"--param {arg!r}: {exc}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", type=Path, required=True, help="results folder (overwritten)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--days", default="1-21", help="days to run, e.g. 1-21")
     ap.add_argument("--from-day", type=int, default=15, help="first day scored (week 3: 15)")
+    ap.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                    help="an adaptive-memory parameter for this run, a TOML value "
+                         "(e.g. leg_pair_m=0.5); repeatable")  # fmt: skip
     args = ap.parse_args()
     d0, d1 = (int(x) for x in args.days.split("-"))
+    params = dict(_param(a, ap) for a in args.param)
     sc = load_scenario(SCENARIO)
-    sc.localizers[:] = [c for c in sc.localizers if c.name == "adaptive-memory"]
+    sc.localizers[:] = [c.model_copy(update={"params": {**c.params, **params}})
+                        for c in sc.localizers if c.name == "adaptive-memory"]  # fmt: skip
     tally = Tally()
     with instrumented(tally, args.from_day):
         run_experiment(sc, out_dir=args.out, days=(d0, d1), seed=args.seed, workers=1,

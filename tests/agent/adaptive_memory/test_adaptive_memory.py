@@ -124,6 +124,43 @@ def test_a_moving_box_is_dynamic_and_a_still_one_static():
     assert np.all(pc[on_still] == STATIC)
 
 
+def _walking_person_dynamic_share(params: TrackerParams, speed_mps: float) -> float:
+    """The mean share of a walking person's beams called dynamic over scans 10-39: two legs
+    (0.1 m squares, 0.2 m apart) whose centres swing 0.12 m fore and aft against each other
+    over a 1.2 m stride while the body walks at ``speed_mps`` across the robot's view."""
+    tr = ObjectTracker(params)
+    robot = np.array([1.0, 1.0, 0.0])
+    walls = room_segments(cupboard=False)
+    shares = []
+    for k in range(40):
+        t = 0.1 * k
+        body = np.array([3.5, 0.3 + speed_mps * t])
+        swing = 0.12 * np.sin(2.0 * np.pi * speed_mps * t / 1.2)
+        legs = [body + [0.1, swing], body + [-0.1, -swing]]
+        segs = np.concatenate([walls] + [box(x - 0.05, y - 0.05, x + 0.05, y + 0.05)
+                                         for x, y in legs])  # fmt: skip
+        r = _points_scan(robot, segs)
+        boxes = segment_scan(r, LASER.angles(), MOUNT, LASER.range_max_m, params)
+        cls, _ = tr.update(boxes, np.array([5.0, -2.0, 0.3]), t)
+        pc = point_classes_of(boxes, cls)
+        hx = robot[0] + r * np.cos(LASER.angles())
+        hy = robot[1] + r * np.sin(LASER.angles())
+        on = np.hypot(hx - body[0], hy - body[1]) < 0.25
+        if k >= 10:
+            shares.append(np.mean(pc[on] == DYNAMIC))
+    return float(np.mean(shares))
+
+
+@pytest.mark.parametrize("speed_mps", [0.4, 0.6])
+def test_a_walking_person_s_two_legs_are_one_dynamic_box(speed_mps):
+    """Leg pairing: the legs' box moves with the body, while each leg alone stops at every
+    step (below ``v_thres`` at these speeds) and is half the time hidden behind the other."""
+    paired = _walking_person_dynamic_share(TrackerParams(leg_pair_m=0.5), speed_mps)
+    legs_alone = _walking_person_dynamic_share(TrackerParams(leg_pair_m=0.0), speed_mps)
+    assert paired >= 0.85
+    assert paired > legs_alone + 0.1
+
+
 def test_a_long_wall_seen_from_a_moving_robot_is_never_dynamic():
     """The sliding-wall trap: the visible part of a long wall moves with the robot."""
     params = TrackerParams()

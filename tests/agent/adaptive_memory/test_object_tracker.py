@@ -61,22 +61,52 @@ def segments_reference(r_all: np.ndarray, p: TrackerParams) -> list[list[int]]:
     return segs
 
 
+def leg_pairs_reference(r: np.ndarray, segs: list[list[int]], p: TrackerParams) -> list[list[int]]:
+    """The segments grouped into boxes: a leg is a segment whose first and last points are at
+    most ``leg_max_m`` apart; two legs whose centroids are each other's nearest leg, closer
+    than ``leg_pair_m``, are one group; every other segment is a group of its own. Groups are
+    lists of segment indices, in the order of their first segment."""
+    a = LASER.angles() + MOUNT[2]
+    pts = [MOUNT[:2] + r[s, None] * np.column_stack([np.cos(a[s]), np.sin(a[s])]) for s in segs]
+    legs = [k for k, q in enumerate(pts) if np.hypot(*(q[-1] - q[0])) <= p.leg_max_m]
+    cen = {k: pts[k].mean(axis=0) for k in legs}
+    nearest = {}
+    for k in legs:
+        d = {j: np.hypot(*(cen[j] - cen[k])) for j in legs if j != k}
+        j = min(d, key=lambda j: (d[j], j)) if d else None
+        if j is not None and d[j] < p.leg_pair_m:
+            nearest[k] = j
+    groups, done = [], set()
+    for k in range(len(segs)):
+        if k in done:
+            continue
+        j = nearest.get(k)
+        if j is not None and nearest.get(j) == k:
+            groups.append([k, j])
+            done.add(j)
+        else:
+            groups.append([k])
+    return groups
+
+
 def never_dynamic_reference(
-    r: np.ndarray, segs: list[list[int]], k: int, length: float, p: TrackerParams
+    r: np.ndarray, segs: list[list[int]], group: list[int], length: float, p: TrackerParams
 ) -> bool:
-    """The sliding-wall trap of segment ``k``: longer than ``max_dynamic_length_m``, or an
-    end cut by the field of view's edge or (``occlusion_never_dynamic``) by a nearer return,
+    """The sliding-wall trap of the box of the segments ``group``: longer than
+    ``max_dynamic_length_m``, or an end (the first segment's first return, the last one's last)
+    cut by the field of view's edge or (``occlusion_never_dynamic``) by a nearer return,
     where "cut" needs the edge or that return at most ``1 + max_gap_beams`` beams away."""
     near = 1 + p.max_gap_beams
-    s = segs[k]
+    k, k2 = group[0], group[-1]
+    s, s2 = segs[k], segs[k2]
     lo_cut = s[0] < near if k == 0 else s[0] - segs[k - 1][-1] <= near
-    hi_cut = s[-1] >= len(r) - near if k == len(segs) - 1 else segs[k + 1][0] - s[-1] <= near
-    if length > p.max_dynamic_length_m or (k == 0 and lo_cut) or (k == len(segs) - 1 and hi_cut):
+    hi_cut = s2[-1] >= len(r) - near if k2 == len(segs) - 1 else segs[k2 + 1][0] - s2[-1] <= near
+    if length > p.max_dynamic_length_m or (k == 0 and lo_cut) or (k2 == len(segs) - 1 and hi_cut):
         return True
     if not p.occlusion_never_dynamic:
         return False
     left = k > 0 and lo_cut and r[segs[k - 1][-1]] < r[s[0]]
-    right = k + 1 < len(segs) and hi_cut and r[segs[k + 1][0]] < r[s[-1]]
+    right = k2 + 1 < len(segs) and hi_cut and r[segs[k2 + 1][0]] < r[s2[-1]]
     return bool(left or right)
 
 
@@ -84,7 +114,7 @@ def test_an_end_next_to_beams_without_return_is_not_cut() -> None:
     """A box in open space (no return on either side for more than ``max_gap_beams`` beams)
     is not cut, though a nearer return lies farther along the scan; the same box with that
     return right next to it is."""
-    p = TrackerParams(max_gap_beams=2)
+    p = TrackerParams(max_gap_beams=2, leg_pair_m=0.0)
     n = len(LASER.angles())
     r = np.full(n, np.inf)
     mid = n // 2
@@ -105,19 +135,27 @@ def test_an_end_next_to_beams_without_return_is_not_cut() -> None:
     assert len(b.length) == 1 and not b.never_dynamic[0]
 
 
-def test_segment_scan_groups_by_breakpoints_and_boxes_each_segments_points() -> None:
+@pytest.mark.parametrize("leg_pair_m", [0.0, 0.5])
+def test_segment_scan_groups_by_breakpoints_and_boxes_each_segments_points(
+    leg_pair_m: float,
+) -> None:
+    """Each box holds the points of one segment, or of a pair of legs (``leg_pair_m`` > 0)."""
     rng = np.random.default_rng(21)
-    n_boxes = 0
+    n_boxes = n_pairs = 0
     for _ in range(60):
         r = random_scan(rng)
         p = TrackerParams(breakpoint_lambda_deg=float(rng.choice([5.0, 10.0, 20.0])),
                           min_points=int(rng.integers(1, 6)),
                           max_gap_beams=int(rng.integers(0, 4)),
                           max_dynamic_length_m=float(rng.choice([0.3, 1.2])),
-                          occlusion_never_dynamic=bool(rng.random() < 0.5))  # fmt: skip
+                          occlusion_never_dynamic=bool(rng.random() < 0.5),
+                          leg_pair_m=leg_pair_m)  # fmt: skip
         b = segment_scan(r, LASER.angles(), MOUNT, LASER.range_max_m, p)
         segs = segments_reference(r, p)
-        kept = [s for s in segs if len(s) >= p.min_points]
+        groups = leg_pairs_reference(r, segs, p)
+        groups = [g for g in groups if sum(len(segs[k]) for k in g) >= p.min_points]
+        kept = [sum((segs[k] for k in g), []) for g in groups]
+        n_pairs += sum(len(g) == 2 for g in groups)
         assert len(b.length) == len(kept)
         labels = np.full(len(r), -1)
         for k, s in enumerate(kept):
@@ -134,10 +172,11 @@ def test_segment_scan_groups_by_breakpoints_and_boxes_each_segments_points() -> 
             np.testing.assert_allclose(
                 np.abs(loc).max(axis=0), [b.length[k] / 2, b.width[k] / 2], atol=1e-9
             )  # the box is the points' tight extent
-            assert b.never_dynamic[k] == never_dynamic_reference(r, segs, segs.index(s),
+            assert b.never_dynamic[k] == never_dynamic_reference(r, segs, groups[k],
                                                                  b.length[k], p)  # fmt: skip
         n_boxes += len(kept)
     assert n_boxes > 300
+    assert (n_pairs > 20) == (leg_pair_m > 0)
 
 
 def kalman_reference(zs: np.ndarray, dts: list[float], p: TrackerParams) -> tuple:

@@ -66,6 +66,8 @@ class TrackerParams(NamedTuple):
     gate_m: float = 0.5
     confirm_steps: int = 2
     max_misses: int = 2
+    leg_pair_m: float = 0.0
+    leg_max_m: float = 0.25
 
     def typed(self) -> TrackerParams:
         """The same values with the field types the kernels are compiled for."""
@@ -74,7 +76,8 @@ class TrackerParams(NamedTuple):
             int(self.min_points), int(self.max_gap_beams), float(self.max_dynamic_length_m),
             bool(self.occlusion_never_dynamic), float(self.sigma_accel),
             float(self.sigma_meas_m), float(self.sigma_v0), float(self.gate_m),
-            int(self.confirm_steps), int(self.max_misses),
+            int(self.confirm_steps), int(self.max_misses), float(self.leg_pair_m),
+            float(self.leg_max_m),
         )  # fmt: skip
 
 
@@ -226,6 +229,44 @@ def _box(xy, lo, hi):  # type: ignore[no-untyped-def]
     return mx + uc * c - vc * s, my + uc * s + vc * c, phi, umax - umin, vmax - vmin
 
 
+@jitable
+def _pair_legs(xy, starts, ends, p):  # type: ignore[no-untyped-def]
+    """Each segment's partner leg (its own index: none): segments no longer than
+    ``leg_max_m`` from first to last return are legs, and two legs whose centroids are
+    mutual nearest within ``leg_pair_m`` are one person's (the ROS ``leg_detector``'s
+    pairing); ``leg_pair_m = 0`` pairs nothing."""
+    m = starts.shape[0]
+    mate = np.arange(m)
+    if p.leg_pair_m <= 0.0 or m < 2:
+        return mate
+    cx, cy = np.zeros(m), np.zeros(m)
+    leg = np.zeros(m, dtype=np.bool_)
+    for k in range(m):
+        lo, hi = starts[k], ends[k]
+        ext = math.hypot(xy[hi - 1, 0] - xy[lo, 0], xy[hi - 1, 1] - xy[lo, 1])
+        leg[k] = ext <= p.leg_max_m
+        for j in range(lo, hi):
+            cx[k] += xy[j, 0]
+            cy[k] += xy[j, 1]
+        cx[k] /= hi - lo
+        cy[k] /= hi - lo
+    nearest = np.full(m, -1, dtype=np.intp)
+    for k in range(m):
+        if not leg[k]:
+            continue
+        best = p.leg_pair_m
+        for j in range(m):
+            if j != k and leg[j]:
+                d = math.hypot(cx[j] - cx[k], cy[j] - cy[k])
+                if d < best:
+                    best, nearest[k] = d, j
+    for k in range(m):
+        j = nearest[k]
+        if j >= 0 and nearest[j] == k:
+            mate[k] = j
+    return mate
+
+
 @compiled
 def _segment(r_all, angles, trig, mount, range_max_m, p):  # type: ignore[no-untyped-def]
     """:func:`segment_scan`: the valid returns' points, their segments, the boxes of those
@@ -252,33 +293,53 @@ def _segment(r_all, angles, trig, mount, range_max_m, p):  # type: ignore[no-unt
         xy[j, 1] = mount[1] + r[j] * trig[1, idx[j]]
     seg, starts = _breakpoints(r, idx, angles, xy, p)
     m = starts.shape[0]
+    ends = np.empty(m, dtype=np.intp)
+    for k in range(m):
+        ends[k] = starts[k + 1] if k + 1 < m else n
+    mate = _pair_legs(xy, starts, ends, p)
     n_box = 0
     for k in range(m):
-        if (starts[k + 1] if k + 1 < m else n) - starts[k] >= p.min_points:
+        if mate[k] < k:
+            continue  # the second leg of a pair, boxed with the first
+        size = ends[k] - starts[k] + (ends[mate[k]] - starts[mate[k]] if mate[k] > k else 0)
+        if size >= p.min_points:
             n_box += 1
     center = np.empty((n_box, 2))
     phi, length, width = np.empty(n_box), np.empty(n_box), np.empty(n_box)
     never = np.empty(n_box, dtype=np.bool_)
     b = 0
+    near = 1 + p.max_gap_beams
     for k in range(m):
-        lo, hi = starts[k], (starts[k + 1] if k + 1 < m else n)
-        if hi - lo < p.min_points:
+        if mate[k] < k:
             continue
-        center[b, 0], center[b, 1], phi[b], length[b], width[b] = _box(xy, lo, hi)
+        k2 = mate[k] if mate[k] > k else k  # the segment of the box's last return
+        lo, hi = starts[k], ends[k]
+        lo2, hi2 = starts[k2], ends[k2]
+        if (hi - lo) + (hi2 - lo2 if k2 > k else 0) < p.min_points:
+            continue
+        if k2 > k:
+            pts = np.concatenate((xy[lo:hi], xy[lo2:hi2]))
+            center[b, 0], center[b, 1], phi[b], length[b], width[b] = _box(pts, 0, len(pts))
+        else:
+            center[b, 0], center[b, 1], phi[b], length[b], width[b] = _box(xy, lo, hi)
         # an end is cut only by what lies next to it: the field of view's edge or a nearer
         # return at most 1 + max_gap_beams beams away (beams without a return between a box
-        # and the next return are open space beyond the range, which hides nothing)
-        near = 1 + p.max_gap_beams
+        # and the next return are open space beyond the range, which hides nothing); a
+        # pair's ends are its first leg's first return and its second leg's last one
         cut_lo = idx[lo] < near if k == 0 else idx[lo] - idx[lo - 1] <= near
-        cut_hi = idx[hi - 1] >= n_beams - near if k == m - 1 else idx[hi] - idx[hi - 1] <= near
+        cut_hi = (idx[hi2 - 1] >= n_beams - near if k2 == m - 1
+                  else idx[hi2] - idx[hi2 - 1] <= near)  # fmt: skip
         nv = length[b] > p.max_dynamic_length_m or (k == 0 and cut_lo)
-        nv = nv or (k == m - 1 and cut_hi)
+        nv = nv or (k2 == m - 1 and cut_hi)
         if p.occlusion_never_dynamic:  # an end hidden behind the neighbour's nearer return
             nv = nv or (k > 0 and cut_lo and r[lo - 1] < r[lo])
-            nv = nv or (k + 1 < m and cut_hi and r[hi] < r[hi - 1])
+            nv = nv or (k2 + 1 < m and cut_hi and r[hi2] < r[hi2 - 1])
         never[b] = nv
         for j in range(lo, hi):
             labels[idx[j]] = b
+        if k2 > k:
+            for j in range(lo2, hi2):
+                labels[idx[j]] = b
         b += 1
     return center, phi, length, width, never, labels
 
